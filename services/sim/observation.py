@@ -1,0 +1,103 @@
+"""Observations: the full numeric state as one fixed-length vector per role.
+
+Layout (64 float32, documented in docs/observation.md; the offsets below are the contract):
+
+    [0:8)    self      x, y, vx, vy, cos heading, sin heading, alive, in region
+    [8:16)   partner   same fields as self
+    [16:23)  fortress  cos facing, sin facing, alive, vulnerable (fraction of the window left),
+                       locked on self, locked on partner, frames since shell / fire interval (<= 1)
+    [23:43)  shells    4 nearest to self, each x, y, vx, vy, present (nearest first; zeros if absent)
+    [43:63)  missiles  4 nearest to the fortress, each x, y, vx, vy, present
+    [63]     time left, as a fraction of the game
+
+Positions are in units of POSITION_SCALE px, velocities of VELOCITY_SCALE px/frame, so values stay
+within a few units for learning. Two frames: "world" (fortress-centred, y up) and "role" (the same
+picture rotated so that +y passes through the observing ship, as the original bait policies saw
+it). The fortress is the origin in both.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from services.sim.config import ROLES
+from services.sim.engine import Game
+
+POSITION_SCALE = 100.0
+VELOCITY_SCALE = 10.0
+N_SHELLS = 4
+N_MISSILES = 4
+SHIP_SIZE = 8
+PROJECTILE_SIZE = 5
+
+SELF = 0
+PARTNER = SELF + SHIP_SIZE
+FORTRESS = PARTNER + SHIP_SIZE
+SHELLS = FORTRESS + 7
+MISSILES = SHELLS + N_SHELLS * PROJECTILE_SIZE
+TIME = MISSILES + N_MISSILES * PROJECTILE_SIZE
+SIZE = TIME + 1
+
+# Field offsets inside a ship block and inside the fortress block.
+X, Y, VX, VY, COS, SIN, ALIVE, IN_REGION = range(SHIP_SIZE)
+F_COS, F_SIN, F_ALIVE, F_VULNERABLE, F_LOCK_SELF, F_LOCK_PARTNER, F_SINCE_SHELL = range(7)
+
+FRAMES = ("world", "role")
+
+
+def observe(game: Game, role: str, frame: str = "world") -> np.ndarray:
+    """The observation vector of `role` (bait or shooter) in the given frame."""
+    if frame not in FRAMES:
+        raise ValueError(f"unknown observation frame {frame!r}; expected one of {FRAMES}")
+    if role not in ROLES:
+        raise ValueError(f"unknown role {role!r}; expected one of {ROLES}")
+    me = ROLES.index(role)
+    ship, partner = game.ships[me], game.ships[1 - me]
+    sx, sy = ship.body.position
+    if frame == "role":
+        rot = math.pi / 2 - math.atan2(sy, sx)
+        cr, sr = math.cos(rot), math.sin(rot)
+    else:
+        rot, cr, sr = 0.0, 1.0, 0.0
+    p, v = 1.0 / POSITION_SCALE, 1.0 / VELOCITY_SCALE
+    out: list[float] = []
+    for s in (ship, partner):
+        x, y = s.body.position
+        h = math.radians(s.heading) + rot
+        out += [
+            (x * cr - y * sr) * p,
+            (x * sr + y * cr) * p,
+            (s.vx * cr - s.vy * sr) * v,
+            (s.vx * sr + s.vy * cr) * v,
+            math.cos(h),
+            math.sin(h),
+            float(s.alive),
+            float(s.in_region),
+        ]
+    c = game.config
+    f = math.radians(game.facing) + rot
+    out += [
+        math.cos(f),
+        math.sin(f),
+        float(game.fortress_alive),
+        game.vulnerable / c.vulnerable_frames,
+        float(game.lock == me),
+        float(game.lock == 1 - me),
+        min(game.since_shell / c.fortress_fire_interval, 1.0),
+    ]
+    shells = sorted(game.shells, key=lambda s: (s[0] - sx) ** 2 + (s[1] - sy) ** 2)[:N_SHELLS]
+    missiles = sorted(game.missiles, key=lambda m: m[0] * m[0] + m[1] * m[1])[:N_MISSILES]
+    for group, size in ((shells, N_SHELLS), (missiles, N_MISSILES)):
+        for x, y, vx, vy, *_ in group:
+            out += [
+                (x * cr - y * sr) * p,
+                (x * sr + y * cr) * p,
+                (vx * cr - vy * sr) * v,
+                (vx * sr + vy * cr) * v,
+                1.0,
+            ]
+        out += [0.0] * (PROJECTILE_SIZE * (size - len(group)))
+    out.append(1.0 - game.frame / c.frames)
+    return np.array(out, dtype=np.float32)

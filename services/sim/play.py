@@ -1,0 +1,51 @@
+"""Play whole games in-process: the core that the CLI, calibration, sweeps and evaluation share."""
+
+from __future__ import annotations
+
+import math
+import statistics
+from dataclasses import dataclass
+
+from services.agent.policy import Policy
+from services.sim.config import GameConfig
+from services.sim.engine import Game
+from services.sim.observation import observe
+
+
+@dataclass(frozen=True)
+class GameResult:
+    seed: int
+    frames: int
+    kills: int
+    kills_per_minute: float
+    points: int
+    counters: dict
+
+
+def play(bait: Policy, shooter: Policy, seed: int = 0, config: GameConfig | None = None) -> GameResult:
+    """One full game between two policies, each reset with a seed derived from the game's."""
+    game = Game(config, seed)
+    bait.reset(2 * seed + 1)
+    shooter.reset(2 * seed + 2)
+    while not game.done:
+        game.step(
+            bait.act(observe(game, "bait", bait.frame)),
+            shooter.act(observe(game, "shooter", shooter.frame)),
+        )
+    return GameResult(seed, game.frame, game.kills, game.kills_per_minute(), game.points, game.counters())
+
+
+@dataclass(frozen=True)
+class Summary:
+    games: int
+    mean: float  # kills per minute
+    stderr: float
+
+    def __str__(self) -> str:
+        return f"{self.mean:.2f} ± {self.stderr:.2f} kills/min over {self.games} games"
+
+
+def summarize(results: list[GameResult]) -> Summary:
+    values = [r.kills_per_minute for r in results]
+    stderr = statistics.stdev(values) / math.sqrt(len(values)) if len(values) > 1 else 0.0
+    return Summary(len(values), statistics.fmean(values), stderr)

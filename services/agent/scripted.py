@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from services.agent.policy import RulePolicy, turn_toward
+from services.agent.policy import RulePolicy, UniformPolicy, turn_toward
 from services.sim import observation as ob
 from services.sim.config import GameConfig
 
@@ -172,3 +172,19 @@ class MirrorShooter(RulePolicy):
             and window >= flight + 1.0
         )
         return turn, 0, int(fire)
+
+
+SCRIPTED = {"circle": CircleBait, "mirror": MirrorShooter}
+
+
+def scripted_policy(key: str, role: str) -> RulePolicy | UniformPolicy:
+    """A scripted policy by key for a seat: circle, mirror, idle or random (any role)."""
+    if key == "idle":
+        return Idle(role)
+    if key == "random":
+        return UniformPolicy(role)
+    if key in SCRIPTED:
+        return SCRIPTED[key]()
+    raise ValueError(
+        f"unknown scripted policy {key!r}; expected one of {sorted([*SCRIPTED, 'idle', 'random'])}"
+    )

@@ -83,8 +83,7 @@ class Ship:
 def _hexagon(radius: float) -> list[tuple[float, float]]:
     """Regular hexagon with a vertex on the body's +x axis: the facing and the rear are vertices."""
     return [
-        (radius * math.cos(math.radians(60 * k)), radius * math.sin(math.radians(60 * k)))
-        for k in range(6)
+        (radius * math.cos(math.radians(60 * k)), radius * math.sin(math.radians(60 * k))) for k in range(6)
     ]
 
 
@@ -368,17 +367,20 @@ class Game:
         self.reset_in = -1
         self.missiles.clear()
         self.shells.clear()
+        self._respawn_dead()
+
+    def _respawn_dead(self) -> None:
         for ship in self.ships:
             if not ship.alive:
                 self._spawn(ship)
                 self.events.append(Event(self.frame, "respawn", ship.role))
 
     def _fortress_down(self) -> None:
+        """A ship that died while the fortress was down comes back with it: a new round starts."""
         self.down_frames += 1
-        if self.down_frames >= self.config.respawn_delay and not any(
-            ship.in_region for ship in self.ships
-        ):
+        if self.down_frames >= self.config.respawn_delay and not any(ship.in_region for ship in self.ships):
             self._reset_fortress(full=False)
+            self._respawn_dead()
             self.events.append(Event(self.frame, "fortress_respawn"))
 
     def _both_dead_reset(self) -> None:

@@ -71,6 +71,26 @@ class GameConfig:
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
+    @classmethod
+    def from_dict(cls, values: dict) -> GameConfig:
+        """The inverse of to_dict (lists from msgpack or JSON become the spawn tuples again)."""
+        if not isinstance(values, dict) or set(values) != {f.name for f in dataclasses.fields(cls)}:
+            raise ValueError("a game config needs exactly the GameConfig fields")
+        defaults = cls()
+        converted = {}
+        for name, value in values.items():
+            default = getattr(defaults, name)
+            value = tuple(value) if isinstance(value, list) else value
+            numeric = (int, float) if isinstance(default, float) else type(default)
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, numeric)
+                or (isinstance(default, tuple) and len(value) != len(default))
+            ):
+                raise ValueError(f"config field {name}: {value!r} does not match {default!r}")
+            converted[name] = value
+        return cls(**converted)
+
     def hash(self) -> str:
         """Stable short hash, so artifacts (tables, recordings) can name the rules they used."""
         text = json.dumps(self.to_dict(), sort_keys=True)

@@ -184,7 +184,7 @@ class Game:
                 x, y = ship.body.position
                 if abs(x) > c.arena_x or abs(y) > c.arena_y:
                     self._kill_ship(ship, "border")
-                elif self._in_hexagon(self.shield, c.shield_radius, x, y):
+                elif self.fortress_alive and self._in_hexagon(self.shield, c.shield_radius, x, y):
                     self._kill_ship(ship, "shield")
         killed_by = self._resolve_missiles() if self.fortress_alive else -1
         self._resolve_shells()

@@ -49,35 +49,45 @@ FRAMES = ("world", "role")
 
 def observe(game: Game, role: str, frame: str = "world") -> np.ndarray:
     """The observation vector of `role` (bait or shooter) in the given frame."""
-    if frame not in FRAMES:
+    return as_observation(world_values(game, role), frame)
+
+
+def as_observation(values: list[float], frame: str = "world") -> np.ndarray:
+    """World-frame values (as the sim publishes them) -> the float32 vector a policy reads.
+
+    The role frame is computed from the float64 world values here, in-process and on the bus alike,
+    so that a policy sees bit-identical input either way."""
+    if frame == "role":
+        values = to_role_frame(values)
+    elif frame != "world":
         raise ValueError(f"unknown observation frame {frame!r}; expected one of {FRAMES}")
+    return np.array(values, dtype=np.float32)
+
+
+def world_values(game: Game, role: str) -> list[float]:
+    """The observation of `role` in the world frame, as float64 values in the documented layout."""
     if role not in ROLES:
         raise ValueError(f"unknown role {role!r}; expected one of {ROLES}")
     me = ROLES.index(role)
     ship, partner = game.ships[me], game.ships[1 - me]
     sx, sy = ship.body.position
-    if frame == "role":
-        rot = math.pi / 2 - math.atan2(sy, sx)
-        cr, sr = math.cos(rot), math.sin(rot)
-    else:
-        rot, cr, sr = 0.0, 1.0, 0.0
     p, v = 1.0 / POSITION_SCALE, 1.0 / VELOCITY_SCALE
     out: list[float] = []
     for s in (ship, partner):
         x, y = s.body.position
-        h = math.radians(s.heading) + rot
+        h = math.radians(s.heading)
         out += [
-            (x * cr - y * sr) * p,
-            (x * sr + y * cr) * p,
-            (s.vx * cr - s.vy * sr) * v,
-            (s.vx * sr + s.vy * cr) * v,
+            x * p,
+            y * p,
+            s.vx * v,
+            s.vy * v,
             math.cos(h),
             math.sin(h),
             float(s.alive),
             float(s.in_region),
         ]
     c = game.config
-    f = math.radians(game.facing) + rot
+    f = math.radians(game.facing)
     out += [
         math.cos(f),
         math.sin(f),
@@ -91,13 +101,27 @@ def observe(game: Game, role: str, frame: str = "world") -> np.ndarray:
     missiles = sorted(game.missiles, key=lambda m: m[0] * m[0] + m[1] * m[1])[:N_MISSILES]
     for group, size in ((shells, N_SHELLS), (missiles, N_MISSILES)):
         for x, y, vx, vy, *_ in group:
-            out += [
-                (x * cr - y * sr) * p,
-                (x * sr + y * cr) * p,
-                (vx * cr - vy * sr) * v,
-                (vx * sr + vy * cr) * v,
-                1.0,
-            ]
+            out += [x * p, y * p, vx * v, vy * v, 1.0]
         out += [0.0] * (PROJECTILE_SIZE * (size - len(group)))
     out.append(1.0 - game.frame / c.frames)
-    return np.array(out, dtype=np.float32)
+    return out
+
+
+# Offsets of every (x, y)-like pair that turns with the frame: positions, velocities, headings.
+_PAIRS = [
+    *(block + field for block in (SELF, PARTNER) for field in (X, VX, COS)),
+    FORTRESS + F_COS,
+    *(SHELLS + i * PROJECTILE_SIZE + field for i in range(N_SHELLS + N_MISSILES) for field in (X, VX)),
+]
+
+
+def to_role_frame(values: list[float]) -> list[float]:
+    """Rotate world-frame values about the fortress so that +y passes through the observing ship."""
+    rot = math.pi / 2 - math.atan2(values[SELF + Y], values[SELF + X])
+    cr, sr = math.cos(rot), math.sin(rot)
+    out = list(values)
+    for i in _PAIRS:
+        x, y = values[i], values[i + 1]
+        out[i] = x * cr - y * sr
+        out[i + 1] = x * sr + y * cr
+    return out

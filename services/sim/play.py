@@ -7,7 +7,7 @@ import statistics
 from dataclasses import dataclass
 
 from services.agent.policy import Policy
-from services.sim.config import GameConfig
+from services.sim.config import ROLES, GameConfig
 from services.sim.engine import Game
 from services.sim.observation import observe
 
@@ -22,11 +22,16 @@ class GameResult:
     counters: dict
 
 
+def policy_seed(game_seed: int, role: str) -> int:
+    """The seed a seat's policy is reset with in a game: in-process, in envs and on the bus alike."""
+    return 2 * game_seed + 1 + ROLES.index(role)
+
+
 def play(bait: Policy, shooter: Policy, seed: int = 0, config: GameConfig | None = None) -> GameResult:
     """One full game between two policies, each reset with a seed derived from the game's."""
     game = Game(config, seed)
-    bait.reset(2 * seed + 1)
-    shooter.reset(2 * seed + 2)
+    bait.reset(policy_seed(seed, "bait"))
+    shooter.reset(policy_seed(seed, "shooter"))
     while not game.done:
         game.step(
             bait.act(observe(game, "bait", bait.frame)),

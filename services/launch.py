@@ -1,0 +1,138 @@
+"""Starting a whole match on one machine: sim, two agents and the recorder as separate processes.
+
+The sim listens on a free loopback port; every other process connects to it in peer mode and
+listens on a port of its own, so zenoh's gossip links them all directly. No router, no multicast.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import zenoh
+
+from services.recorder.recording import load
+from services.recorder.service import recording_path
+from shared import keys
+from shared.bus import BusConfig, free_endpoint, session
+from shared.messages import MessageError, State, Summary, decode
+
+
+@dataclass(frozen=True)
+class MatchPlan:
+    match: str
+    seed: int = 0
+    frames: int = 1800
+    mode: str = "realtime"
+    bait: str = "circle"
+    shooter: str = "mirror"
+    directory: Path = Path("recordings")
+
+
+def service_command(name: str, bus: BusConfig, *args: str) -> list[str]:
+    """The command line that starts one service of the `tsf` CLI in a new Python process."""
+    return [sys.executable, "-m", "services.cli", name, *bus.to_args(), *args]
+
+
+class Processes:
+    """The child processes of a match; all are ended (SIGTERM, then SIGKILL) on exit."""
+
+    def __init__(self) -> None:
+        self.children: dict[str, subprocess.Popen] = {}
+
+    def start(self, name: str, command: list[str]) -> subprocess.Popen:
+        self.children[name] = subprocess.Popen(command, stdin=subprocess.DEVNULL)
+        return self.children[name]
+
+    def wait(self, name: str, timeout: float) -> int | None:
+        try:
+            return self.children[name].wait(timeout)
+        except subprocess.TimeoutExpired:
+            return None
+
+    def __enter__(self) -> Processes:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for child in self.children.values():
+            if child.poll() is None:
+                child.terminate()
+        for child in self.children.values():
+            try:
+                child.wait(5)
+            except subprocess.TimeoutExpired:
+                child.kill()
+                child.wait()
+
+
+def run_match(
+    plan: MatchPlan, on_state: Callable[[State], None] = lambda state: None
+) -> tuple[Summary, Path]:
+    """Run the match to its end; `on_state` sees every state (for a live scoreboard)."""
+    endpoint = free_endpoint()
+    sim_bus = BusConfig(listen=(endpoint,))
+    peer_bus = BusConfig(connect=(endpoint,))
+    summary: list[Summary] = []
+    done = threading.Event()
+
+    def on_summary(sample: zenoh.Sample) -> None:
+        try:
+            summary.append(decode(sample.payload.to_bytes(), Summary))
+        except MessageError:
+            return
+        done.set()
+
+    def on_state_sample(sample: zenoh.Sample) -> None:
+        try:
+            on_state(decode(sample.payload.to_bytes(), State))
+        except MessageError:
+            return
+
+    match = ["--match", plan.match]
+    with Processes() as processes:
+        processes.start(
+            "sim",
+            service_command(
+                "sim", sim_bus, *match, "--seed", str(plan.seed), "--frames", str(plan.frames),
+                "--sim-mode", plan.mode, "--bait", plan.bait, "--shooter", plan.shooter,
+                "--wait-recorder", "10",
+            ),
+        )  # fmt: skip
+        processes.start(
+            "recorder", service_command("recorder", peer_bus, *match, "--out", str(plan.directory))
+        )
+        for role, policy in (("bait", plan.bait), ("shooter", plan.shooter)):
+            processes.start(
+                f"agent-{role}",
+                service_command(
+                    "agent", peer_bus, *match, "--role", role, "--policy", policy, "--seed", str(plan.seed)
+                ),
+            )
+        with session(peer_bus) as z:
+            subscribers = [
+                z.declare_subscriber(keys.state(plan.match), on_state_sample),
+                z.declare_subscriber(keys.summary(plan.match), on_summary),
+            ]
+            while not done.wait(0.2):
+                if processes.children["sim"].poll() is not None:
+                    break
+            for subscriber in subscribers:
+                subscriber.undeclare()
+        processes.wait("sim", 10)
+        processes.wait("recorder", 10)
+    path = recording_path(plan.directory, plan.match)
+    if not summary and path.exists():  # the live view can miss it; the recording cannot
+        summary = [s for s in [load(path).summary] if s is not None]
+    if not summary:
+        code = processes.children["sim"].returncode
+        raise RuntimeError(f"match {plan.match} ended without a summary (sim exit code {code})")
+    return summary[0], path
+
+
+def new_match_id() -> str:
+    return time.strftime("m%Y%m%d-%H%M%S")

@@ -1,0 +1,147 @@
+"""Reading a recording: decoded messages, a replay check, and the Parquet export for pandas / DuckDB."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from services.recorder.log import read_log
+from services.sim.config import GameConfig
+from services.sim.engine import Game
+from shared.messages import Action, GameEvent, MessageError, PolicySwitch, Start, State, Summary, decode_any
+
+TABLES = ("states", "actions", "switches", "events", "gaps", "match")
+
+
+@dataclass
+class Recording:
+    """The decoded content of one match's log."""
+
+    path: Path
+    clean: bool  # False: the log ended in a torn or corrupt record
+    start: Start | None = None
+    summary: Summary | None = None
+    states: list[State] = field(default_factory=list)
+    actions: list[tuple[int, Action]] = field(default_factory=list)  # (receive time ns, action)
+    switches: list[PolicySwitch] = field(default_factory=list)
+    events: list[GameEvent] = field(default_factory=list)
+    gaps: list[tuple[int, int]] = field(default_factory=list)
+    undecodable: int = 0
+
+    @property
+    def missing_frames(self) -> int:
+        return sum(last - first + 1 for first, last in self.gaps)
+
+
+def load(path: str | Path) -> Recording:
+    records, clean = read_log(path)
+    recording = Recording(Path(path), clean)
+    for record in records:
+        if record.gap is not None:
+            recording.gaps.append(record.gap)
+            continue
+        try:
+            message = decode_any(record.data)
+        except MessageError:
+            recording.undecodable += 1
+            continue
+        if isinstance(message, State):
+            recording.states.append(message)
+        elif isinstance(message, Action):
+            recording.actions.append((record.t, message))
+        elif isinstance(message, PolicySwitch):
+            recording.switches.append(message)
+        elif isinstance(message, GameEvent):
+            recording.events.append(message)
+        elif isinstance(message, Start):
+            recording.start = message
+        elif isinstance(message, Summary):
+            recording.summary = message
+    return recording
+
+
+def replay(recording: Recording) -> list[int]:
+    """Re-simulate the match through the engine with the actions the sim applied; returns the
+    frames whose recorded state hash differs (empty: every recorded state reproduced)."""
+    if recording.start is None:
+        raise ValueError(f"{recording.path}: no start record, so the match cannot be replayed")
+    game = Game(GameConfig.from_dict(recording.start.config), recording.start.seed)
+    by_frame = {s.frame: s for s in recording.states}
+    mismatches = []
+    for frame in range(0, max(by_frame, default=0) + 1):
+        if frame > 0:
+            if frame not in by_frame:
+                raise ValueError(f"{recording.path}: frame {frame} is missing, so its actions are unknown")
+            game.step(*by_frame[frame].applied)
+        if frame in by_frame and by_frame[frame].hash != game.state_hash():
+            mismatches.append(frame)
+    return mismatches
+
+
+def export_parquet(recording: Recording, out: str | Path) -> dict[str, Path]:
+    """Write one Parquet file per table (states, actions, switches, events, gaps, match)."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    start, summary = recording.start, recording.summary
+    tables = {
+        "states": {
+            "frame": [s.frame for s in recording.states],
+            "hash": [s.hash for s in recording.states],
+            "kills": [s.kills for s in recording.states],
+            "points": [s.points for s in recording.states],
+            "bait_action": [s.applied[0] for s in recording.states],
+            "shooter_action": [s.applied[1] for s in recording.states],
+            "sent_ns": [s.sent_ns for s in recording.states],
+            "bait_obs": [s.obs["bait"] for s in recording.states],
+            "shooter_obs": [s.obs["shooter"] for s in recording.states],
+            "ships": [s.ships for s in recording.states],
+            "fortress": [s.fortress for s in recording.states],
+        },
+        "actions": {
+            "frame": [a.frame for _, a in recording.actions],
+            "role": [a.role for _, a in recording.actions],
+            "action": [a.action for _, a in recording.actions],
+            "policy": [a.policy for _, a in recording.actions],
+            "received_ns": [t for t, _ in recording.actions],
+        },
+        "switches": {
+            "frame": [s.frame for s in recording.switches],
+            "role": [s.role for s in recording.switches],
+            "policy": [s.policy for s in recording.switches],
+            "reason": [s.reason for s in recording.switches],
+        },
+        "events": {
+            "frame": [e.frame for e in recording.events],
+            "kind": [e.kind for e in recording.events],
+            "role": [e.role for e in recording.events],
+            "detail": [e.detail for e in recording.events],
+        },
+        "gaps": {"first": [g[0] for g in recording.gaps], "last": [g[1] for g in recording.gaps]},
+        "match": {
+            "match": [start.match if start else ""],
+            "seed": [start.seed if start else None],
+            "mode": [start.mode if start else ""],
+            "config": [json.dumps(start.config) if start else ""],
+            "policies": [json.dumps(start.policies) if start else ""],
+            "frames": [summary.frame if summary else None],
+            "kills": [summary.kills if summary else None],
+            "kills_per_minute": [summary.kills_per_minute if summary else None],
+            "counters": [json.dumps(summary.counters) if summary else ""],
+            "clean": [recording.clean],
+            "missing_frames": [recording.missing_frames],
+        },
+    }
+    paths = {}
+    for name, columns in tables.items():
+        paths[name] = out / f"{name}.parquet"
+        pq.write_table(pa.table(columns), paths[name])
+    return paths
+
+
+def read_parquet(directory: str | Path) -> dict[str, pa.Table]:
+    """The exported tables of one recording (`.to_pandas()` on each, or query the files with DuckDB)."""
+    return {name: pq.read_table(Path(directory) / f"{name}.parquet") for name in TABLES}

@@ -1,0 +1,84 @@
+"""The recorder service: a thin shell that writes everything a match puts on the bus to its log.
+
+The zenoh callback only timestamps and queues the bytes (it never blocks the session's receive
+thread); a drain thread validates, writes and tracks gaps. Bad input is counted and dropped.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from pathlib import Path
+
+import zenoh
+
+from services.recorder.log import GapTracker, LogWriter
+from shared import keys
+from shared.bus import BusConfig, Drops, session
+from shared.messages import MessageError, State, Summary, decode_any
+
+log = logging.getLogger("tsf.recorder")
+_DONE = object()
+
+
+def recording_path(directory: str | Path, match: str) -> Path:
+    return Path(directory) / f"{keys.check_match(match)}.tsflog"
+
+
+def run_recorder(
+    bus: BusConfig, match: str, directory: str | Path = "recordings", stop: threading.Event | None = None
+) -> Path:
+    """Record `match` until its summary is written or `stop` is set; returns the log's path.
+    Restarted on the same directory, it appends to the same log after cutting any torn tail."""
+    stop = stop or threading.Event()
+    path = recording_path(directory, match)
+    inbox: queue.SimpleQueue = queue.SimpleQueue()
+    drops = Drops("recorder")
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        inbox.put((str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
+
+    def drain(writer: LogWriter, gaps: GapTracker) -> None:
+        while True:
+            item = inbox.get()
+            if item is _DONE:
+                return
+            key, data, t = item
+            try:
+                message = decode_any(data)
+            except MessageError as error:
+                drops.drop(key, error)
+                continue
+            if isinstance(message, State) and (gap := gaps.see(message.frame)):
+                writer.write_gap(*gap)
+            writer.write(key, data, t)
+            if isinstance(message, Summary):
+                stop.set()
+
+    with LogWriter(path) as writer:
+        last = max((_frame(r.data) for r in writer.last_records if r.key == keys.state(match)), default=-1)
+        if writer.cut_bytes:
+            log.warning("cut a torn tail of %d bytes from %s", writer.cut_bytes, path)
+        drainer = threading.Thread(target=drain, args=(writer, GapTracker(last)), daemon=True)
+        drainer.start()
+        with session(bus) as z:
+            subscriber = z.declare_subscriber(keys.everything(match), on_sample)
+            token = z.liveliness().declare_token(keys.alive(match, "recorder"))
+            try:
+                stop.wait()
+                time.sleep(0.1)  # what is still in flight after the summary
+            finally:
+                token.undeclare()
+                subscriber.undeclare()
+        inbox.put(_DONE)
+        drainer.join()
+    return path
+
+
+def _frame(data: bytes) -> int:
+    try:
+        return decode_any(data).frame
+    except MessageError:
+        return -1

@@ -1,0 +1,91 @@
+"""The sim service's pure core: which action each seat plays, and the messages a frame produces."""
+
+from __future__ import annotations
+
+import time
+
+from services.sim.config import ROLES
+from services.sim.engine import Game
+from services.sim.observation import world_values
+from shared.messages import Action, GameEvent, Start, State, Summary
+
+NOOP = 0
+
+
+class Seats:
+    """The latest action of each seat. A seat with no fresh action keeps its last one; a seat whose
+    player is gone (by liveliness) plays no-op until it returns."""
+
+    def __init__(self) -> None:
+        self.latest = dict.fromkeys(ROLES, NOOP)
+        self.frame = dict.fromkeys(ROLES, -1)  # the state frame the latest action answered
+        self.players = dict.fromkeys(ROLES, 0)  # live services holding each seat
+
+    def offer(self, action: Action) -> bool:
+        """Take an action unless an answer to a later frame is already in; returns whether taken."""
+        if action.frame < self.frame[action.role]:
+            return False
+        self.latest[action.role] = action.action
+        self.frame[action.role] = action.frame
+        return True
+
+    def arrive(self, role: str) -> None:
+        self.players[role] += 1
+
+    def leave(self, role: str) -> None:
+        self.players[role] = max(0, self.players[role] - 1)
+        if not self.players[role]:
+            self.latest[role] = NOOP
+
+    def present(self, role: str) -> bool:
+        return self.players[role] > 0
+
+    def answered(self, frame: int) -> bool:
+        """Whether every present seat has answered the state of `frame` (lockstep's condition)."""
+        return all(self.frame[r] >= frame or not self.present(r) for r in ROLES)
+
+    def actions(self) -> tuple[int, int]:
+        return tuple(self.latest[r] if self.present(r) else NOOP for r in ROLES)  # type: ignore[return-value]
+
+
+def start_message(game: Game, match: str, sender: str, mode: str, policies: dict[str, str]) -> Start:
+    return Start(match, game.frame, sender, game.seed, mode, game.config.to_dict(), policies)
+
+
+def state_message(game: Game, match: str, sender: str, applied: tuple[int, int]) -> State:
+    return State(
+        match,
+        game.frame,
+        sender,
+        obs={role: world_values(game, role) for role in ROLES},
+        ships=[[s.x, s.y, s.vx, s.vy, s.heading, float(s.alive)] for s in game.ships],
+        fortress=[game.facing, float(game.fortress_alive), game.vulnerable, game.lock, game.since_shell],
+        missiles=[list(m) for m in game.missiles],
+        shells=[list(s) for s in game.shells],
+        kills=game.kills,
+        points=game.points,
+        frames=game.config.frames,
+        hash=game.state_hash(),
+        applied=list(applied),
+        sent_ns=time.time_ns(),
+    )
+
+
+def event_messages(game: Game, match: str, sender: str) -> list[GameEvent]:
+    return [GameEvent(match, e.frame, sender, e.kind, e.role, e.detail) for e in game.events]
+
+
+def summary_message(
+    game: Game, match: str, sender: str, drops: dict[str, int], timing: dict[str, float]
+) -> Summary:
+    return Summary(
+        match,
+        game.frame,
+        sender,
+        kills=game.kills,
+        kills_per_minute=game.kills_per_minute(),
+        points=game.points,
+        counters=game.counters(),
+        drops=dict(drops),
+        timing=timing,
+    )

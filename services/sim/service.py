@@ -1,0 +1,147 @@
+"""The sim service: a thin shell that runs the engine on the bus. It owns the clock.
+
+Real-time mode ticks at the game's fps on a monotonic schedule (tick k is due at start + k/fps,
+so lateness never accumulates) and applies each seat's latest action; lockstep mode waits for
+both seats' answers to each state, but never longer than `step_timeout`, and never for a seat
+whose player is gone. State is published with congestion control *drop*: a frozen subscriber
+can never stall the sim.
+"""
+
+from __future__ import annotations
+
+import logging
+import statistics
+import threading
+import time
+
+import zenoh
+
+from services.sim.config import ROLES, GameConfig
+from services.sim.engine import Game
+from services.sim.match import Seats, event_messages, start_message, state_message, summary_message
+from shared import keys
+from shared.bus import BusConfig, Drops, session
+from shared.messages import Action, MessageError, Summary, decode
+
+log = logging.getLogger("tsf.sim")
+MODES = ("realtime", "lockstep")
+
+
+def run_sim(
+    bus: BusConfig,
+    match: str,
+    seed: int = 0,
+    config: GameConfig | None = None,
+    mode: str = "realtime",
+    policies: dict[str, str] | None = None,
+    stop: threading.Event | None = None,
+    wait_players: float = 10.0,
+    wait_recorder: float = 0.0,
+    step_timeout: float = 1.0,
+) -> Summary:
+    """Play one match on the bus and return its summary (also published on the summary key).
+
+    Waits up to `wait_players` seconds for both seats and up to `wait_recorder` for a recorder
+    before the first frame; a seat still empty then plays no-op until its player arrives."""
+    if mode not in MODES:
+        raise ValueError(f"unknown sim mode {mode!r}; expected one of {MODES}")
+    stop = stop or threading.Event()
+    game = Game(config, seed)
+    seats, drops = Seats(), Drops("sim")
+    changed = threading.Condition()
+    answered_at: dict[tuple[str, int], int] = {}  # (role, frame) -> arrival time, for round trips
+    recorders = [0]
+
+    def on_action(sample: zenoh.Sample) -> None:
+        arrived = time.perf_counter_ns()
+        try:
+            action = decode(sample.payload.to_bytes(), Action)
+            if action.match != match or action.role != keys.role_of(sample.key_expr):
+                raise MessageError(
+                    "mismatch", f"{action.role} action for {action.match} on {sample.key_expr}"
+                )
+        except (MessageError, ValueError) as error:
+            drops.drop(str(sample.key_expr), error)
+            return
+        with changed:
+            if seats.offer(action):
+                answered_at.setdefault((action.role, action.frame), arrived)
+            changed.notify_all()
+
+    def on_alive(sample: zenoh.Sample) -> None:
+        chunks = str(sample.key_expr).split("/")
+        with changed:
+            if chunks[-1] == "recorder":
+                recorders[0] += 1 if sample.kind == zenoh.SampleKind.PUT else -1
+            elif chunks[-1] in ROLES:
+                (seats.arrive if sample.kind == zenoh.SampleKind.PUT else seats.leave)(chunks[-1])
+            changed.notify_all()
+
+    def wait(condition, timeout: float) -> None:  # noqa: ANN001 - a predicate
+        deadline = time.monotonic() + timeout
+        with changed:
+            while not condition() and not stop.is_set():
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return
+                changed.wait(min(left, 0.05))
+
+    with session(bus) as z:
+        token = z.liveliness().declare_token(keys.alive(match, "sim"))
+        fast = {"congestion_control": zenoh.CongestionControl.DROP, "express": True}
+        state_pub = z.declare_publisher(keys.state(match), priority=zenoh.Priority.REAL_TIME, **fast)
+        event_pub = z.declare_publisher(keys.event(match), **fast)
+        subscribers = [
+            z.declare_subscriber(keys.actions(match), on_action),
+            z.liveliness().declare_subscriber(keys.seats_alive(match), on_alive, history=True),
+            z.liveliness().declare_subscriber(keys.alive(match, "recorder"), on_alive, history=True),
+        ]
+        try:
+            wait(lambda: all(seats.present(r) for r in ROLES), wait_players)
+            wait(lambda: recorders[0] > 0, wait_recorder)
+            z.put(keys.start(match), start_message(game, match, "sim", mode, policies or {}).encode())
+            sent: dict[int, int] = {}
+            ticks: list[float] = []
+            applied = (0, 0)
+            period = 1.0 / game.config.fps
+            start = time.monotonic()
+            while True:
+                sent[game.frame] = time.perf_counter_ns()
+                state_pub.put(state_message(game, match, "sim", applied).encode())
+                for event in event_messages(game, match, "sim"):
+                    event_pub.put(event.encode())
+                if game.done or stop.is_set():
+                    break
+                if mode == "lockstep":
+                    frame = game.frame
+                    wait(lambda frame=frame: seats.answered(frame), step_timeout)
+                else:
+                    due = start + (game.frame + 1) * period
+                    delay = due - time.monotonic()
+                    if delay > 0:
+                        time.sleep(delay)
+                    ticks.append(time.monotonic() - due)
+                with changed:
+                    applied = seats.actions()
+                game.step(*applied)
+            with changed:
+                trips = [(t - sent[f]) / 1e6 for (_, f), t in answered_at.items() if f in sent]
+            summary = summary_message(game, match, "sim", drops.counts, _timing(trips, ticks))
+            z.put(keys.summary(match), summary.encode())
+            time.sleep(0.2)  # let the last puts leave before the session closes
+            return summary
+        finally:
+            for subscriber in subscribers:
+                subscriber.undeclare()
+            token.undeclare()
+
+
+def _timing(trips: list[float], ticks: list[float]) -> dict[str, float]:
+    """Round trip state -> action (ms) and tick lateness (ms): median and p99."""
+    timing: dict[str, float] = {}
+    for name, values in (("round_trip", trips), ("tick_late", [t * 1e3 for t in ticks])):
+        if len(values) >= 2:
+            cuts = statistics.quantiles(values, n=100)
+            timing[f"{name}_ms_p50"] = statistics.median(values)
+            timing[f"{name}_ms_p99"] = cuts[98]
+    return timing

@@ -1,0 +1,107 @@
+"""Opening zenoh sessions from one config, counting bad input, and stopping cleanly on signals.
+
+Peer mode by default: no router is needed. Multicast scouting is off unless asked for, so that
+parallel runs on one machine never meet; peers find each other through the explicit endpoints and
+zenoh's gossip (a peer that connects to one learns the others).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import signal
+import socket
+import threading
+from collections import Counter
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+
+import zenoh
+
+log = logging.getLogger("tsf.bus")
+
+MODES = ("peer", "client", "router")
+
+
+@dataclass(frozen=True)
+class BusConfig:
+    """Where a service's session listens and connects. Endpoints are zenoh locators such as
+    `tcp/127.0.0.1:7447`; `tcp/127.0.0.1:0` listens on a free loopback port."""
+
+    mode: str = "peer"
+    listen: tuple[str, ...] = ("tcp/127.0.0.1:0",)
+    connect: tuple[str, ...] = ()
+    multicast: bool = False
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise ValueError(f"unknown zenoh mode {self.mode!r}; expected one of {MODES}")
+
+    def to_zenoh(self) -> zenoh.Config:
+        config = zenoh.Config()
+        config.insert_json5("mode", json.dumps(self.mode))
+        config.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
+        config.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
+        config.insert_json5("scouting/multicast/enabled", json.dumps(self.multicast))
+        return config
+
+    def to_args(self) -> list[str]:
+        """The same config as `tsf` options, for starting a service in another process."""
+        args = ["--mode", self.mode]
+        for endpoint in self.listen:
+            args += ["--listen", endpoint]
+        for endpoint in self.connect:
+            args += ["--connect", endpoint]
+        return [*args, "--multicast"] if self.multicast else args
+
+
+def free_endpoint(host: str = "127.0.0.1") -> str:
+    """A TCP endpoint on a port that is free now (for the sim a local match connects to)."""
+    with socket.socket() as sock:
+        sock.bind((host, 0))
+        return f"tcp/{host}:{sock.getsockname()[1]}"
+
+
+@contextmanager
+def session(config: BusConfig) -> Iterator[zenoh.Session]:
+    """An open zenoh session, closed on exit (an unclosed session keeps the process alive)."""
+    opened = zenoh.open(config.to_zenoh())
+    try:
+        yield opened
+    finally:
+        opened.close()
+
+
+class Drops:
+    """Counts dropped input by reason and logs each reason once, so bad input never floods logs."""
+
+    def __init__(self, service: str) -> None:
+        self.service = service
+        self.counts: Counter[str] = Counter()
+        self._lock = threading.Lock()
+
+    def drop(self, key: str, error: Exception) -> None:
+        reason = getattr(error, "reason", type(error).__name__)
+        with self._lock:
+            self.counts[reason] += 1
+            first = self.counts[reason] == 1
+        if first:
+            log.warning(
+                "%s dropped input on %s (%s); further drops of this kind are only counted",
+                self.service,
+                key,
+                error,
+            )
+
+    @property
+    def total(self) -> int:
+        return sum(self.counts.values())
+
+
+def stop_on_signals() -> threading.Event:
+    """An event set by SIGINT or SIGTERM: services poll it and leave through their `finally`."""
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    return stop

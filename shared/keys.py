@@ -1,0 +1,84 @@
+"""Every zenoh key expression of the system, namespaced by match id. Nothing else builds keys.
+
+tsf/<match>/state                 sim -> all       one State per frame
+tsf/<match>/action/<role>         agent or human -> sim, one Action per state
+tsf/<match>/policy/<role>         adapter or operator -> agent: which library policy to play
+tsf/<match>/event                 sim -> all       game events (kills, deaths, ...)
+tsf/<match>/summary               sim -> all       the match result, once, at the end
+tsf/<match>/alive/<service>[/<role>]  liveliness tokens, one per running service
+"""
+
+from __future__ import annotations
+
+import re
+
+from services.sim.config import ROLES
+
+PREFIX = "tsf"
+SERVICES = ("sim", "agent", "recorder", "adapter", "human")
+_MATCH_ID = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
+
+
+def check_match(match: str) -> str:
+    """A match id is one key chunk: letters, digits, '-' and '_' only (no wildcards, no '/')."""
+    if not isinstance(match, str) or not _MATCH_ID.match(match):
+        raise ValueError(f"invalid match id {match!r}: use 1-64 letters, digits, '-' or '_'")
+    return match
+
+
+def _role(role: str) -> str:
+    if role not in ROLES:
+        raise ValueError(f"unknown role {role!r}; expected one of {ROLES}")
+    return role
+
+
+def state(match: str) -> str:
+    return f"{PREFIX}/{check_match(match)}/state"
+
+
+def action(match: str, role: str) -> str:
+    return f"{PREFIX}/{check_match(match)}/action/{_role(role)}"
+
+
+def policy(match: str, role: str) -> str:
+    return f"{PREFIX}/{check_match(match)}/policy/{_role(role)}"
+
+
+def start(match: str) -> str:
+    return f"{PREFIX}/{check_match(match)}/start"
+
+
+def event(match: str) -> str:
+    return f"{PREFIX}/{check_match(match)}/event"
+
+
+def summary(match: str) -> str:
+    return f"{PREFIX}/{check_match(match)}/summary"
+
+
+def alive(match: str, service: str, role: str | None = None) -> str:
+    """Liveliness token key of one running service (agents and humans name their role)."""
+    if service not in SERVICES:
+        raise ValueError(f"unknown service {service!r}; expected one of {SERVICES}")
+    key = f"{PREFIX}/{check_match(match)}/alive/{service}"
+    return f"{key}/{_role(role)}" if role is not None else key
+
+
+def actions(match: str) -> str:
+    """Both seats' action keys (what the sim subscribes to)."""
+    return f"{PREFIX}/{check_match(match)}/action/*"
+
+
+def seats_alive(match: str) -> str:
+    """Liveliness tokens of every service that plays a seat (agents and human gateways)."""
+    return f"{PREFIX}/{check_match(match)}/alive/*/*"
+
+
+def everything(match: str) -> str:
+    """All data keys of a match (what the recorder subscribes to)."""
+    return f"{PREFIX}/{check_match(match)}/**"
+
+
+def role_of(key: str) -> str:
+    """The role named by the last chunk of an action, policy or alive key."""
+    return _role(str(key).rsplit("/", 1)[-1])

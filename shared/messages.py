@@ -1,0 +1,294 @@
+"""Every message type on the bus: versioned msgpack records, validated where they enter a service.
+
+Each record is a map with the envelope `v` (SCHEMA_VERSION), `type`, `match`, `frame`, `sender`
+and the type's own fields. `decode(data, Type)` checks type, shape and ranges and returns the
+dataclass, or raises `MessageError` whose `reason` is a short, stable code that services count and
+log once per reason. docs/contract.md lists the fields.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, TypeVar
+
+import msgpack
+
+from services.sim.config import N_ACTIONS, ROLES, GameConfig
+from services.sim.observation import SIZE as OBS_SIZE
+
+SCHEMA_VERSION = 1
+MAX_BYTES = 64 * 1024
+MAX_FRAME = 10**9
+EVENT_KINDS = (
+    "kill",
+    "death",
+    "shield_hit",
+    "missile",
+    "shell",
+    "lock",
+    "fortress_respawn",
+    "reset",
+    "respawn",
+    "match_start",
+    "match_end",
+)
+
+
+class MessageError(ValueError):
+    """A message that does not meet the contract. `reason` is a short code for counting."""
+
+    def __init__(self, reason: str, detail: str) -> None:
+        super().__init__(f"{reason}: {detail}")
+        self.reason = reason
+
+
+Check = Callable[[Any], bool]
+
+
+def _int(lo: int, hi: int) -> Check:
+    return lambda v: isinstance(v, int) and not isinstance(v, bool) and lo <= v <= hi
+
+
+def _number(lo: float = -math.inf, hi: float = math.inf) -> Check:
+    return lambda v: (
+        isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and lo <= v <= hi
+    )
+
+
+def _text(pattern: str = r"[A-Za-z0-9_.:/-]{0,64}") -> Check:
+    regex = re.compile(pattern)
+    return lambda v: isinstance(v, str) and regex.fullmatch(v) is not None
+
+
+def _bool(v: Any) -> bool:
+    return isinstance(v, bool)
+
+
+def _vector(n: int, lo: float = -1e6, hi: float = 1e6) -> Check:
+    item = _number(lo, hi)
+    return lambda v: isinstance(v, list) and len(v) == n and all(item(x) for x in v)
+
+
+def _rows(width: int, most: int) -> Check:
+    row = _vector(width)
+    return lambda v: isinstance(v, list) and len(v) <= most and all(row(r) for r in v)
+
+
+def _one_of(options: tuple[str, ...]) -> Check:
+    return lambda v: v in options
+
+
+def _map(keys: tuple[str, ...], value: Check) -> Check:
+    return lambda v: isinstance(v, dict) and set(v) == set(keys) and all(value(v[k]) for k in keys)
+
+
+_ROLE = _one_of(ROLES)
+_ROLE_OR_NONE = _one_of(("", *ROLES))
+_KEY = _text(r"[A-Za-z0-9_.:-]{1,32}")
+_SENDER = _text(r"[A-Za-z0-9_.:/-]{1,64}")
+_MATCH = _text(r"[A-Za-z0-9_-]{1,64}")
+
+
+@dataclass(frozen=True)
+class Message:
+    """The envelope every message carries."""
+
+    TYPE: ClassVar[str] = ""
+    CHECKS: ClassVar[dict[str, Check]] = {}
+
+    match: str
+    frame: int
+    sender: str
+
+    def encode(self) -> bytes:
+        record = {"v": SCHEMA_VERSION, "type": self.TYPE, **dataclasses.asdict(self)}
+        return msgpack.packb(record, use_bin_type=True)
+
+
+@dataclass(frozen=True)
+class State(Message):
+    """One frame of the game, published by the sim after stepping.
+
+    `obs` holds each role's world-frame observation values (float64, docs/observation.md), from
+    which agents build their policy's input; `snapshot` holds what a viewer or the recorder needs
+    beyond them: ships [x, y, vx, vy, heading, alive], fortress [facing, alive, vulnerable, lock,
+    since_shell], every missile [x, y, vx, vy, owner] and shell [x, y, vx, vy]."""
+
+    TYPE: ClassVar[str] = "state"
+    CHECKS: ClassVar[dict[str, Check]] = {
+        "obs": _map(ROLES, _vector(OBS_SIZE)),
+        "ships": _rows(6, 2),
+        "fortress": _vector(5),
+        "missiles": _rows(5, 64),
+        "shells": _rows(4, 256),
+        "kills": _int(0, MAX_FRAME),
+        "points": _int(-(10**9), 10**9),
+        "frames": _int(1, MAX_FRAME),
+        "hash": _text(r"[0-9a-f]{16}"),
+        "applied": lambda v: (
+            isinstance(v, list) and len(v) == 2 and all(_int(0, N_ACTIONS - 1)(a) for a in v)
+        ),
+        "sent_ns": _int(0, 2**63),
+    }
+
+    obs: dict[str, list[float]] = field(default_factory=dict)
+    ships: list[list[float]] = field(default_factory=list)
+    fortress: list[float] = field(default_factory=list)
+    missiles: list[list[float]] = field(default_factory=list)
+    shells: list[list[float]] = field(default_factory=list)
+    kills: int = 0
+    points: int = 0
+    frames: int = 1
+    hash: str = "0" * 16
+    applied: list[int] = field(default_factory=lambda: [0, 0])  # the actions that led to this frame
+    sent_ns: int = 0
+
+
+@dataclass(frozen=True)
+class Action(Message):
+    """A player's action for the state of `frame`, from an agent (`policy` = its key) or a human."""
+
+    TYPE: ClassVar[str] = "action"
+    CHECKS: ClassVar[dict[str, Check]] = {
+        "role": _ROLE,
+        "action": _int(0, N_ACTIONS - 1),
+        "policy": _text(r"[A-Za-z0-9_.:-]{0,32}"),
+    }
+
+    role: str = "bait"
+    action: int = 0
+    policy: str = ""
+
+
+@dataclass(frozen=True)
+class PolicySwitch(Message):
+    """Tells the agent of `role` to play library policy `policy` from the next frame on."""
+
+    TYPE: ClassVar[str] = "policy"
+    CHECKS: ClassVar[dict[str, Check]] = {"role": _ROLE, "policy": _KEY, "reason": _text(r"[ -~]{0,200}")}
+
+    role: str = "bait"
+    policy: str = "circle"
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class GameEvent(Message):
+    """Something that happened in a frame (services/sim/engine.py Event), or the match's start/end."""
+
+    TYPE: ClassVar[str] = "event"
+    CHECKS: ClassVar[dict[str, Check]] = {
+        "kind": _one_of(EVENT_KINDS),
+        "role": _ROLE_OR_NONE,
+        "detail": _text(r"[ -~]{0,200}"),
+    }
+
+    kind: str = "kill"
+    role: str = ""
+    detail: str = ""
+
+
+def _config(value: Any) -> bool:
+    try:
+        GameConfig.from_dict(value)
+    except (TypeError, ValueError):
+        return False
+    return True
+
+
+@dataclass(frozen=True)
+class Start(Message):
+    """The match's set-up, published by the sim when it starts: enough to replay it."""
+
+    TYPE: ClassVar[str] = "start"
+    CHECKS: ClassVar[dict[str, Check]] = {
+        "seed": _int(-(2**63), 2**63),
+        "mode": _one_of(("realtime", "lockstep")),
+        "config": _config,
+        "policies": _map(ROLES, _text(r"[A-Za-z0-9_.:-]{0,32}")),
+    }
+
+    seed: int = 0
+    mode: str = "realtime"
+    config: dict = field(default_factory=dict)
+    policies: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Summary(Message):
+    """The match result, published once by the sim when the match ends."""
+
+    TYPE: ClassVar[str] = "summary"
+    CHECKS: ClassVar[dict[str, Check]] = {
+        "kills": _int(0, MAX_FRAME),
+        "kills_per_minute": _number(0.0),
+        "points": _int(-(10**9), 10**9),
+        "counters": lambda v: isinstance(v, dict) and set(v) == set(ROLES),
+        "timing": lambda v: (
+            isinstance(v, dict) and all(isinstance(k, str) and _number()(x) for k, x in v.items())
+        ),
+        "drops": lambda v: (
+            isinstance(v, dict) and all(isinstance(k, str) and _int(0, 2**63)(n) for k, n in v.items())
+        ),
+    }
+
+    kills: int = 0
+    kills_per_minute: float = 0.0
+    points: int = 0
+    counters: dict = field(default_factory=dict)
+    drops: dict[str, int] = field(default_factory=dict)  # bad input the sim dropped, by reason
+    timing: dict[str, float] = field(default_factory=dict)  # round trip and tick jitter, ms
+
+
+TYPES: dict[str, type[Message]] = {
+    t.TYPE: t for t in (Start, State, Action, PolicySwitch, GameEvent, Summary)
+}
+_ENVELOPE: dict[str, Check] = {"match": _MATCH, "frame": _int(0, MAX_FRAME), "sender": _SENDER}
+M = TypeVar("M", bound=Message)
+
+
+def decode(data: bytes | bytearray | memoryview, expected: type[M]) -> M:
+    """Bytes from the bus -> a validated message of the expected type, or MessageError."""
+    return _build(_unpack(data), expected)
+
+
+def decode_any(data: bytes | bytearray | memoryview) -> Message:
+    """Bytes -> a validated message of whichever known type it declares (for the recorder)."""
+    record = _unpack(data)
+    kind = record.get("type")
+    if kind not in TYPES:
+        raise MessageError("type", f"unknown message type {kind!r}")
+    return _build(record, TYPES[kind])
+
+
+def _unpack(data: bytes | bytearray | memoryview) -> dict:
+    if len(data) > MAX_BYTES:
+        raise MessageError("too_large", f"{len(data)} bytes > {MAX_BYTES}")
+    try:
+        record = msgpack.unpackb(bytes(data), raw=False, strict_map_key=True)
+    except Exception as exc:  # msgpack raises several unrelated types for garbage
+        raise MessageError("undecodable", f"not msgpack: {type(exc).__name__}") from None
+    if not isinstance(record, dict):
+        raise MessageError("shape", f"expected a map, got {type(record).__name__}")
+    if record.get("v") != SCHEMA_VERSION:
+        raise MessageError("version", f"schema version {record.get('v')!r}, expected {SCHEMA_VERSION}")
+    return record
+
+
+def _build(record: dict, expected: type[M]) -> M:
+    if record.get("type") != expected.TYPE:
+        raise MessageError("type", f"expected {expected.TYPE!r}, got {record.get('type')!r}")
+    checks = {**_ENVELOPE, **expected.CHECKS}
+    extra = set(record) - set(checks) - {"v", "type"}
+    if extra:
+        raise MessageError("shape", f"unexpected fields {sorted(extra)}")
+    for name, check in checks.items():
+        if name not in record:
+            raise MessageError("shape", f"missing field {name!r}")
+        if not check(record[name]):
+            raise MessageError("range", f"bad {expected.TYPE}.{name}: {str(record[name])[:80]}")
+    return expected(**{name: record[name] for name in checks})

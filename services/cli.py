@@ -25,12 +25,17 @@ Mode = Annotated[str, typer.Option("--mode", help="zenoh mode: peer (default), c
 Listen = Annotated[list[str] | None, typer.Option("--listen", help="Endpoint to listen on (repeatable).")]
 Connect = Annotated[list[str] | None, typer.Option("--connect", help="Endpoint to connect to (repeatable).")]
 Multicast = Annotated[bool, typer.Option("--multicast", help="Turn multicast scouting on (off by default).")]
+LowLatency = Annotated[bool, typer.Option("--low-latency", help="zenoh low-latency transport (all peers).")]
 Match = Annotated[str, typer.Option("--match", help="Match id: the key namespace tsf/<match>/...")]
 
 
-def _bus(mode: str, listen: list[str] | None, connect: list[str] | None, multicast: bool) -> BusConfig:
+def _bus(
+    mode: str, listen: list[str] | None, connect: list[str] | None, multicast: bool, low_latency: bool
+) -> BusConfig:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
-    return BusConfig(mode, tuple(listen or ("tcp/127.0.0.1:0",)), tuple(connect or ()), multicast)
+    return BusConfig(
+        mode, tuple(listen or ("tcp/127.0.0.1:0",)), tuple(connect or ()), multicast, low_latency
+    )
 
 
 @app.command()
@@ -81,16 +86,17 @@ def sim(
     listen: Listen = None,
     connect: Connect = None,
     multicast: Multicast = False,
+    low_latency: LowLatency = False,
 ) -> None:
     """Run the sim service for one match."""
     from services.sim.service import run_sim
 
     summary = run_sim(
-        _bus(zmode, listen, connect, multicast), match, seed, GameConfig(frames=frames), mode,
+        _bus(zmode, listen, connect, multicast, low_latency), match, seed, GameConfig(frames=frames), mode,
         {"bait": bait, "shooter": shooter}, stop_on_signals(), wait_players, wait_recorder,
     )  # fmt: skip
     logging.getLogger("tsf.sim").info(
-        "match %s over: %d kills in %d frames", match, summary.kills, summary.frame
+        "match %s over: %d kills in %d frames; timing %s", match, summary.kills, summary.frame, summary.timing
     )
 
 
@@ -104,11 +110,14 @@ def agent(
     listen: Listen = None,
     connect: Connect = None,
     multicast: Multicast = False,
+    low_latency: LowLatency = False,
 ) -> None:
     """Run an agent service that plays one seat."""
     from services.agent.service import run_agent
 
-    run_agent(_bus(zmode, listen, connect, multicast), match, role, policy, seed, stop_on_signals())
+    run_agent(
+        _bus(zmode, listen, connect, multicast, low_latency), match, role, policy, seed, stop_on_signals()
+    )
 
 
 @app.command()
@@ -119,11 +128,12 @@ def recorder(
     listen: Listen = None,
     connect: Connect = None,
     multicast: Multicast = False,
+    low_latency: LowLatency = False,
 ) -> None:
     """Run the recorder service for one match."""
     from services.recorder.service import run_recorder
 
-    path = run_recorder(_bus(zmode, listen, connect, multicast), match, out, stop_on_signals())
+    path = run_recorder(_bus(zmode, listen, connect, multicast, low_latency), match, out, stop_on_signals())
     logging.getLogger("tsf.recorder").info("recording written to %s", path)
 
 

@@ -32,6 +32,7 @@ class MatchPlan:
     bait: str = "circle"
     shooter: str = "mirror"
     directory: Path = Path("recordings")
+    low_latency: bool = True
 
 
 def service_command(name: str, bus: BusConfig, *args: str) -> list[str]:
@@ -75,8 +76,8 @@ def run_match(
 ) -> tuple[Summary, Path]:
     """Run the match to its end; `on_state` sees every state (for a live scoreboard)."""
     endpoint = free_endpoint()
-    sim_bus = BusConfig(listen=(endpoint,))
-    peer_bus = BusConfig(connect=(endpoint,))
+    sim_bus = BusConfig(listen=(endpoint,), low_latency=plan.low_latency)
+    peer_bus = BusConfig(connect=(endpoint,), low_latency=plan.low_latency)
     summary: list[Summary] = []
     done = threading.Event()
 

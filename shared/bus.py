@@ -33,6 +33,7 @@ class BusConfig:
     listen: tuple[str, ...] = ("tcp/127.0.0.1:0",)
     connect: tuple[str, ...] = ()
     multicast: bool = False
+    low_latency: bool = False  # zenoh's low-latency unicast transport (no QoS); every peer must agree
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -44,6 +45,9 @@ class BusConfig:
         config.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
         config.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
         config.insert_json5("scouting/multicast/enabled", json.dumps(self.multicast))
+        if self.low_latency:
+            config.insert_json5("transport/unicast/lowlatency", "true")
+            config.insert_json5("transport/unicast/qos/enabled", "false")
         return config
 
     def to_args(self) -> list[str]:
@@ -53,7 +57,8 @@ class BusConfig:
             args += ["--listen", endpoint]
         for endpoint in self.connect:
             args += ["--connect", endpoint]
-        return [*args, "--multicast"] if self.multicast else args
+        args += ["--multicast"] if self.multicast else []
+        return [*args, "--low-latency"] if self.low_latency else args
 
 
 def free_endpoint(host: str = "127.0.0.1") -> str:

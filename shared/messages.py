@@ -18,6 +18,7 @@ from typing import Any, ClassVar, TypeVar
 import msgpack
 
 from services.sim.config import N_ACTIONS, ROLES, GameConfig
+from services.sim.engine import DEATH_CAUSES
 from services.sim.observation import SIZE as OBS_SIZE
 
 SCHEMA_VERSION = 1
@@ -69,8 +70,18 @@ def _bool(v: Any) -> bool:
 
 
 def _vector(n: int, lo: float = -1e6, hi: float = 1e6) -> Check:
-    item = _number(lo, hi)
-    return lambda v: isinstance(v, list) and len(v) == n and all(item(x) for x in v)
+    """A list of n finite numbers in [lo, hi]; C-speed builtins, since states carry hundreds."""
+
+    def check(v: Any) -> bool:
+        if not isinstance(v, list) or len(v) != n or not {type(x) for x in v} <= {float, int}:
+            return False
+        try:
+            finite = math.isfinite(math.fsum(v))  # NaN or an infinity anywhere makes the sum so
+        except (OverflowError, ValueError):
+            return False
+        return finite and (n == 0 or (lo <= min(v) and max(v) <= hi))
+
+    return check
 
 
 def _rows(width: int, most: int) -> Check:
@@ -105,7 +116,8 @@ class Message:
     sender: str
 
     def encode(self) -> bytes:
-        record = {"v": SCHEMA_VERSION, "type": self.TYPE, **dataclasses.asdict(self)}
+        record = {"v": SCHEMA_VERSION, "type": self.TYPE}
+        record.update((f.name, getattr(self, f.name)) for f in dataclasses.fields(self))
         return msgpack.packb(record, use_bin_type=True)
 
 
@@ -192,6 +204,20 @@ class GameEvent(Message):
     detail: str = ""
 
 
+_COUNT = _int(0, MAX_FRAME)
+
+
+def _counters(v: Any) -> bool:
+    """One player's counters, shaped as services.sim.engine.Counters.to_dict()."""
+    plain = ("kills", "missiles_fired", "shield_hits", "frames_in_region", "frames_locked")
+    return (
+        isinstance(v, dict)
+        and set(v) == {*plain, "deaths"}
+        and all(_COUNT(v[k]) for k in plain)
+        and _map(DEATH_CAUSES, _COUNT)(v["deaths"])
+    )
+
+
 def _config(value: Any) -> bool:
     try:
         GameConfig.from_dict(value)
@@ -227,7 +253,7 @@ class Summary(Message):
         "kills": _int(0, MAX_FRAME),
         "kills_per_minute": _number(0.0),
         "points": _int(-(10**9), 10**9),
-        "counters": lambda v: isinstance(v, dict) and set(v) == set(ROLES),
+        "counters": _map(ROLES, _counters),
         "timing": lambda v: (
             isinstance(v, dict) and all(isinstance(k, str) and _number()(x) for k, x in v.items())
         ),
@@ -260,7 +286,7 @@ def decode_any(data: bytes | bytearray | memoryview) -> Message:
     """Bytes -> a validated message of whichever known type it declares (for the recorder)."""
     record = _unpack(data)
     kind = record.get("type")
-    if kind not in TYPES:
+    if not isinstance(kind, str) or kind not in TYPES:  # a list or map here is unhashable
         raise MessageError("type", f"unknown message type {kind!r}")
     return _build(record, TYPES[kind])
 
@@ -274,7 +300,7 @@ def _unpack(data: bytes | bytearray | memoryview) -> dict:
         raise MessageError("undecodable", f"not msgpack: {type(exc).__name__}") from None
     if not isinstance(record, dict):
         raise MessageError("shape", f"expected a map, got {type(record).__name__}")
-    if record.get("v") != SCHEMA_VERSION:
+    if type(record.get("v")) is not int or record["v"] != SCHEMA_VERSION:
         raise MessageError("version", f"schema version {record.get('v')!r}, expected {SCHEMA_VERSION}")
     return record
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import math
 from dataclasses import dataclass
 
 ROLES: tuple[str, str] = ("bait", "shooter")
@@ -81,12 +82,7 @@ class GameConfig:
         for name, value in values.items():
             default = getattr(defaults, name)
             value = tuple(value) if isinstance(value, list) else value
-            numeric = (int, float) if isinstance(default, float) else type(default)
-            if (
-                isinstance(value, bool)
-                or not isinstance(value, numeric)
-                or (isinstance(default, tuple) and len(value) != len(default))
-            ):
+            if not _same_kind(value, default):
                 raise ValueError(f"config field {name}: {value!r} does not match {default!r}")
             converted[name] = value
         return cls(**converted)
@@ -95,6 +91,22 @@ class GameConfig:
         """Stable short hash, so artifacts (tables, recordings) can name the rules they used."""
         text = json.dumps(self.to_dict(), sort_keys=True)
         return hashlib.blake2b(text.encode(), digest_size=8).hexdigest()
+
+
+def _same_kind(value: object, default: object) -> bool:
+    """Whether a loaded value can stand for a default: an int for an int, a finite number for a
+    float, a tuple of such numbers as long as the default's."""
+    if isinstance(default, tuple):
+        return (
+            isinstance(value, tuple)
+            and len(value) == len(default)
+            and all(_same_kind(v, d) for v, d in zip(value, default, strict=True))
+        )
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    if isinstance(default, int):
+        return isinstance(value, int)
+    return math.isfinite(value)
 
 
 def split_action(action: int) -> tuple[int, int, int]:

@@ -1,0 +1,158 @@
+"""Reading recordings: a real match written in-process as the recorder writes it, loaded, replayed
+through the engine and exported to Parquet."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import pytest
+
+from services.agent.player import Player
+from services.recorder.log import GapTracker, LogWriter
+from services.recorder.recording import TABLES, Recording, export_parquet, load, read_parquet, replay
+from services.sim.config import ROLES, GameConfig
+from services.sim.engine import Game
+from services.sim.match import event_messages, start_message, state_message, summary_message
+from shared import keys
+from shared.messages import PolicySwitch, State
+
+M = "rec-1"
+SEED = 5
+FRAMES = 60
+POLICIES = {"bait": "circle", "shooter": "mirror"}
+SWITCH_AT = 30  # the bait switches to idle before answering this frame
+
+
+def record_match(
+    path: Path, tamper: int | None = None, lose: int | None = None, summary: bool = True
+) -> list[State]:
+    """Play a lockstep match of the scripted pair and log every message as the recorder does.
+    `tamper`: that frame's state is logged with a wrong hash; `lose`: that state never arrives."""
+    game = Game(GameConfig(frames=FRAMES), SEED)
+    players = {role: Player(role, POLICIES[role], SEED) for role in ROLES}
+    gaps, published, applied = GapTracker(), [], (0, 0)
+    with LogWriter(path) as log:
+        log.write(keys.start(M), start_message(game, M, "sim", "lockstep", POLICIES).encode())
+        while True:
+            state = state_message(game, M, "sim", applied)
+            published.append(state)
+            if state.frame == tamper:
+                state = dataclasses.replace(state, hash=f"{int(state.hash, 16) ^ 1:016x}")
+            if state.frame != lose:
+                if gap := gaps.see(state.frame):
+                    log.write_gap(*gap)
+                log.write(keys.state(M), state.encode())
+            for event in event_messages(game, M, "sim"):
+                log.write(keys.event(M), event.encode())
+            if game.done:
+                break
+            if state.frame == SWITCH_AT:
+                switch = PolicySwitch(M, state.frame, "operator", "bait", "idle", "test")
+                log.write(keys.policy(M, "bait"), switch.encode())
+                players["bait"].switch(switch.policy)
+            answers = [players[role].act(state, f"agent/{role}") for role in ROLES]
+            for answer in answers:
+                log.write(keys.action(M, answer.role), answer.encode())
+            applied = tuple(a.action for a in answers)
+            game.step(*applied)
+        if summary:
+            log.write(keys.summary(M), summary_message(game, M, "sim", {}, {}).encode())
+    return published
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory: pytest.TempPathFactory) -> tuple[Recording, list[State]]:
+    path = tmp_path_factory.mktemp("rec") / f"{M}.tsflog"
+    states = record_match(path)
+    return load(path), states
+
+
+def test_load_counts(recorded: tuple[Recording, list[State]]) -> None:
+    recording, states = recorded
+    assert recording.clean and recording.undecodable == 0 and recording.gaps == []
+    assert recording.start is not None and recording.start.seed == SEED
+    assert recording.summary is not None and recording.summary.frame == FRAMES
+    assert [s.frame for s in recording.states] == list(range(FRAMES + 1))
+    assert recording.states == states
+    assert len(recording.actions) == 2 * FRAMES
+    assert [a.policy for _, a in recording.actions if a.role == "bait"] == ["circle"] * SWITCH_AT + [
+        "idle"
+    ] * (FRAMES - SWITCH_AT)
+    assert [(s.frame, s.policy) for s in recording.switches] == [(SWITCH_AT, "idle")]
+    assert recording.events and all(e.frame <= FRAMES for e in recording.events)
+    assert sum(e.kind == "missile" for e in recording.events) == sum(
+        c["missiles_fired"] for c in recording.summary.counters.values()
+    )
+
+
+def test_applied_actions_are_the_answers(recorded: tuple[Recording, list[State]]) -> None:
+    recording, _ = recorded
+    answers = {(a.frame, a.role): a.action for _, a in recording.actions}
+    for state in recording.states[1:]:
+        assert state.applied == [answers[(state.frame - 1, role)] for role in ROLES]
+
+
+def test_replay_reproduces(recorded: tuple[Recording, list[State]]) -> None:
+    assert replay(recorded[0]) == []
+
+
+def test_replay_reports_tampered_frame(tmp_path: Path) -> None:
+    path = tmp_path / "t.tsflog"
+    record_match(path, tamper=17)
+    assert replay(load(path)) == [17]
+
+
+def test_lost_state_is_a_gap(tmp_path: Path) -> None:
+    path = tmp_path / "g.tsflog"
+    record_match(path, lose=20, summary=False)
+    recording = load(path)
+    assert recording.gaps == [(20, 20)] and recording.missing_frames == 1 and recording.summary is None
+    with pytest.raises(ValueError, match="frame 20 is missing"):
+        replay(recording)
+    export_parquet(recording, tmp_path / "pq")
+    tables = read_parquet(tmp_path / "pq")
+    assert tables["gaps"].to_pydict() == {"first": [20], "last": [20]}
+    assert tables["match"].to_pydict()["missing_frames"] == [1]
+    assert tables["match"].to_pydict()["kills"] == [None]
+
+
+def test_replay_needs_a_start(recorded: tuple[Recording, list[State]]) -> None:
+    with pytest.raises(ValueError, match="no start record"):
+        replay(dataclasses.replace(recorded[0], start=None))
+
+
+def test_parquet_round_trip(recorded: tuple[Recording, list[State]], tmp_path: Path) -> None:
+    recording, _ = recorded
+    paths = export_parquet(recording, tmp_path / "out")
+    assert set(paths) == set(TABLES) and all(p.exists() for p in paths.values())
+    tables = {name: table.to_pydict() for name, table in read_parquet(tmp_path / "out").items()}
+    states, actions = tables["states"], tables["actions"]
+
+    assert len(states["frame"]) == len(recording.states)
+    assert states["hash"] == [s.hash for s in recording.states]
+    assert states["bait_obs"][10] == recording.states[10].obs["bait"]
+    assert states["shooter_action"] == [s.applied[1] for s in recording.states]
+    assert states["ships"][5] == recording.states[5].ships
+    for role in ROLES:
+        mine = [i for i, r in enumerate(actions["role"]) if r == role]
+        assert [actions["action"][i] for i in mine] == [
+            a.action for _, a in recording.actions if a.role == role
+        ]
+    assert actions["received_ns"] == [t for t, _ in recording.actions]
+    assert len(tables["events"]["kind"]) == len(recording.events)
+    assert tables["switches"] == {
+        "frame": [SWITCH_AT],
+        "role": ["bait"],
+        "policy": ["idle"],
+        "reason": ["test"],
+    }
+    assert tables["gaps"] == {"first": [], "last": []}
+
+    match = {name: values[0] for name, values in tables["match"].items()}
+    assert len(tables["match"]["seed"]) == 1
+    assert (match["match"], match["seed"], match["mode"]) == (M, SEED, "lockstep")
+    assert (match["kills"], match["frames"]) == (recording.summary.kills, FRAMES)
+    assert match["clean"] and match["missing_frames"] == 0
+    assert GameConfig.from_dict(json.loads(match["config"])) == GameConfig(frames=FRAMES)

@@ -1,0 +1,247 @@
+"""The message contract: every type round-trips, every bad input fails with its reason code, and no
+input whatever makes decoding raise anything but MessageError."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import msgpack
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from services.sim.config import GameConfig
+from services.sim.engine import Game
+from services.sim.match import start_message, state_message, summary_message
+from services.sim.observation import SIZE as OBS_SIZE
+from shared.messages import (
+    MAX_BYTES,
+    SCHEMA_VERSION,
+    TYPES,
+    Action,
+    GameEvent,
+    Message,
+    MessageError,
+    PolicySwitch,
+    Start,
+    State,
+    Summary,
+    decode,
+    decode_any,
+)
+
+M = "match-1"
+POLICIES = {"bait": "circle", "shooter": "mirror"}
+FUZZ = settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+
+
+def played(steps: int = 40) -> Game:
+    """A game after some steps with the shooter firing, so that missiles and events exist."""
+    game = Game(GameConfig(frames=60), seed=3)
+    for frame in range(steps):
+        game.step(2 + 4 * (frame % 3 == 0), 1 + 4 * (frame % 5 == 0))
+    return game
+
+
+def examples() -> dict[str, Message]:
+    """One realistic instance of every message type."""
+    game = played()
+    return {
+        "start": start_message(Game(GameConfig(frames=60), seed=3), M, "sim", "lockstep", POLICIES),
+        "state": state_message(game, M, "sim", (6, 1)),
+        "action": Action(M, game.frame, "agent/bait", "bait", 11, "circle"),
+        "policy": PolicySwitch(M, game.frame, "adapter", "shooter", "mirror", "cross-entropy 2.3 > 1.5"),
+        "event": GameEvent(M, 12, "sim", "death", "bait", "shell"),
+        "summary": summary_message(game, M, "sim", {"range": 2, "shape": 1}, {"round_trip_ms_p50": 1.5}),
+    }
+
+
+EXAMPLES = examples()
+
+
+def record(kind: str, /, **changes: Any) -> dict:
+    """The wire record of the example of `kind`, with fields changed (a value of ... deletes it)."""
+    out = msgpack.unpackb(EXAMPLES[kind].encode(), raw=False)
+    for name, value in changes.items():
+        if value is ...:
+            del out[name]
+        else:
+            out[name] = value
+    return out
+
+
+def pack(value: Any) -> bytes:
+    return msgpack.packb(value, use_bin_type=True)
+
+
+def reason(data: bytes, expected: type[Message] | None = None) -> str:
+    with pytest.raises(MessageError) as caught:
+        decode(data, expected) if expected else decode_any(data)
+    return caught.value.reason
+
+
+def test_examples_cover_every_type() -> None:
+    assert set(EXAMPLES) == set(TYPES)
+    assert EXAMPLES["state"].missiles  # a state with projectiles in flight
+
+
+@pytest.mark.parametrize("kind", sorted(TYPES))
+def test_round_trip(kind: str) -> None:
+    message = EXAMPLES[kind]
+    data = message.encode()
+    for view in (data, bytearray(data), memoryview(data)):
+        for decoded in (decode(view, TYPES[kind]), decode_any(view)):
+            assert type(decoded) is TYPES[kind]
+            assert decoded.encode() == data
+            if kind != "start":  # msgpack turns the config's spawn tuples into lists
+                assert decoded == message
+
+
+def test_start_config_round_trips() -> None:
+    start = decode(EXAMPLES["start"].encode(), Start)
+    assert GameConfig.from_dict(start.config) == GameConfig(frames=60)
+    assert (start.seed, start.mode, start.policies) == (3, "lockstep", POLICIES)
+
+
+def obs_with(value: float, role: str = "shooter", index: int = 5, length: int | None = None) -> bytes:
+    obs = {r: list(v) for r, v in EXAMPLES["state"].obs.items()}
+    obs[role][index] = value
+    if length is not None:
+        obs[role] = (obs[role] + [0.0] * length)[:length]
+    return pack(record("state", obs=obs))
+
+
+BAD: list[tuple[str, Callable[[], bytes], type[Message] | None, str]] = [
+    ("wrong version", lambda: pack(record("action", v=SCHEMA_VERSION + 1)), Action, "version"),
+    ("no version", lambda: pack(record("action", v=...)), None, "version"),
+    ("unknown type", lambda: pack(record("action", type="chat")), None, "type"),
+    ("type is a list", lambda: pack(record("action", type=["action"])), None, "type"),
+    ("type is a map", lambda: pack(record("action", type={"a": 1})), None, "type"),
+    ("wrong expected type", lambda: EXAMPLES["action"].encode(), State, "type"),
+    ("missing field", lambda: pack(record("action", role=...)), Action, "shape"),
+    ("missing envelope", lambda: pack(record("state", frame=...)), None, "shape"),
+    ("extra field", lambda: pack(record("event", colour="red")), GameEvent, "shape"),
+    ("action 12", lambda: pack(record("action", action=12)), Action, "range"),
+    ("action -1", lambda: pack(record("action", action=-1)), Action, "range"),
+    ("bool action", lambda: pack(record("action", action=True)), Action, "range"),
+    ("bool frame", lambda: pack(record("policy", frame=False)), PolicySwitch, "range"),
+    ("float kills", lambda: pack(record("summary", kills=1.0)), Summary, "range"),
+    ("unknown role", lambda: pack(record("action", role="pilot")), Action, "range"),
+    ("wildcard match", lambda: pack(record("event", match="a/*")), GameEvent, "range"),
+    ("unknown event", lambda: pack(record("event", kind="explosion")), GameEvent, "range"),
+    ("bad mode", lambda: pack(record("start", mode="turbo")), Start, "range"),
+    ("bad config", lambda: pack(record("start", config={"fps": 30})), Start, "range"),
+    ("bad hash", lambda: pack(record("state", hash="XYZ")), State, "range"),
+    ("applied too short", lambda: pack(record("state", applied=[1])), State, "range"),
+    ("too many missiles", lambda: pack(record("state", missiles=[[0.0] * 5] * 65)), State, "range"),
+    ("negative kpm", lambda: pack(record("summary", kills_per_minute=-1.0)), Summary, "range"),
+    ("counters roles", lambda: pack(record("summary", counters={"bait": {}})), Summary, "range"),
+    ("undecodable", lambda: b"\xc1", None, "undecodable"),
+    ("truncated", lambda: EXAMPLES["action"].encode()[:-1], Action, "undecodable"),
+    ("trailing bytes", lambda: EXAMPLES["action"].encode() + b"\x00", Action, "undecodable"),
+    ("bad utf-8", lambda: b"\x81\xa1v\xa2\xff\xfe", None, "undecodable"),
+    ("list", lambda: pack([1, "state"]), None, "shape"),
+    ("int", lambda: pack(7), State, "shape"),
+    ("too large", lambda: b"\x00" * (MAX_BYTES + 1), None, "too_large"),
+    ("too large valid", lambda: pack(record("event", detail="x" * MAX_BYTES)), GameEvent, "too_large"),
+    ("NaN in obs", lambda: obs_with(math.nan), State, "range"),
+    ("inf in obs", lambda: obs_with(math.inf, "bait"), State, "range"),
+    ("-inf in obs", lambda: obs_with(-math.inf, index=0), State, "range"),
+    ("huge in obs", lambda: obs_with(1e300), State, "range"),
+    ("bool in obs", lambda: obs_with(True), State, "range"),  # type: ignore[arg-type]
+    ("str in obs", lambda: obs_with("1.0"), State, "range"),  # type: ignore[arg-type]
+    ("short obs", lambda: obs_with(0.0, length=OBS_SIZE - 1), State, "range"),
+    ("long obs", lambda: obs_with(0.0, length=OBS_SIZE + 1), State, "range"),
+    (
+        "inf in fortress",
+        lambda: pack(record("state", fortress=[0.0, 1.0, 0.0, math.inf, 0.0])),
+        State,
+        "range",
+    ),
+    ("NaN timing", lambda: pack(record("summary", timing={"tick_late_ms_p50": math.nan})), Summary, "range"),
+    ("obs missing role", lambda: pack(record("state", obs={"bait": [0.0] * OBS_SIZE})), State, "range"),
+    ("version true", lambda: pack(record("action", v=True)), Action, "version"),
+    ("version float", lambda: pack(record("action", v=1.0)), Action, "version"),
+    ("config NaN", lambda: pack(record("start", config=config_with(ship_thrust=math.nan))), Start, "range"),
+    (
+        "config spawn",
+        lambda: pack(record("start", config=config_with(bait_spawn=["a", None, []]))),
+        Start,
+        "range",
+    ),
+    (
+        "counter values",
+        lambda: pack(record("summary", counters={"bait": b"x", "shooter": 1})),
+        Summary,
+        "range",
+    ),
+]
+
+
+def config_with(**changes: Any) -> dict:
+    return {**GameConfig().to_dict(), **changes}
+
+
+@pytest.mark.parametrize(("data", "expected", "code"), [b[1:] for b in BAD], ids=[b[0] for b in BAD])
+def test_bad_input_reason(data: Callable[[], bytes], expected: type[Message] | None, code: str) -> None:
+    payload = data()
+    assert reason(payload, expected) == code
+    if expected is not None and code != "type":  # the same bytes fail the same way untyped
+        assert reason(payload) == code
+
+
+def test_message_error_is_value_error() -> None:
+    error = MessageError("range", "bad")
+    assert isinstance(error, ValueError) and error.reason == "range" and str(error) == "range: bad"
+
+
+# ---------------------------------------------------------------------------------------- fuzzing
+
+SCALARS = (
+    st.none()
+    | st.booleans()
+    | st.integers(min_value=-(2**63), max_value=2**64 - 1)
+    | st.floats(allow_nan=True, allow_infinity=True)
+    | st.text(max_size=20)
+    | st.binary(max_size=20)
+)
+PACKABLE = st.recursive(
+    SCALARS,
+    lambda inner: (
+        st.lists(inner, max_size=6)
+        | st.dictionaries(st.text(max_size=8) | st.binary(max_size=4) | st.integers(-9, 9), inner, max_size=6)
+    ),
+    max_leaves=30,
+)
+FIELDS = sorted({"v", "type", "match", "frame", "sender"} | {n for t in TYPES.values() for n in t.CHECKS})
+
+
+def only_message_errors(data: bytes) -> None:
+    """Every decoder either returns a message that re-encodes to itself or raises MessageError."""
+    for expected in (None, *TYPES.values()):
+        try:
+            message = decode(data, expected) if expected else decode_any(data)
+        except MessageError:
+            continue
+        assert decode(message.encode(), type(message)).encode() == message.encode()
+
+
+@FUZZ
+@given(st.binary(max_size=300))
+def test_fuzz_bytes(data: bytes) -> None:
+    only_message_errors(data)
+
+
+@FUZZ
+@given(PACKABLE)
+def test_fuzz_structures(value: Any) -> None:
+    only_message_errors(pack(value))
+
+
+@FUZZ
+@given(st.sampled_from(sorted(TYPES)), st.dictionaries(st.sampled_from(FIELDS), PACKABLE, max_size=4))
+def test_fuzz_near_valid(kind: str, changes: dict) -> None:
+    """Valid records with a few fields replaced by anything: reaches every field check."""
+    only_message_errors(pack({**record(kind), **changes}))

@@ -26,6 +26,10 @@ Listen = Annotated[list[str] | None, typer.Option("--listen", help="Endpoint to 
 Connect = Annotated[list[str] | None, typer.Option("--connect", help="Endpoint to connect to (repeatable).")]
 Multicast = Annotated[bool, typer.Option("--multicast", help="Turn multicast scouting on (off by default).")]
 LowLatency = Annotated[bool, typer.Option("--low-latency", help="zenoh low-latency transport (all peers).")]
+User = Annotated[
+    str, typer.Option("--user", help="Log-in for a secured router; the password comes from TSF_BUS_PASSWORD.")
+]
+Password = Annotated[str, typer.Option("--password", envvar="TSF_BUS_PASSWORD", hidden=True)]
 Match = Annotated[str, typer.Option("--match", help="Match id: the key namespace tsf/<match>/...")]
 
 
@@ -87,13 +91,16 @@ def sim(
     connect: Connect = None,
     multicast: Multicast = False,
     low_latency: LowLatency = False,
+    user: User = "",
+    password: Password = "",
 ) -> None:
     """Run the sim service for one match."""
     from services.sim.service import run_sim
 
+    bus = _bus(zmode, listen, connect, multicast, low_latency, user, password)
     summary = run_sim(
-        _bus(zmode, listen, connect, multicast, low_latency), match, seed, GameConfig(frames=frames), mode,
-        {"bait": bait, "shooter": shooter}, stop_on_signals(), wait_players, wait_recorder,
+        bus, match, seed, GameConfig(frames=frames), mode, {"bait": bait, "shooter": shooter},
+        stop_on_signals(), wait_players, wait_recorder,
     )  # fmt: skip
     logging.getLogger("tsf.sim").info(
         "match %s over: %d kills in %d frames; timing %s", match, summary.kills, summary.frame, summary.timing
@@ -111,12 +118,19 @@ def agent(
     connect: Connect = None,
     multicast: Multicast = False,
     low_latency: LowLatency = False,
+    user: User = "",
+    password: Password = "",
 ) -> None:
     """Run an agent service that plays one seat."""
     from services.agent.service import run_agent
 
     run_agent(
-        _bus(zmode, listen, connect, multicast, low_latency), match, role, policy, seed, stop_on_signals()
+        _bus(zmode, listen, connect, multicast, low_latency, user, password),
+        match,
+        role,
+        policy,
+        seed,
+        stop_on_signals(),
     )
 
 
@@ -129,12 +143,32 @@ def recorder(
     connect: Connect = None,
     multicast: Multicast = False,
     low_latency: LowLatency = False,
+    user: User = "",
+    password: Password = "",
 ) -> None:
     """Run the recorder service for one match."""
     from services.recorder.service import run_recorder
 
-    path = run_recorder(_bus(zmode, listen, connect, multicast, low_latency), match, out, stop_on_signals())
+    path = run_recorder(
+        _bus(zmode, listen, connect, multicast, low_latency, user, password), match, out, stop_on_signals()
+    )
     logging.getLogger("tsf.recorder").info("recording written to %s", path)
+
+
+@app.command()
+def router(
+    listen: Annotated[list[str] | None, typer.Option("--listen", help="Endpoint (repeatable).")] = None,
+    credentials: Path | None = typer.Option(
+        None, help="Dictionary file of `user:password` lines: turns on log-in and access control."
+    ),
+) -> None:
+    """Run a zenoh router (a Python session in router mode) for matches across machines."""
+    from services.router import run_router
+
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    endpoints = tuple(listen or ("tcp/0.0.0.0:7447",))
+    logging.getLogger("tsf.router").info("routing on %s%s", endpoints, " (secured)" if credentials else "")
+    run_router(endpoints, credentials, stop_on_signals())
 
 
 @app.command("match")

@@ -34,6 +34,9 @@ class BusConfig:
     connect: tuple[str, ...] = ()
     multicast: bool = False
     low_latency: bool = False  # zenoh's low-latency unicast transport (no QoS); every peer must agree
+    user: str = ""  # credentials for a secured router (services/router.py); empty: none
+    password: str = ""
+    wait_router: float = 10.0  # seconds a client keeps trying to reach its router at start
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -45,6 +48,14 @@ class BusConfig:
         config.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
         config.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
         config.insert_json5("scouting/multicast/enabled", json.dumps(self.multicast))
+        # A client waits for its router (services may start in any order); a peer retries in the
+        # background for ever (zenoh's default).
+        timeouts = {"client": round(self.wait_router * 1000), "peer": -1, "router": -1}
+        config.insert_json5("connect/timeout_ms", json.dumps(timeouts))
+        if self.user:
+            config.insert_json5(
+                "transport/auth/usrpwd", json.dumps({"user": self.user, "password": self.password})
+            )
         if self.low_latency:
             config.insert_json5("transport/unicast/lowlatency", "true")
             config.insert_json5("transport/unicast/qos/enabled", "false")
@@ -58,6 +69,7 @@ class BusConfig:
         for endpoint in self.connect:
             args += ["--connect", endpoint]
         args += ["--multicast"] if self.multicast else []
+        args += ["--user", self.user] if self.user else []
         return [*args, "--low-latency"] if self.low_latency else args
 
 

@@ -101,7 +101,8 @@ def run_sim(
             wait(lambda: recorders[0] > 0, wait_recorder)
             # At the states' priority: zenoh orders messages only within one priority, so a start
             # put at the default priority could arrive after state 0.
-            start_bytes = start_message(game, match, "sim", mode, policies or {}).encode()
+            named = {role: (policies or {}).get(role, "") for role in ROLES}  # the contract wants both
+            start_bytes = start_message(game, match, "sim", mode, named).encode()
             z.put(keys.start(match), start_bytes, priority=zenoh.Priority.REAL_TIME)
             sent: dict[int, int] = {}
             ticks: list[float] = []

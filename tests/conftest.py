@@ -1,0 +1,151 @@
+"""Shared fixtures of the bus tests: one loopback endpoint per test, sessions and services that are
+always closed or killed at teardown, a poll helper, and a tap that records what a match puts on the bus."""
+
+from __future__ import annotations
+
+import subprocess
+import threading
+import time
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
+from contextlib import ExitStack
+
+import pytest
+import zenoh
+
+from services.launch import service_command
+from shared import keys
+from shared.bus import BusConfig, free_endpoint, session
+from shared.messages import Message, MessageError, decode_any
+
+
+def wait_until(predicate: Callable[[], object], timeout: float = 5.0, interval: float = 0.005) -> bool:
+    """Poll `predicate` until it is true or `timeout` seconds pass; returns its last truth."""
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            return bool(predicate())
+        time.sleep(interval)
+    return True
+
+
+class Bus:
+    """The test's bus: one free loopback endpoint that one session listens on and the others connect
+    to (multicast off). Sessions opened here are closed at teardown."""
+
+    def __init__(self, endpoint: str, stack: ExitStack) -> None:
+        self.endpoint, self._stack = endpoint, stack
+
+    def config(self, listen: bool = False) -> BusConfig:
+        return BusConfig(listen=(self.endpoint,)) if listen else BusConfig(connect=(self.endpoint,))
+
+    def open(self, listen: bool = False) -> zenoh.Session:
+        return self._stack.enter_context(session(self.config(listen)))
+
+
+class Tap:
+    """Records every sample of a match in arrival order, decoded where valid, and the live tokens."""
+
+    def __init__(self, z: zenoh.Session, match: str) -> None:
+        self.match = match
+        self.samples: list[tuple[float, str, Message | bytes]] = []  # (monotonic time, key, message)
+        self.alive: set[str] = set()
+        self._lock = threading.Lock()
+        self._subscribers = [
+            z.declare_subscriber(keys.everything(match), self._on_sample),
+            z.liveliness().declare_subscriber(f"tsf/{match}/alive/**", self._on_alive, history=True),
+        ]
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        data = sample.payload.to_bytes()
+        try:
+            message: Message | bytes = decode_any(data)
+        except MessageError:
+            message = data
+        with self._lock:
+            self.samples.append((time.monotonic(), str(sample.key_expr), message))
+
+    def _on_alive(self, sample: zenoh.Sample) -> None:
+        with self._lock:
+            (self.alive.add if sample.kind == zenoh.SampleKind.PUT else self.alive.discard)(
+                str(sample.key_expr)
+            )
+
+    def of(self, kind: type[Message], key: str | None = None) -> list:
+        """The valid messages of one type (on one key, if given), in arrival order."""
+        with self._lock:
+            return [m for _, k, m in self.samples if isinstance(m, kind) and key in (None, k)]
+
+    def timed(self, kind: type[Message]) -> list[tuple[float, Message]]:
+        with self._lock:
+            return [(t, m) for t, _, m in self.samples if isinstance(m, kind)]
+
+    def is_alive(self, service: str, role: str | None = None) -> bool:
+        with self._lock:
+            return keys.alive(self.match, service, role) in self.alive
+
+    def close(self) -> None:
+        for subscriber in self._subscribers:
+            subscriber.undeclare()
+
+
+@pytest.fixture
+def endpoint() -> str:
+    return free_endpoint()
+
+
+@pytest.fixture
+def bus(endpoint: str) -> Iterator[Bus]:
+    with ExitStack() as stack:
+        yield Bus(endpoint, stack)
+
+
+@pytest.fixture(name="wait_until")
+def wait_until_fixture() -> Callable[..., bool]:
+    return wait_until
+
+
+@pytest.fixture
+def tap() -> Iterator[Callable[[zenoh.Session, str], Tap]]:
+    taps: list[Tap] = []
+
+    def make(z: zenoh.Session, match: str) -> Tap:
+        taps.append(Tap(z, match))
+        return taps[-1]
+
+    yield make
+    for made in taps:
+        made.close()
+
+
+@pytest.fixture
+def background() -> Iterator[Callable[..., Future]]:
+    """Runs a service function in a thread with `stop=` an event of its own; all are set (and the
+    threads joined) at teardown, so a failing test never leaves a service running."""
+    stops: list[threading.Event] = []
+
+    def start(fn: Callable[..., object], *args: object, **kwargs: object) -> Future:
+        stops.append(threading.Event())
+        return pool.submit(fn, *args, stop=stops[-1], **kwargs)
+
+    with ThreadPoolExecutor(max_workers=16) as pool:
+        yield start
+        for stop in stops:
+            stop.set()
+
+
+@pytest.fixture
+def spawn(tmp_path) -> Iterator[Callable[..., subprocess.Popen]]:  # noqa: ANN001 - pytest's tmp_path
+    """Starts `tsf <service> <bus options> <args>` as a process (`python -m services.cli`, output to
+    pytest's capture); every process still running at teardown is killed."""
+    children: list[subprocess.Popen] = []
+
+    def start(service: str, config: BusConfig, *args: str) -> subprocess.Popen:
+        children.append(subprocess.Popen(service_command(service, config, *args), stdin=subprocess.DEVNULL))
+        return children[-1]
+
+    yield start
+    for child in children:
+        if child.poll() is None:
+            child.kill()
+        child.wait()

@@ -34,11 +34,18 @@ Match = Annotated[str, typer.Option("--match", help="Match id: the key namespace
 
 
 def _bus(
-    mode: str, listen: list[str] | None, connect: list[str] | None, multicast: bool, low_latency: bool
+    mode: str,
+    listen: list[str] | None,
+    connect: list[str] | None,
+    multicast: bool,
+    low_latency: bool,
+    user: str,
+    password: str,
 ) -> BusConfig:
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    listen_default = () if mode == "client" else ("tcp/127.0.0.1:0",)
     return BusConfig(
-        mode, tuple(listen or ("tcp/127.0.0.1:0",)), tuple(connect or ()), multicast, low_latency
+        mode, tuple(listen or listen_default), tuple(connect or ()), multicast, low_latency, user, password
     )
 
 

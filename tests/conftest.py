@@ -33,11 +33,13 @@ class Bus:
     """The test's bus: one free loopback endpoint that one session listens on and the others connect
     to (multicast off). Sessions opened here are closed at teardown."""
 
-    def __init__(self, endpoint: str, stack: ExitStack) -> None:
+    def __init__(self, endpoint: str, stack: ExitStack, low_latency: bool = False) -> None:
         self.endpoint, self._stack = endpoint, stack
+        self.low_latency = low_latency  # zenoh's low-latency transport: every peer must agree
 
     def config(self, listen: bool = False) -> BusConfig:
-        return BusConfig(listen=(self.endpoint,)) if listen else BusConfig(connect=(self.endpoint,))
+        ends = {"listen": (self.endpoint,)} if listen else {"connect": (self.endpoint,)}
+        return BusConfig(**ends, low_latency=self.low_latency)
 
     def open(self, listen: bool = False) -> zenoh.Session:
         return self._stack.enter_context(session(self.config(listen)))

@@ -1,0 +1,113 @@
+"""The recorder service alone on a real bus: the test publishes a match, with a hole and garbage."""
+
+from __future__ import annotations
+
+from concurrent.futures import Future
+
+import msgpack
+import pytest
+import zenoh
+
+from services.recorder.log import read_log
+from services.recorder.recording import load
+from services.recorder.service import run_recorder
+from services.sim.config import GameConfig
+from services.sim.engine import Game
+from services.sim.match import start_message, state_message, summary_message
+from shared import keys
+from shared.messages import Action, GameEvent, PolicySwitch
+
+MATCH, SEED = "rec", 3
+POLICIES = {"bait": "circle", "shooter": "mirror"}
+
+
+class FakeMatch:
+    """Publishes the messages of a real game (states skipped where asked) and remembers the valid ones."""
+
+    def __init__(self, z) -> None:  # noqa: ANN001 - a session
+        self.z, self.game, self.sent = z, Game(GameConfig(frames=20), SEED), []
+        self.state_at: dict[int, int] = {}  # frame -> index of its state in `sent`
+
+    def put(self, key: str, data: bytes, valid: bool = True) -> None:
+        self.z.put(key, data, congestion_control=zenoh.CongestionControl.BLOCK)
+        if valid:
+            self.sent.append((key, data))
+
+    def start(self) -> None:
+        self.put(keys.start(MATCH), start_message(self.game, MATCH, "sim", "lockstep", POLICIES).encode())
+
+    def frames(self, last: int, skip: tuple[int, ...] = ()) -> None:
+        """States (with both seats' actions) up to `last`; the states of `skip` are not published."""
+        while self.game.frame <= last:
+            frame = self.game.frame
+            if frame not in skip:
+                self.state_at[frame] = len(self.sent)
+                self.put(keys.state(MATCH), state_message(self.game, MATCH, "sim", (frame % 12, 3)).encode())
+            for role, action in (("bait", frame % 12), ("shooter", 3)):
+                self.put(keys.action(MATCH, role), Action(MATCH, frame, "agent", role, action, "p").encode())
+            self.game.step(frame % 12, 3)
+
+    def summary(self) -> None:
+        self.put(keys.summary(MATCH), summary_message(self.game, MATCH, "sim", {}, {}).encode())
+
+
+@pytest.fixture
+def recorder(bus, tap, background, wait_until, tmp_path):
+    """(a FakeMatch, start()): start() runs run_recorder in a thread and returns its future once the
+    recorder's token is seen."""
+    z = bus.open(listen=True)
+    recorded = tap(z, MATCH)
+
+    def start() -> Future:
+        future = background(run_recorder, bus.config(), MATCH, tmp_path)
+        assert wait_until(lambda: recorded.is_alive("recorder"))
+        return future
+
+    return FakeMatch(z), start
+
+
+def test_everything_valid_exactly_once_a_gap_for_the_hole_and_no_garbage(recorder):
+    match, start = recorder
+    future = start()
+    match.start()
+    match.frames(4)
+    match.put(keys.state(MATCH), b"\xc1 garbage", valid=False)
+    match.put(keys.event(MATCH), msgpack.packb({"v": 1, "type": "event", "kind": "kill"}), valid=False)
+    match.put(keys.action(MATCH, "bait"), Action(MATCH, 5, "x", "bait", 99).encode(), valid=False)
+    match.put(f"tsf/{MATCH}/elsewhere", msgpack.packb([1, 2]), valid=False)
+    match.put(keys.event(MATCH), GameEvent(MATCH, 4, "sim", "kill", "shooter", "test").encode())
+    match.put(keys.policy(MATCH, "bait"), PolicySwitch(MATCH, 4, "adapter", "bait", "idle").encode())
+    match.frames(9, skip=(5, 6))
+    match.summary()
+    path = future.result(timeout=5)  # it stops by itself after the summary
+
+    records, clean = read_log(path)
+    assert clean
+    at = match.state_at[7]  # the gap record comes right before state 7, the first after the hole
+    assert [r.gap or (r.key, r.data) for r in records] == [*match.sent[:at], (5, 6), *match.sent[at:]]
+    recording = load(path)
+    assert [s.frame for s in recording.states] == [0, 1, 2, 3, 4, 7, 8, 9]
+    assert (recording.gaps, recording.missing_frames, recording.undecodable) == ([(5, 6)], 2, 0)
+    assert recording.start is not None and recording.summary is not None and len(recording.events) == 1
+
+
+def test_a_restarted_recorder_cuts_a_torn_tail_and_records_the_gap(recorder):
+    match, start = recorder
+    first = start()
+    match.start()
+    match.frames(3)
+    match.summary()
+    path = first.result(timeout=5)
+    with path.open("ab") as log:
+        log.write(b"\x40\0\0\0\1\2\3\4 torn")  # a record cut short by a crash
+    assert not read_log(path)[1]
+
+    match.frames(5)  # published while no recorder ran
+    second = start()
+    match.frames(8)
+    match.summary()
+    assert second.result(timeout=5) == path
+    recording = load(path)
+    assert recording.clean
+    assert [s.frame for s in recording.states] == [0, 1, 2, 3, 6, 7, 8]
+    assert recording.gaps == [(4, 5)]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from collections import Counter
 
 import msgpack
@@ -85,9 +86,11 @@ def test_a_policy_switch_applies_from_the_next_state(seat, wait_until):
     sim, agent = seat("shooter", "mirror")
     for _ in range(10):
         sim.step(wait_until)
-    sim.put(
-        keys.policy(MATCH, "shooter"), PolicySwitch(MATCH, 9, "adapter", "shooter", "idle", "test").encode()
-    )
+    switch = PolicySwitch(MATCH, 9, "adapter", "shooter", "idle", "test")
+    sim.put(keys.policy(MATCH, "shooter"), switch.encode())
+    # zenoh-python runs each subscriber's callbacks in a thread of its own, so the agent orders a
+    # switch and a state only by when it handles them: the switch is given a moment, as between frames.
+    time.sleep(0.05)
     for _ in range(10):
         sim.step(wait_until)
     assert [a.policy for a in sim.actions()] == ["mirror"] * 10 + ["idle"] * 10

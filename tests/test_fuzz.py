@@ -4,13 +4,12 @@ matches of the real services (in threads); nothing crashes, every drop is counte
 from __future__ import annotations
 
 import itertools
-import threading
 from collections import Counter
 
 import msgpack
 import pytest
 import zenoh
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 from services.agent.scripted import CircleBait, MirrorShooter
@@ -59,7 +58,9 @@ def clean_run() -> tuple[list[str], tuple]:
     shooter.reset(policy_seed(SEED, "shooter"))
     hashes = [game.state_hash()]
     while not game.done:
-        game.step(bait.act(observe(game, "bait", bait.frame)), shooter.act(observe(game, "shooter", shooter.frame)))
+        game.step(
+            bait.act(observe(game, "bait", bait.frame)), shooter.act(observe(game, "shooter", shooter.frame))
+        )
         hashes.append(game.state_hash())
     return hashes, (game.kills, game.points, game.counters())
 
@@ -73,7 +74,9 @@ def reason(suffix: str, data: bytes, match: str) -> str | None:
         message = decode(data, SUBSCRIBED[suffix][0])
     except MessageError as error:
         return error.reason
-    if suffix.startswith(("action/", "policy/")) and (message.role != suffix.split("/")[1] or message.match != match):
+    if suffix.startswith(("action/", "policy/")) and (
+        message.role != suffix.split("/")[1] or message.match != match
+    ):
         return "mismatch"
     return None
 
@@ -91,35 +94,63 @@ def record(kind: str, how: str, pick: int) -> bytes:
     return msgpack.packb(fields)
 
 
+def rematch(data: bytes, match: str) -> bytes:
+    """Records made from VALID name match "m": point them at this example's match instead."""
+    try:
+        fields = msgpack.unpackb(data)
+    except Exception:
+        return data
+    if isinstance(fields, dict) and fields.get("match") == "m":
+        return msgpack.packb({**fields, "match": match})
+    return data
+
+
 kinds = st.sampled_from(sorted(VALID))
 payloads = st.one_of(
     st.binary(max_size=200),
     st.builds(record, kinds, st.sampled_from(["drop", "none", "extra"]), st.integers(0, 50)),
-    st.dictionaries(st.text(max_size=6), st.one_of(st.none(), st.integers(), st.text(max_size=6)), max_size=6).map(
-        msgpack.packb
-    ),
+    st.dictionaries(
+        st.text(max_size=6),
+        st.one_of(st.none(), st.integers(-(2**63), 2**63 - 1), st.text(max_size=6)),
+        max_size=6,
+    ).map(msgpack.packb),
     kinds.map(lambda kind: msgpack.packb(VALID[kind])),  # valid, but (below) only where not expected
 )
-bad_inputs = st.lists(st.tuples(st.sampled_from(sorted(SUBSCRIBED)), payloads, st.integers(0, FRAMES // 2)), max_size=12)
+bad_inputs = st.lists(
+    st.tuples(st.sampled_from(sorted(SUBSCRIBED)), payloads, st.integers(0, FRAMES // 2)), max_size=12
+)
+
+
+matches = itertools.count()
 
 
 @pytest.fixture
-def bus_session(bus):
+def listener(bus):
+    """The test's session, kept over all examples; each example's services connect to it."""
     return bus, bus.open(listen=True)
 
 
-@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=30,
+    deadline=None,
+    phases=[Phase.explicit, Phase.reuse, Phase.generate],  # a match per example: shrinking takes minutes
+    suppress_health_check=[HealthCheck.function_scoped_fixture],
+)
 @given(bad_inputs)
-def test_bad_input_anywhere_is_dropped_counted_and_harmless(bus_session, tap, background, tmp_path, inputs):
-    bus, z = bus_session
-    match = f"fuzz{next(counter)}"
-    inputs = [(suffix, data.replace(b"\xa1m", b"\xa1m") if False else _rematch(data, match), frame)
-              for suffix, data, frame in inputs]  # fmt: skip
-    inputs = [(s, d, f) for s, d, f in inputs if reason(s, d, match)]
+def test_bad_input_anywhere_is_dropped_counted_and_harmless(listener, tap, background, tmp_path, inputs):
+    bus, z = listener
+    match = f"fuzz{next(matches)}"
+    inputs = [
+        (s, d, f) for s, d, f in ((s, rematch(d, match), f) for s, d, f in inputs) if reason(s, d, match)
+    ]
     by_frame = {f: [(s, d) for s, d, g in inputs if g == f] for f in range(FRAMES)}
 
     def inject(sample: zenoh.Sample) -> None:
-        for suffix, data in by_frame.get(decode(sample.payload.to_bytes(), State).frame, []):
+        try:
+            frame = decode(sample.payload.to_bytes(), State).frame
+        except MessageError:  # what this test itself puts on the state key
+            return
+        for suffix, data in by_frame.get(frame, []):
             z.put(f"tsf/{match}/{suffix}", data, congestion_control=zenoh.CongestionControl.BLOCK)
 
     recorded = tap(z, match)
@@ -142,20 +173,7 @@ def test_bad_input_anywhere_is_dropped_counted_and_harmless(bus_session, tap, ba
     assert [s.hash for s in recording.states] == CLEAN[0]
     assert (summary.kills, summary.points, summary.counters) == CLEAN[1]
     assert recording.clean and recording.gaps == [] and recording.undecodable == 0 and replay(recording) == []
-    assert len(recording.actions) == 2 * FRAMES and recording.summary == summary
-    assert recording.events == [e for e in recorded.of(GameEvent) if e.sender == "sim"]
-
-
-counter = itertools.count()
-_lock = threading.Lock()
-
-
-def _rematch(data: bytes, match: str) -> bytes:
-    """Valid records name match "m": point them at this match, so only the schema is wrong."""
-    try:
-        fields = msgpack.unpackb(data)
-    except Exception:
-        return data
-    if isinstance(fields, dict) and fields.get("match") == "m":
-        return msgpack.packb({**fields, "match": match})
-    return data
+    answers = Counter((a.role, a.frame) for _, a in recording.actions)  # the last state's may be cut off
+    assert {k for k in answers if k[1] < FRAMES} == set(itertools.product(ROLES, range(FRAMES)))
+    assert max(answers.values()) == 1 and recording.summary == summary
+    assert recording.events == recorded.of(GameEvent, keys.event(match))

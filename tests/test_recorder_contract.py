@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from concurrent.futures import Future
 
 import msgpack
@@ -75,6 +76,13 @@ def test_everything_valid_exactly_once_a_gap_for_the_hole_and_no_garbage(recorde
     match.put(keys.event(MATCH), msgpack.packb({"v": 1, "type": "event", "kind": "kill"}), valid=False)
     match.put(keys.action(MATCH, "bait"), Action(MATCH, 5, "x", "bait", 99).encode(), valid=False)
     match.put(f"tsf/{MATCH}/elsewhere", msgpack.packb([1, 2]), valid=False)
+    # Valid messages where they do not belong: a state on an action key, an action on the state key,
+    # the bait's action on the shooter's key, another match's state.
+    state = state_message(match.game, MATCH, "sim", (0, 0))
+    match.put(keys.action(MATCH, "bait"), state.encode(), valid=False)
+    match.put(keys.state(MATCH), Action(MATCH, 5, "x", "bait", 1).encode(), valid=False)
+    match.put(keys.action(MATCH, "shooter"), Action(MATCH, 5, "x", "bait", 1).encode(), valid=False)
+    match.put(keys.state(MATCH), dataclasses.replace(state, match="other").encode(), valid=False)
     match.put(keys.event(MATCH), GameEvent(MATCH, 4, "sim", "kill", "shooter", "test").encode())
     match.put(keys.policy(MATCH, "bait"), PolicySwitch(MATCH, 4, "adapter", "bait", "idle").encode())
     match.frames(9, skip=(5, 6))

@@ -17,7 +17,7 @@ import zenoh
 from services.recorder.log import GapTracker, LogWriter
 from shared import keys
 from shared.bus import BusConfig, Drops, session
-from shared.messages import MessageError, State, Summary, decode_any
+from shared.messages import Message, MessageError, State, Summary, decode_any
 
 log = logging.getLogger("tsf.recorder")
 _DONE = object()
@@ -48,6 +48,7 @@ def run_recorder(
             key, data, t = item
             try:
                 message = decode_any(data)
+                _check_key(key, message, match)
             except MessageError as error:
                 drops.drop(key, error)
                 continue
@@ -82,3 +83,13 @@ def _frame(data: bytes) -> int:
         return decode_any(data).frame
     except MessageError:
         return -1
+
+
+def _check_key(key: str, message: Message, match: str) -> None:
+    """A valid message is still bad input on a key that does not carry its type, or for another match
+    or seat (as the sim and agents judge it): recorded, it would pass for a state, action, ..."""
+    chunks = key.split("/")  # tsf/<match>/<kind>[/<role>], and each kind is named for its type
+    if len(chunks) < 3 or chunks[2] != message.TYPE:
+        raise MessageError("type", f"{message.TYPE} on {key}")
+    if message.match != match or (len(chunks) > 3 and getattr(message, "role", None) != chunks[3]):
+        raise MessageError("mismatch", f"{message.TYPE} for {message.match} on {key}")

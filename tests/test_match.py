@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import itertools
 import signal
 import time
+from collections import Counter
 
 import pytest
 
@@ -11,7 +13,7 @@ from services.agent.scripted import CircleBait, MirrorShooter
 from services.launch import MatchPlan, run_match
 from services.recorder.recording import load, replay
 from services.recorder.service import recording_path
-from services.sim.config import GameConfig
+from services.sim.config import ROLES, GameConfig
 from services.sim.play import play
 from shared.messages import State, Summary
 
@@ -31,6 +33,8 @@ def test_a_lockstep_match_equals_the_in_process_game(tmp_path):
     recording = load(path)
     assert recording.clean and recording.gaps == [] and len(recording.states) == 151
     assert replay(recording) == []
+    answers = Counter((a.role, a.frame) for _, a in recording.actions)  # the last state's may be cut off
+    assert set(answers) >= set(itertools.product(ROLES, range(150))) and max(answers.values()) == 1
 
 
 class LiveMatch:
@@ -42,13 +46,7 @@ class LiveMatch:
         common = ("--match", match, "--seed", str(SEED))
         sim = ("--frames", str(REALTIME_FRAMES), "--sim-mode", "realtime", "--wait-recorder", "10")
         self.commands = {
-            "sim": (
-                "sim",
-                bus.config(listen=True),
-                *common,
-                *sim,
-                *(f"--{r}={p}" for r, p in POLICIES.items()),
-            ),
+            "sim": ("sim", bus.config(listen=True), *common, *sim, "--bait", "circle", "--shooter", "mirror"),
             "recorder": ("recorder", bus.config(), "--match", match, "--out", str(directory)),
             **{r: ("agent", bus.config(), *common, "--role", r, "--policy", p) for r, p in POLICIES.items()},
         }

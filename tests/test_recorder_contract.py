@@ -12,7 +12,7 @@ import zenoh
 from services.recorder.log import read_log
 from services.recorder.recording import load
 from services.recorder.service import run_recorder
-from services.sim.config import GameConfig
+from services.sim.config import ROLES, GameConfig
 from services.sim.engine import Game
 from services.sim.match import start_message, state_message, summary_message
 from shared import keys
@@ -54,17 +54,33 @@ class FakeMatch:
 
 @pytest.fixture
 def recorder(bus, tap, background, wait_until, tmp_path):
-    """(a FakeMatch, start()): start() runs run_recorder in a thread and returns its future once the
-    recorder's token is seen."""
+    """(a FakeMatch, start()): the test holds both seats' tokens (as the agents would); start() runs
+    run_recorder in a thread and returns its future once the recorder's token is seen."""
     z = bus.open(listen=True)
     recorded = tap(z, MATCH)
+    seats = [z.liveliness().declare_token(keys.alive(MATCH, "agent", role)) for role in ROLES]
 
     def start() -> Future:
         future = background(run_recorder, bus.config(), MATCH, tmp_path)
         assert wait_until(lambda: recorded.is_alive("recorder"))
         return future
 
-    return FakeMatch(z), start
+    yield FakeMatch(z), start
+    for token in seats:
+        token.undeclare()
+
+
+def test_the_recorder_is_ready_only_once_it_sees_both_seats(bus, tap, background, wait_until, tmp_path):
+    """Its token starts the match: declared before the seats' actions can reach it, they could be lost."""
+    z = bus.open(listen=True)
+    recorded = tap(z, MATCH)
+    bait = z.liveliness().declare_token(keys.alive(MATCH, "agent", "bait"))
+    background(run_recorder, bus.config(), MATCH, tmp_path)
+    assert not wait_until(lambda: recorded.is_alive("recorder"), timeout=0.3)
+    shooter = z.liveliness().declare_token(keys.alive(MATCH, "agent", "shooter"))
+    assert wait_until(lambda: recorded.is_alive("recorder"))
+    for token in (bait, shooter):
+        token.undeclare()
 
 
 def test_everything_valid_exactly_once_a_gap_for_the_hole_and_no_garbage(recorder):

@@ -77,14 +77,9 @@ def table(bus, tap, background):
     z = bus.open(listen=True)
 
     def make(match: str, frames: int, mode: str = "lockstep", roles: tuple[str, ...] = ROLES, **options):
-        recorded = tap(z, match)
-        hands = Hands(z, match, roles)
-        config = GameConfig(frames=frames)
-        return (
-            hands,
-            recorded,
-            background(run_sim, bus.config(), match, SEED, config, mode, **{"policies": POLICIES, **options}),
-        )
+        recorded, hands = tap(z, match), Hands(z, match, roles)
+        config, options = GameConfig(frames=frames), {"policies": POLICIES, **options}
+        return hands, recorded, background(run_sim, bus.config(), match, SEED, config, mode, **options)
 
     return make
 

@@ -15,6 +15,7 @@ from pathlib import Path
 import zenoh
 
 from services.recorder.log import GapTracker, LogWriter
+from services.sim.config import ROLES
 from shared import keys
 from shared.bus import BusConfig, Drops, session
 from shared.messages import Message, MessageError, State, Summary, decode_any
@@ -28,10 +29,19 @@ def recording_path(directory: str | Path, match: str) -> Path:
 
 
 def run_recorder(
-    bus: BusConfig, match: str, directory: str | Path = "recordings", stop: threading.Event | None = None
+    bus: BusConfig,
+    match: str,
+    directory: str | Path = "recordings",
+    stop: threading.Event | None = None,
+    wait_seats: float = 10.0,
 ) -> Path:
     """Record `match` until its summary is written or `stop` is set; returns the log's path.
-    Restarted on the same directory, it appends to the same log after cutting any torn tail."""
+    Restarted on the same directory, it appends to the same log after cutting any torn tail.
+
+    Its liveliness token (which the sim waits for) is declared once both seats' players are seen,
+    or after `wait_seats` seconds: a peer learns of the others over gossip after the sim has seen
+    it, so a token declared at once could start the match before the seats' first actions reach
+    this recorder."""
     stop = stop or threading.Event()
     path = recording_path(directory, match)
     inbox: queue.SimpleQueue = queue.SimpleQueue()
@@ -66,6 +76,7 @@ def run_recorder(
         drainer.start()
         with session(bus) as z:
             subscriber = z.declare_subscriber(keys.everything(match), on_sample)
+            _wait_for_seats(z, match, wait_seats, stop)
             token = z.liveliness().declare_token(keys.alive(match, "recorder"))
             try:
                 stop.wait()
@@ -76,6 +87,24 @@ def run_recorder(
         inbox.put(_DONE)
         drainer.join()
     return path
+
+
+def _wait_for_seats(z: zenoh.Session, match: str, timeout: float, stop: threading.Event) -> None:
+    """Return once a player of each seat is seen (by its liveliness token), after `timeout` seconds,
+    or when `stop` is set."""
+    seen: set[str] = set()
+
+    def on_seat(sample: zenoh.Sample) -> None:
+        role = str(sample.key_expr).rsplit("/", 1)[-1]
+        (seen.add if sample.kind == zenoh.SampleKind.PUT else seen.discard)(role)
+
+    watcher = z.liveliness().declare_subscriber(keys.seats_alive(match), on_seat, history=True)
+    deadline = time.monotonic() + timeout
+    try:
+        while not seen >= set(ROLES) and time.monotonic() < deadline and not stop.wait(0.005):
+            pass
+    finally:
+        watcher.undeclare()
 
 
 def _frame(data: bytes) -> int:

@@ -80,7 +80,7 @@ def run_recorder(
             token = z.liveliness().declare_token(keys.alive(match, "recorder"))
             try:
                 stop.wait()
-                time.sleep(0.1)  # what is still in flight after the summary
+                time.sleep(0.5)  # actions still in flight after the summary (they come over other links)
             finally:
                 token.undeclare()
                 subscriber.undeclare()

@@ -48,6 +48,10 @@ class BusConfig:
         config.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
         config.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
         config.insert_json5("scouting/multicast/enabled", json.dumps(self.multicast))
+        # Of two peers that learn of each other by gossip, only one dials: when both did at once, the
+        # low-latency transport sometimes kept neither link, and peers do not relay for each other.
+        strategy = {"peer": {"to_router": "always", "to_peer": "greater-zid"}}
+        config.insert_json5("scouting/gossip/autoconnect_strategy", json.dumps(strategy))
         # A client waits for its router (services may start in any order); a peer retries in the
         # background for ever (zenoh's default).
         timeouts = {"client": round(self.wait_router * 1000), "peer": -1, "router": -1}

@@ -97,9 +97,16 @@ def _map(keys: tuple[str, ...], value: Check) -> Check:
     return lambda v: isinstance(v, dict) and set(v) == set(keys) and all(value(v[k]) for k in keys)
 
 
+def _named(value: Check) -> Check:
+    """A map from any string names to values that pass `value`."""
+    return lambda v: isinstance(v, dict) and all(isinstance(k, str) and value(x) for k, x in v.items())
+
+
 _ROLE = _one_of(ROLES)
 _ROLE_OR_NONE = _one_of(("", *ROLES))
 _KEY = _text(r"[A-Za-z0-9_.:-]{1,32}")
+_KEY_OR_NONE = _text(r"[A-Za-z0-9_.:-]{0,32}")
+_ACTION = _int(0, N_ACTIONS - 1)
 _SENDER = _text(r"[A-Za-z0-9_.:/-]{1,64}")
 _MATCH = _text(r"[A-Za-z0-9_-]{1,64}")
 
@@ -141,9 +148,7 @@ class State(Message):
         "points": _int(-(10**9), 10**9),
         "frames": _int(1, MAX_FRAME),
         "hash": _text(r"[0-9a-f]{16}"),
-        "applied": lambda v: (
-            isinstance(v, list) and len(v) == 2 and all(_int(0, N_ACTIONS - 1)(a) for a in v)
-        ),
+        "applied": lambda v: isinstance(v, list) and len(v) == 2 and all(_ACTION(a) for a in v),
         "sent_ns": _int(0, 2**63),
     }
 
@@ -167,8 +172,8 @@ class Action(Message):
     TYPE: ClassVar[str] = "action"
     CHECKS: ClassVar[dict[str, Check]] = {
         "role": _ROLE,
-        "action": _int(0, N_ACTIONS - 1),
-        "policy": _text(r"[A-Za-z0-9_.:-]{0,32}"),
+        "action": _ACTION,
+        "policy": _KEY_OR_NONE,
     }
 
     role: str = "bait"
@@ -235,7 +240,7 @@ class Start(Message):
         "seed": _int(-(2**63), 2**63),
         "mode": _one_of(("realtime", "lockstep")),
         "config": _config,
-        "policies": _map(ROLES, _text(r"[A-Za-z0-9_.:-]{0,32}")),
+        "policies": _map(ROLES, _KEY_OR_NONE),
     }
 
     seed: int = 0
@@ -254,12 +259,8 @@ class Summary(Message):
         "kills_per_minute": _number(0.0),
         "points": _int(-(10**9), 10**9),
         "counters": _map(ROLES, _counters),
-        "timing": lambda v: (
-            isinstance(v, dict) and all(isinstance(k, str) and _number()(x) for k, x in v.items())
-        ),
-        "drops": lambda v: (
-            isinstance(v, dict) and all(isinstance(k, str) and _int(0, 2**63)(n) for k, n in v.items())
-        ),
+        "timing": _named(_number()),
+        "drops": _named(_int(0, 2**63)),
     }
 
     kills: int = 0

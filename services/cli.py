@@ -11,7 +11,7 @@ from rich.console import Console
 from rich.live import Live
 from rich.table import Table
 
-from services.agent.scripted import scripted_policy
+from services.agent.library import policy_for
 from services.sim.calibration import calibrate
 from services.sim.config import GameConfig
 from services.sim.play import play, summarize
@@ -61,7 +61,7 @@ def game(
     config = GameConfig(frames=frames)
     results = []
     for s in range(seed, seed + games):
-        result = play(scripted_policy(bait, "bait"), scripted_policy(shooter, "shooter"), s, config)
+        result = play(policy_for(bait, "bait"), policy_for(shooter, "shooter"), s, config)
         results.append(result)
         deaths = {role: sum(c["deaths"].values()) for role, c in result.counters.items()}
         console.print(
@@ -81,6 +81,242 @@ def calibrate_command(games: int = typer.Option(20, min=2, help="Seeded one-minu
     for label, bait, shooter, summary in calibrate(games):
         table.add_row(label, bait, shooter, f"{summary.mean:.2f}", f"{summary.stderr:.2f}")
     console.print(table)
+
+
+@app.command()
+def train(
+    keys: list[str] = typer.Argument(None, help="Library keys to train (default: every learned policy)."),
+    steps: int | None = typer.Option(None, min=1, help="Environment steps (default: the recipe's)."),
+    seed: int | None = typer.Option(None, help="Training seed (default: the recipe's)."),
+    log_dir: Path = typer.Option(Path("runs"), help="CSV training logs go to LOG_DIR/KEY."),
+    score_games: int = typer.Option(10, min=0, help="Games scored with the first partner after training."),
+) -> None:
+    """Train library policies by their registry recipes (needs the `train` extra)."""
+    from services.agent import library
+    from services.agent.train import train as train_policy
+
+    todo = keys or [k for k, r in library.registry().items() if r.algorithm]
+    for key in todo:
+        console.print(f"[bold]training {key}[/]: {library.registry()[key].description}")
+        entry = train_policy(key, steps, seed, log_dir / key, score_games=score_games)
+        score = entry.get("score")
+        console.print(f"  {entry['file']} sha256 {entry['sha256'][:12]} in {entry['seconds']} s")
+        if score:
+            console.print(
+                f"  {score['kills_per_minute']:.2f} ± {score['stderr']:.2f} kills/min with {score['partner']}"
+            )
+
+
+def _score_text(score: dict) -> str:
+    return f"{score['kills_per_minute']:.2f} ± {score['stderr']:.2f} kills/min with {score['partner']}"
+
+
+@app.command("library")
+def library_command() -> None:
+    """List the policy library: recipe, training record and score of each policy."""
+    from services.agent import library
+
+    manifest = library.manifest()
+    table = Table(title=f"Policy library (manifest {library.manifest_hash()})")
+    for column in ("key", "role", "family", "algorithm", "steps", "seed", "score"):
+        table.add_column(column)
+    for key, recipe in library.registry().items():
+        entry = manifest.get(key, {})
+        score = entry.get("score")
+        steps = entry.get("steps", "untrained" if recipe.algorithm else "-")
+        seed = str(entry.get("seed", "-"))
+        score = _score_text(score) if score else "-"
+        table.add_row(key, recipe.role, recipe.family, recipe.algorithm or "rule", str(steps), seed, score)
+    console.print(table)
+
+
+@app.command()
+def diversity(
+    games: int = typer.Option(5, min=1, help="Seeded games of each policy."),
+    bait_partner: str = typer.Option("S4", help="The shooter every bait plays with."),
+    shooter_partner: str = typer.Option("B1", help="The bait every shooter plays with."),
+    out: Path | None = typer.Option(None, help="Write the two matrices as CSV files into this directory."),
+) -> None:
+    """The library's CEM matrices: mean log-probability of policy i's actions under policy j."""
+    from services.adapter.cem import cem_matrix
+    from services.agent import library
+
+    for role, partner in (("bait", shooter_partner), ("shooter", bait_partner)):
+        keys = library.keys(role)
+        partner_role = "shooter" if role == "bait" else "bait"
+        m = cem_matrix([library.load(k) for k in keys], policy_for(partner, partner_role), list(range(games)))
+        table = Table(title=f"{role}s with {partner}: mean log-probability of row's actions under column")
+        for column in ("", *keys):
+            table.add_column(column)
+        for key, row in zip(keys, m, strict=True):
+            cells = (f"[bold]{v:.2f}[/]" if k == key else f"{v:.2f}" for k, v in zip(keys, row, strict=True))
+            table.add_row(key, *cells)
+        console.print(table)
+        if out is not None:
+            out.mkdir(parents=True, exist_ok=True)
+            header = ",".join(["policy", *keys])
+            rows = [",".join([k, *(f"{v:.4f}" for v in row)]) for k, row in zip(keys, m, strict=True)]
+            (out / f"cem_{role}.csv").write_text("\n".join([header, *rows]) + "\n")
+
+
+def _keys(text: str, role: str) -> list[str]:
+    from services.agent import library
+
+    keys = [k.strip() for k in text.split(",") if k.strip()] if text else library.keys(role)
+    unknown = [k for k in keys if k not in library.keys(role)]
+    if unknown:
+        raise typer.BadParameter(f"not {role}s of the library: {unknown}")
+    return keys
+
+
+@app.command()
+def sweep(
+    games: int = typer.Option(20, min=1, help="Seeded one-minute games per pair (seeds 0..games-1)."),
+    baits: str = typer.Option("", help="Comma-separated baits (default: all)."),
+    shooters: str = typer.Option("", help="Comma-separated shooters (default: all)."),
+    workers: int = typer.Option(2, min=0, help="Worker processes to start here (0: only remote workers)."),
+    chunk: int = typer.Option(10, min=1, help="Games per job."),
+    out: Path = typer.Option(Path("services/agent/library/table.json"), help="Where the table goes."),
+    plot: Path | None = typer.Option(None, help="Also draw the heatmap into this PNG."),
+    sweep_id: str = typer.Option("table", "--sweep", help="Sweep id: the key namespace tsf/sweep/<id>/..."),
+    zmode: Mode = "peer",
+    listen: Listen = None,
+    connect: Connect = None,
+    multicast: Multicast = False,
+    low_latency: LowLatency = False,
+    user: User = "",
+    password: Password = "",
+) -> None:
+    """Coordinate a self-play sweep: measure the table with local and remote workers; resumable."""
+    import subprocess
+    import sys
+
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
+
+    from services.table.sweep import run_sweep
+    from shared.bus import free_endpoint
+
+    bait_keys, shooter_keys = _keys(baits, "bait"), _keys(shooters, "shooter")
+    endpoint = free_endpoint()
+    bus = _bus(
+        zmode,
+        [*(listen or ()), endpoint] if zmode != "client" else listen,
+        connect,
+        multicast,
+        low_latency,
+        user,
+        password,
+    )
+    local = [
+        subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "services.cli",
+                "worker",
+                "--sweep",
+                sweep_id,
+                "--id",
+                f"{sweep_id}-local{i}",
+                "--connect",
+                endpoint,
+                "--listen",
+                "tcp/127.0.0.1:0",
+            ]
+        )  # fmt: skip
+        for i in range(workers)
+    ]
+    stop = stop_on_signals()
+    columns = (
+        *Progress.get_default_columns()[:1],
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+    )
+    try:
+        with Progress(*columns, console=console) as bar:
+            task = bar.add_task(
+                f"sweep {sweep_id}: {len(bait_keys)}x{len(shooter_keys)} pairs, {games} games", total=None
+            )
+            table = run_sweep(
+                bus, sweep_id, out, bait_keys, shooter_keys, games, chunk,
+                lambda done, total: bar.update(task, completed=done, total=total), stop,
+            )  # fmt: skip
+    finally:
+        for process in local:
+            process.terminate()
+        for process in local:
+            process.wait()
+    if table is None:
+        console.print("stopped; run the same command again to resume from the journal")
+        raise typer.Exit(1)
+    _print_table(table)
+    console.print(f"table written to {out}")
+    if plot is not None:
+        from services.table.plot import heatmap
+
+        console.print(f"heatmap written to {heatmap(table, plot)}")
+
+
+@app.command()
+def worker(
+    sweep_id: str = typer.Option("table", "--sweep", help="The sweep to work for."),
+    worker_id: str = typer.Option("", "--id", help="This worker's name (default: host and pid)."),
+    zmode: Mode = "peer",
+    listen: Listen = None,
+    connect: Connect = None,
+    multicast: Multicast = False,
+    low_latency: LowLatency = False,
+    user: User = "",
+    password: Password = "",
+) -> None:
+    """Run a sweep worker: plays the jobs a coordinator hands it, until the coordinator is gone."""
+    import os
+    import socket
+
+    from services.table.sweep import run_worker
+
+    name = worker_id or f"{socket.gethostname()}-{os.getpid()}".replace(".", "-")
+    bus = _bus(zmode, listen, connect, multicast, low_latency, user, password)
+    done = run_worker(bus, sweep_id, name, stop_on_signals())
+    logging.getLogger("tsf.worker").info("worker %s did %d jobs", name, done)
+
+
+def _print_table(table) -> None:  # noqa: ANN001 - a services.table.table.Table
+    grid = Table(title=f"P: mean kills/min over {table.games} games (bold: best shooter for the bait)")
+    for column in ("", *table.shooters):
+        grid.add_column(column)
+    for bait in table.baits:
+        best = table.best_shooter(bait)
+        cells = (
+            f"[bold]{table.mean(bait, s):.2f}[/]" if s == best else f"{table.mean(bait, s):.2f}"
+            for s in table.shooters
+        )
+        grid.add_row(bait, *cells)
+    console.print(grid)
+    console.print(f"mean of the table: {table.overall_mean():.2f} kills/min")
+
+
+@app.command("table")
+def table_command(
+    path: Path = typer.Argument(Path("services/agent/library/table.json")),
+    plot: Path | None = typer.Option(None, help="Draw the heatmap into this PNG."),
+) -> None:
+    """Show a measured table (refused if the library or rules changed since)."""
+    from services.table.table import StaleTable
+    from services.table.table import Table as SelfPlayTable
+
+    try:
+        table = SelfPlayTable.load(path)
+    except StaleTable as error:
+        console.print(f"[red]{error}[/]")
+        raise typer.Exit(1) from None
+    _print_table(table)
+    if plot is not None:
+        from services.table.plot import heatmap
+
+        console.print(f"heatmap written to {heatmap(table, plot)}")
 
 
 @app.command()

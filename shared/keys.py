@@ -6,6 +6,11 @@ tsf/<match>/policy/<role>         adapter or operator -> agent: which library po
 tsf/<match>/event                 sim -> all       game events (kills, deaths, ...)
 tsf/<match>/summary               sim -> all       the match result, once, at the end
 tsf/<match>/alive/<service>[/<role>]  liveliness tokens, one per running service
+
+tsf/sweep/<sweep>/coordinator       liveliness token of a sweep's coordinator
+tsf/sweep/<sweep>/worker/<worker>   liveliness token of a sweep worker
+tsf/sweep/<sweep>/job/<worker>      coordinator -> one worker: a SweepJob
+tsf/sweep/<sweep>/result            workers -> coordinator: SweepResults
 """
 
 from __future__ import annotations
@@ -77,6 +82,28 @@ def seats_alive(match: str) -> str:
 def everything(match: str) -> str:
     """All data keys of a match (what the recorder subscribes to)."""
     return f"{PREFIX}/{check_match(match)}/**"
+
+
+def sweep_worker(sweep: str, worker: str = "*") -> str:
+    """A sweep worker's liveliness token (the default `*` matches every worker of the sweep)."""
+    return f"{PREFIX}/sweep/{check_match(sweep)}/worker/{_worker(worker)}"
+
+
+def sweep_coordinator(sweep: str) -> str:
+    """The coordinator's liveliness token: workers leave when it goes away."""
+    return f"{PREFIX}/sweep/{check_match(sweep)}/coordinator"
+
+
+def sweep_job(sweep: str, worker: str) -> str:
+    return f"{PREFIX}/sweep/{check_match(sweep)}/job/{_worker(worker)}"
+
+
+def sweep_result(sweep: str) -> str:
+    return f"{PREFIX}/sweep/{check_match(sweep)}/result"
+
+
+def _worker(worker: str) -> str:
+    return worker if worker == "*" else check_match(worker)
 
 
 def role_of(key: str) -> str:

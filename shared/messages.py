@@ -271,8 +271,55 @@ class Summary(Message):
     timing: dict[str, float] = field(default_factory=dict)  # round trip and tick jitter, ms
 
 
+_POLICY_KEY = _text(r"[A-Z][0-9]{1,2}")
+_HASH = _text(r"[0-9a-f]{16}")
+
+
+@dataclass(frozen=True)
+class SweepJob(Message):
+    """A sweep coordinator's job for one worker: play a pair over some seeds. `match` carries the
+    sweep id; `library` and `config` are the hashes the worker's own copies must have."""
+
+    TYPE: ClassVar[str] = "sweep_job"
+    CHECKS: ClassVar[dict[str, Check]] = {
+        "job": _text(r"[A-Za-z0-9_-]{1,64}"),
+        "bait": _POLICY_KEY,
+        "shooter": _POLICY_KEY,
+        "seeds": lambda v: isinstance(v, list) and 0 < len(v) <= 1000 and all(_int(0, 2**31)(x) for x in v),
+        "library": _HASH,
+        "config": _HASH,
+    }
+
+    job: str = ""
+    bait: str = "B1"
+    shooter: str = "S1"
+    seeds: list[int] = field(default_factory=list)
+    library: str = "0" * 16
+    config: str = "0" * 16
+
+
+@dataclass(frozen=True)
+class SweepResult(Message):
+    """A worker's answer to a job: kills/min per seed, in the job's seed order, or why it could not."""
+
+    TYPE: ClassVar[str] = "sweep_result"
+    CHECKS: ClassVar[dict[str, Check]] = {
+        "job": _text(r"[A-Za-z0-9_-]{1,64}"),
+        "kills_per_minute": lambda v: (
+            isinstance(v, list) and len(v) <= 1000 and all(_number(0.0)(x) for x in v)
+        ),
+        "error": _text(r"[ -~]{0,300}"),
+        "seconds": _number(0.0),
+    }
+
+    job: str = ""
+    kills_per_minute: list[float] = field(default_factory=list)
+    error: str = ""
+    seconds: float = 0.0
+
+
 TYPES: dict[str, type[Message]] = {
-    t.TYPE: t for t in (Start, State, Action, PolicySwitch, GameEvent, Summary)
+    t.TYPE: t for t in (Start, State, Action, PolicySwitch, GameEvent, Summary, SweepJob, SweepResult)
 }
 _ENVELOPE: dict[str, Check] = {"match": _MATCH, "frame": _int(0, MAX_FRAME), "sender": _SENDER}
 M = TypeVar("M", bound=Message)

@@ -9,7 +9,7 @@ import msgpack
 import pytest
 import zenoh
 
-from services.agent.scripted import scripted_policy
+from services.agent.library import policy_for
 from services.agent.service import run_agent
 from services.sim.config import ROLES, GameConfig
 from services.sim.engine import Game
@@ -72,7 +72,7 @@ def seat(bus, tap, background, wait_until):
 @pytest.mark.parametrize(("role", "policy"), [("bait", "circle"), ("shooter", "mirror")])
 def test_one_action_per_state_as_the_policy_plays_it(seat, wait_until, role, policy):
     sim, agent = seat(role, policy)
-    reference = scripted_policy(policy, role)
+    reference = policy_for(policy, role)
     reference.reset(policy_seed(SEED, role))
     for _ in range(FRAMES):
         expected = reference.act(observe(sim.game, role, reference.frame))

@@ -5,8 +5,8 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 
+from services.agent.library import policy_for
 from services.agent.policy import Policy
-from services.agent.scripted import scripted_policy
 from services.sim.observation import as_observation
 from services.sim.play import policy_seed
 from shared.messages import Action, State
@@ -19,7 +19,7 @@ class Player:
     frame goes unanswered; the new policy is reset with a seed derived from the game's seed and the
     frame, so a match stays a function of its inputs."""
 
-    def __init__(self, role: str, key: str, seed: int = 0, load: PolicyLoader = scripted_policy) -> None:
+    def __init__(self, role: str, key: str, seed: int = 0, load: PolicyLoader = policy_for) -> None:
         self.role, self.seed, self.load = role, seed, load
         self.policy = load(key, role)
         self.policy.reset(policy_seed(seed, role))

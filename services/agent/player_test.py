@@ -7,8 +7,8 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
+from services.agent.library import policy_for
 from services.agent.player import Player
-from services.agent.scripted import scripted_policy
 from services.sim.config import N_ACTIONS, GameConfig
 from services.sim.engine import Game
 from services.sim.match import state_message
@@ -126,4 +126,4 @@ def test_seed_matters() -> None:
 
 
 def test_default_loader_is_scripted() -> None:
-    assert Player("bait", "circle").load is scripted_policy
+    assert Player("bait", "circle").load is policy_for

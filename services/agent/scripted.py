@@ -118,7 +118,11 @@ class CircleBait(RulePolicy):
 
 
 class MirrorShooter(RulePolicy):
-    """Holds the point opposite the bait just outside the region and fires into the opening."""
+    """Holds the point opposite the bait just outside the region and fires into the opening.
+
+    It stops moving to aim once placed: by default within 20 degrees and 25 px of its circle
+    opposite the bait; with `placed_distance`, within that many px of the mirror point itself
+    (the knob that makes the library's S4-S7)."""
 
     key = "mirror"
     role = "shooter"
@@ -129,11 +133,12 @@ class MirrorShooter(RulePolicy):
         max_speed: float = 7.0,
         aim_tolerance: float = 4.0,
         rear_tolerance: float = 40.0,
+        placed_distance: float | None = None,
         epsilon: float = RulePolicy.EPSILON,
         config: GameConfig = _DEFAULTS,
     ) -> None:
         super().__init__(epsilon)
-        self.radius, self.max_speed = radius, max_speed
+        self.radius, self.max_speed, self.placed_distance = radius, max_speed, placed_distance
         self.aim_tolerance, self.rear_tolerance = aim_tolerance, rear_tolerance
         self.config = config
 
@@ -142,7 +147,8 @@ class MirrorShooter(RulePolicy):
         x, y, _, _ = _ship(obs, ob.SELF)
         bx, by, bvx, bvy = _ship(obs, ob.PARTNER)
         me = math.atan2(y, x)
-        gap = (math.atan2(-by, -bx) - me + math.pi) % (2 * math.pi) - math.pi
+        mirror = math.atan2(-by, -bx)
+        gap = (mirror - me + math.pi) % (2 * math.pi) - math.pi
         bait_turn_rate = (bx * bvy - by * bvx) / max(bx * bx + by * by, 1.0)  # rad/frame about the fortress
         tangential = (bait_turn_rate + 0.05 * gap) * self.radius
         tangential = max(-self.max_speed, min(self.max_speed, tangential))
@@ -151,27 +157,39 @@ class MirrorShooter(RulePolicy):
         if abs(x + 12 * vx) > c.arena_x - 25 or abs(y + 12 * vy) > c.arena_y - 25:
             dvx, dvy = -0.02 * x, -0.02 * y  # heading for the border: pull back toward the centre
         steer = seek(obs, dvx, dvy, tolerance=0.6)
-        placed = abs(gap) < math.radians(20) and abs(math.hypot(x, y) - self.radius) < 25.0
+        if self.placed_distance is None:
+            placed = abs(gap) < math.radians(20) and abs(math.hypot(x, y) - self.radius) < 25.0
+        else:
+            mx, my = self.radius * math.cos(mirror), self.radius * math.sin(mirror)
+            placed = math.hypot(x - mx, y - my) < self.placed_distance
         if steer is not None and not placed:
             return (*steer, 0)
         cos_h, sin_h = float(obs[ob.SELF + ob.COS]), float(obs[ob.SELF + ob.SIN])
-        to_fortress = math.atan2(-y, -x)
-        turn = turn_toward(cos_h, sin_h, to_fortress, deadband=self.aim_tolerance / 2)
-        aim = math.degrees(
-            math.acos(max(-1.0, min(1.0, cos_h * math.cos(to_fortress) + sin_h * math.sin(to_fortress))))
-        )
-        f = ob.FORTRESS
-        rear = math.atan2(-float(obs[f + ob.F_SIN]), -float(obs[f + ob.F_COS]))
-        rear_off = abs(math.degrees((me - rear + math.pi) % (2 * math.pi) - math.pi))
-        flight = (math.hypot(x, y) - c.kill_distance) / c.missile_speed
-        window = float(obs[f + ob.F_VULNERABLE]) * c.vulnerable_frames
-        fire = (
-            obs[f + ob.F_ALIVE] > 0.5
-            and aim <= self.aim_tolerance
-            and rear_off <= self.rear_tolerance
-            and window >= flight + 1.0
-        )
-        return turn, 0, int(fire)
+        turn = turn_toward(cos_h, sin_h, math.atan2(-y, -x), deadband=self.aim_tolerance / 2)
+        return turn, 0, int(good_shot(obs, c, self.aim_tolerance, self.rear_tolerance))
+
+
+def good_shot(obs: np.ndarray, config: GameConfig, aim_tolerance: float, rear_tolerance: float) -> bool:
+    """Whether a missile fired now flies into the open rear before the vulnerability window shuts:
+    the ship faces the fortress within `aim_tolerance` and sits within `rear_tolerance` of the
+    rear (degrees). Works in either observation frame."""
+    x, y, _, _ = _ship(obs, ob.SELF)
+    cos_h, sin_h = float(obs[ob.SELF + ob.COS]), float(obs[ob.SELF + ob.SIN])
+    to_fortress = math.atan2(-y, -x)
+    aim = math.degrees(
+        math.acos(max(-1.0, min(1.0, cos_h * math.cos(to_fortress) + sin_h * math.sin(to_fortress))))
+    )
+    f = ob.FORTRESS
+    rear = math.atan2(-float(obs[f + ob.F_SIN]), -float(obs[f + ob.F_COS]))
+    rear_off = abs(math.degrees((math.atan2(y, x) - rear + math.pi) % (2 * math.pi) - math.pi))
+    flight = (math.hypot(x, y) - config.kill_distance) / config.missile_speed
+    window = float(obs[f + ob.F_VULNERABLE]) * config.vulnerable_frames
+    return bool(
+        obs[f + ob.F_ALIVE] > 0.5
+        and aim <= aim_tolerance
+        and rear_off <= rear_tolerance
+        and window >= flight + 1.0
+    )
 
 
 SCRIPTED = {"circle": CircleBait, "mirror": MirrorShooter}

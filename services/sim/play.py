@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import statistics
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from services.agent.policy import Policy
@@ -27,16 +28,25 @@ def policy_seed(game_seed: int, role: str) -> int:
     return 2 * game_seed + 1 + ROLES.index(role)
 
 
-def play(bait: Policy, shooter: Policy, seed: int = 0, config: GameConfig | None = None) -> GameResult:
-    """One full game between two policies, each reset with a seed derived from the game's."""
+Trace = Callable[[Game, int, int], None]
+
+
+def play(
+    bait: Policy, shooter: Policy, seed: int = 0, config: GameConfig | None = None, trace: Trace | None = None
+) -> GameResult:
+    """One full game between two policies, each reset with a seed derived from the game's.
+    `trace(game, bait_action, shooter_action)` sees every frame just before it is stepped."""
     game = Game(config, seed)
     bait.reset(policy_seed(seed, "bait"))
     shooter.reset(policy_seed(seed, "shooter"))
     while not game.done:
-        game.step(
+        actions = (
             bait.act(observe(game, "bait", bait.frame)),
             shooter.act(observe(game, "shooter", shooter.frame)),
         )
+        if trace is not None:
+            trace(game, *actions)
+        game.step(*actions)
     return GameResult(seed, game.frame, game.kills, game.kills_per_minute(), game.points, game.counters())
 
 

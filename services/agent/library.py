@@ -1,0 +1,291 @@
+"""The exemplar policy library: B1-B9 (bait) and S1-S7 (shooter), loaded by key.
+
+`library/registry.toml` lists every policy's role, family and recipe; `library/manifest.json`
+(written by `tsf train`) lists each trained policy's weights file with its hash, steps, seed, score
+and the command that made it. Weights are plain arrays in `.npz` files read with
+`allow_pickle=False`, and inference is numpy: loading a policy never executes code from a file and
+playing one needs no torch.
+
+A learned policy chooses some heads (turn; or turn and thrust) with its network and leaves the
+others to rules; every head spreads a small probability over its other choices (rules: EPSILON,
+networks: FLOOR mixed into the softmax), so the joint distribution is never zero.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import random
+import tomllib
+from dataclasses import dataclass, field
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+
+from services.agent.policy import N_FIRE, N_THRUST, N_TURN, Policy, RulePolicy, factored_probs
+from services.agent.scripted import MirrorShooter, good_shot, scripted_policy
+from services.sim import observation as ob
+from services.sim.config import N_ACTIONS, ROLES, GameConfig
+
+LIBRARY = Path(__file__).parent / "library"
+FLOOR = 1e-3  # weight of the uniform mixed into a network head's softmax
+HEADS = ("turn", "thrust", "fire")
+HEAD_SIZES = {"turn": N_TURN, "thrust": N_THRUST, "fire": N_FIRE}
+
+# Feature sets: offsets into the 64-value observation (docs/observation.md) that a network reads.
+_SELF = [ob.SELF + f for f in (ob.X, ob.Y, ob.VX, ob.VY, ob.COS, ob.SIN)]
+_SHELLS2 = list(range(ob.SHELLS, ob.SHELLS + 2 * ob.PROJECTILE_SIZE))
+# A bait also sees whether the fortress is up: a new round starts only once it leaves the region.
+_UP = [ob.FORTRESS + ob.F_ALIVE]
+_PARTNER = [ob.PARTNER + f for f in (ob.X, ob.Y, ob.VX, ob.VY)]
+_FORTRESS = [ob.FORTRESS + f for f in (ob.F_COS, ob.F_SIN, ob.F_ALIVE, ob.F_VULNERABLE)]
+FEATURES: dict[str, list[int]] = {
+    "self+shells": _SELF + _SHELLS2 + _UP,
+    "self+shells+partner": _SELF + _SHELLS2 + _UP + _PARTNER,
+    "shooter": _SELF + _PARTNER + [ob.PARTNER + ob.IN_REGION] + _FORTRESS,
+}
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """One registry entry: what a policy is and, for a learned one, how it is trained."""
+
+    key: str
+    role: str
+    family: str
+    description: str
+    algorithm: str | None = None  # A2C, PPO, TRPO, DQN; None for a rule-based policy
+    learned: tuple[str, ...] = ()  # heads the network chooses
+    features: str = ""
+    frame: str = "role"
+    reward: str = ""
+    weights: dict[str, float] = field(default_factory=dict)  # reward term weights
+    speed_cap: float = 0.0  # px/frame, the thrust rule's cap
+    temperature: float = 0.0  # DQN: softmax temperature over Q values
+    steps: int = 0
+    seed: int = 0
+    partners: tuple[str, ...] = ()
+    rule: dict[str, float] = field(default_factory=dict)  # a rule-based policy's parameters
+    demonstrator: dict[str, float] = field(default_factory=dict)  # a bait's warm start (train.py)
+
+
+@cache
+def registry(root: Path = LIBRARY) -> dict[str, Recipe]:
+    """The recipes of the library at `root` (its registry.toml), by key in file order."""
+    with open(root / "registry.toml", "rb") as f:
+        raw = tomllib.load(f)
+    recipes = {}
+    for key, entry in raw.items():
+        entry = {k: tuple(v) if isinstance(v, list) else v for k, v in entry.items()}
+        recipe = Recipe(key=key, **entry)
+        if recipe.role not in ROLES:
+            raise ValueError(f"registry entry {key}: unknown role {recipe.role!r}")
+        if recipe.algorithm and recipe.features not in FEATURES:
+            raise ValueError(f"registry entry {key}: unknown feature set {recipe.features!r}")
+        recipes[key] = recipe
+    return recipes
+
+
+def keys(role: str | None = None) -> list[str]:
+    """Library keys in registry order, optionally of one role."""
+    return [k for k, r in registry().items() if role is None or r.role == role]
+
+
+def manifest(root: Path = LIBRARY) -> dict[str, dict]:
+    """The training record of each trained policy: weights file, sha256, steps, seed, score, command."""
+    path = root / "manifest.json"
+    return json.loads(path.read_text()) if path.exists() else {}
+
+
+def manifest_hash(root: Path = LIBRARY) -> str:
+    """Hash of the registry and manifest: what a table measured with this library is bound to."""
+    h = hashlib.sha256((root / "registry.toml").read_bytes())
+    h.update(json.dumps(manifest(root), sort_keys=True).encode())
+    return h.hexdigest()[:16]
+
+
+def file_hash(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+# --- rules for the heads a network leaves alone ------------------------------------------------
+
+
+def speed(obs: np.ndarray) -> float:
+    return math.hypot(float(obs[ob.SELF + ob.VX]), float(obs[ob.SELF + ob.VY])) * ob.VELOCITY_SCALE
+
+
+def rule_heads(recipe: Recipe, obs: np.ndarray, config: GameConfig) -> dict[str, int]:
+    """The rule's choice for every head the network does not choose.
+
+    A bait thrusts while under the recipe's speed cap and never fires. A shooter thrusts as the
+    mirror shooter with the recipe's speed cap would (toward the point opposite the bait, holding
+    once there) and fires when the shot is good (scripted.good_shot). Shooter rules read the
+    world frame."""
+    out = {}
+    if recipe.role == "bait":
+        if "thrust" not in recipe.learned:
+            out["thrust"] = int(speed(obs) < recipe.speed_cap)
+        if "fire" not in recipe.learned:
+            out["fire"] = 0
+        return out
+    if "thrust" not in recipe.learned:
+        out["thrust"] = _mirror(recipe.speed_cap, config).choose(obs)[1]
+    if "fire" not in recipe.learned:
+        out["fire"] = int(good_shot(obs, config, 4.0, 40.0))
+    return out
+
+
+@cache
+def _mirror(max_speed: float, config: GameConfig) -> MirrorShooter:
+    return MirrorShooter(max_speed=max_speed, config=config)
+
+
+# --- the network ---------------------------------------------------------------------------------
+
+
+class Network:
+    """A multilayer perceptron held as numpy arrays: hidden layers with tanh or relu, linear out."""
+
+    ACTIVATIONS = {"tanh": np.tanh, "relu": lambda h: np.maximum(h, 0.0)}
+
+    def __init__(self, arrays: dict[str, np.ndarray], activation: str) -> None:
+        n = len([k for k in arrays if k.startswith("w")])
+        self.layers = [(arrays[f"w{i}"].astype(float), arrays[f"b{i}"].astype(float)) for i in range(n)]
+        self.activation = self.ACTIVATIONS[activation]
+
+    @classmethod
+    def load(cls, path: Path) -> tuple[Network, dict]:
+        """Weights and metadata from an .npz file; never unpickles anything."""
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}
+        meta = json.loads(bytes(arrays.pop("meta")).decode())
+        return cls(arrays, meta["activation"]), meta
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        """Outputs for one input row or a batch of rows."""
+        h = x
+        for w, b in self.layers[:-1]:
+            h = self.activation(h @ w.T + b)
+        w, b = self.layers[-1]
+        return h @ w.T + b
+
+
+def softmax(z: np.ndarray) -> np.ndarray:
+    z = z - z.max(axis=-1, keepdims=True)
+    e = np.exp(z)
+    return e / e.sum(axis=-1, keepdims=True)
+
+
+class LearnedPolicy:
+    """A trained library policy: network heads plus rule heads, sampled independently."""
+
+    def __init__(self, recipe: Recipe, network: Network, config: GameConfig | None = None) -> None:
+        self.recipe, self.network = recipe, network
+        self.key, self.role, self.frame = recipe.key, recipe.role, recipe.frame
+        self.config = config or GameConfig()
+        self.features = np.array(FEATURES[recipe.features])
+        self.rng = random.Random(0)
+
+    def reset(self, seed: int | None = None) -> None:
+        self.rng = random.Random(seed)
+
+    def learned_heads(self, obs: np.ndarray) -> list[np.ndarray]:
+        """Distributions of the learned heads for a batch of observations (rows)."""
+        out = self.network(obs[..., self.features].astype(np.float64))
+        if self.recipe.algorithm == "DQN":  # one head; Q values -> Boltzmann distribution
+            return [self._floor(softmax(out / self.recipe.temperature))]
+        heads, start = [], 0
+        for name in self.recipe.learned:
+            n = HEAD_SIZES[name]
+            heads.append(self._floor(softmax(out[..., start : start + n])))
+            start += n
+        return heads
+
+    @staticmethod
+    def _floor(p: np.ndarray) -> np.ndarray:
+        return (1.0 - FLOOR) * p + FLOOR / p.shape[-1]
+
+    def rule_head_probs(self, obs: np.ndarray) -> dict[str, np.ndarray]:
+        """The rule heads' distributions: the rule's choice with 1 - EPSILON, the rest spread."""
+        eps, heads = RulePolicy.EPSILON, {}
+        for name, choice in rule_heads(self.recipe, obs, self.config).items():
+            n = HEAD_SIZES[name]
+            heads[name] = np.full(n, eps / (n - 1))
+            heads[name][choice] = 1.0 - eps
+        return heads
+
+    def head_probs(self, obs: np.ndarray) -> dict[str, np.ndarray]:
+        learned = dict(zip(self.recipe.learned, self.learned_heads(obs), strict=True))
+        return learned | self.rule_head_probs(obs)
+
+    def probs(self, obs: np.ndarray) -> np.ndarray:
+        heads = self.head_probs(obs)
+        return factored_probs(*(heads[name] for name in HEADS))
+
+    def probs_batch(self, observations: np.ndarray) -> np.ndarray:
+        """probs() of every row of an (n, 64) array, with one network pass for all rows."""
+        learned = dict(zip(self.recipe.learned, self.learned_heads(observations), strict=True))
+        out = np.empty((len(observations), N_ACTIONS))
+        for i, obs in enumerate(observations):
+            heads = {name: head[i] for name, head in learned.items()} | self.rule_head_probs(obs)
+            out[i] = factored_probs(*(heads[name] for name in HEADS))
+        return out
+
+    def act(self, obs: np.ndarray) -> int:
+        heads = self.head_probs(obs)
+        turn, thrust, fire = (self._sample(heads[name]) for name in HEADS)
+        return turn * 4 + thrust * 2 + fire
+
+    def _sample(self, p: np.ndarray) -> int:
+        u, total = self.rng.random(), 0.0
+        for i, pi in enumerate(p):
+            total += pi
+            if u < total:
+                return i
+        return len(p) - 1
+
+
+class MirrorVariant(MirrorShooter):
+    """A rule-based library shooter: the mirror shooter with its own placement distance."""
+
+    def __init__(self, recipe: Recipe) -> None:
+        super().__init__(**recipe.rule)
+        self.key, self.role, self.frame = recipe.key, recipe.role, "world"
+
+
+def load(key: str, config: GameConfig | None = None, root: Path = LIBRARY) -> Policy:
+    """A library policy by key; a learned one's weights are checked against the manifest hash."""
+    recipes = registry(root)
+    if key not in recipes:
+        raise KeyError(f"unknown library policy {key!r}; expected one of {list(recipes)}")
+    recipe = recipes[key]
+    if recipe.algorithm is None:
+        return MirrorVariant(recipe)
+    entry = manifest(root).get(key)
+    path = root / entry["file"] if entry else None
+    if path is None or not path.exists():
+        raise FileNotFoundError(f"library policy {key} is not trained yet: run `tsf train {key}`")
+    if file_hash(path) != entry["sha256"]:
+        raise ValueError(f"{path} does not match its manifest hash; retrain {key} or restore the file")
+    network, _ = Network.load(path)
+    return LearnedPolicy(recipe, network, config)
+
+
+def batch_probs(policy: Policy, observations: np.ndarray) -> np.ndarray:
+    """The (n, 12) distributions of a policy over n observations, batched where the policy can."""
+    if isinstance(policy, LearnedPolicy):
+        return policy.probs_batch(observations)
+    return np.stack([policy.probs(obs) for obs in observations])
+
+
+def policy_for(key: str, role: str) -> Policy:
+    """Any policy a seat can play, by key: a library policy (B1-B9, S1-S7) or a scripted one."""
+    if key in registry():
+        policy = load(key)
+        if policy.role != role:
+            raise ValueError(f"library policy {key} plays {policy.role}, not {role}")
+        return policy
+    return scripted_policy(key, role)

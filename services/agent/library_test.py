@@ -1,0 +1,134 @@
+"""The shipped library: every policy loads by key, follows the protocol and samples what it says."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from services.agent import library
+from services.agent.policy import Policy
+from services.sim.config import N_ACTIONS, ROLES, GameConfig
+from services.sim.engine import Game
+from services.sim.observation import observe
+
+KEYS = library.keys()
+
+
+def observations(role: str, frame: str, n: int = 40) -> list[np.ndarray]:
+    """Observations from a few frames of random play (ships moving, shells flying)."""
+    game, rng, out = Game(GameConfig(), seed=3), np.random.default_rng(0), []
+    for _ in range(n * 10):
+        game.step(int(rng.integers(N_ACTIONS)), int(rng.integers(N_ACTIONS)))
+        if game.frame % 10 == 0:
+            out.append(observe(game, role, frame))
+    return out
+
+
+def test_registry_names_the_papers_library():
+    assert library.keys("bait") == [f"B{i}" for i in range(1, 10)]
+    assert library.keys("shooter") == [f"S{i}" for i in range(1, 8)]
+    recipes = library.registry()
+    assert {recipes[k].algorithm for k in ("S4", "S5", "S6", "S7")} == {None}
+    assert {recipes[k].algorithm for k in ("B1", "B2", "B3")} == {"A2C"}
+    assert {recipes[k].algorithm for k in ("S1", "S2", "S3")} == {"DQN"}
+
+
+@pytest.mark.parametrize("key", KEYS)
+def test_policy_conforms_and_never_gives_zero(key):
+    policy = library.load(key)
+    recipe = library.registry()[key]
+    assert isinstance(policy, Policy)
+    assert (policy.key, policy.role) == (key, recipe.role) and policy.frame in ("world", "role")
+    policy.reset(7)
+    for obs in observations(policy.role, policy.frame):
+        p = policy.probs(obs)
+        assert p.shape == (N_ACTIONS,)
+        assert p.sum() == pytest.approx(1.0, abs=1e-9)
+        assert p.min() > 0.0
+        assert 0 <= policy.act(obs) < N_ACTIONS
+
+
+@pytest.mark.parametrize("key", ["B1", "B5", "S1", "S4"])
+def test_act_samples_the_distribution_probs_reports(key):
+    policy = library.load(key)
+    obs = observations(policy.role, policy.frame)[5]
+    p = policy.probs(obs)
+    policy.reset(1)
+    n = 4000
+    counts = np.bincount([policy.act(obs) for _ in range(n)], minlength=N_ACTIONS)
+    # every action's frequency within 5 standard errors of its probability
+    assert np.all(np.abs(counts / n - p) <= 5 * np.sqrt(p * (1 - p) / n) + 1e-3)
+
+
+def test_same_seed_same_actions():
+    a, b = library.load("B5"), library.load("B5")
+    obs = observations("bait", "role")
+    a.reset(11)
+    b.reset(11)
+    assert [a.act(o) for o in obs] == [b.act(o) for o in obs]
+
+
+def test_policy_for_resolves_library_and_scripted_keys():
+    assert library.policy_for("S5", "shooter").key == "S5"
+    assert library.policy_for("circle", "bait").key == "circle"
+    with pytest.raises(ValueError, match="plays shooter"):
+        library.policy_for("S5", "bait")
+    with pytest.raises(ValueError, match="unknown scripted policy"):
+        library.policy_for("B99", "bait")
+
+
+def copy_library(tmp_path: Path) -> Path:
+    root = tmp_path / "library"
+    shutil.copytree(library.LIBRARY, root)
+    return root
+
+
+def test_tampered_weights_are_refused(tmp_path):
+    root = copy_library(tmp_path)
+    path = root / library.manifest(root)["B2"]["file"]
+    data = bytearray(path.read_bytes())
+    data[-100] ^= 1
+    path.write_bytes(bytes(data))
+    with pytest.raises(ValueError, match="does not match its manifest hash"):
+        library.load("B2", root=root)
+
+
+def test_untrained_policy_says_how_to_train_it(tmp_path):
+    root = copy_library(tmp_path)
+    (root / "manifest.json").write_text(json.dumps({}))
+    with pytest.raises(FileNotFoundError, match="tsf train B3"):
+        library.load("B3", root=root)
+
+
+def test_weights_never_unpickle(tmp_path):
+    path = tmp_path / "evil.npz"
+    np.savez(path, w0=np.array([object()], dtype=object), meta=np.frombuffer(b"{}", np.uint8))
+    with pytest.raises(ValueError, match="allow_pickle"):
+        library.Network.load(path)
+
+
+def test_manifest_records_every_learned_policy():
+    manifest = library.manifest()
+    for key, recipe in library.registry().items():
+        if recipe.algorithm is None:
+            continue
+        entry = manifest[key]
+        assert entry["sha256"] == library.file_hash(library.LIBRARY / entry["file"])
+        assert entry["algorithm"] == recipe.algorithm and entry["steps"] > 0
+        assert entry["command"].startswith(f"tsf train {key}")
+        assert entry["score"]["games"] >= 10
+
+
+@pytest.mark.parametrize("role", ROLES)
+def test_manifest_hash_changes_with_the_manifest(tmp_path, role):
+    root = copy_library(tmp_path)
+    before = library.manifest_hash(root)
+    manifest = library.manifest(root)
+    key = next(k for k in manifest if library.registry()[k].role == role)
+    manifest[key]["seed"] += 1
+    (root / "manifest.json").write_text(json.dumps(manifest))
+    assert library.manifest_hash(root) != before

@@ -1,0 +1,49 @@
+"""The table as a heatmap, laid out like the original study's: baits as rows, shooters as columns,
+families separated by lines, each bait's best shooter outlined."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")  # files only, no display
+import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.patches import Rectangle  # noqa: E402
+
+from services.agent import library  # noqa: E402
+from services.table.table import Table  # noqa: E402
+
+
+def family_breaks(keys: tuple[str, ...]) -> list[int]:
+    """Indices where the registry family changes along `keys`."""
+    families = [library.registry()[k].family for k in keys]
+    return [i for i in range(1, len(keys)) if families[i] != families[i - 1]]
+
+
+def heatmap(table: Table, path: Path) -> Path:
+    means = [[table.mean(b, s) for s in table.shooters] for b in table.baits]
+    fig, ax = plt.subplots(figsize=(1.0 + 0.9 * len(table.shooters), 1.0 + 0.6 * len(table.baits)))
+    image = ax.imshow(means, cmap="viridis", aspect="auto")
+    fig.colorbar(image, ax=ax, label="kills per minute")
+    ax.set_xticks(range(len(table.shooters)), table.shooters)
+    ax.set_yticks(range(len(table.baits)), table.baits)
+    ax.set_xlabel("shooter")
+    ax.set_ylabel("bait")
+    top = max(max(row) for row in means) or 1.0
+    for i, bait in enumerate(table.baits):
+        best = table.shooters.index(table.best_shooter(bait))
+        ax.add_patch(Rectangle((best - 0.5, i - 0.5), 1, 1, fill=False, edgecolor="red", linewidth=2))
+        for j, value in enumerate(means[i]):
+            ax.text(
+                j, i, f"{value:.1f}", ha="center", va="center", color="white" if value < top / 2 else "black"
+            )
+    for j in family_breaks(table.shooters):
+        ax.axvline(j - 0.5, color="white", linewidth=2)
+    for i in family_breaks(table.baits):
+        ax.axhline(i - 0.5, color="white", linewidth=2)
+    ax.set_title(f"Self-play table P: mean kills/min over {table.games} games (red: best shooter)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path

@@ -1,0 +1,264 @@
+"""Distributed self-play sweeps over zenoh: a coordinator hands table jobs to live workers.
+
+Workers announce themselves with liveliness tokens; the coordinator keeps one job in flight per
+live worker, hands a dead worker's job to another, counts each job's first result only, and
+appends every result to a journal beside the table, so that a stopped sweep resumes from what it
+has. A worker exits when the coordinator it has seen goes away. The games themselves are played
+by the pure core (table.py): results do not depend on which worker, or how many, computed them.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import queue
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import zenoh
+
+from services.agent import library
+from services.sim.config import GameConfig
+from services.table.table import Job, Table, assemble, jobs, run_job
+from shared import keys
+from shared.bus import BusConfig, Drops, session
+from shared.messages import MessageError, SweepJob, SweepResult, decode
+
+log = logging.getLogger("tsf.sweep")
+Progress = Callable[[int, int], None]  # (jobs done, jobs in all)
+
+
+def journal_path(out: Path) -> Path:
+    return out.with_name(out.name + ".journal")
+
+
+def read_journal(path: Path) -> dict[str, list[float]]:
+    """Results already collected by an earlier run of the same sweep (a torn last line is skipped)."""
+    done: dict[str, list[float]] = {}
+    if path.exists():
+        for line in path.read_text().splitlines():
+            try:
+                record = json.loads(line)
+            except json.JSONDecodeError:
+                continue
+            done.setdefault(record["job"], record["kills_per_minute"])
+    return done
+
+
+class Coordinator:
+    """The bookkeeping of a sweep, apart from the bus: which jobs wait, which worker has which."""
+
+    def __init__(self, todo: list[Job], done: dict[str, list[float]]) -> None:
+        self.jobs = {job.id: job for job in todo}
+        self.done = {k: v for k, v in done.items() if k in self.jobs}
+        self.waiting = [job for job in todo if job.id not in self.done]
+        self.flying: dict[str, tuple[str, float]] = {}  # worker -> (job id, since)
+        self.idle: set[str] = set()
+        self.live: set[str] = set()
+        self.duplicates = 0
+        self.changed = threading.Condition()
+
+    def worker_up(self, worker: str) -> None:
+        with self.changed:
+            self.live.add(worker)
+            if worker not in self.flying:
+                self.idle.add(worker)
+            self.changed.notify_all()
+
+    def worker_down(self, worker: str) -> None:
+        with self.changed:
+            self.live.discard(worker)
+            self.idle.discard(worker)
+            if worker in self.flying:
+                job, _ = self.flying.pop(worker)
+                if job not in self.done:
+                    log.warning("worker %s left with job %s; handing it to another", worker, job)
+                    self.waiting.insert(0, self.jobs[job])
+            self.changed.notify_all()
+
+    def result(self, worker: str, job: str, values: list[float]) -> bool:
+        """Record a job's result; False for a duplicate (a job counts once)."""
+        with self.changed:
+            if self.flying.get(worker, ("",))[0] == job:
+                del self.flying[worker]
+            if worker in self.live and worker not in self.flying:
+                self.idle.add(worker)
+            fresh = job in self.jobs and job not in self.done
+            if fresh:
+                self.done[job] = values
+                self.waiting = [j for j in self.waiting if j.id != job]
+            else:
+                self.duplicates += 1
+            self.changed.notify_all()
+            return fresh
+
+    def failed(self, worker: str, job: str) -> None:
+        """A worker could not run a job (its library or rules differ): give it nothing more."""
+        with self.changed:
+            self.flying.pop(worker, None)
+            self.live.discard(worker)
+            self.idle.discard(worker)
+            if job in self.jobs and job not in self.done:
+                self.waiting.insert(0, self.jobs[job])
+            self.changed.notify_all()
+
+    def assignments(self, now: float, timeout: float) -> list[tuple[str, Job]]:
+        """Jobs to send now: one per idle worker; a job in flight past `timeout` is sent again."""
+        with self.changed:
+            for worker, (job, since) in list(self.flying.items()):
+                if now - since > timeout and job not in self.done:
+                    log.warning("job %s on %s took over %.0f s; handing it to another", job, worker, timeout)
+                    del self.flying[worker]
+                    self.waiting.insert(0, self.jobs[job])
+            out = []
+            while self.idle and self.waiting:
+                worker, job = min(self.idle), self.waiting.pop(0)
+                self.idle.discard(worker)
+                self.flying[worker] = (job.id, now)
+                out.append((worker, job))
+            return out
+
+    @property
+    def finished(self) -> bool:
+        return len(self.done) == len(self.jobs)
+
+
+def run_sweep(
+    bus: BusConfig,
+    sweep: str,
+    out: Path,
+    baits: list[str],
+    shooters: list[str],
+    games: int,
+    chunk: int = 10,
+    progress: Progress | None = None,
+    stop: threading.Event | None = None,
+    job_timeout: float = 900.0,
+) -> Table | None:
+    """Coordinate a sweep until every job has a result, then write the table to `out` (None if
+    stopped first; the journal keeps what was collected)."""
+    stop = stop or threading.Event()
+    todo = jobs(baits, shooters, games, chunk)
+    journal = journal_path(out)
+    state = Coordinator(todo, read_journal(journal))
+    library_hash, config_hash = library.manifest_hash(), GameConfig().hash()
+    drops = Drops("sweep")
+    journal_lock = threading.Lock()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with session(bus) as z, open(journal, "a") as journal_file:
+
+        def on_worker(sample: zenoh.Sample) -> None:
+            worker = str(sample.key_expr).rsplit("/", 1)[-1]
+            if sample.kind == zenoh.SampleKind.PUT:
+                log.info("worker %s is up", worker)
+                state.worker_up(worker)
+            else:
+                state.worker_down(worker)
+
+        def on_result(sample: zenoh.Sample) -> None:
+            try:
+                result = decode(sample.payload.to_bytes(), SweepResult)
+                if result.job not in state.jobs:
+                    raise MessageError("unknown_job", f"no job {result.job!r} in this sweep")
+            except MessageError as error:
+                drops.drop(str(sample.key_expr), error)
+                return
+            worker = result.sender.rsplit("/", 1)[-1]
+            if result.error:
+                log.error("worker %s cannot run %s: %s", worker, result.job, result.error)
+                state.failed(worker, result.job)
+            elif len(result.kills_per_minute) != len(state.jobs[result.job].seeds):
+                drops.drop(
+                    str(sample.key_expr), MessageError("shape", f"{result.job}: wrong number of games")
+                )
+                state.failed(worker, result.job)
+            elif state.result(worker, result.job, result.kills_per_minute):
+                record = {"job": result.job, "kills_per_minute": result.kills_per_minute}
+                with journal_lock:
+                    journal_file.write(json.dumps(record) + "\n")
+                    journal_file.flush()
+
+        result_sub = z.declare_subscriber(keys.sweep_result(sweep), on_result)
+        worker_sub = z.liveliness().declare_subscriber(keys.sweep_worker(sweep), on_worker, history=True)
+        token = z.liveliness().declare_token(keys.sweep_coordinator(sweep))
+        try:
+            while not state.finished and not stop.is_set():
+                for worker, job in state.assignments(time.monotonic(), job_timeout):
+                    seeds = list(job.seeds)
+                    message = SweepJob(
+                        sweep, 0, "sweep", job.id, job.bait, job.shooter, seeds, library_hash, config_hash
+                    )
+                    z.put(keys.sweep_job(sweep, worker), message.encode())
+                if progress is not None:
+                    progress(len(state.done), len(state.jobs))
+                with state.changed:
+                    state.changed.wait(0.5)
+        finally:
+            token.undeclare()
+            worker_sub.undeclare()
+            result_sub.undeclare()
+    if progress is not None:
+        progress(len(state.done), len(state.jobs))
+    if not state.finished:
+        return None
+    table = assemble(baits, shooters, games, state.done, chunk)
+    table.save(out)
+    return table
+
+
+def run_worker(bus: BusConfig, sweep: str, worker: str, stop: threading.Event | None = None) -> int:
+    """Run the jobs a sweep's coordinator sends this worker until it goes away (or `stop`); returns
+    the number of jobs done."""
+    stop = stop or threading.Event()
+    inbox: queue.Queue[SweepJob] = queue.Queue()
+    drops = Drops(f"worker/{worker}")
+    coordinator_seen = threading.Event()
+    library_hash, config_hash = library.manifest_hash(), GameConfig().hash()
+    done = 0
+    with session(bus) as z:
+
+        def on_job(sample: zenoh.Sample) -> None:
+            try:
+                inbox.put(decode(sample.payload.to_bytes(), SweepJob))
+            except MessageError as error:
+                drops.drop(str(sample.key_expr), error)
+
+        def on_coordinator(sample: zenoh.Sample) -> None:
+            if sample.kind == zenoh.SampleKind.PUT:
+                coordinator_seen.set()
+            elif coordinator_seen.is_set():
+                log.info("the coordinator of sweep %s is gone; worker %s stops", sweep, worker)
+                stop.set()
+
+        job_sub = z.declare_subscriber(keys.sweep_job(sweep, worker), on_job)
+        coordinator_sub = z.liveliness().declare_subscriber(
+            keys.sweep_coordinator(sweep), on_coordinator, history=True
+        )
+        token = z.liveliness().declare_token(keys.sweep_worker(sweep, worker))
+        publisher = z.declare_publisher(keys.sweep_result(sweep))
+        sender = f"worker/{worker}"
+        try:
+            while not stop.is_set():
+                try:
+                    job = inbox.get(timeout=0.2)
+                except queue.Empty:
+                    continue
+                started = time.monotonic()
+                if (job.library, job.config) != (library_hash, config_hash):
+                    error = (
+                        f"library/rules {library_hash}/{config_hash} here, {job.library}/{job.config} "
+                        "in the sweep: update this worker's checkout"
+                    )
+                    result = SweepResult(sweep, 0, sender, job.job, [], error)
+                else:
+                    values = run_job(Job(job.bait, job.shooter, tuple(job.seeds)))
+                    result = SweepResult(sweep, 0, sender, job.job, values, "", time.monotonic() - started)
+                    done += 1
+                publisher.put(result.encode())
+        finally:
+            token.undeclare()
+            coordinator_sub.undeclare()
+            job_sub.undeclare()
+    return done

@@ -188,66 +188,23 @@ def sweep(
     password: Password = "",
 ) -> None:
     """Coordinate a self-play sweep: measure the table with local and remote workers; resumable."""
-    import subprocess
-    import sys
-
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
 
-    from services.table.sweep import run_sweep
+    from services.table.sweep import local_workers, run_sweep
     from shared.bus import free_endpoint
 
     bait_keys, shooter_keys = _keys(baits, "bait"), _keys(shooters, "shooter")
     endpoint = free_endpoint()
-    bus = _bus(
-        zmode,
-        [*(listen or ()), endpoint] if zmode != "client" else listen,
-        connect,
-        multicast,
-        low_latency,
-        user,
-        password,
-    )
-    local = [
-        subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "services.cli",
-                "worker",
-                "--sweep",
-                sweep_id,
-                "--id",
-                f"{sweep_id}-local{i}",
-                "--connect",
-                endpoint,
-                "--listen",
-                "tcp/127.0.0.1:0",
-            ]
-        )  # fmt: skip
-        for i in range(workers)
-    ]
+    listen = [*(listen or ()), endpoint] if zmode != "client" else listen
+    bus = _bus(zmode, listen, connect, multicast, low_latency, user, password)
     stop = stop_on_signals()
-    columns = (
-        *Progress.get_default_columns()[:1],
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        TimeRemainingColumn(),
-    )
-    try:
-        with Progress(*columns, console=console) as bar:
-            task = bar.add_task(
-                f"sweep {sweep_id}: {len(bait_keys)}x{len(shooter_keys)} pairs, {games} games", total=None
-            )
-            table = run_sweep(
-                bus, sweep_id, out, bait_keys, shooter_keys, games, chunk,
-                lambda done, total: bar.update(task, completed=done, total=total), stop,
-            )  # fmt: skip
-    finally:
-        for process in local:
-            process.terminate()
-        for process in local:
-            process.wait()
+    columns = (BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
+    with local_workers(sweep_id, endpoint, workers), Progress(*columns, console=console) as bar:
+        task = bar.add_task("jobs", total=None)
+        table = run_sweep(
+            bus, sweep_id, out, bait_keys, shooter_keys, games, chunk,
+            lambda done, total: bar.update(task, completed=done, total=total), stop,
+        )  # fmt: skip
     if table is None:
         console.print("stopped; run the same command again to resume from the journal")
         raise typer.Exit(1)

@@ -12,9 +12,12 @@ from __future__ import annotations
 import json
 import logging
 import queue
+import subprocess
+import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import zenoh
@@ -206,6 +209,22 @@ def run_sweep(
     table = assemble(baits, shooters, games, state.done, chunk)
     table.save(out)
     return table
+
+
+@contextmanager
+def local_workers(sweep: str, endpoint: str, n: int) -> Iterator[list[subprocess.Popen]]:
+    """`n` worker processes on this machine, connected to a coordinator listening on `endpoint`;
+    ended on exit."""
+    bus = BusConfig("peer", ("tcp/127.0.0.1:0",), (endpoint,))
+    command = [sys.executable, "-m", "services.cli", "worker", *bus.to_args(), "--sweep", sweep]
+    workers = [subprocess.Popen([*command, "--id", f"{sweep}-local{i}"]) for i in range(n)]
+    try:
+        yield workers
+    finally:
+        for worker in workers:
+            worker.terminate()
+        for worker in workers:
+            worker.wait()
 
 
 def run_worker(bus: BusConfig, sweep: str, worker: str, stop: threading.Event | None = None) -> int:

@@ -141,7 +141,7 @@ def diversity(
     from services.adapter.cem import cem_matrix
     from services.agent import library
 
-    for role, partner in (("bait", shooter_partner), ("shooter", bait_partner)):
+    for role, partner in (("bait", bait_partner), ("shooter", shooter_partner)):
         keys = library.keys(role)
         partner_role = "shooter" if role == "bait" else "bait"
         m = cem_matrix([library.load(k) for k in keys], policy_for(partner, partner_role), list(range(games)))

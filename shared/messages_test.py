@@ -28,6 +28,8 @@ from shared.messages import (
     Start,
     State,
     Summary,
+    SweepJob,
+    SweepResult,
     decode,
     decode_any,
 )
@@ -55,6 +57,18 @@ def examples() -> dict[str, Message]:
         "policy": PolicySwitch(M, game.frame, "adapter", "shooter", "mirror", "cross-entropy 2.3 > 1.5"),
         "event": GameEvent(M, 12, "sim", "death", "bait", "shell"),
         "summary": summary_message(game, M, "sim", {"range": 2, "shape": 1}, {"round_trip_ms_p50": 1.5}),
+        "sweep_job": SweepJob(
+            "table",
+            0,
+            "sweep",
+            "B5-S4-10-10",
+            "B5",
+            "S4",
+            list(range(10, 20)),
+            "0123456789abcdef",
+            GameConfig().hash(),
+        ),
+        "sweep_result": SweepResult("table", 0, "worker/w1", "B5-S4-10-10", [8.0, 6.5, 9.0], "", 1.25),
     }
 
 

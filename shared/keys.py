@@ -5,6 +5,7 @@ tsf/<match>/action/<role>         agent or human -> sim, one Action per state
 tsf/<match>/policy/<role>         adapter or operator -> agent: which library policy to play
 tsf/<match>/event                 sim -> all       game events (kills, deaths, ...)
 tsf/<match>/summary               sim -> all       the match result, once, at the end
+tsf/<match>/adapter               adapter -> all   AdapterStatus: similarity scores, belief, choice
 tsf/<match>/alive/<service>[/<role>]  liveliness tokens, one per running service
 
 tsf/sweep/<sweep>/coordinator       liveliness token of a sweep's coordinator
@@ -59,6 +60,10 @@ def event(match: str) -> str:
 
 def summary(match: str) -> str:
     return f"{PREFIX}/{check_match(match)}/summary"
+
+
+def adapter(match: str) -> str:
+    return f"{PREFIX}/{check_match(match)}/adapter"
 
 
 def alive(match: str, service: str, role: str | None = None) -> str:

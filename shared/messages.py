@@ -271,6 +271,39 @@ class Summary(Message):
     timing: dict[str, float] = field(default_factory=dict)  # round trip and tick jitter, ms
 
 
+@dataclass(frozen=True)
+class AdapterStatus(Message):
+    """The adapter's view of the partner, published a few times a second and on every switch.
+
+    `role` is the adaptive agent's seat (the partner plays the other); `scores` holds the CEM
+    similarity (mean log-probability over the window) of each library policy of the partner's role;
+    `belief` the posterior over partner types where the strategy keeps one (else empty);
+    `partner` the estimated type ("" while the window fills); `policy` what our agent plays."""
+
+    TYPE: ClassVar[str] = "adapter"
+    CHECKS: ClassVar[dict[str, Check]] = {
+        "role": _ROLE,
+        "strategy": _text(r"[a-z_-]{1,32}"),
+        "window": _int(1, 100_000),
+        "filled": _int(0, 100_000),
+        "partner": _KEY_OR_NONE,
+        "policy": _KEY,
+        "scores": _named(_number(-1e6, 0.0)),
+        "belief": _named(_number(0.0, 1.0)),
+        "out_of_library": _bool,
+    }
+
+    role: str = "shooter"
+    strategy: str = "cem"
+    window: int = 400
+    filled: int = 0
+    partner: str = ""
+    policy: str = "S1"
+    scores: dict[str, float] = field(default_factory=dict)
+    belief: dict[str, float] = field(default_factory=dict)
+    out_of_library: bool = False
+
+
 _POLICY_KEY = _text(r"[A-Z][0-9]{1,2}")
 _HASH = _text(r"[0-9a-f]{16}")
 
@@ -319,7 +352,8 @@ class SweepResult(Message):
 
 
 TYPES: dict[str, type[Message]] = {
-    t.TYPE: t for t in (Start, State, Action, PolicySwitch, GameEvent, Summary, SweepJob, SweepResult)
+    t.TYPE: t
+    for t in (Start, State, Action, PolicySwitch, GameEvent, Summary, AdapterStatus, SweepJob, SweepResult)
 }
 _ENVELOPE: dict[str, Check] = {"match": _MATCH, "frame": _int(0, MAX_FRAME), "sender": _SENDER}
 M = TypeVar("M", bound=Message)

@@ -21,6 +21,7 @@ from shared.messages import (
     SCHEMA_VERSION,
     TYPES,
     Action,
+    AdapterStatus,
     GameEvent,
     Message,
     MessageError,
@@ -68,6 +69,20 @@ def examples() -> dict[str, Message]:
             "0123456789abcdef",
             GameConfig().hash(),
         ),
+        "adapter": AdapterStatus(
+            M,
+            420,
+            "adapter",
+            "shooter",
+            "cem",
+            400,
+            400,
+            "B5",
+            "S5",
+            {"B1": -4.1, "B5": -1.2},
+            {"B1": 0.05, "B5": 0.95},
+            False,
+        ),  # fmt: skip
         "sweep_result": SweepResult("table", 0, "worker/w1", "B5-S4-10-10", [8.0, 6.5, 9.0], "", 1.25),
     }
 

@@ -12,9 +12,19 @@ import pyarrow.parquet as pq
 from services.recorder.log import read_log
 from services.sim.config import GameConfig
 from services.sim.engine import Game
-from shared.messages import Action, GameEvent, MessageError, PolicySwitch, Start, State, Summary, decode_any
+from shared.messages import (
+    Action,
+    AdapterStatus,
+    GameEvent,
+    MessageError,
+    PolicySwitch,
+    Start,
+    State,
+    Summary,
+    decode_any,
+)
 
-TABLES = ("states", "actions", "switches", "events", "gaps", "match")
+TABLES = ("states", "actions", "switches", "events", "gaps", "match", "adapter")
 
 
 @dataclass
@@ -29,6 +39,7 @@ class Recording:
     actions: list[tuple[int, Action]] = field(default_factory=list)  # (receive time ns, action)
     switches: list[PolicySwitch] = field(default_factory=list)
     events: list[GameEvent] = field(default_factory=list)
+    adapter: list[AdapterStatus] = field(default_factory=list)
     gaps: list[tuple[int, int]] = field(default_factory=list)
     undecodable: int = 0
 
@@ -57,6 +68,8 @@ def load(path: str | Path) -> Recording:
             recording.switches.append(message)
         elif isinstance(message, GameEvent):
             recording.events.append(message)
+        elif isinstance(message, AdapterStatus):
+            recording.adapter.append(message)
         elif isinstance(message, Start):
             recording.start = message
         elif isinstance(message, Summary):
@@ -83,7 +96,7 @@ def replay(recording: Recording) -> list[int]:
 
 
 def export_parquet(recording: Recording, out: str | Path) -> dict[str, Path]:
-    """Write one Parquet file per table (states, actions, switches, events, gaps, match)."""
+    """Write one Parquet file per table (states, actions, switches, events, gaps, match, adapter)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     start, summary = recording.start, recording.summary
@@ -133,6 +146,18 @@ def export_parquet(recording: Recording, out: str | Path) -> dict[str, Path]:
             "counters": [json.dumps(summary.counters) if summary else ""],
             "clean": [recording.clean],
             "missing_frames": [recording.missing_frames],
+        },
+        "adapter": {
+            "frame": pa.array([a.frame for a in recording.adapter], pa.int64()),
+            "role": pa.array([a.role for a in recording.adapter], pa.string()),
+            "partner": pa.array([a.partner for a in recording.adapter], pa.string()),
+            "policy": pa.array([a.policy for a in recording.adapter], pa.string()),
+            "strategy": pa.array([a.strategy for a in recording.adapter], pa.string()),
+            "window": pa.array([a.window for a in recording.adapter], pa.int64()),
+            "filled": pa.array([a.filled for a in recording.adapter], pa.int64()),
+            "out_of_library": pa.array([a.out_of_library for a in recording.adapter], pa.bool_()),
+            "scores": pa.array([json.dumps(a.scores) for a in recording.adapter], pa.string()),
+            "belief": pa.array([json.dumps(a.belief) for a in recording.adapter], pa.string()),
         },
     }
     paths = {}

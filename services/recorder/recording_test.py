@@ -16,13 +16,16 @@ from services.sim.config import ROLES, GameConfig
 from services.sim.engine import Game
 from services.sim.match import event_messages, start_message, state_message, summary_message
 from shared import keys
-from shared.messages import PolicySwitch, State
+from shared.messages import AdapterStatus, PolicySwitch, State
 
 M = "rec-1"
 SEED = 5
 FRAMES = 60
 POLICIES = {"bait": "circle", "shooter": "mirror"}
 SWITCH_AT = 30  # the bait switches to idle before answering this frame
+ADAPTER = AdapterStatus(
+    M, SWITCH_AT, "adapter", "shooter", "cem", 20, 20, "B5", "S5", {"B5": -0.5, "B1": -3.0}
+)
 
 
 def record_match(
@@ -50,6 +53,7 @@ def record_match(
                 break
             if state.frame == SWITCH_AT:
                 switch = PolicySwitch(M, state.frame, "operator", "bait", "idle", "test")
+                log.write(keys.adapter(M), ADAPTER.encode())
                 log.write(keys.policy(M, "bait"), switch.encode())
                 players["bait"].switch(switch.policy)
             answers = [players[role].act(state, f"agent/{role}") for role in ROLES]
@@ -149,6 +153,16 @@ def test_parquet_round_trip(recorded: tuple[Recording, list[State]], tmp_path: P
         "reason": ["test"],
     }
     assert tables["gaps"] == {"first": [], "last": []}
+    assert recording.adapter == [ADAPTER]
+    adapter = {name: values[0] for name, values in tables["adapter"].items()}
+    assert (adapter["frame"], adapter["role"], adapter["partner"], adapter["policy"]) == (
+        SWITCH_AT,
+        "shooter",
+        "B5",
+        "S5",
+    )
+    assert (adapter["strategy"], adapter["window"], adapter["out_of_library"]) == ("cem", 20, False)
+    assert json.loads(adapter["scores"]) == ADAPTER.scores and json.loads(adapter["belief"]) == {}
 
     match = {name: values[0] for name, values in tables["match"].items()}
     assert len(tables["match"]["seed"]) == 1

@@ -414,5 +414,47 @@ def match_command(
     console.print(f"  recording: {path}  (Parquet: {export['states'].parent})")
 
 
+@app.command("replay")
+def replay_command(
+    recording: Path = typer.Argument(..., help="A recording (.tsflog)."),
+    video: Path | None = typer.Option(None, help="Write the re-simulated match as an .mp4 or .gif."),
+    scale: float = typer.Option(1.0, min=0.1, help="Video pixels per world pixel."),
+    every: int = typer.Option(1, min=1, help="Video: draw every N-th frame (the video keeps real speed)."),
+    live: bool = typer.Option(False, "--live", help="Put the match back on the bus at the game's pace."),
+    speed: float = typer.Option(1.0, min=0.01, help="--live: playback speed (1 = real time)."),
+    as_match: str = typer.Option("", "--as", help="--live: publish under this match id (default: its own)."),
+    delay: float = typer.Option(1.0, min=0.0, help="--live: seconds to wait for watchers before starting."),
+    zmode: Mode = "peer",
+    listen: Listen = None,
+    connect: Connect = None,
+    multicast: Multicast = False,
+    low_latency: LowLatency = False,
+    user: User = "",
+    password: Password = "",
+) -> None:
+    """Re-simulate a recording and check every state hash; optionally write a video or re-broadcast it."""
+    from services.recorder.recording import load, replay
+    from services.recorder.replay import republish, write_video
+
+    loaded = load(recording)
+    try:
+        mismatches = replay(loaded)
+    except ValueError as error:
+        console.print(f"[red]{error}[/]")
+        raise typer.Exit(1) from None
+    tail = "" if loaded.clean else " [yellow](the log ends in a torn or corrupt record)[/]"
+    if mismatches:
+        console.print(f"[red]{recording}: {len(mismatches)} states differ, first at frame {mismatches[0]}[/]")
+        raise typer.Exit(1)
+    console.print(f"{recording}: all {len(loaded.states)} states reproduce their hashes{tail}")
+    if video is not None:
+        count = write_video(loaded, video, scale, every)
+        console.print(f"video: {video} ({count} frames)")
+    if live:
+        bus = _bus(zmode, listen, connect, multicast, low_latency, user, password)
+        sent = republish(bus, recording, as_match or None, speed, delay, stop_on_signals())
+        console.print(f"republished {sent} messages")
+
+
 if __name__ == "__main__":
     app()

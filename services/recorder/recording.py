@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -77,22 +78,26 @@ def load(path: str | Path) -> Recording:
     return recording
 
 
-def replay(recording: Recording) -> list[int]:
-    """Re-simulate the match through the engine with the actions the sim applied; returns the
-    frames whose recorded state hash differs (empty: every recorded state reproduced)."""
+def simulate(recording: Recording) -> Iterator[tuple[State, Game]]:
+    """Re-simulate the match through the engine with the actions the sim applied: each recorded
+    state beside the engine's game at that frame (the same Game object, stepped in place)."""
     if recording.start is None:
         raise ValueError(f"{recording.path}: no start record, so the match cannot be replayed")
     game = Game(GameConfig.from_dict(recording.start.config), recording.start.seed)
     by_frame = {s.frame: s for s in recording.states}
-    mismatches = []
     for frame in range(0, max(by_frame, default=0) + 1):
         if frame > 0:
             if frame not in by_frame:
                 raise ValueError(f"{recording.path}: frame {frame} is missing, so its actions are unknown")
             game.step(*by_frame[frame].applied)
-        if frame in by_frame and by_frame[frame].hash != game.state_hash():
-            mismatches.append(frame)
-    return mismatches
+        if frame in by_frame:
+            yield by_frame[frame], game
+
+
+def replay(recording: Recording) -> list[int]:
+    """The frames whose recorded state hash differs from the re-simulated one (empty: every
+    recorded state reproduced)."""
+    return [state.frame for state, game in simulate(recording) if state.hash != game.state_hash()]
 
 
 def export_parquet(recording: Recording, out: str | Path) -> dict[str, Path]:

@@ -8,7 +8,7 @@ from collections.abc import Callable
 from services.agent.library import policy_for
 from services.agent.policy import Policy
 from services.sim.observation import as_observation
-from services.sim.play import policy_seed
+from services.sim.play import policy_seed, switch_seed
 from shared.messages import Action, State
 
 PolicyLoader = Callable[[str, str], Policy]
@@ -41,7 +41,7 @@ class Player:
         with self._lock:
             if self.pending is not None:
                 self.policy, self.pending = self._next, None
-                self.policy.reset(policy_seed(self.seed, self.role) * 1_000_003 + state.frame)
+                self.policy.reset(switch_seed(self.seed, self.role, state.frame))
             policy = self.policy
         action = policy.act(as_observation(state.obs[self.role], policy.frame))
         return Action(state.match, state.frame, sender, self.role, action, policy.key)

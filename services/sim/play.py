@@ -28,6 +28,11 @@ def policy_seed(game_seed: int, role: str) -> int:
     return 2 * game_seed + 1 + ROLES.index(role)
 
 
+def switch_seed(game_seed: int, role: str, frame: int) -> int:
+    """The seed a seat's policy is reset with when it is switched to from `frame` on."""
+    return policy_seed(game_seed, role) * 1_000_003 + frame
+
+
 Trace = Callable[[Game, int, int], None]
 
 

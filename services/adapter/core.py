@@ -1,0 +1,258 @@
+"""The adapter's pure core: which library policy is the partner like, and what should we play.
+
+Every frame, each library policy of the partner's role scores the partner's action in the state
+the partner saw (`Scorer`: log pi_k(a_t | s_t)). A strategy turns those scores into an estimated
+partner type C and our policy D (`Adapter`):
+
+- `cem` (the study's): C is the policy with the highest mean log-probability over the last T
+  frames (the window, `Window`); D is the best response to C in the self-play table P.
+- `bayes`: a hidden Markov model over partner types. The partner switches type with probability
+  `hazard` per frame and slips to a uniformly random action with probability `noise`; D maximises
+  the expected table entry under the belief instead of trusting the single most likely type.
+- `-dwell`: a new D must stay the choice for `dwell` frames before the agent switches to it, so
+  that the agent does not flap between policies on noise.
+- `-ood`: when the best window score is far below what library policies score on their own play
+  (calibration.json, see `calibrate` in evaluate.py), the partner is out of library: we play the
+  policy with the best average table entry and say so.
+
+Until `warmup` frames are seen, no estimate is made and the agent plays its initial policy:
+`best-average` (the best average table entry) or `random` (drawn from our role's library with
+the adapter's seed, as in the study).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import random
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from services.agent.library import batch_probs
+from services.agent.policy import Policy
+from services.sim.config import N_ACTIONS, ROLES
+from services.sim.observation import as_observation
+from services.table.table import Table
+
+STRATEGIES = ("cem", "cem-dwell", "cem-ood", "bayes", "bayes-dwell-ood")
+INITIAL = ("best-average", "random")
+CALIBRATION = Path(__file__).parent / "calibration.json"
+
+
+def other(role: str) -> str:
+    """The other seat."""
+    return ROLES[1 - ROLES.index(role)]
+
+
+@dataclass(frozen=True)
+class AdapterConfig:
+    """How an adaptive agent adapts. Zero means "the default derived from the window"."""
+
+    role: str = "shooter"  # the adaptive agent's seat; the partner plays the other
+    window: int = 400  # T, frames of partner play the CEM averages over
+    strategy: str = "cem"
+    initial: str = "best-average"
+    warmup: int = 0  # frames before the first estimate (default: min(T, 150), 5 s)
+    dwell: int = 0  # -dwell strategies: frames a new choice must hold (default: max(15, T // 10))
+    hazard: float = 0.0  # bayes: per-frame switching probability (default: 1 / T)
+    noise: float = 0.05  # bayes: probability that the partner's action is a uniform slip
+    seed: int = 0  # draws the random initial policy
+
+    def __post_init__(self) -> None:
+        if self.role not in ROLES:
+            raise ValueError(f"unknown role {self.role!r}; expected one of {ROLES}")
+        if self.strategy not in STRATEGIES:
+            raise ValueError(f"unknown strategy {self.strategy!r}; expected one of {STRATEGIES}")
+        if self.initial not in INITIAL:
+            raise ValueError(f"unknown initial policy rule {self.initial!r}; expected one of {INITIAL}")
+        if self.window < 1 or self.warmup < 0 or self.dwell < 0:
+            raise ValueError("window must be >= 1, warmup and dwell >= 0")
+        if not (0.0 <= self.hazard < 1.0 and 0.0 <= self.noise < 1.0):
+            raise ValueError("hazard and noise are probabilities in [0, 1)")
+
+    @property
+    def partner_role(self) -> str:
+        return other(self.role)
+
+    @property
+    def warmup_frames(self) -> int:
+        return self.warmup or min(self.window, 150)
+
+    @property
+    def dwell_frames(self) -> int:
+        return (self.dwell or max(15, self.window // 10)) if "dwell" in self.strategy else 0
+
+    @property
+    def hazard_rate(self) -> float:
+        return self.hazard or 1.0 / self.window
+
+    @property
+    def name(self) -> str:
+        """The variant's name in results: adaptive-T<window>-<strategy>."""
+        return f"adaptive-T{self.window}-{self.strategy}"
+
+
+@dataclass(frozen=True)
+class Payoff:
+    """The table P seen from our seat: values[i, j] = kills/min of partner type i with our policy j."""
+
+    partners: tuple[str, ...]
+    ours: tuple[str, ...]
+    values: np.ndarray
+
+    @classmethod
+    def from_table(cls, table: Table, role: str) -> Payoff:
+        """`role` is our seat."""
+        grid = np.array([[table.mean(b, s) for s in table.shooters] for b in table.baits])
+        if role == "shooter":
+            return cls(tuple(table.baits), tuple(table.shooters), grid)
+        return cls(tuple(table.shooters), tuple(table.baits), grid.T)
+
+    def best_response(self, partner: int) -> int:
+        return int(np.argmax(self.values[partner]))
+
+    def best_average(self) -> int:
+        return int(np.argmax(self.values.mean(axis=0)))
+
+    def best_expected(self, belief: np.ndarray) -> int:
+        return int(np.argmax(belief @ self.values))
+
+    def initial(self, config: AdapterConfig) -> str:
+        """Our policy before the first estimate."""
+        if config.initial == "random":
+            return random.Random(config.seed).choice(self.ours)
+        return self.ours[self.best_average()]
+
+
+class Window:
+    """Running sums of the last `size` score vectors: O(K) per frame, never a re-scan."""
+
+    def __init__(self, policies: int, size: int) -> None:
+        self.size = size
+        self.ring = np.zeros((size, policies))
+        self.sums = np.zeros(policies)
+        self.filled = 0
+        self.next = 0
+
+    def push(self, scores: np.ndarray) -> None:
+        if self.filled == self.size:
+            self.sums -= self.ring[self.next]
+        else:
+            self.filled += 1
+        self.ring[self.next] = scores
+        self.sums += scores
+        self.next = (self.next + 1) % self.size
+
+    def means(self) -> np.ndarray:
+        return self.sums / max(self.filled, 1)
+
+
+class Scorer:
+    """log pi_k(a | s) under every library policy k of one role, from world-frame state values."""
+
+    def __init__(self, policies: list[Policy]) -> None:
+        self.policies = policies
+        self.keys = tuple(p.key for p in policies)
+        self.frames = sorted({p.frame for p in policies})
+
+    def __call__(self, values: list[float] | np.ndarray, action: int) -> np.ndarray:
+        obs = {frame: as_observation(values, frame) for frame in self.frames}
+        return np.log([p.probs(obs[p.frame])[action] for p in self.policies])
+
+    def batch(self, values: np.ndarray, actions: np.ndarray) -> np.ndarray:
+        """(n, K) scores of n frames, one batched probability evaluation per policy."""
+        obs = {f: np.stack([as_observation(v, f) for v in values]) for f in self.frames}
+        rows = np.arange(len(actions))
+        return np.log(np.stack([batch_probs(p, obs[p.frame])[rows, actions] for p in self.policies], axis=1))
+
+
+def ood_threshold(partner_role: str, window: int, path: Path = CALIBRATION) -> float:
+    """The out-of-library threshold for a window of T frames (the nearest calibrated T)."""
+    thresholds = json.loads(path.read_text())["thresholds"][partner_role]
+    nearest = min(thresholds, key=lambda t: abs(int(t) - window))
+    return float(thresholds[nearest])
+
+
+class Adapter:
+    """Turns the partner's per-frame scores into an estimated type and our policy (a library key)."""
+
+    def __init__(self, config: AdapterConfig, payoff: Payoff, threshold: float | None = None) -> None:
+        if "ood" in config.strategy and threshold is None:
+            raise ValueError(f"strategy {config.strategy} needs an out-of-library threshold")
+        self.config, self.payoff, self.threshold = config, payoff, threshold
+        k = len(payoff.partners)
+        self.window = Window(k, config.window)
+        self.log_belief = np.full(k, -math.log(k))
+        self.policy = payoff.initial(config)
+        self.partner = ""  # the estimated type, "" until warmup ends
+        self.out_of_library = False
+        self.candidate, self.held = self.policy, 0
+        self.frames = 0
+
+    @property
+    def bayes(self) -> bool:
+        return self.config.strategy.startswith("bayes")
+
+    def update(self, scores: np.ndarray) -> bool:
+        """Take one frame's scores (log-probabilities, library order); True when our policy changes."""
+        self.frames += 1
+        self.window.push(scores)
+        if self.bayes:
+            self._filter(scores)
+        if self.frames < self.config.warmup_frames:
+            return False
+        means = self.window.means()
+        if self.bayes:
+            belief = self.belief()
+            estimate, choice = int(np.argmax(belief)), self.payoff.best_expected(belief)
+        else:
+            estimate = int(np.argmax(means))
+            choice = self.payoff.best_response(estimate)
+        self.partner = self.payoff.partners[estimate]
+        self.out_of_library = self.threshold is not None and float(means.max()) < self.threshold
+        if self.out_of_library:
+            choice = self.payoff.best_average()
+        return self._choose(self.payoff.ours[choice])
+
+    def _filter(self, scores: np.ndarray) -> None:
+        """One forward step of the hidden Markov model, in log space."""
+        k, h, eta = len(scores), self.config.hazard_rate, self.config.noise
+        belief = np.exp(self.log_belief)
+        predicted = (1.0 - h) * belief + h * (1.0 - belief) / max(k - 1, 1)
+        likelihood = (1.0 - eta) * np.exp(scores) + eta / N_ACTIONS
+        log_post = np.log(predicted) + np.log(likelihood)
+        self.log_belief = log_post - np.logaddexp.reduce(log_post)
+
+    def belief(self) -> np.ndarray:
+        return np.exp(self.log_belief)
+
+    def _choose(self, choice: str) -> bool:
+        if choice == self.policy:
+            self.candidate, self.held = choice, 0
+            return False
+        if choice != self.candidate:
+            self.candidate, self.held = choice, 0
+        self.held += 1
+        if self.held < self.config.dwell_frames:
+            return False
+        self.policy, self.held = choice, 0
+        return True
+
+    def status(self) -> dict:
+        """The adapter's view, as AdapterStatus fields."""
+        c = self.config
+        return {
+            "role": c.role,
+            "strategy": c.strategy,
+            "window": c.window,
+            "filled": self.window.filled,
+            "partner": self.partner,
+            "policy": self.policy,
+            "scores": dict(zip(self.payoff.partners, map(float, self.window.means()), strict=True)),
+            "belief": dict(zip(self.payoff.partners, map(float, self.belief()), strict=True))
+            if self.bayes
+            else {},
+            "out_of_library": self.out_of_library,
+        }

@@ -1,0 +1,160 @@
+"""The adapter core: window arithmetic, selection from a table, the filter, dwell and fallback."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from services.adapter.core import Adapter, AdapterConfig, Payoff, Scorer, Window, ood_threshold
+from services.agent import library
+from services.agent.library import policy_for
+from services.sim.engine import Game
+from services.sim.observation import world_values
+
+# A hand-made table: partner types X, Y, Z (rows) against our policies a, b, c (columns).
+PAYOFF = Payoff(
+    ("X", "Y", "Z"), ("a", "b", "c"), np.array([[5.0, 1.0, 2.0], [0.0, 4.0, 3.0], [1.0, 1.0, 3.5]])
+)
+LOW, HIGH = math.log(0.05), math.log(0.8)
+
+
+def frame(best: int, k: int = 3) -> np.ndarray:
+    """Scores of one frame in which type `best` finds the action likely and the others do not."""
+    scores = np.full(k, LOW)
+    scores[best] = HIGH
+    return scores
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    size=st.integers(1, 20),
+    rows=st.lists(st.lists(st.floats(-20, 0), min_size=3, max_size=3), min_size=1, max_size=80),
+)
+def test_window_means_match_brute_force(size: int, rows: list[list[float]]) -> None:
+    window = Window(3, size)
+    for t, row in enumerate(rows):
+        window.push(np.array(row))
+        recent = np.array(rows[max(0, t + 1 - size) : t + 1])
+        assert window.filled == len(recent)
+        np.testing.assert_allclose(window.means(), recent.mean(axis=0), atol=1e-9)
+
+
+def test_best_response_and_average_from_a_hand_made_table() -> None:
+    assert [PAYOFF.best_response(i) for i in range(3)] == [0, 1, 2]
+    assert PAYOFF.best_average() == 2  # column means 2.0, 2.0, 2.83
+    assert PAYOFF.best_expected(np.array([0.5, 0.5, 0.0])) == 0  # 2.5, 2.5, 2.5 -> first
+    assert PAYOFF.best_expected(np.array([0.4, 0.6, 0.0])) == 1  # 2.0, 2.8, 2.6
+
+
+def test_payoff_from_the_shipped_table_for_either_seat() -> None:
+    from services.table.table import DEFAULT_TABLE, Table
+
+    table = Table.load(DEFAULT_TABLE)
+    shooter = Payoff.from_table(table, "shooter")
+    bait = Payoff.from_table(table, "bait")
+    assert shooter.partners == tuple(library.keys("bait")) and bait.partners == tuple(library.keys("shooter"))
+    assert shooter.ours[shooter.best_response(0)] == table.best_shooter("B1")
+    assert bait.ours[bait.best_response(0)] == table.best_bait("S1")
+
+
+def test_cem_plays_the_initial_policy_until_warmup_then_the_best_response() -> None:
+    adapter = Adapter(AdapterConfig(window=10, warmup=5), PAYOFF)
+    assert adapter.policy == "c" and adapter.partner == ""  # best average
+    changes = [adapter.update(frame(1)) for _ in range(5)]
+    assert changes == [False] * 4 + [True]
+    assert (adapter.partner, adapter.policy) == ("Y", "b")
+
+
+def test_cem_follows_a_switch_once_the_window_majority_changes() -> None:
+    adapter = Adapter(AdapterConfig(window=9, warmup=9), PAYOFF)
+    for _ in range(9):
+        adapter.update(frame(0))
+    assert adapter.policy == "a"
+    followed = next(t for t in range(1, 10) if adapter.update(frame(1)))
+    assert followed == 5  # the mean favours Y once 5 of the 9 frames are Y's
+    assert (adapter.partner, adapter.policy) == ("Y", "b")
+
+
+def test_dwell_waits_for_a_choice_to_hold_and_ignores_a_blip() -> None:
+    config = AdapterConfig(window=4, warmup=1, strategy="cem-dwell", dwell=3)
+    adapter = Adapter(config, PAYOFF)
+    assert [adapter.update(frame(0)) for _ in range(3)] == [False, False, True]
+    adapter = Adapter(config, PAYOFF)
+    adapter.window = Window(3, 1)  # a one-frame window, so every frame's estimate is that frame's
+    pattern = [0, 0, 1, 0, 0, 0]
+    changes = [adapter.update(frame(i)) for i in pattern]
+    assert changes == [False, False, False, False, False, True]  # the Y blip never held 3 frames
+    assert adapter.policy == "a"
+
+
+def test_out_of_library_partner_falls_back_to_the_best_average() -> None:
+    config = AdapterConfig(window=5, warmup=5, strategy="cem-ood")
+    adapter = Adapter(config, PAYOFF, threshold=-1.0)
+    for _ in range(5):
+        adapter.update(np.full(3, math.log(0.1)))  # no type explains the actions
+    assert adapter.out_of_library and adapter.policy == "c"
+    for _ in range(5):
+        adapter.update(frame(0))
+    assert not adapter.out_of_library and adapter.policy == "a"
+    with pytest.raises(ValueError, match="threshold"):
+        Adapter(config, PAYOFF)
+
+
+def test_bayes_filter_matches_a_hand_computed_forward_pass() -> None:
+    config = AdapterConfig(window=10, warmup=1, strategy="bayes", hazard=0.1, noise=0.2)
+    adapter = Adapter(config, PAYOFF)
+    p1, p2 = np.array([0.6, 0.3, 0.1]), np.array([0.2, 0.5, 0.3])
+    adapter.update(np.log(p1))
+    adapter.update(np.log(p2))
+    belief = np.full(3, 1 / 3)
+    for p in (p1, p2):
+        predicted = np.array([0.9 * belief[i] + 0.05 * (1 - belief[i]) for i in range(3)])
+        post = predicted * (0.8 * p + 0.2 / 12)
+        belief = post / post.sum()
+    np.testing.assert_allclose(adapter.belief(), belief, rtol=1e-12)
+    assert adapter.partner == "XYZ"[int(np.argmax(belief))]
+    assert adapter.policy == "abc"[int(np.argmax(belief @ PAYOFF.values))]
+    assert set(adapter.status()["belief"]) == {"X", "Y", "Z"}
+
+
+def test_random_initial_policy_is_drawn_by_seed() -> None:
+    drawn = {Payoff.initial(PAYOFF, AdapterConfig(initial="random", seed=s)) for s in range(20)}
+    assert drawn == {"a", "b", "c"}
+    assert PAYOFF.initial(AdapterConfig(initial="random", seed=3)) == PAYOFF.initial(
+        AdapterConfig(initial="random", seed=3)
+    )
+
+
+def test_config_is_validated() -> None:
+    with pytest.raises(ValueError, match="strategy"):
+        AdapterConfig(strategy="oracle")
+    with pytest.raises(ValueError, match="role"):
+        AdapterConfig(role="pilot")
+    assert AdapterConfig(window=800).warmup_frames == 150
+    assert AdapterConfig(window=400, strategy="cem-dwell").dwell_frames == 40
+    assert AdapterConfig(window=400).dwell_frames == 0
+
+
+def test_scorer_single_and_batched_agree_with_each_policy() -> None:
+    baits = [library.load(k) for k in library.keys("bait")]
+    scorer = Scorer(baits)
+    game, circle = Game(seed=4), policy_for("circle", "bait")
+    values, actions = [], []
+    for t in range(40):
+        values.append(world_values(game, "bait"))
+        actions.append(circle.act(np.asarray(values[-1], dtype=np.float32)))
+        game.step(actions[-1], 0 if t % 2 else 5)
+    batched = scorer.batch(np.array(values), np.array(actions))
+    single = np.array([scorer(v, a) for v, a in zip(values, actions, strict=True)])
+    np.testing.assert_allclose(batched, single, rtol=1e-6)
+    assert batched.shape == (40, 9) and np.all(batched < 0)
+
+
+def test_shipped_calibration_has_a_threshold_per_role() -> None:
+    for role in ("bait", "shooter"):
+        assert -12.0 < ood_threshold(role, 400) < 0.0
+        assert ood_threshold(role, 150) <= ood_threshold(role, 800) + 1e-9

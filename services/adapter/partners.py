@@ -1,0 +1,173 @@
+"""Partners for evaluating an adaptive agent: library policies and stand-ins for humans built from them.
+
+A partner is named by a small grammar, so that an evaluation's partners can be rebuilt by name in
+any worker process:
+
+    B5                 a library (or scripted) policy as it is
+    noisy(B5)          plays a uniformly random action with probability NOISE per frame
+    delayed(B5)        acts on the state of DELAY frames ago (a reaction time of 0.2 s)
+    sticky(B5)         repeats its previous action with probability STICKY (keys held too long)
+    switch(B5,B7)      plays B5 until SWITCH_AT, then B7 (a partner who changes style mid-game)
+    package.module:attr  your own partner: an object with the policy protocol's key, role, frame,
+                         reset(seed) and act(obs), or a callable that returns a new one
+
+Wrappers nest: `noisy(switch(B5,B7))`.
+"""
+
+from __future__ import annotations
+
+import importlib
+import random
+import re
+from collections import deque
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from services.agent import library
+from services.agent.library import policy_for
+from services.sim.config import N_ACTIONS
+
+NOISE = 0.1
+DELAY = 6  # frames
+STICKY = 0.5
+SWITCH_AT = 900  # frame: the middle of a one-minute game
+
+
+@runtime_checkable
+class Partner(Protocol):
+    """What a partner needs of the policy protocol: it acts, it need not report probabilities."""
+
+    key: str
+    role: str
+    frame: str
+
+    def reset(self, seed: int | None = None) -> None: ...
+
+    def act(self, obs: np.ndarray) -> int: ...
+
+
+class Wrapper:
+    """A partner that changes how an inner partner acts; reset seeds both."""
+
+    def __init__(self, inner: Partner, key: str) -> None:
+        self.inner, self.key = inner, key
+        self.role, self.frame = inner.role, inner.frame
+        self.rng = random.Random(0)
+
+    def reset(self, seed: int | None = None) -> None:
+        self.inner.reset(seed)
+        self.rng = random.Random(None if seed is None else seed * 7919 + 1)
+
+
+class Noisy(Wrapper):
+    def __init__(self, inner: Partner, noise: float = NOISE) -> None:
+        super().__init__(inner, f"noisy({inner.key})")
+        self.noise = noise
+
+    def act(self, obs: np.ndarray) -> int:
+        action = self.inner.act(obs)
+        return self.rng.randrange(N_ACTIONS) if self.rng.random() < self.noise else action
+
+
+class Delayed(Wrapper):
+    def __init__(self, inner: Partner, delay: int = DELAY) -> None:
+        super().__init__(inner, f"delayed({inner.key})")
+        self.seen: deque[np.ndarray] = deque(maxlen=delay + 1)
+
+    def reset(self, seed: int | None = None) -> None:
+        super().reset(seed)
+        self.seen.clear()
+
+    def act(self, obs: np.ndarray) -> int:
+        self.seen.append(obs)
+        return self.inner.act(self.seen[0])  # the oldest kept: `delay` frames ago once full
+
+
+class Sticky(Wrapper):
+    def __init__(self, inner: Partner, sticky: float = STICKY) -> None:
+        super().__init__(inner, f"sticky({inner.key})")
+        self.sticky, self.last = sticky, 0
+
+    def reset(self, seed: int | None = None) -> None:
+        super().reset(seed)
+        self.last = 0
+
+    def act(self, obs: np.ndarray) -> int:
+        action = self.inner.act(obs)  # the inner partner keeps its own course either way
+        if self.rng.random() >= self.sticky:
+            self.last = action
+        return self.last
+
+
+class Switching(Wrapper):
+    def __init__(self, first: Partner, second: Partner, at: int = SWITCH_AT) -> None:
+        if first.role != second.role or first.frame != second.frame:
+            raise ValueError(f"switch({first.key},{second.key}): both must share role and observation frame")
+        super().__init__(first, f"switch({first.key},{second.key})")
+        self.second, self.at, self.t = second, at, 0
+
+    def reset(self, seed: int | None = None) -> None:
+        super().reset(seed)
+        self.second.reset(None if seed is None else seed + 1)
+        self.t = 0
+
+    def act(self, obs: np.ndarray) -> int:
+        self.t += 1
+        return (self.inner if self.t <= self.at else self.second).act(obs)
+
+
+WRAPPERS = {"noisy": Noisy, "delayed": Delayed, "sticky": Sticky}
+_CALL = re.compile(r"^(\w+)\((.*)\)$")
+
+
+def make_partner(name: str, role: str) -> Partner:
+    """A fresh partner of `role` by name (see the module docstring for the grammar)."""
+    call = _CALL.match(name)
+    if call and call[1] in WRAPPERS:
+        return WRAPPERS[call[1]](make_partner(call[2], role))
+    if call and call[1] == "switch":
+        first, second = _split_arguments(call[2])
+        return Switching(make_partner(first, role), make_partner(second, role))
+    if ":" in name:
+        return _external(name, role)
+    return policy_for(name, role)
+
+
+def _split_arguments(text: str) -> tuple[str, str]:
+    """The two top-level, comma-separated arguments of switch(...), which may nest."""
+    depth = 0
+    for i, char in enumerate(text):
+        depth += {"(": 1, ")": -1}.get(char, 0)
+        if char == "," and depth == 0:
+            return text[:i].strip(), text[i + 1 :].strip()
+    raise ValueError(f"switch({text}) needs two partners")
+
+
+def _external(path: str, role: str) -> Partner:
+    module, _, attr = path.partition(":")
+    found = getattr(importlib.import_module(module), attr)
+    partner = found if isinstance(found, Partner) else found()
+    if not isinstance(partner, Partner):
+        raise TypeError(f"{path} is not a partner (key, role, frame, reset, act)")
+    if partner.role != role:
+        raise ValueError(f"{path} plays {partner.role}, not {role}")
+    return partner
+
+
+def population(role: str) -> dict[str, list[str]]:
+    """The default evaluation population of partners of `role`, by group: every library policy,
+    its noisy, delayed and sticky stand-ins, switchers between library policies of different
+    families, and two partners outside the library (the scripted demonstrator and random)."""
+    keys = library.keys(role)
+    half = len(keys) // 2
+    switches = [f"switch({a},{b})" for a, b in zip(keys, keys[half:] + keys[:half], strict=True)]
+    outside = ["circle" if role == "bait" else "mirror", "random"]
+    return {
+        "library": keys,
+        "noisy": [f"noisy({k})" for k in keys],
+        "delayed": [f"delayed({k})" for k in keys],
+        "sticky": [f"sticky({k})" for k in keys],
+        "switching": switches,
+        "outside": outside,
+    }

@@ -20,17 +20,28 @@ from shared.bus import BusConfig, stop_on_signals
 app = typer.Typer(no_args_is_help=True, add_completion=False, help="Team Space Fortress.")
 console = Console()
 
-# Options every bus service shares.
-Mode = Annotated[str, typer.Option("--mode", help="zenoh mode: peer (default), client or router.")]
-Listen = Annotated[list[str] | None, typer.Option("--listen", help="Endpoint to listen on (repeatable).")]
-Connect = Annotated[list[str] | None, typer.Option("--connect", help="Endpoint to connect to (repeatable).")]
+# Options every bus service shares. The environment can set them (space-separated endpoints), so that
+# one deployment file configures every service's bus in one place (compose.yaml).
+Mode = Annotated[
+    str, typer.Option("--mode", envvar="TSF_MODE", help="zenoh mode: peer (default), client or router.")
+]
+Listen = Annotated[
+    list[str] | None,
+    typer.Option("--listen", envvar="TSF_LISTEN", help="Endpoint to listen on (repeatable)."),
+]
+Connect = Annotated[
+    list[str] | None,
+    typer.Option("--connect", envvar="TSF_CONNECT", help="Endpoint to connect to (repeatable)."),
+]
 Multicast = Annotated[bool, typer.Option("--multicast", help="Turn multicast scouting on (off by default).")]
 LowLatency = Annotated[bool, typer.Option("--low-latency", help="zenoh low-latency transport (all peers).")]
 User = Annotated[
     str, typer.Option("--user", help="Log-in for a secured router; the password comes from TSF_BUS_PASSWORD.")
 ]
 Password = Annotated[str, typer.Option("--password", envvar="TSF_BUS_PASSWORD", hidden=True)]
-Match = Annotated[str, typer.Option("--match", help="Match id: the key namespace tsf/<match>/...")]
+Match = Annotated[
+    str, typer.Option("--match", envvar="TSF_MATCH", help="Match id: the key namespace tsf/<match>/...")
+]
 
 
 def _bus(
@@ -454,6 +465,113 @@ def replay_command(
         bus = _bus(zmode, listen, connect, multicast, low_latency, user, password)
         sent = republish(bus, recording, as_match or None, speed, delay, stop_on_signals())
         console.print(f"republished {sent} messages")
+
+
+@app.command()
+def alive(
+    match: Match,
+    service: str = typer.Option(..., help="sim, agent, recorder, adapter or human."),
+    role: str = typer.Option("", help="The seat, for an agent or a human."),
+    connect: Connect = None,
+    timeout: float = typer.Option(2.0, help="Seconds to wait for the bus."),
+) -> None:
+    """Exit 0 if the service's liveliness token is on the bus, else 1 (a container healthcheck).
+
+    Asks as a zenoh client of the endpoint it connects to (default: this host's tcp/127.0.0.1:7447),
+    so the probe never joins the match's mesh of peers."""
+    import zenoh
+
+    from shared import keys
+    from shared.bus import session
+
+    key = keys.alive(match, service, role or None)
+    bus = BusConfig("client", (), tuple(connect or ("tcp/127.0.0.1:7447",)), wait_router=timeout)
+    try:
+        with session(bus) as z:
+            found = any(reply.ok is not None for reply in z.liveliness().get(key, timeout=timeout))
+    except zenoh.ZError as error:
+        console.print(f"cannot reach the bus: {error}")
+        found = False
+    console.print(f"{key}: {'alive' if found else 'not on the bus'}")
+    if not found:
+        raise typer.Exit(1)
+
+
+Host = Annotated[str, typer.Option(help="Address the web page is served on (0.0.0.0: every interface).")]
+Port = Annotated[int, typer.Option(help="Port of the web page (0: any free port).")]
+
+
+@app.command()
+def human(
+    match: Match,
+    token: list[str] = typer.Option(..., "--token", help="ROLE=TOKEN: a seat open to people (repeatable)."),
+    host: Host = "127.0.0.1",
+    port: Port = 8000,
+    zmode: Mode = "peer",
+    listen: Listen = None,
+    connect: Connect = None,
+    multicast: Multicast = False,
+    low_latency: LowLatency = False,
+    user: User = "",
+    password: Password = "",
+) -> None:
+    """Run the human gateway: a web page that plays a match's seats from browsers, by seat token."""
+    from services.human.gateway import run_human
+    from services.human.play import seat_links
+
+    tokens = dict(t.split("=", 1) for t in token if "=" in t)
+    if len(tokens) != len(token):
+        raise typer.BadParameter("give each seat as ROLE=TOKEN")
+    bus = _bus(zmode, listen, connect, multicast, low_latency, user, password)
+
+    def show(gateway) -> None:  # noqa: ANN001 - a Gateway
+        for role, link in seat_links(gateway.url, tokens).items():
+            console.print(f"{role}: {link}")
+
+    run_human(bus, match, tokens, host, port, stop_on_signals(), show)
+
+
+@app.command("play")
+def play_command(
+    role: str = typer.Option("bait", help="The seat you play: bait or shooter."),
+    partner: str = typer.Option(
+        "",
+        help="Who plays the other seat: a policy key (see `tsf library`; default S5 or B9, the best "
+        "partners in the table), or `human` for a person.",
+    ),
+    seed: int = typer.Option(0, help="The game's seed."),
+    duration: float = typer.Option(60.0, min=0.1, help="Game length in seconds (30 frames each)."),
+    wait: float = typer.Option(600.0, help="Seconds to wait for the players to press start."),
+    host: Host = "127.0.0.1",
+    port: Port = 8000,
+    match: str = typer.Option("", help="Match id (default: from the clock)."),
+    out: Path = typer.Option(Path("recordings"), help="Directory of the recordings."),
+) -> None:
+    """Play a match from a browser, with an agent or another person; prints the link(s) to open."""
+    from services.human.play import play_with_people
+    from services.launch import HUMAN, MatchPlan, new_match_id
+
+    if role not in ("bait", "shooter"):
+        raise typer.BadParameter("role is bait or shooter")
+    other = "shooter" if role == "bait" else "bait"
+    partner = partner or {"shooter": "S5", "bait": "B9"}[other]
+    if partner != HUMAN:
+        policy_for(partner, other)  # an unknown key fails here, before anyone opens the page
+    seats = {role: HUMAN, other: partner}
+    plan = MatchPlan(
+        match or new_match_id(), seed, round(duration * 30), "realtime", seats["bait"], seats["shooter"], out,
+        wait_players=wait,
+    )  # fmt: skip
+
+    def links(urls: dict[str, str]) -> None:
+        for seat, url in urls.items():
+            console.print(f"[bold]{seat}[/]: open {url}")
+
+    summary, path = play_with_people(plan, host, port, links)
+    console.print(
+        f"[bold]{plan.match}[/]: {summary.kills} kills in {summary.frame} frames "
+        f"= {summary.kills_per_minute:.2f} kills/min, points {summary.points}; recording: {path}"
+    )
 
 
 if __name__ == "__main__":

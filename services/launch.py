@@ -23,6 +23,8 @@ from shared import keys
 from shared.bus import BusConfig, free_endpoint, session
 from shared.messages import MessageError, State, Summary, decode
 
+HUMAN = "human"  # a seat's policy key for a person: no agent is started, a gateway plays it
+
 
 @dataclass(frozen=True)
 class MatchPlan:
@@ -34,6 +36,8 @@ class MatchPlan:
     shooter: str = "mirror"
     directory: Path = Path("recordings")
     low_latency: bool = True
+    peers: tuple[str, ...] = ()  # endpoints the sim also connects to (a human gateway's session)
+    wait_players: float = 10.0  # seconds the sim waits for both seats (people take longer)
 
 
 def service_command(name: str, bus: BusConfig, *args: str) -> list[str]:
@@ -80,7 +84,7 @@ def run_match(
 ) -> tuple[Summary, Path]:
     """Run the match to its end; `on_state` sees up to 10 states a second (for a live scoreboard)."""
     endpoint = free_endpoint()
-    sim_bus = BusConfig(listen=(endpoint,), low_latency=plan.low_latency)
+    sim_bus = BusConfig(listen=(endpoint,), connect=plan.peers, low_latency=plan.low_latency)
     peer_bus = BusConfig(connect=(endpoint,), low_latency=plan.low_latency)
     summary: list[Summary] = []
     done = threading.Event()
@@ -111,12 +115,14 @@ def run_match(
             service_command(
                 "sim", sim_bus, *match, "--seed", str(plan.seed), "--frames", str(plan.frames),
                 "--sim-mode", plan.mode, "--bait", plan.bait, "--shooter", plan.shooter,
-                "--wait-recorder", "10",
+                "--wait-recorder", "10", "--wait-players", str(plan.wait_players),
             ),
         )  # fmt: skip
         recorder = service_command("recorder", peer_bus, *match, "--out", str(plan.directory))
         processes.start("recorder", recorder, nice=10)  # it drains a queue: latency is not its job
         for role, policy in (("bait", plan.bait), ("shooter", plan.shooter)):
+            if policy == HUMAN:
+                continue
             processes.start(
                 f"agent-{role}",
                 service_command(

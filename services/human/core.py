@@ -1,0 +1,206 @@
+"""The human gateway's pure core: seats and their tokens, what a browser may send, the key state it
+holds, and what the page is sent. No web server and no bus here (services/human/gateway.py is the
+shell), so every rule about a person's input is tested directly.
+
+The browser protocol is JSON text frames. Up (browser -> gateway):
+
+    {"type": "join", "role": "bait", "token": "...", "obs": false}   first message, claims a seat
+    {"type": "ready"}                                                 instructions read: play
+    {"type": "keys", "left": b, "right": b, "thrust": b, "fire": b}   the held keys, on every change
+
+Down (gateway -> browser): `welcome` (the seat and the arena's geometry) or `refused` (why), then
+`state` (one frame to draw) and `end` (the match's result). The study runner adds its own messages
+(services/study) on the same socket.
+"""
+
+from __future__ import annotations
+
+import hmac
+import json
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from services.sim.config import ROLES, GameConfig, join_action
+from shared.messages import State, Summary
+
+KEYS = ("left", "right", "thrust", "fire")
+MAX_MESSAGE = 512  # bytes: the largest message a browser has reason to send
+RATE = 60.0  # messages a second a connection may send on average (a person changes keys far less)
+BURST = 60  # and at once
+STRIKES = 300  # messages dropped (bad or over the rate) before the connection is closed
+
+
+class BadInput(ValueError):
+    """A browser message that does not meet the protocol; `reason` is a short code for counting."""
+
+    def __init__(self, reason: str, detail: str) -> None:
+        super().__init__(f"{reason}: {detail}")
+        self.reason = reason
+
+
+def parse(text: str | bytes, allowed: tuple[str, ...]) -> dict:
+    """A browser's text frame -> the validated message, or BadInput. `allowed`: the types accepted
+    now (a join only first, keys only after it)."""
+    if not isinstance(text, str):
+        raise BadInput("binary", "only text frames are accepted")
+    if len(text.encode()) > MAX_MESSAGE:
+        raise BadInput("too_large", f"{len(text)} characters")
+    try:
+        message = json.loads(text)
+    except ValueError:
+        raise BadInput("undecodable", "not JSON") from None
+    if not isinstance(message, dict) or message.get("type") not in allowed:
+        kind = message.get("type") if isinstance(message, dict) else type(message).__name__
+        raise BadInput("type", f"{kind!r} where {allowed} was expected")
+    fields = _FIELDS[message["type"]]
+    if not set(message) - {"type"} <= set(fields) or not all(
+        check(message[name]) for name, check in fields.items() if name in message
+    ):
+        raise BadInput("shape", f"bad {message['type']} message")
+    if message["type"] == "keys" and set(message) != {"type", *KEYS}:
+        raise BadInput("shape", "a keys message names all four keys")
+    return message
+
+
+def _is_bool(v: object) -> bool:
+    return isinstance(v, bool)
+
+
+def _short_text(v: object) -> bool:
+    return isinstance(v, str) and 0 < len(v) <= 64
+
+
+_FIELDS: dict[str, dict[str, Callable[[object], bool]]] = {
+    "join": {"role": lambda v: v in ROLES, "token": _short_text, "obs": _is_bool},
+    "ready": {},
+    "keys": dict.fromkeys(KEYS, _is_bool),
+    # the study runner's messages (services/study/runner.py)
+    "hello": {"participant": _short_text, "key": _short_text, "obs": _is_bool},
+    "consent": {},
+}
+
+
+def keys_action(keys: dict[str, bool]) -> int:
+    """Held keys -> the action index. Left and right together cancel, as on a keyboard's joystick."""
+    turn = 1 if keys["left"] and not keys["right"] else 2 if keys["right"] and not keys["left"] else 0
+    return join_action(turn, int(keys["thrust"]), int(keys["fire"]))
+
+
+def action_keys(action: int) -> dict[str, bool]:
+    """The key state that plays `action` (what a scripted stand-in presses)."""
+    turn = action // 4
+    return {"left": turn == 1, "right": turn == 2, "thrust": bool(action & 2), "fire": bool(action & 1)}
+
+
+class RateLimit:
+    """A token bucket: `rate` messages a second on average, `burst` at once."""
+
+    def __init__(self, rate: float = RATE, burst: int = BURST, clock: Callable[[], float] = time.monotonic):
+        self.rate, self.burst, self.clock = rate, burst, clock
+        self.tokens, self.last = float(burst), clock()
+
+    def allow(self) -> bool:
+        now = self.clock()
+        self.tokens = min(self.burst, self.tokens + (now - self.last) * self.rate)
+        self.last = now
+        if self.tokens < 1.0:
+            return False
+        self.tokens -= 1.0
+        return True
+
+
+@dataclass
+class Controls:
+    """One connection's input: what it holds now, whether it is playing, and what it got wrong.
+
+    The bus side reads `action` once per state (from another thread: one int, replaced whole)."""
+
+    action: int = 0
+    ready: bool = False
+    drops: dict[str, int] = field(default_factory=dict)
+    limit: RateLimit = field(default_factory=RateLimit)
+
+    def receive(self, text: str | bytes, allowed: tuple[str, ...] = ("ready", "keys")) -> dict | None:
+        """Take one message; returns it if valid and within the rate, else counts the drop and
+        returns None. Raises BadInput("strikes") once too many were dropped: close the connection."""
+        try:
+            if not self.limit.allow():
+                raise BadInput("rate", "over the message rate")
+            message = parse(text, allowed)
+        except BadInput as error:
+            self.drops[error.reason] = self.drops.get(error.reason, 0) + 1
+            if sum(self.drops.values()) >= STRIKES:
+                raise BadInput("strikes", f"{STRIKES} bad or excess messages") from None
+            return None
+        if message["type"] == "ready":
+            self.ready = True
+        elif message["type"] == "keys":
+            self.action = keys_action(message)
+        return message
+
+
+class SeatBook:
+    """The seats of one match and their tokens: a seat obeys one connection, the one that showed its
+    token first; others are refused until it leaves. Seats without a token are not offered."""
+
+    def __init__(self, tokens: dict[str, str]) -> None:
+        unknown = set(tokens) - set(ROLES)
+        if unknown:
+            raise ValueError(f"unknown roles {sorted(unknown)}; expected {ROLES}")
+        self.tokens = dict(tokens)
+        self.holders: dict[str, object] = {}
+
+    def claim(self, role: str, token: str, holder: object) -> str:
+        """Give `role` to `holder`; returns "" on success, else why not (shown to the person)."""
+        expected = self.tokens.get(role)
+        if expected is None:
+            return f"the {role} seat of this match is not open to people"
+        if not hmac.compare_digest(expected.encode(), token.encode()):
+            return f"wrong seat token for the {role} seat"
+        if role in self.holders:
+            return f"the {role} seat is already taken by another connection"
+        self.holders[role] = holder
+        return ""
+
+    def release(self, role: str, holder: object) -> None:
+        if self.holders.get(role) is holder:
+            del self.holders[role]
+
+
+def setup(config: GameConfig) -> dict:
+    """The numbers the page draws with (services/sim/render.py draws the same picture)."""
+    names = (
+        "fps", "frames", "arena_x", "arena_y", "fortress_radius", "shield_radius", "region_radius",
+        "ship_radius", "missile_radius", "shell_radius", "rear_arc",
+    )  # fmt: skip
+    return {name: getattr(config, name) for name in names}
+
+
+def view(state: State) -> dict:
+    """One frame as the page draws it, rounded to what a screen shows (a tenth of a pixel)."""
+    return {
+        "type": "state",
+        "frame": state.frame,
+        "frames": state.frames,
+        "ships": [[_r(x), _r(y), _r(heading), alive] for x, y, _, _, heading, alive in state.ships],
+        "fortress": [_r(state.fortress[0]), *state.fortress[1:4]],  # facing, alive, vulnerable, lock
+        "missiles": [[_r(m[0]), _r(m[1]), int(m[4])] for m in state.missiles],
+        "shells": [[_r(s[0]), _r(s[1])] for s in state.shells],
+        "kills": state.kills,
+        "points": state.points,
+    }
+
+
+def end(summary: Summary) -> dict:
+    return {
+        "type": "end",
+        "kills": summary.kills,
+        "kills_per_minute": round(summary.kills_per_minute, 2),
+        "points": summary.points,
+    }
+
+
+def _r(value: float) -> float:
+    return round(value, 1) if math.isfinite(value) else 0.0

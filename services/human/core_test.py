@@ -1,0 +1,133 @@
+"""The gateway core: input validation, key state -> action, rate limit, seats and tokens, the view."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from services.human.core import (
+    BURST,
+    STRIKES,
+    BadInput,
+    Controls,
+    RateLimit,
+    SeatBook,
+    action_keys,
+    keys_action,
+    parse,
+    view,
+)
+from services.sim.config import GameConfig, split_action
+from services.sim.engine import Game
+from services.sim.match import state_message
+
+
+def keys(**held: bool) -> dict[str, bool]:
+    return {"left": False, "right": False, "thrust": False, "fire": False, **held}
+
+
+def test_key_state_maps_to_the_action_encoding() -> None:
+    assert keys_action(keys()) == 0
+    assert keys_action(keys(fire=True)) == 1
+    assert keys_action(keys(thrust=True)) == 2
+    assert keys_action(keys(left=True)) == 4
+    assert keys_action(keys(right=True, thrust=True, fire=True)) == 11
+    assert keys_action(keys(left=True, right=True)) == 0  # both turns cancel
+    for action in range(12):
+        assert keys_action(action_keys(action)) == action
+        turn, thrust, fire = split_action(action)
+        assert action_keys(action)["thrust"] == bool(thrust) and action_keys(action)["fire"] == bool(fire)
+
+
+@pytest.mark.parametrize(
+    ("text", "reason"),
+    [
+        ("not json", "undecodable"),
+        ("[1, 2]", "type"),
+        ('{"type": "launch"}', "type"),
+        ('{"type": "keys", "left": true}', "shape"),
+        ('{"type": "keys", "left": 1, "right": false, "thrust": false, "fire": false}', "shape"),
+        ('{"type": "keys", "left": true, "right": false, "thrust": false, "fire": false, "x": 1}', "shape"),
+        ('{"type": "join", "role": "pilot", "token": "t"}', "shape"),
+        ('{"type": "join", "role": "bait", "token": ""}', "shape"),
+        ('{"type": "join", "role": "bait", "token": "' + "t" * 600 + '"}', "too_large"),
+        (b"\x00\x01", "binary"),
+    ],
+)
+def test_bad_messages_are_refused_with_a_reason(text: str | bytes, reason: str) -> None:
+    with pytest.raises(BadInput) as error:
+        parse(text, ("join", "keys"))
+    assert error.value.reason == reason
+
+
+def test_a_message_type_is_only_taken_where_it_is_expected() -> None:
+    join = json.dumps({"type": "join", "role": "bait", "token": "abc"})
+    assert parse(join, ("join",))["role"] == "bait"
+    with pytest.raises(BadInput):
+        parse(join, ("ready", "keys"))
+
+
+def test_controls_hold_the_latest_keys_and_count_drops() -> None:
+    controls = Controls()
+    assert controls.receive(json.dumps({"type": "keys", **keys(left=True, fire=True)}))
+    assert controls.action == 5 and not controls.ready
+    assert controls.receive("garbage") is None
+    assert controls.action == 5 and controls.drops == {"undecodable": 1}
+    controls.receive('{"type": "ready"}')
+    assert controls.ready
+
+
+def test_rate_limit_allows_a_burst_then_the_rate() -> None:
+    now = [0.0]
+    limit = RateLimit(rate=10.0, burst=5, clock=lambda: now[0])
+    assert [limit.allow() for _ in range(6)] == [True] * 5 + [False]
+    now[0] += 0.1  # one message's worth
+    assert limit.allow() and not limit.allow()
+    now[0] += 100.0  # never more than the burst
+    assert sum(limit.allow() for _ in range(20)) == 5
+
+
+def test_a_flooding_connection_is_cut_off() -> None:
+    now = [0.0]
+    controls = Controls(limit=RateLimit(clock=lambda: now[0]))
+    message = json.dumps({"type": "keys", **keys(thrust=True)})
+    taken = [controls.receive(message) is not None for _ in range(BURST)]
+    assert all(taken) and controls.action == 2
+    with pytest.raises(BadInput) as error:
+        for _ in range(STRIKES):
+            controls.receive(json.dumps({"type": "keys", **keys(fire=True)}))
+    assert error.value.reason == "strikes"
+    assert controls.action == 2  # nothing over the rate was played
+    assert controls.drops == {"rate": STRIKES}
+
+
+def test_a_seat_obeys_one_holder_with_the_right_token() -> None:
+    book = SeatBook({"bait": "secret"})
+    first, second = object(), object()
+    assert "wrong seat token" in book.claim("bait", "guess", first)
+    assert "not open to people" in book.claim("shooter", "secret", first)
+    assert book.claim("bait", "secret", first) == ""
+    assert "already taken" in book.claim("bait", "secret", second)
+    book.release("bait", second)  # not the holder: nothing changes
+    assert "already taken" in book.claim("bait", "secret", second)
+    book.release("bait", first)
+    assert book.claim("bait", "secret", second) == ""
+    with pytest.raises(ValueError, match="unknown roles"):
+        SeatBook({"pilot": "x"})
+
+
+def test_view_carries_what_the_page_draws() -> None:
+    game = Game(GameConfig(frames=60), seed=3)
+    for _ in range(40):
+        game.step(1, 5)  # bait fires, shooter turns left and fires
+    state = state_message(game, "m1", "sim", (1, 5))
+    frame = view(state)
+    assert frame["frame"] == 40 and frame["frames"] == 60
+    assert [s[:3] for s in frame["ships"]] == [
+        [round(s.x, 1), round(s.y, 1), round(s.heading, 1)] for s in game.ships
+    ]
+    assert len(frame["missiles"]) == len(game.missiles) > 0
+    assert {m[2] for m in frame["missiles"]} == {0, 1}  # both ships' missiles, by owner
+    assert frame["fortress"][0] == round(game.facing, 1)
+    json.dumps(frame)  # what goes down the socket

@@ -1,0 +1,300 @@
+"""The human gateway's shell: a web server for the one page, a WebSocket per player, and the bus.
+
+One thread runs the asyncio web server (websockets); zenoh's callbacks run on zenoh's threads. A
+State from the sim is answered at once, on zenoh's thread, with the seat's latest key state (so the
+sim stays the clock and a slow browser never delays an action), and handed to the connection as
+the newest frame to draw: a browser that falls behind skips frames, it never queues them. The
+seat's liveliness token is declared once the person is ready and goes when the socket closes, so
+a dropped connection leaves the ship idle (the sim plays no-op) and the match goes on.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import logging
+import mimetypes
+import threading
+from collections.abc import Awaitable, Callable
+from pathlib import Path
+
+import websockets
+import zenoh
+from websockets.asyncio.server import ServerConnection, serve
+from websockets.datastructures import Headers
+from websockets.http11 import Request, Response
+
+from services.human.core import MAX_MESSAGE, BadInput, Controls, SeatBook, end, parse, setup, view
+from services.sim.config import GameConfig
+from shared import keys
+from shared.bus import BusConfig, Drops, session
+from shared.messages import Action, MessageError, Start, State, Summary, decode
+
+log = logging.getLogger("tsf.human")
+STATIC = Path(__file__).parent / "static"
+PAGES = {"/": "index.html", "/index.html": "index.html", "/tsf.js": "tsf.js"}
+SOCKET_PATH = "/ws"
+JOIN_TIMEOUT = 60.0  # seconds a new socket has to say who it is
+REFUSED = 4003  # WebSocket close code: seat refused
+
+
+class Outbox:
+    """What goes down one socket: control messages in order, and only the newest frame."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+        self.loop = loop
+        self.frame: str | None = None
+        self.control: list[str] = []
+        self.wake = asyncio.Event()
+
+    def offer(self, text: str, control: bool = False) -> None:
+        """From any thread."""
+        self.loop.call_soon_threadsafe(self._put, text, control)
+
+    def _put(self, text: str, control: bool) -> None:
+        if control:
+            self.control.append(text)
+        else:
+            self.frame = text
+        self.wake.set()
+
+    async def pump(self, ws: ServerConnection) -> None:
+        """Send until the socket closes."""
+        while True:
+            await self.wake.wait()
+            self.wake.clear()
+            frame, self.frame = self.frame, None
+            control, self.control = self.control, []
+            for text in ([frame] if frame else []) + control:
+                await ws.send(text)
+
+
+class Bridge:
+    """One seat of one match on the bus, for one connection: answers each state with the held keys
+    (once the person is ready), forwards frames and the result down, holds the seat's token."""
+
+    def __init__(
+        self, z: zenoh.Session, match: str, role: str, controls: Controls, outbox: Outbox, obs: bool = False
+    ) -> None:
+        self.z, self.match, self.role, self.controls, self.outbox = z, match, role, controls, outbox
+        self.obs = obs  # also send the seat's observation values (for scripted stand-ins)
+        self.sender = f"human/{role}"
+        self.drops = Drops(self.sender)
+        self.config = GameConfig()
+        self.summary = threading.Event()
+        self.token: zenoh.LivelinessToken | None = None
+        self.publisher = z.declare_publisher(
+            keys.action(match, role), congestion_control=zenoh.CongestionControl.DROP, express=True
+        )
+        self.subscribers = [
+            z.declare_subscriber(keys.state(match), self._on_state),
+            z.declare_subscriber(keys.start(match), self._on_start),
+            z.declare_subscriber(keys.summary(match), self._on_summary),
+        ]
+
+    def live(self) -> None:
+        """The person is ready: take the seat on the bus (the sim waits for it)."""
+        if self.token is None:
+            self.token = self.z.liveliness().declare_token(keys.alive(self.match, "human", self.role))
+
+    def _decode(self, sample: zenoh.Sample, kind: type) -> object | None:
+        try:
+            message = decode(sample.payload.to_bytes(), kind)
+            if message.match != self.match:
+                raise MessageError("mismatch", f"{message.match} on {sample.key_expr}")
+        except MessageError as error:
+            self.drops.drop(str(sample.key_expr), error)
+            return None
+        return message
+
+    def _on_state(self, sample: zenoh.Sample) -> None:
+        state = self._decode(sample, State)
+        if state is None:
+            return
+        if self.token is not None:
+            action = Action(self.match, state.frame, self.sender, self.role, self.controls.action, "")
+            self.publisher.put(action.encode())
+        frame = view(state)
+        if self.obs:
+            frame["obs"] = state.obs[self.role]
+        self.outbox.offer(json.dumps(frame, separators=(",", ":")))
+
+    def _on_start(self, sample: zenoh.Sample) -> None:
+        start = self._decode(sample, Start)
+        if start is not None:
+            self.config = GameConfig.from_dict(start.config)
+            self.outbox.offer(json.dumps({"type": "setup", **setup(self.config)}), control=True)
+
+    def _on_summary(self, sample: zenoh.Sample) -> None:
+        summary = self._decode(sample, Summary)
+        if summary is not None:
+            self.outbox.offer(json.dumps(end(summary)), control=True)
+            self.summary.set()
+
+    def close(self) -> None:
+        if self.token is not None:
+            self.token.undeclare()
+            self.token = None
+        for subscriber in self.subscribers:
+            subscriber.undeclare()
+        self.publisher.undeclare()
+
+
+async def play_seat(ws: ServerConnection, bridge: Bridge, outbox: Outbox) -> None:
+    """Pump frames down and take keys up until the socket closes; the connection is closed if it
+    keeps sending bad or excess input."""
+    pump = asyncio.ensure_future(outbox.pump(ws))
+    try:
+        async for text in ws:
+            try:
+                message = bridge.controls.receive(text)
+            except BadInput as error:
+                await ws.close(1008, str(error))
+                break
+            if message is not None and message["type"] == "ready":
+                bridge.live()
+    finally:
+        pump.cancel()
+        with contextlib.suppress(asyncio.CancelledError, websockets.ConnectionClosed):
+            await pump
+
+
+async def receive_first(ws: ServerConnection, allowed: tuple[str, ...]) -> dict | None:
+    """The socket's first message, validated; None (and the socket closed) if it is bad or late."""
+    try:
+        text = await asyncio.wait_for(ws.recv(), JOIN_TIMEOUT)
+        return parse(text, allowed)
+    except (BadInput, TimeoutError) as error:
+        await ws.close(1008, str(error)[:120])
+    except websockets.ConnectionClosed:
+        pass
+    return None
+
+
+async def refuse(ws: ServerConnection, reason: str) -> None:
+    await ws.send(json.dumps({"type": "refused", "reason": reason}))
+    await ws.close(REFUSED, reason[:120])
+
+
+def serve_page(connection: ServerConnection, request: Request) -> Response | None:
+    """Plain HTTP for the page and its script; the socket path goes on to the WebSocket handshake."""
+    path = request.path.split("?", 1)[0]
+    if path == SOCKET_PATH:
+        return None
+    name = PAGES.get(path)
+    if name is None:
+        return connection.respond(404, "not found\n")
+    body = (STATIC / name).read_bytes()
+    kind = mimetypes.guess_type(name)[0] or "application/octet-stream"
+    headers = Headers(
+        [
+            ("Content-Type", f"{kind}; charset=utf-8"),
+            ("Content-Length", str(len(body))),
+            ("Cache-Control", "no-store"),
+        ]
+    )
+    return Response(200, "OK", headers, body)
+
+
+Handler = Callable[[ServerConnection, zenoh.Session], Awaitable[None]]
+
+
+class Gateway:
+    """The web server and one zenoh session, running in a thread of their own until closed.
+
+    `handler(ws, z)` serves one socket. The session listens on a loopback port of its own
+    (`endpoint`), so a match's sim can connect to it (MatchPlan.peers)."""
+
+    def __init__(self, bus: BusConfig, handler: Handler, host: str = "127.0.0.1", port: int = 8000) -> None:
+        self.bus, self.handler, self.host, self.port = bus, handler, host, port
+        self.loop = asyncio.new_event_loop()
+        self.ready = threading.Event()
+        self.failed: BaseException | None = None
+        self.thread = threading.Thread(target=self.loop.run_until_complete, args=(self._run(),), daemon=True)
+        self.z: zenoh.Session | None = None
+        self.closing: asyncio.Future | None = None
+
+    @property
+    def url(self) -> str:
+        return f"http://{self.host}:{self.port}/"
+
+    def __enter__(self) -> Gateway:
+        self.thread.start()
+        self.ready.wait()
+        if self.failed is not None:
+            raise self.failed
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.closing is not None:
+            self.loop.call_soon_threadsafe(self.closing.set_result, None)
+        self.thread.join(10)
+
+    async def _run(self) -> None:
+        try:
+            with session(self.bus) as z:
+                self.z, self.closing = z, self.loop.create_future()
+                server = await serve(
+                    lambda ws: self.handler(ws, z),
+                    self.host, self.port, process_request=serve_page, max_size=MAX_MESSAGE,
+                )  # fmt: skip
+                self.port = server.sockets[0].getsockname()[1]
+                self.ready.set()
+                async with server:
+                    await self.closing
+                    server.close(close_connections=True)
+        except BaseException as error:  # surfaced to the thread that opened the gateway
+            self.failed = error
+            raise
+        finally:
+            self.ready.set()
+
+
+def seat_handler(match: str, book: SeatBook, done: threading.Event | None = None) -> Handler:
+    """Serve the seats of one match: each socket joins one seat by its token and plays it."""
+
+    async def handle(ws: ServerConnection, z: zenoh.Session) -> None:
+        join = await receive_first(ws, ("join",))
+        if join is None:
+            return
+        reason = book.claim(join["role"], join["token"], ws)
+        if reason:
+            log.info("refused a connection for %s: %s", join["role"], reason)
+            await refuse(ws, reason)
+            return
+        outbox, role = Outbox(asyncio.get_running_loop()), join["role"]
+        bridge = Bridge(z, match, role, Controls(), outbox, join.get("obs", False))
+        try:
+            await ws.send(
+                json.dumps({"type": "welcome", "match": match, "role": role, **setup(bridge.config)})
+            )
+            log.info("a person took the %s seat of %s", role, match)
+            await play_seat(ws, bridge, outbox)
+        except websockets.ConnectionClosed:
+            pass
+        finally:
+            bridge.close()
+            book.release(role, ws)
+            log.info("the %s seat of %s is free again", role, match)
+            if done is not None and bridge.summary.is_set():
+                done.set()
+
+    return handle
+
+
+def run_human(
+    bus: BusConfig,
+    match: str,
+    tokens: dict[str, str],
+    host: str = "127.0.0.1",
+    port: int = 8000,
+    stop: threading.Event | None = None,
+    on_ready: Callable[[Gateway], None] = lambda gateway: None,
+) -> None:
+    """The `tsf human` service: serve the page and the seats of `match` that have tokens, until a
+    player has seen the match end and left, or `stop` is set."""
+    stop = stop or threading.Event()
+    with Gateway(bus, seat_handler(match, SeatBook(tokens), stop), host, port) as gateway:
+        on_ready(gateway)
+        stop.wait()

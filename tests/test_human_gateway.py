@@ -1,0 +1,115 @@
+"""The human gateway on a real bus with a real sim and agent, driven by a WebSocket client as a
+browser would: seats by token, held keys as that seat's actions, a dropped connection leaves the
+ship idle and the match goes on."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import urllib.request
+
+import pytest
+import websockets
+
+from services.agent.service import run_agent
+from services.human.core import SeatBook
+from services.human.gateway import REFUSED, Gateway, seat_handler
+from services.sim.config import GameConfig
+from services.sim.service import run_sim
+from shared import keys
+from shared.messages import Action, State, Summary
+
+MATCH = "human"
+TOKEN = "bait-token"
+
+
+def socket_url(gateway: Gateway) -> str:
+    return f"ws://{gateway.host}:{gateway.port}/ws"
+
+
+async def join(gateway: Gateway, role: str, token: str):  # noqa: ANN201 - a client connection
+    ws = await websockets.connect(socket_url(gateway))
+    await ws.send(json.dumps({"type": "join", "role": role, "token": token}))
+    return ws, json.loads(await ws.recv())
+
+
+def keys_message(**held: bool) -> str:
+    return json.dumps({"type": "keys", "left": False, "right": False, "thrust": False, "fire": False, **held})
+
+
+@pytest.fixture
+def gateway(bus):
+    with Gateway(bus.config(listen=True), seat_handler(MATCH, SeatBook({"bait": TOKEN})), port=0) as opened:
+        yield opened
+
+
+def test_the_page_is_served_and_only_it(gateway):
+    page = urllib.request.urlopen(gateway.url, timeout=5)
+    assert page.status == 200 and b"<canvas" in page.read()
+    script = urllib.request.urlopen(gateway.url + "tsf.js", timeout=5)
+    assert script.headers["Content-Type"].startswith("text/javascript")
+    with pytest.raises(urllib.error.HTTPError) as missing:
+        urllib.request.urlopen(gateway.url + "../pyproject.toml", timeout=5)
+    assert missing.value.code == 404
+
+
+def test_wrong_token_taken_seat_and_closed_seat_are_refused(gateway):
+    async def scenario() -> list:
+        answers = []
+        ws, answer = await join(gateway, "bait", "guess")
+        await ws.wait_closed()
+        answers.append((answer, ws.close_code))
+        holder, welcome = await join(gateway, "bait", TOKEN)
+        assert welcome["type"] == "welcome" and welcome["role"] == "bait"
+        for role in ("bait", "shooter"):
+            ws, answer = await join(gateway, role, TOKEN)
+            await ws.wait_closed()
+            answers.append((answer, ws.close_code))
+        await holder.close()
+        ws, welcome = await join(gateway, "bait", TOKEN)  # free again once its holder left
+        answers.append((welcome["type"], None))
+        await ws.close()
+        return answers
+
+    wrong, taken, closed, again = asyncio.run(scenario())
+    assert wrong == ({"type": "refused", "reason": "wrong seat token for the bait seat"}, REFUSED)
+    assert taken[0]["reason"] == "the bait seat is already taken by another connection"
+    assert taken[1] == REFUSED
+    assert "not open to people" in closed[0]["reason"]
+    assert again == ("welcome", None)
+
+
+def test_held_keys_play_the_seat_and_a_dropped_connection_leaves_it_idle(bus, gateway, tap, background):
+    z = bus.open()
+    recorded = tap(z, MATCH)
+    background(run_agent, bus.config(), MATCH, "shooter", "mirror")
+    sim = background(run_sim, bus.config(), MATCH, 0, GameConfig(frames=120), wait_players=20)
+
+    async def person() -> list[dict]:
+        ws, welcome = await join(gateway, "bait", TOKEN)
+        assert welcome["type"] == "welcome"
+        await ws.send("not json")  # counted and dropped; the connection stays
+        await ws.send(keys_message(left=True))
+        await ws.send(json.dumps({"type": "ready"}))
+        frames = []
+        while len(frames) < 40:
+            message = json.loads(await ws.recv())
+            if message["type"] == "state":
+                frames.append(message)
+                if len(frames) == 20:
+                    await ws.send(keys_message(left=True, fire=True))
+        await ws.close()  # the person goes away mid-match
+        return frames
+
+    frames = asyncio.run(person())
+    summary = sim.result(timeout=30)  # the match ran to its end without its bait
+    assert summary.frame == 120
+    actions = recorded.of(Action, keys.action(MATCH, "bait"))
+    assert actions and all(a.sender == "human/bait" and a.policy == "" for a in actions)
+    assert {a.action for a in actions} == {4, 5}  # left, then left + fire
+    states = {s.frame: s for s in recorded.of(State)}
+    assert any(s.applied[0] == 4 for s in states.values())
+    last_human = max(a.frame for a in actions)
+    assert all(states[f].applied[0] == 0 for f in range(last_human + 3, 121) if f in states)
+    assert frames[-1]["frame"] > frames[0]["frame"]  # the page got the frames as they came
+    assert recorded.of(Summary)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
@@ -26,43 +27,67 @@ SWITCH_AT = 30  # the bait switches to idle before answering this frame
 ADAPTER = AdapterStatus(
     M, SWITCH_AT, "adapter", "shooter", "cem", 20, 20, "B5", "S5", {"B5": -0.5, "B1": -3.0}
 )
+SWITCH = PolicySwitch(M, SWITCH_AT, "operator", "bait", "idle", "test")
+
+
+@dataclass(frozen=True)
+class Script:
+    """What an in-process match plays: its id, seed and length, each seat's policy, what its start
+    record announces (default: the policies; "" marks a person's seat), and the adapter statuses and
+    policy switches logged just before the seats answer the frame each names."""
+
+    match: str = M
+    seed: int = SEED
+    frames: int = FRAMES
+    policies: dict[str, str] = field(default_factory=lambda: dict(POLICIES))
+    announced: dict[str, str] | None = None
+    statuses: tuple[AdapterStatus, ...] = (ADAPTER,)
+    switches: tuple[PolicySwitch, ...] = (SWITCH,)
 
 
 def record_match(
-    path: Path, tamper: int | None = None, lose: int | None = None, summary: bool = True
+    path: Path,
+    tamper: int | None = None,
+    lose: int | None = None,
+    summary: bool = True,
+    script: Script = Script(),  # noqa: B008 - frozen
 ) -> list[State]:
-    """Play a lockstep match of the scripted pair and log every message as the recorder does.
-    `tamper`: that frame's state is logged with a wrong hash; `lose`: that state never arrives."""
-    game = Game(GameConfig(frames=FRAMES), SEED)
-    players = {role: Player(role, POLICIES[role], SEED) for role in ROLES}
+    """Play a lockstep match (the scripted pair by default) and log every message as the recorder
+    does. `tamper`: that frame's state is logged with a wrong hash; `lose`: that state never arrives."""
+    m = script.match
+    game = Game(GameConfig(frames=script.frames), script.seed)
+    players = {role: Player(role, script.policies[role], script.seed) for role in ROLES}
     gaps, published, applied = GapTracker(), [], (0, 0)
     with LogWriter(path) as log:
-        log.write(keys.start(M), start_message(game, M, "sim", "lockstep", POLICIES).encode())
+        announced = script.announced or script.policies
+        log.write(keys.start(m), start_message(game, m, "sim", "lockstep", announced).encode())
         while True:
-            state = state_message(game, M, "sim", applied)
+            state = state_message(game, m, "sim", applied)
             published.append(state)
             if state.frame == tamper:
                 state = dataclasses.replace(state, hash=f"{int(state.hash, 16) ^ 1:016x}")
             if state.frame != lose:
                 if gap := gaps.see(state.frame):
                     log.write_gap(*gap)
-                log.write(keys.state(M), state.encode())
-            for event in event_messages(game, M, "sim"):
-                log.write(keys.event(M), event.encode())
+                log.write(keys.state(m), state.encode())
+            for event in event_messages(game, m, "sim"):
+                log.write(keys.event(m), event.encode())
             if game.done:
                 break
-            if state.frame == SWITCH_AT:
-                switch = PolicySwitch(M, state.frame, "operator", "bait", "idle", "test")
-                log.write(keys.adapter(M), ADAPTER.encode())
-                log.write(keys.policy(M, "bait"), switch.encode())
-                players["bait"].switch(switch.policy)
+            for status in script.statuses:
+                if status.frame == state.frame:
+                    log.write(keys.adapter(m), status.encode())
+            for switch in script.switches:
+                if switch.frame == state.frame:
+                    log.write(keys.policy(m, switch.role), switch.encode())
+                    players[switch.role].switch(switch.policy)
             answers = [players[role].act(state, f"agent/{role}") for role in ROLES]
             for answer in answers:
-                log.write(keys.action(M, answer.role), answer.encode())
+                log.write(keys.action(m, answer.role), answer.encode())
             applied = tuple(a.action for a in answers)
             game.step(*applied)
         if summary:
-            log.write(keys.summary(M), summary_message(game, M, "sim", {}, {}).encode())
+            log.write(keys.summary(m), summary_message(game, m, "sim", {}, {}).encode())
     return published
 
 

@@ -1,0 +1,330 @@
+"""The study's analyses over loaded recordings: pure functions from pandas frames to pandas frames.
+
+Who is the partner in a recording (`seats`):
+- an adaptive match (it has adapter statuses): the partner is the seat the adapter watches, the
+  other one from its `role`;
+- a human match (the start names no policy, "", for a seat): the person's seat;
+- an agent-agent match: each seat is the partner of the other, so the match gives two rows (or
+  one, where the report is told the partner's role).
+
+The partner's label is the sidecar's `participant`, else its policy key, else "person". The agent's
+variant is the sidecar's `variant`, else the agent's policy key (a static agent), else
+`adaptive-T<window>-<strategy>` from the adapter statuses.
+
+A partner's similarity to a library policy is the mean log-probability that policy gives the
+partner's actions in the states the partner answered (the CEM of services/adapter/cem.py): each
+recorded action of the partner's seat with the state named by its frame, one per frame (the last
+received).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from services.adapter.cem import cem_matrix
+from services.agent import library
+from services.agent.policy import Policy
+from services.report.load import Match
+from services.sim.config import ROLES, GameConfig
+from services.sim.observation import as_observation
+from services.table.table import Table
+
+ROUND_ENDS = ("kill", "reset")  # the events that end a round (docs/rules.md)
+SMOOTH = 30  # frames in the log-probability curves' moving mean (one second)
+
+
+def other(role: str) -> str:
+    return ROLES[1 - ROLES.index(role)]
+
+
+@dataclass(frozen=True)
+class Seat:
+    """One partner-agent pairing in one match."""
+
+    match: str
+    partner_role: str
+    partner: str
+    agent: str  # the key the agent seat played most (a library key, for the table)
+    variant: str
+    adaptive: bool
+    kills_per_minute: float
+
+
+def seats(match: Match, partner_role: str | None = None) -> list[Seat]:
+    """The partner-agent pairings of a match (the rule is in the module docstring)."""
+    policies, adapter = match.policies, match.tables["adapter"]
+    if not adapter.empty:
+        roles = [other(adapter["role"].iloc[0])]
+    elif any(policies[r] == "" for r in ROLES):
+        roles = [r for r in ROLES if policies[r] == ""]
+    else:
+        roles = list(ROLES)
+    out = []
+    for role in roles:
+        if partner_role not in (None, role):
+            continue
+        agent_role = other(role)
+        adaptive = not adapter.empty and adapter["role"].iloc[0] == agent_role
+        if adaptive:
+            variant = f"adaptive-T{adapter['window'].iloc[0]}-{adapter['strategy'].iloc[0]}"
+        else:
+            variant = policies[agent_role] or "person"
+        out.append(
+            Seat(
+                match.name,
+                role,
+                match.meta.get("participant") or policies[role] or "person",
+                most_played(match, agent_role),
+                match.meta.get("variant") or variant,
+                adaptive,
+                match.kills_per_minute,
+            )
+        )
+    return out
+
+
+def most_played(match: Match, role: str) -> str:
+    """The policy key behind most of a seat's actions ("" for a person)."""
+    played = match.tables["actions"].query("role == @role")["policy"]
+    return str(played.mode().iloc[0]) if not played.empty else match.policies[role]
+
+
+def partner_stream(match: Match, role: str) -> pd.DataFrame:
+    """The partner's (frame, world-frame observation, action) pairs, one per answered frame."""
+    actions = match.tables["actions"].query("role == @role").drop_duplicates("frame", keep="last")
+    states = match.tables["states"][["frame", f"{role}_obs"]].rename(columns={f"{role}_obs": "obs"})
+    return actions[["frame", "action"]].merge(states, on="frame").sort_values("frame", ignore_index=True)
+
+
+def log_probs(stream: pd.DataFrame, policies: list[Policy]) -> np.ndarray:
+    """(frames, policies): log pi(a_t | s_t) of each policy for each pair of a partner's stream."""
+    out = np.empty((len(stream), len(policies)))
+    actions = stream["action"].to_numpy()
+    observed = {}
+    for j, policy in enumerate(policies):
+        if policy.frame not in observed:
+            observed[policy.frame] = np.stack([as_observation(list(o), policy.frame) for o in stream["obs"]])
+        probs = library.batch_probs(policy, observed[policy.frame])
+        out[:, j] = np.log(probs[np.arange(len(stream)), actions])
+    return out
+
+
+def library_policies(role: str, config: GameConfig) -> dict[str, Policy]:
+    return {key: library.load(key, config) for key in library.keys(role)}
+
+
+def partner_vectors(matches: list[Match], partner_role: str | None = None) -> pd.DataFrame:
+    """One row per seat: who played, team performance, and the mean log-probability of the
+    partner's actions under each library policy of the partner's role (columns named by key)."""
+    rows = []
+    loaded: dict[tuple[str, str], dict[str, Policy]] = {}
+    for match in matches:
+        for seat in seats(match, partner_role):
+            config = match.config
+            cache_key = (seat.partner_role, config.hash())
+            if cache_key not in loaded:
+                loaded[cache_key] = library_policies(seat.partner_role, config)
+            policies = loaded[cache_key]
+            stream = partner_stream(match, seat.partner_role)
+            means = log_probs(stream, list(policies.values())).mean(axis=0) if len(stream) else []
+            rows.append({**seat.__dict__, "frames": len(stream), **dict(zip(policies, means, strict=False))})
+    return pd.DataFrame(rows, columns=[*Seat.__dataclass_fields__, "frames", *library.keys()])
+
+
+def reference_partner(table: Table, role: str) -> str:
+    """The library policy of the other role that plays best with the `role` policies on average."""
+    if role == "bait":
+        return max(table.shooters, key=lambda s: sum(table.mean(b, s) for b in table.baits))
+    return max(table.baits, key=lambda b: sum(table.mean(b, s) for s in table.shooters))
+
+
+def reference_vectors(role: str, table: Table, games: int, config: GameConfig) -> pd.DataFrame:
+    """The library policies of `role` as reference points: row i is the mean log-probability under
+    each policy of policy i's own actions over `games` games with the reference partner (the CEM
+    matrix of docs/library.md)."""
+    policies = library_policies(role, config)
+    partner = library.load(reference_partner(table, role), config)
+    matrix = cem_matrix(list(policies.values()), partner, list(range(games)), config)
+    return pd.DataFrame(matrix, index=list(policies), columns=list(policies))
+
+
+def pca2(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rows' coordinates on the first two principal components, and the share of variance each
+    explains. Signs are fixed so that each component's largest loading is positive."""
+    centred = matrix - matrix.mean(axis=0)
+    _, s, vt = np.linalg.svd(centred, full_matrices=False)
+    vt = vt[:2]
+    vt = vt * np.sign(vt[np.arange(len(vt)), np.abs(vt).argmax(axis=1)])[:, None]
+    total = float((s**2).sum())
+    explained = (s[:2] ** 2) / total if total > 0 else np.zeros(min(2, len(s)))
+    coords = centred @ vt.T
+    pad = 2 - coords.shape[1]  # fewer rows or columns than two components: the rest is zero
+    return np.pad(coords, ((0, 0), (0, pad))), np.pad(explained, (0, pad))
+
+
+def policy_space(
+    partners: pd.DataFrame, references: dict[str, pd.DataFrame]
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Per role, the partners' and the library policies' similarity vectors projected together on
+    two principal components; the points, and the variance the components explain."""
+    points, variance = [], []
+    for role, reference in references.items():
+        keys = list(reference.columns)
+        mine = partners[partners["partner_role"] == role]
+        matrix = np.vstack([reference.to_numpy(), mine[keys].to_numpy()])
+        coords, explained = pca2(matrix)
+        labels = [("library", key, "", math.nan) for key in reference.index] + [
+            ("partner", row.partner, row.match, row.kills_per_minute) for row in mine.itertuples()
+        ]
+        for (kind, name, match, kpm), (pc1, pc2) in zip(labels, coords, strict=True):
+            points.append({"role": role, "kind": kind, "name": name, "match": match,
+                           "kills_per_minute": kpm, "pc1": pc1, "pc2": pc2})  # fmt: skip
+        variance.append({"role": role, "pc1": explained[0], "pc2": explained[1], "points": len(matrix)})
+    return pd.DataFrame(points), pd.DataFrame(variance)
+
+
+def similarity_to_optimal(partners: pd.DataFrame, table: Table) -> pd.DataFrame:
+    """Each seat whose agent played a library policy: the partner's similarity to the policy of its
+    role that the table says plays best with that agent."""
+    rows = []
+    for _, row in partners.iterrows():
+        agent, role = row["agent"], row["partner_role"]
+        if role == "bait" and agent in table.shooters:
+            optimal = table.best_bait(agent)
+        elif role == "shooter" and agent in table.baits:
+            optimal = table.best_shooter(agent)
+        else:
+            continue
+        rows.append(
+            {"match": row["match"], "partner_role": role, "partner": row["partner"], "agent": agent,
+             "optimal": optimal, "similarity": row[optimal], "kills_per_minute": row["kills_per_minute"]}
+        )  # fmt: skip
+    columns = ["match", "partner_role", "partner", "agent", "optimal", "similarity", "kills_per_minute"]
+    return pd.DataFrame(rows, columns=columns)
+
+
+def correlations(similarity: pd.DataFrame) -> pd.DataFrame:
+    """Pearson r and its two-sided p between similarity to optimal and team performance, per role.
+    r and p are left empty (NaN) with fewer than three seats or a constant column."""
+    rows = []
+    for role in ROLES:
+        mine = similarity[similarity["partner_role"] == role]
+        x, y = mine["similarity"].to_numpy(float), mine["kills_per_minute"].to_numpy(float)
+        r = p = math.nan
+        note = ""
+        if len(mine) < 3:
+            note = "fewer than 3 seats"
+        elif np.ptp(x) == 0 or np.ptp(y) == 0:
+            note = "a constant column"
+        else:
+            result = stats.pearsonr(x, y)
+            r, p = float(result.statistic), float(result.pvalue)
+        rows.append({"partner_role": role, "n": len(mine), "r": r, "p": p, "note": note})
+    return pd.DataFrame(rows)
+
+
+def rounds(match: Match, frames: np.ndarray) -> np.ndarray:
+    """The round (0, 1, ...) each frame belongs to: a round ends at a kill or a both-dead reset."""
+    events = match.tables["events"]
+    ends = np.sort(events[events["kind"].isin(ROUND_ENDS)]["frame"].to_numpy())
+    return np.searchsorted(ends, frames, side="left")
+
+
+def curves(match: Match, seat: Seat, smooth: int = SMOOTH) -> pd.DataFrame:
+    """Over one trial: the log-probability of the partner's every action under each library policy
+    of its role, its moving mean over `smooth` frames, and the round of the frame."""
+    policies = library_policies(seat.partner_role, match.config)
+    stream = partner_stream(match, seat.partner_role)
+    values = log_probs(stream, list(policies.values()))
+    frames = stream["frame"].to_numpy()
+    round_of = rounds(match, frames)
+    parts = []
+    for j, key in enumerate(policies):
+        series = pd.Series(values[:, j])
+        parts.append(
+            pd.DataFrame(
+                {
+                    "match": match.name,
+                    "partner_role": seat.partner_role,
+                    "policy": key,
+                    "frame": frames,
+                    "round": round_of,
+                    "log_prob": values[:, j],
+                    "smoothed": series.rolling(smooth, min_periods=1).mean().to_numpy(),
+                }
+            )  # fmt: skip
+        )
+    return pd.concat(parts, ignore_index=True)
+
+
+def variants(partners: pd.DataFrame) -> pd.DataFrame:
+    """Team performance per agent variant: matches, mean and standard error of kills per minute."""
+    rows = []
+    for (variant, adaptive), group in partners.groupby(["variant", "adaptive"], sort=True):
+        values = group["kills_per_minute"].to_numpy(float)
+        stderr = values.std(ddof=1) / math.sqrt(len(values)) if len(values) > 1 else math.nan
+        rows.append({"variant": variant, "adaptive": bool(adaptive), "n": len(values),
+                     "mean": values.mean(), "stderr": stderr})  # fmt: skip
+    return pd.DataFrame(rows, columns=["variant", "adaptive", "n", "mean", "stderr"])
+
+
+def adaptive_tests(partners: pd.DataFrame, summary: pd.DataFrame) -> pd.DataFrame:
+    """Each adaptive variant against the best static one (the highest mean among static variants
+    with two or more matches): Welch's unequal-variance t-test, two-sided. Welch, because the two
+    groups are different matches (unpaired), of unequal sizes and not known to share a variance."""
+    static = summary[(~summary["adaptive"]) & (summary["n"] >= 2)]
+    columns = [
+        "adaptive",
+        "static",
+        "n_adaptive",
+        "n_static",
+        "mean_adaptive",
+        "mean_static",
+        "t",
+        "p",
+        "note",
+    ]
+    if static.empty:
+        return pd.DataFrame(columns=columns)
+    best = static.sort_values(["mean", "variant"], ascending=[False, True]).iloc[0]["variant"]
+    b = partners[partners["variant"] == best]["kills_per_minute"].to_numpy(float)
+    rows = []
+    for variant in summary[summary["adaptive"]]["variant"]:
+        a = partners[partners["variant"] == variant]["kills_per_minute"].to_numpy(float)
+        t = p = math.nan
+        note = ""
+        if len(a) < 2:
+            note = "fewer than 2 adaptive matches"
+        elif np.ptp(a) == 0 and np.ptp(b) == 0:
+            note = "no variance in either group"
+        else:
+            result = stats.ttest_ind(a, b, equal_var=False)
+            t, p = float(result.statistic), float(result.pvalue)
+        values = (variant, best, len(a), len(b), a.mean(), b.mean(), t, p, note)
+        rows.append(dict(zip(columns, values, strict=True)))
+    return pd.DataFrame(rows, columns=columns)
+
+
+def adapter_timeline(matches: list[Match]) -> pd.DataFrame:
+    """Every adapter status of the adaptive matches: the estimated partner type and the agent's
+    policy over time (seconds of game time; `end`: the match's length in seconds)."""
+    parts = []
+    for match in matches:
+        adapter = match.tables["adapter"]
+        if adapter.empty:
+            continue
+        part = adapter[
+            ["frame", "role", "partner", "policy", "strategy", "window", "filled", "out_of_library"]
+        ]
+        config = match.config
+        parts.append(
+            part.assign(match=match.name, seconds=part["frame"] / config.fps, end=config.frames / config.fps)
+        )
+    columns = ["match", "frame", "seconds", "role", "partner", "policy", "strategy", "window", "filled",
+               "out_of_library", "end"]  # fmt: skip
+    return pd.concat(parts, ignore_index=True)[columns] if parts else pd.DataFrame(columns=columns)

@@ -1,0 +1,127 @@
+"""The report's figures: matplotlib PNGs drawn from the analysis frames (services/report/analysis.py),
+so that every number drawn is also in the report's data files."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")  # files only, no display
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+
+DPI = 100
+
+
+def _save(fig: plt.Figure, path: Path) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=DPI)
+    plt.close(fig)
+    return path
+
+
+def _roles_axes(roles: list[str], height: float = 4.5) -> tuple[plt.Figure, list[plt.Axes]]:
+    fig, axes = plt.subplots(1, max(1, len(roles)), figsize=(5.5 * max(1, len(roles)), height), squeeze=False)
+    return fig, list(axes[0])
+
+
+def policy_space(points: pd.DataFrame, variance: pd.DataFrame, path: Path) -> Path:
+    """Per role: library policies (crosses) and partners (discs, area growing with kills/min) on the
+    first two principal components of their similarity vectors."""
+    roles = list(variance["role"])
+    fig, axes = _roles_axes(roles)
+    for ax, role in zip(axes, roles, strict=False):
+        mine = points[points["role"] == role]
+        lib, partners = mine[mine["kind"] == "library"], mine[mine["kind"] == "partner"]
+        ax.scatter(lib["pc1"], lib["pc2"], marker="x", color="black", label="library policy")
+        for row in lib.itertuples():
+            ax.annotate(row.name, (row.pc1, row.pc2), textcoords="offset points", xytext=(4, 4), fontsize=8)
+        sizes = 30 + 40 * partners["kills_per_minute"].clip(lower=0)
+        ax.scatter(partners["pc1"], partners["pc2"], s=sizes, alpha=0.6, color="tab:orange", label="partner")
+        for row in partners.itertuples():
+            ax.annotate(row.name, (row.pc1, row.pc2), textcoords="offset points", xytext=(4, -10), fontsize=7)
+        share = variance[variance["role"] == role].iloc[0]
+        ax.set_xlabel(f"PC1 ({100 * share['pc1']:.0f}% of variance)")
+        ax.set_ylabel(f"PC2 ({100 * share['pc2']:.0f}% of variance)")
+        ax.set_title(f"{role} partners in the {role} library's policy space")
+        ax.legend(fontsize=8, loc="best")
+    if not roles:
+        axes[0].text(0.5, 0.5, "no partners", ha="center", va="center")
+    return _save(fig, path)
+
+
+def similarity(similarity: pd.DataFrame, correlations: pd.DataFrame, path: Path) -> Path:
+    """Per role: similarity to the agent's optimal partner policy against team performance."""
+    roles = list(correlations["partner_role"])
+    fig, axes = _roles_axes(roles, 4.0)
+    for ax, role in zip(axes, roles, strict=False):
+        mine = similarity[similarity["partner_role"] == role]
+        ax.scatter(mine["similarity"], mine["kills_per_minute"], color="tab:blue")
+        c = correlations[correlations["partner_role"] == role].iloc[0]
+        stat = f"r = {c['r']:.2f}, p = {c['p']:.3g}" if np.isfinite(c["r"]) else c["note"]
+        ax.set_title(f"{role} partners: {stat} (n = {c['n']})", fontsize=10)
+        ax.set_xlabel("similarity to the optimal policy (mean log-prob)")
+        ax.set_ylabel("team kills per minute")
+    return _save(fig, path)
+
+
+def curves(curves: pd.DataFrame, fps: float, path: Path) -> Path:
+    """Moving mean of each library policy's log-probability of the partner's actions over one trial,
+    rounds shaded alternately."""
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    for policy, group in curves.groupby("policy", sort=False):
+        ax.plot(group["frame"] / fps, group["smoothed"], label=policy, linewidth=1.2)
+    first = curves[curves["policy"] == curves["policy"].iloc[0]] if len(curves) else curves
+    for number, part in first.groupby("round"):
+        if number % 2:
+            ax.axvspan(part["frame"].min() / fps, part["frame"].max() / fps, color="grey", alpha=0.15, lw=0)
+    match = curves["match"].iloc[0] if len(curves) else ""
+    ax.set_title(
+        f"log-probability of the partner's actions under each library policy: {match} (shade: rounds)"
+    )
+    ax.set_xlabel("game time (s)")
+    ax.set_ylabel("log-prob, 1 s moving mean")
+    ax.legend(fontsize=8, ncol=2, loc="lower left")
+    return _save(fig, path)
+
+
+def variants(summary: pd.DataFrame, tests: pd.DataFrame, path: Path) -> Path:
+    """Team performance per agent variant, mean with standard-error bars; adaptive variants in orange."""
+    fig, ax = plt.subplots(figsize=(max(5.0, 0.8 * len(summary) + 2), 4.5))
+    colours = ["tab:orange" if a else "tab:blue" for a in summary["adaptive"]]
+    ax.bar(summary["variant"], summary["mean"], yerr=summary["stderr"].fillna(0), color=colours, capsize=4)
+    ax.set_ylabel("team kills per minute")
+    ax.set_xlabel("agent variant (n matches below)")
+    ax.set_xticks(
+        range(len(summary)), [f"{v}\nn={n}" for v, n in zip(summary["variant"], summary["n"], strict=True)]
+    )
+    ax.tick_params(axis="x", labelsize=8)
+    done = tests.dropna(subset=["p"])
+    title = "; ".join(f"{r.adaptive} vs {r.static}: Welch p = {r.p:.3g}" for r in done.itertuples())
+    ax.set_title(title or "adaptive vs static: no test (see the table)", fontsize=9)
+    return _save(fig, path)
+
+
+def adapter(timeline: pd.DataFrame, path: Path, most: int = 6) -> Path:
+    """For up to `most` adaptive matches: the estimated partner type and the agent's policy over time."""
+    matches = list(dict.fromkeys(timeline["match"]))[:most]
+    fig, axes = plt.subplots(len(matches), 1, figsize=(10, 2.6 * len(matches)), squeeze=False)
+    for ax, match in zip(axes[:, 0], matches, strict=True):
+        mine = timeline[timeline["match"] == match]
+        labels = sorted(set(mine["partner"].replace("", "(filling)")) | set(mine["policy"]))
+        level = {label: i for i, label in enumerate(labels)}
+        seconds = [
+            *mine["seconds"],
+            mine["end"].iloc[0],
+        ]  # a status holds until the next; the last to the end
+        estimated = list(mine["partner"].replace("", "(filling)").map(level))
+        policy = list(mine["policy"].map(level))
+        ax.step(seconds, [*estimated, estimated[-1]], where="post", label="estimated partner type")
+        ax.step(seconds, [*policy, policy[-1]], where="post", label="agent's policy", linestyle="--")
+        ax.set_yticks(range(len(labels)), labels)
+        ax.set_title(f"{match}: {mine['strategy'].iloc[0]}, window {mine['window'].iloc[0]}", fontsize=10)
+        ax.set_xlabel("game time (s)")
+        ax.legend(fontsize=8, loc="upper right")
+    return _save(fig, path)

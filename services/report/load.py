@@ -1,0 +1,118 @@
+"""Recordings for the report: each one checked, exported to Parquet and read back with pandas.
+
+A recording is left out of the analyses, and named in the report with the reason, when it cannot be
+read, has no start or no summary (a truncated log, or a match that never ended), or when the engine
+does not reproduce its states. A torn tail after the summary, or lost frames that stop the replay
+check, are named too but the recording is still used: its result is known.
+
+A study runner may leave a JSON sidecar beside a recording (`<match>.json`): its `participant`,
+`variant`, `session` and `trial` are used where present (see services/report/analysis.py).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pandas as pd
+
+from services.recorder.recording import TABLES, export_parquet, load, replay
+from services.sim.config import GameConfig
+
+SIDECAR_FIELDS = ("participant", "variant", "session", "trial")
+
+
+@dataclass(frozen=True)
+class Match:
+    """One usable recording, as pandas frames read from its Parquet export."""
+
+    name: str
+    path: Path
+    tables: dict[str, pd.DataFrame]
+    meta: dict[str, str] = field(default_factory=dict)  # the sidecar's fields, where there is one
+
+    @property
+    def info(self) -> pd.Series:
+        return self.tables["match"].iloc[0]
+
+    @property
+    def policies(self) -> dict[str, str]:
+        return json.loads(self.info["policies"])
+
+    @property
+    def config(self) -> GameConfig:
+        return GameConfig.from_dict(json.loads(self.info["config"]))
+
+    @property
+    def kills_per_minute(self) -> float:
+        return float(self.info["kills_per_minute"])
+
+
+@dataclass(frozen=True)
+class Problem:
+    name: str
+    path: str
+    reason: str
+    used: bool  # True: noted, but the recording is still in the analyses
+
+
+def load_matches(paths: list[Path], parquet: Path) -> tuple[list[Match], list[Problem]]:
+    """Check and export each recording under `parquet/<name>/`; the usable ones, and every problem."""
+    matches: list[Match] = []
+    problems: list[Problem] = []
+    names: set[str] = set()
+    for path in paths:
+        name = _unique(path.name.removesuffix(".tsflog"), names)
+
+        def problem(reason: str, used: bool = False, name: str = name, path: Path = path) -> None:
+            problems.append(Problem(name, str(path), reason, used))
+
+        try:
+            recording = load(path)
+        except (OSError, ValueError) as error:
+            problem(f"unreadable: {error}")
+            continue
+        if recording.start is None:
+            problem("no start record: the log is truncated or not a match's")
+            continue
+        if recording.summary is None:
+            last = recording.states[-1].frame if recording.states else "none"
+            problem(f"no summary: the log is truncated or the match never ended (last state {last})")
+            continue
+        try:
+            mismatches = replay(recording)
+        except ValueError as error:
+            problem(f"not replayed: {error}", used=True)
+        else:
+            if mismatches:
+                problem(f"{len(mismatches)} states differ from the engine's, first at frame {mismatches[0]}")
+                continue
+        if not recording.clean:
+            problem("the log ends in a torn or corrupt record after the summary", used=True)
+        export_parquet(recording, parquet / name)
+        tables = {t: pd.read_parquet(parquet / name / f"{t}.parquet") for t in TABLES}
+        matches.append(Match(name, path, tables, _sidecar(path)))
+    return matches, problems
+
+
+def _unique(name: str, taken: set[str]) -> str:
+    unique, n = name, 1
+    while unique in taken:
+        n += 1
+        unique = f"{name}-{n}"
+    taken.add(unique)
+    return unique
+
+
+def _sidecar(path: Path) -> dict[str, str]:
+    sidecar = path.with_name(path.name.removesuffix(".tsflog") + ".json")
+    if not sidecar.exists():
+        return {}
+    try:
+        record = json.loads(sidecar.read_text())
+    except (OSError, ValueError):
+        return {}
+    if not isinstance(record, dict):
+        return {}
+    return {k: str(record[k]) for k in SIDECAR_FIELDS if record.get(k) not in (None, "")}

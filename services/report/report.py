@@ -1,0 +1,193 @@
+"""`tsf report`: recordings -> the original study's figures and numbers, in one directory.
+
+DIR/report.html (self-contained), DIR/figures/*.png, DIR/data/*.csv and *.parquet (every number
+behind the figures), DIR/parquet/<match>/ (each recording's Parquet export, which the analyses read).
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pandas as pd
+
+from services.report import analysis, figures
+from services.report.html import Section, write_html
+from services.report.load import Match, Problem, load_matches
+from services.sim.config import GameConfig
+from services.table.plot import heatmap
+from services.table.table import DEFAULT_TABLE, Table
+
+REFERENCE_GAMES = 2
+
+
+@dataclass
+class Report:
+    html: Path
+    figures: dict[str, Path] = field(default_factory=dict)
+    data: dict[str, pd.DataFrame] = field(default_factory=dict)
+    problems: list[Problem] = field(default_factory=list)
+
+
+def build_report(
+    recordings: list[Path],
+    out: Path,
+    table_path: Path = DEFAULT_TABLE,
+    partner_role: str | None = None,
+    trial: str | None = None,
+    reference_games: int = REFERENCE_GAMES,
+) -> Report:
+    """Load, analyse, draw and write everything; a recording that cannot be used is named in the
+    report and left out, and the rest still builds."""
+    (out / "figures").mkdir(parents=True, exist_ok=True)
+    (out / "data").mkdir(parents=True, exist_ok=True)
+    matches, problems = load_matches(recordings, out / "parquet")
+    table = Table.load(table_path)
+
+    partners = analysis.partner_vectors(matches, partner_role)
+    for row in partners[partners["frames"] == 0].itertuples():
+        problems.append(Problem(row.match, "", f"no recorded actions of the {row.partner_role} seat", True))
+    partners = partners[partners["frames"] > 0].reset_index(drop=True)
+    config = _common_config(matches)
+    references = {
+        role: analysis.reference_vectors(role, table, reference_games, config)
+        for role in sorted(set(partners["partner_role"]))
+    }
+    points, variance = analysis.policy_space(partners, references)
+    similarity = analysis.similarity_to_optimal(partners, table)
+    correlations = analysis.correlations(similarity)
+    summary = analysis.variants(partners)
+    tests = analysis.adaptive_tests(partners, summary)
+    timeline = analysis.adapter_timeline(matches)
+    trial_match, seat = _trial(matches, partners, trial, partner_role)
+    curves = analysis.curves(trial_match, seat) if seat else pd.DataFrame()
+
+    report = Report(out / "report.html", problems=problems)
+    report.data = {
+        "table": pd.DataFrame(
+            [
+                {
+                    "bait": b,
+                    "shooter": s,
+                    "mean": table.mean(b, s),
+                    "stderr": table.stderr(b, s),
+                    "best_shooter": table.best_shooter(b) == s,
+                }
+                for b in table.baits
+                for s in table.shooters
+            ]
+        ),  # fmt: skip
+        "partners": partners,
+        "references": pd.concat(
+            [ref.rename_axis("policy").reset_index().assign(role=role) for role, ref in references.items()]
+        )
+        if references
+        else pd.DataFrame(),
+        "policy_space": points,
+        "policy_space_variance": variance,
+        "similarity": similarity,
+        "correlations": correlations,
+        "logprob_curves": curves,
+        "variants": summary,
+        "adaptive_tests": tests,
+        "adapter": timeline,
+        "problems": pd.DataFrame([p.__dict__ for p in problems], columns=["name", "path", "reason", "used"]),
+    }
+    for name, frame in report.data.items():
+        frame.to_csv(out / "data" / f"{name}.csv", index=False)
+        frame.to_parquet(out / "data" / f"{name}.parquet", index=False)
+
+    fig = out / "figures"
+    report.figures["table"] = heatmap(table, fig / "table.png")
+    report.figures["policy_space"] = figures.policy_space(points, variance, fig / "policy_space.png")
+    report.figures["similarity"] = figures.similarity(similarity, correlations, fig / "similarity.png")
+    if seat:
+        report.figures["logprob_curves"] = figures.curves(curves, trial_match.config.fps, fig / "logprob.png")
+    report.figures["variants"] = figures.variants(summary, tests, fig / "variants.png")
+    if not timeline.empty:
+        report.figures["adapter"] = figures.adapter(timeline, fig / "adapter.png")
+    write_html(
+        report.html, "Team Space Fortress: study report", _intro(matches, problems), _sections(report, seat)
+    )
+    return report
+
+
+def _common_config(matches: list[Match]) -> GameConfig:
+    """The rules most recordings were played with (the reference games use them)."""
+    if not matches:
+        return GameConfig()
+    configs = Counter(m.config for m in matches)
+    return configs.most_common(1)[0][0]
+
+
+def _trial(
+    matches: list[Match], partners: pd.DataFrame, trial: str | None, partner_role: str | None
+) -> tuple[Match | None, analysis.Seat | None]:
+    """The match and seat whose log-probability curves are drawn: `trial` (a match name), else the
+    first match with a partner."""
+    for match in matches:
+        if (trial in (None, match.name)) and match.name in set(partners["match"]):
+            return match, analysis.seats(match, partner_role)[0]
+    return None, None
+
+
+def _intro(matches: list[Match], problems: list[Problem]) -> str:
+    text = f"{len(matches)} recordings analysed."
+    for p in problems:
+        status = "used" if p.used else "left out"
+        text += f"<br><span class='problem'>{p.name} ({status}): {p.reason}</span>"
+    return text
+
+
+def _sections(report: Report, seat: analysis.Seat | None) -> list[Section]:
+    d, f = report.data, report.figures
+    sections = [
+        Section(
+            "Self-play table",
+            "Mean kills per minute of every library pair (red: each bait's best shooter).",
+            f["table"],
+        ),
+        Section(
+            "Policy-space map",
+            "Each partner's vector of mean log-probabilities of its actions under every library policy of "
+            "its role, projected with PCA (fitted on the library's own vectors and the partners' together) "
+            "to two components; library policies are the reference points, marker area grows with team "
+            "performance.",
+            f["policy_space"],
+            [("Variance explained", d["policy_space_variance"]), ("Points", d["policy_space"])],
+        ),
+        Section(
+            "Similarity to optimal",
+            "For each partner-agent pair, the partner's similarity to the library policy of its role that "
+            "the table says plays best with the agent, against team performance: Pearson r and two-sided p "
+            "per role.",
+            f["similarity"],
+            [("Correlations", d["correlations"]), ("Pairs", d["similarity"])],
+        ),
+    ]
+    if seat is not None:
+        sections.append(
+            Section(
+                "Log-probability curves",
+                f"Match {seat.match}, {seat.partner_role} partner {seat.partner}: each library policy's "
+                "log-probability of the partner's actions (1 s moving mean), rounds shaded alternately.",
+                f["logprob_curves"],
+            )
+        )
+    sections.append(
+        Section(
+            "Adaptive vs static",
+            "Team performance per agent variant (mean and standard error). Each adaptive variant is tested "
+            "against the best static variant with Welch's t-test (unpaired, unequal variances).",
+            f["variants"],
+            [("Variants", d["variants"]), ("Tests", d["adaptive_tests"])],
+        )
+    )
+    if "adapter" in f:
+        sections.append(
+            Section("Adapter over time", "The estimated partner type and the agent's policy.", f["adapter"])
+        )
+    sections.append(Section("Partners", "Every partner-agent pair and its similarity vector.", None,
+                            [("Partners", d["partners"])]))  # fmt: skip
+    return sections

@@ -1,0 +1,242 @@
+"""The report on short matches recorded in-process through the real log writer: agent-agent, adaptive
+and a person's seat, plus a truncated and a garbage file. Every number checked here is recomputed
+directly from the recordings (services/recorder/recording.load), not from the report's Parquet path."""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import statistics
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from PIL import Image
+from scipy import stats
+
+from services.adapter.cem import log_probs
+from services.agent import library
+from services.recorder.recording import Recording, load
+from services.recorder.recording_test import Script, record_match
+from services.report.report import Report, build_report
+from services.sim.config import GameConfig
+from services.table.table import Table
+from shared.messages import AdapterStatus, PolicySwitch
+
+FRAMES = 450  # 15 s: long enough for the weak pairs to score less than the strong ones
+STATIC = [("B5", "S5"), ("B9", "S5"), ("B2", "S4"), ("B3", "S6"), ("B4", "S7"), ("B8", "S1")]
+ADAPTIVE = [("B5", 10), ("B9", 11), ("B4", 12)]  # partner bait, seed; the shooter adapts (window 100)
+WINDOW = 100
+
+
+def adaptive_script(name: str, partner: str, seed: int) -> Script:
+    """The shooter starts as S1, the adapter names the partner at frame 100 and switches to the
+    table's best shooter for it."""
+    best = Table.load().best_shooter(partner)
+
+    def status(frame: int, filled: int, estimate: str, policy: str) -> AdapterStatus:
+        """The adapter's status at `frame` (`filled` frames of its window seen)."""
+        scores = {estimate: -0.5} if estimate else {}
+        return AdapterStatus(
+            name, frame, "adapter", "shooter", "cem", WINDOW, filled, estimate, policy, scores
+        )
+
+    return Script(
+        name, seed, FRAMES, {"bait": partner, "shooter": "S1"},
+        statuses=(status(0, 0, "", "S1"), *(status(f, WINDOW, partner, best) for f in (WINDOW, 2 * WINDOW))),
+        switches=(PolicySwitch(name, WINDOW, "adapter", "shooter", best, "partner"),),
+    )  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory: pytest.TempPathFactory) -> tuple[Report, dict[str, Path], Path]:
+    root = tmp_path_factory.mktemp("report")
+    paths: dict[str, Path] = {}
+    for i, (bait, shooter) in enumerate(STATIC):
+        name = f"static-{bait}-{shooter}"
+        paths[name] = root / f"{name}.tsflog"
+        record_match(
+            paths[name], script=Script(name, i, FRAMES, {"bait": bait, "shooter": shooter}, None, (), ())
+        )
+    for partner, seed in ADAPTIVE:
+        name = f"adaptive-{partner}"
+        paths[name] = root / f"{name}.tsflog"
+        record_match(paths[name], script=adaptive_script(name, partner, seed))
+    person = "person-1"  # a person's bait seat (B4 stands in for the person), with a study sidecar
+    paths[person] = root / f"{person}.tsflog"
+    script = Script(
+        person, 20, FRAMES, {"bait": "B4", "shooter": "S5"}, {"bait": "", "shooter": "S5"}, (), ()
+    )
+    record_match(paths[person], script=script)
+    (root / f"{person}.json").write_text(json.dumps({"participant": "P01", "session": 1}))
+    truncated, garbage = root / "truncated.tsflog", root / "garbage.tsflog"
+    shutil.copy(paths["static-B5-S5"], truncated)
+    with truncated.open("r+b") as f:
+        f.truncate(truncated.stat().st_size // 2)
+    garbage.write_bytes(b"not a recording at all")
+    report = build_report([*paths.values(), truncated, garbage], root / "out", reference_games=1)
+    return report, paths, root / "out"
+
+
+def csv(out: Path, name: str) -> pd.DataFrame:
+    return pd.read_csv(out / "data" / f"{name}.csv", keep_default_na=False, na_values=[""])
+
+
+def stream(recording: Recording, role: str) -> tuple[list[list[float]], list[int]]:
+    """The partner's (world-frame state, action) pairs straight from the decoded recording."""
+    obs = {s.frame: s.obs[role] for s in recording.states}
+    pairs = {a.frame: a.action for _, a in recording.actions if a.role == role and a.frame in obs}
+    frames = sorted(pairs)
+    return [obs[f] for f in frames], [pairs[f] for f in frames]
+
+
+def test_bad_recordings_are_named_and_the_rest_builds(built: tuple[Report, dict[str, Path], Path]) -> None:
+    report, paths, out = built
+    problems = csv(out, "problems").set_index("name")
+    assert "no summary" in problems.loc["truncated", "reason"] and not problems.loc["truncated", "used"]
+    assert "unreadable" in problems.loc["garbage", "reason"]
+    page = report.html.read_text()
+    assert "truncated (left out)" in page and "garbage (left out)" in page
+    assert set(csv(out, "partners")["match"]) == set(paths)
+
+
+def test_seats_follow_the_partner_rule(built: tuple[Report, dict[str, Path], Path]) -> None:
+    _, paths, out = built
+    partners = csv(out, "partners")
+    seats = {(r.match, r.partner_role): r for r in partners.itertuples()}
+    assert len(partners) == 2 * len(STATIC) + len(ADAPTIVE) + 1
+    b5 = seats[("static-B5-S5", "bait")]
+    assert (b5.partner, b5.agent, b5.variant, b5.adaptive) == ("B5", "S5", "S5", False)
+    assert seats[("static-B5-S5", "shooter")].variant == "B5"
+    adaptive = seats[("adaptive-B9", "bait")]
+    assert (adaptive.variant, adaptive.adaptive) == (f"adaptive-T{WINDOW}-cem", True)
+    assert ("adaptive-B9", "shooter") not in seats
+    person = seats[("person-1", "bait")]
+    assert (person.partner, person.variant) == ("P01", "S5") and ("person-1", "shooter") not in seats
+
+
+def test_similarity_vectors_and_performance(built: tuple[Report, dict[str, Path], Path]) -> None:
+    _, paths, out = built
+    partners = csv(out, "partners")
+    config = GameConfig(frames=FRAMES)
+    for row in partners.itertuples():
+        recording = load(paths[row.match])
+        assert row.kills_per_minute == pytest.approx(recording.summary.kills_per_minute)
+        states, actions = stream(recording, row.partner_role)
+        assert row.frames == len(actions) == FRAMES
+        for key in library.keys(row.partner_role)[:3]:  # a few judges per seat keep the test quick
+            direct = log_probs(library.load(key, config), states, actions).mean()
+            assert getattr(row, key) == pytest.approx(direct, rel=1e-9)
+        others = library.keys("shooter" if row.partner_role == "bait" else "bait")
+        assert all(math.isnan(getattr(row, key)) for key in others)
+
+
+def test_similarity_to_optimal_and_correlation(built: tuple[Report, dict[str, Path], Path]) -> None:
+    _, _, out = built
+    table, partners = Table.load(), csv(out, "partners")
+    similarity, correlations = csv(out, "similarity"), csv(out, "correlations").set_index("partner_role")
+    for row in similarity.itertuples():
+        best = table.best_bait(row.agent) if row.partner_role == "bait" else table.best_shooter(row.agent)
+        assert row.optimal == best
+        seat = partners[(partners["match"] == row.match) & (partners["partner_role"] == row.partner_role)]
+        assert row.similarity == pytest.approx(seat.iloc[0][best])
+    # the scripted seats of no match here: every seat's agent is a library policy
+    assert len(similarity) == len(partners)
+    for role in ("bait", "shooter"):
+        mine = similarity[similarity["partner_role"] == role]
+        x, y = mine["similarity"].to_numpy(), mine["kills_per_minute"].to_numpy()
+        r = np.corrcoef(x, y)[0, 1]
+        t = r * math.sqrt((len(x) - 2) / (1 - r * r))
+        assert correlations.loc[role, "n"] == len(mine)
+        assert correlations.loc[role, "r"] == pytest.approx(r)
+        assert correlations.loc[role, "p"] == pytest.approx(2 * stats.t.sf(abs(t), len(x) - 2))
+
+
+def test_policy_space(built: tuple[Report, dict[str, Path], Path]) -> None:
+    _, _, out = built
+    points, variance = csv(out, "policy_space"), csv(out, "policy_space_variance").set_index("role")
+    references = csv(out, "references")
+    partners = csv(out, "partners")
+    for role in ("bait", "shooter"):
+        keys = library.keys(role)
+        ref = references[references["role"] == role].set_index("policy")[keys]
+        matrix = np.vstack([ref.to_numpy(), partners[partners["partner_role"] == role][keys].to_numpy()])
+        eigen = np.sort(np.linalg.eigvalsh(np.cov(matrix.T)))[::-1]
+        assert variance.loc[role, ["pc1", "pc2"]].to_numpy() == pytest.approx(eigen[:2] / eigen.sum())
+        mine = points[points["role"] == role]
+        assert list(mine[mine["kind"] == "library"]["name"]) == keys
+        assert (mine["kind"] == "partner").sum() == (partners["partner_role"] == role).sum()
+        # the projection keeps the spread: the points' variance along each axis is the eigenvalue
+        assert np.var(mine[["pc1", "pc2"]].to_numpy(), axis=0, ddof=1) == pytest.approx(eigen[:2])
+        # a library policy is most similar to itself in its own row of the reference matrix
+        assert all(ref.loc[key].idxmax() == key for key in keys)
+
+
+def test_adaptive_vs_static(built: tuple[Report, dict[str, Path], Path]) -> None:
+    _, paths, out = built
+    variants, tests = csv(out, "variants").set_index("variant"), csv(out, "adaptive_tests")
+    kpm = {name: load(path).summary.kills_per_minute for name, path in paths.items()}
+    adaptive = [kpm[f"adaptive-{p}"] for p, _ in ADAPTIVE]
+    row = variants.loc[f"adaptive-T{WINDOW}-cem"]
+    assert row["n"] == len(ADAPTIVE) and row["mean"] == pytest.approx(statistics.fmean(adaptive))
+    assert row["stderr"] == pytest.approx(statistics.stdev(adaptive) / math.sqrt(len(adaptive)))
+    s5 = [kpm[f"static-{b}-{s}"] for b, s in STATIC if s == "S5"] + [kpm["person-1"]]
+    assert variants.loc["S5", "n"] == len(s5) and variants.loc["S5", "mean"] == pytest.approx(
+        statistics.fmean(s5)
+    )
+    statics = variants[(~variants["adaptive"]) & (variants["n"] >= 2)]
+    best = statics["mean"].idxmax()
+    [test] = tests.itertuples()
+    assert test.static == best
+    b = np.array([kpm[m] for m in csv(out, "partners").query("variant == @best")["match"]])
+    a = np.array(adaptive)
+    se = math.sqrt(a.var(ddof=1) / len(a) + b.var(ddof=1) / len(b))
+    assert test.t == pytest.approx((a.mean() - b.mean()) / se)
+
+
+def test_adapter_timeline_and_curves(built: tuple[Report, dict[str, Path], Path]) -> None:
+    _, paths, out = built
+    timeline = csv(out, "adapter")
+    assert len(timeline) == 3 * len(ADAPTIVE)
+    b9 = timeline[timeline["match"] == "adaptive-B9"]
+    assert list(b9["frame"]) == [0, WINDOW, 200] and list(b9["partner"].fillna("")) == ["", "B9", "B9"]
+    assert list(b9["policy"]) == ["S1", Table.load().best_shooter("B9")] * 1 + [
+        Table.load().best_shooter("B9")
+    ]
+    assert b9["seconds"].iloc[1] == pytest.approx(WINDOW / 30)
+
+    curves = csv(out, "logprob_curves")
+    trial = curves["match"].iloc[0]
+    role = curves["partner_role"].iloc[0]
+    recording = load(paths[trial])
+    assert len(curves) == FRAMES * len(library.keys(role))
+    states, actions = stream(recording, role)
+    key = library.keys(role)[0]
+    mine = curves[curves["policy"] == key]
+    direct = log_probs(library.load(key, GameConfig(frames=FRAMES)), states, actions)
+    assert mine["log_prob"].to_numpy() == pytest.approx(direct)
+    assert mine["smoothed"].iloc[40] == pytest.approx(direct[11:41].mean())
+    ends = sorted(e.frame for e in recording.events if e.kind in ("kill", "reset"))
+    assert mine["round"].iloc[-1] == sum(f < FRAMES - 1 for f in ends)
+
+
+def test_figures_and_page(built: tuple[Report, dict[str, Path], Path]) -> None:
+    report, _, out = built
+    assert set(report.figures) == {
+        "table",
+        "policy_space",
+        "similarity",
+        "logprob_curves",
+        "variants",
+        "adapter",
+    }
+    for path in report.figures.values():
+        with Image.open(path) as image:
+            assert image.format == "PNG" and image.width > 300 and image.height > 200
+            colours = image.convert("RGB").getcolors(maxcolors=1 << 16)
+            assert colours is None or len(colours) > 20  # drawn, not blank
+    page = report.html.read_text()
+    assert page.count("data:image/png;base64,") == len(report.figures)
+    assert "Welch" in page and "Pearson" in page

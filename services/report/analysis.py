@@ -19,7 +19,9 @@ received).
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -215,17 +217,22 @@ def correlations(similarity: pd.DataFrame) -> pd.DataFrame:
     for role in ROLES:
         mine = similarity[similarity["partner_role"] == role]
         x, y = mine["similarity"].to_numpy(float), mine["kills_per_minute"].to_numpy(float)
-        r = p = math.nan
-        note = ""
-        if len(mine) < 3:
-            note = "fewer than 3 seats"
-        elif np.ptp(x) == 0 or np.ptp(y) == 0:
-            note = "a constant column"
-        else:
-            result = stats.pearsonr(x, y)
-            r, p = float(result.statistic), float(result.pvalue)
+        refusal = "fewer than 3 seats" if len(mine) < 3 else "a constant column" if _constant(x, y) else ""
+        r, p, note = _test(stats.pearsonr, refusal, x, y)
         rows.append({"partner_role": role, "n": len(mine), "r": r, "p": p, "note": note})
     return pd.DataFrame(rows)
+
+
+def _constant(*samples: np.ndarray) -> bool:
+    return any(np.ptp(x) == 0 for x in samples)
+
+
+def _test(test: Callable, refusal: str, *samples: np.ndarray) -> tuple[float, float, str]:
+    """A scipy test's statistic and p-value, or NaNs and the reason it was not run."""
+    if refusal:
+        return math.nan, math.nan, refusal
+    result = test(*samples)
+    return float(result.statistic), float(result.pvalue), ""
 
 
 def rounds(match: Match, frames: np.ndarray) -> np.ndarray:
@@ -296,15 +303,12 @@ def adaptive_tests(partners: pd.DataFrame, summary: pd.DataFrame) -> pd.DataFram
     rows = []
     for variant in summary[summary["adaptive"]]["variant"]:
         a = partners[partners["variant"] == variant]["kills_per_minute"].to_numpy(float)
-        t = p = math.nan
-        note = ""
-        if len(a) < 2:
-            note = "fewer than 2 adaptive matches"
-        elif np.ptp(a) == 0 and np.ptp(b) == 0:
-            note = "no variance in either group"
-        else:
-            result = stats.ttest_ind(a, b, equal_var=False)
-            t, p = float(result.statistic), float(result.pvalue)
+        refusal = (
+            "fewer than 2 adaptive matches" if len(a) < 2
+            else "no variance in either group" if _constant(a) and _constant(b)
+            else ""
+        )  # fmt: skip
+        t, p, note = _test(functools.partial(stats.ttest_ind, equal_var=False), refusal, a, b)
         values = (variant, best, len(a), len(b), a.mean(), b.mean(), t, p, note)
         rows.append(dict(zip(columns, values, strict=True)))
     return pd.DataFrame(rows, columns=columns)

@@ -1,0 +1,110 @@
+"""The page in a real browser: Debian's Chromium driven by Playwright (never a downloaded browser),
+against a real match (`tsf play`'s path: gateway here, sim, agent and recorder as processes).
+Skipped, with the reason, where Chromium is not installed (.ci/run installs it)."""
+
+from __future__ import annotations
+
+import io
+import shutil
+import threading
+from concurrent.futures import Future, ThreadPoolExecutor
+
+import pytest
+
+from services.human.core import SeatBook
+from services.human.gateway import Gateway, seat_handler
+from services.human.play import play_with_people, seat_links
+from services.launch import HUMAN, MatchPlan
+from services.recorder.recording import load
+from services.sim.config import GameConfig
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is not installed")
+FRAMES = 300  # 10 s of real time
+BACKGROUND = (12, 14, 28)
+BAIT_COLOUR = (255, 150, 40)
+
+
+@pytest.fixture(scope="module")
+def browser():
+    sync_api = pytest.importorskip("playwright.sync_api")
+    with sync_api.sync_playwright() as playwright:
+        launched = playwright.chromium.launch(
+            executable_path=CHROMIUM, args=["--no-sandbox", "--disable-background-networking"]
+        )
+        yield launched
+        launched.close()
+
+
+@pytest.fixture
+def match(tmp_path):
+    """A match with a person in the bait seat and the mirror shooter: (links, the running match)."""
+    links: dict[str, str] = {}
+    ready = threading.Event()
+    plan = MatchPlan("browser", 1, FRAMES, bait=HUMAN, shooter="mirror", directory=tmp_path, wait_players=60)
+
+    def on_links(urls: dict[str, str]) -> None:
+        links.update(urls)
+        ready.set()
+
+    with ThreadPoolExecutor(1) as pool:
+        running: Future = pool.submit(play_with_people, plan, port=0, on_links=on_links)
+        assert ready.wait(30) or running.exception(0), "the gateway is up and prints the links"
+        yield links, running
+        if not running.done():  # a failed test: let the match run out (the sim stops on its own)
+            running.exception(FRAMES / 30 + 60)
+
+
+def test_a_person_plays_the_bait_from_the_browser(browser, match, tmp_path):
+    links, running = match  # the match's sim waits for this person to press start
+    page = browser.new_page(viewport={"width": 900, "height": 800})
+    page.goto(links["bait"])
+    assert page.locator("canvas#game").is_visible()
+    page.wait_for_function("window.tsf.phase === 'instructions'", timeout=10_000)
+    assert "BAIT" in page.locator("#text").inner_text()
+    page.keyboard.press("Space")  # read the instructions: start
+    page.wait_for_function("window.tsf.phase === 'playing' && window.tsf.drawn > 5", timeout=30_000)
+    page.keyboard.down("ArrowLeft")
+    page.wait_for_timeout(1000)
+    page.keyboard.up("ArrowLeft")
+    page.keyboard.down("Space")
+    page.wait_for_timeout(300)
+    page.keyboard.up("Space")
+    shot = page.locator("canvas#game").screenshot(path=str(tmp_path / "page.png"))
+    page.wait_for_function("window.tsf.phase === 'ended'", timeout=FRAMES / 30 * 1000 + 20_000)
+    assert "Time is up" in page.locator("#title").inner_text()
+    summary, path = running.result(timeout=30)
+    assert summary.frame == FRAMES
+
+    recording = load(path)
+    assert recording.start.policies == {"bait": HUMAN, "shooter": "mirror"}
+    states = {s.frame: s for s in recording.states}
+    turned = [f for f, s in states.items() if s.applied[0] == 4 and f - 1 in states]
+    assert len(turned) >= 15, "about a second of held left arrow reached the sim"
+    turn = GameConfig().ship_turn
+    for f in turned:
+        before, after = states[f - 1].ships[0][4], states[f].ships[0][4]
+        assert (after - before) % 360 == pytest.approx(turn), "the bait turned left by a turn a frame"
+    bait_actions = [a for _, a in recording.actions if a.role == "bait"]
+    assert all(a.policy == "" and a.sender == "human/bait" for a in bait_actions)
+    assert any(a.action & 1 for a in bait_actions), "space fired"
+    assert any(e.kind == "missile" and e.role == "bait" for e in recording.events), "a missile left"
+
+    from PIL import Image
+
+    image = Image.open(io.BytesIO(shot)).convert("RGB")
+    colours = image.getcolors(maxcolors=1 << 20)
+    assert image.size[0] >= 700 and len(colours) > 20, "more than a blank canvas"
+    drawn = sum(n for n, c in colours if c != BACKGROUND)
+    assert 0.005 < drawn / (image.size[0] * image.size[1]) < 0.5
+    assert any(max(abs(a - b) for a, b in zip(c, BAIT_COLOUR, strict=True)) < 30 for _, c in colours)
+
+
+def test_a_wrong_seat_token_is_refused_in_the_page(browser, bus):
+    book = SeatBook({"bait": "right-token"})
+    with Gateway(bus.config(listen=True), seat_handler("refused", book), port=0) as gateway:
+        page = browser.new_page()
+        page.goto(seat_links(gateway.url, {"bait": "wrong-token"})["bait"])
+        page.wait_for_function("window.tsf.phase === 'refused'", timeout=10_000)
+        assert page.locator("#title").inner_text() == "Seat refused"
+        assert page.locator("#text").inner_text() == "wrong seat token for the bait seat"

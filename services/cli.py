@@ -297,6 +297,7 @@ def sim(
     shooter: str = typer.Option("", help="Shooter's policy key, for the record."),
     wait_players: float = typer.Option(10.0, help="Seconds to wait for both seats before starting."),
     wait_recorder: float = typer.Option(0.0, help="Seconds to wait for a recorder before starting."),
+    wait_adapter: float = typer.Option(0.0, help="Seconds to wait for an adapter before starting."),
     zmode: Mode = "peer",
     listen: Listen = None,
     connect: Connect = None,
@@ -311,7 +312,7 @@ def sim(
     bus = _bus(zmode, listen, connect, multicast, low_latency, user, password)
     summary = run_sim(
         bus, match, seed, GameConfig(frames=frames), mode, {"bait": bait, "shooter": shooter},
-        stop_on_signals(), wait_players, wait_recorder,
+        stop_on_signals(), wait_players, wait_recorder, wait_adapter=wait_adapter,
     )  # fmt: skip
     logging.getLogger("tsf.sim").info(
         "match %s over: %d kills in %d frames; timing %s", match, summary.kills, summary.frame, summary.timing
@@ -650,6 +651,29 @@ def calibrate_adapter(
     for role, thresholds in result["thresholds"].items():
         console.print(f"{role}: " + ", ".join(f"T={t}: {v:.2f}" for t, v in thresholds.items()))
     console.print(f"written to {write_calibration(result)}")
+
+
+@app.command("report")
+def report_command(
+    recordings: list[Path] = typer.Argument(..., help="Recordings (.tsflog); bad ones are named, left out."),
+    out: Path = typer.Option(Path("report"), help="Directory for report.html, figures/, data/ and parquet/."),
+    table: Path = typer.Option(Path("services/agent/library/table.json"), help="The self-play table."),
+    partner_role: str = typer.Option(
+        "", help="Only this seat is the partner in agent-agent matches (default: each seat in turn)."
+    ),
+    trial: str = typer.Option("", help="Match whose log-prob curves are drawn (default: the first)."),
+    reference_games: int = typer.Option(2, min=1, help="Games per library policy for the reference points."),
+) -> None:
+    """The study's figures and numbers from recordings: one self-contained HTML report."""
+    from services.report.report import build_report
+
+    if partner_role not in ("", "bait", "shooter"):
+        raise typer.BadParameter("bait or shooter", param_hint="--partner-role")
+    report = build_report(recordings, out, table, partner_role or None, trial or None, reference_games)
+    for problem in report.problems:
+        colour = "yellow" if problem.used else "red"
+        console.print(f"[{colour}]{problem.name}: {problem.reason}[/]")
+    console.print(f"report: {report.html}  ({len(report.figures)} figures, numbers in {out / 'data'})")
 
 
 if __name__ == "__main__":

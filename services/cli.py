@@ -368,6 +368,45 @@ def recorder(
 
 
 @app.command()
+def adapter(
+    match: Match,
+    role: str = typer.Option("shooter", help="The seat of the adaptive agent (its partner plays the other)."),
+    window: int = typer.Option(400, min=1, help="T: frames of partner play the similarity averages over."),
+    strategy: str = typer.Option("cem", help="cem, cem-dwell, cem-ood, bayes or bayes-dwell-ood."),
+    initial: str = typer.Option(
+        "best-average", help="Policy before the first estimate: best-average or random."
+    ),
+    warmup: int = typer.Option(0, min=0, help="Frames before the first estimate (0: min(T, 150))."),
+    dwell: int = typer.Option(0, min=0, help="-dwell strategies: frames a new choice must hold (0: T/10)."),
+    hazard: float = typer.Option(
+        0.0, min=0.0, max=0.99, help="bayes: per-frame switching probability (0: 1/T)."
+    ),
+    noise: float = typer.Option(
+        0.05, min=0.0, max=0.99, help="bayes: probability of a random partner action."
+    ),
+    seed: int = typer.Option(0, help="Draws the random initial policy."),
+    zmode: Mode = "peer",
+    listen: Listen = None,
+    connect: Connect = None,
+    multicast: Multicast = False,
+    low_latency: LowLatency = False,
+    user: User = "",
+    password: Password = "",
+) -> None:
+    """Run the adapter service: watch the partner, switch the agent of ROLE to the best response."""
+    from services.adapter.core import AdapterConfig
+    from services.adapter.service import run_adapter
+
+    try:
+        config = AdapterConfig(role, window, strategy, initial, warmup, dwell, hazard, noise, seed)
+    except ValueError as error:
+        raise typer.BadParameter(str(error)) from None
+    run_adapter(
+        _bus(zmode, listen, connect, multicast, low_latency, user, password), match, config, stop_on_signals()
+    )
+
+
+@app.command()
 def router(
     listen: Annotated[list[str] | None, typer.Option("--listen", help="Endpoint (repeatable).")] = None,
     credentials: Path | None = typer.Option(
@@ -394,24 +433,40 @@ def match_command(
     ),
     match: str = typer.Option("", help="Match id (default: from the clock)."),
     out: Path = typer.Option(Path("recordings"), help="Directory of the recordings."),
+    adaptive: str = typer.Option("", help="Make this seat (bait or shooter) the adaptive agent."),
+    window: int = typer.Option(400, min=1, help="--adaptive: the window T in frames."),
+    strategy: str = typer.Option(
+        "cem", help="--adaptive: cem, cem-dwell, cem-ood, bayes or bayes-dwell-ood."
+    ),
 ) -> None:
-    """Start a complete match on this machine: sim, two agents and the recorder as processes."""
+    """Start a complete match on this machine: sim, two agents and the recorder as processes (and
+    with --adaptive, the adapter)."""
     from services.launch import MatchPlan, new_match_id, run_match
     from services.recorder.recording import export_parquet, load
 
     plan = MatchPlan(
         match or new_match_id(), seed, round(duration * 30), "lockstep" if lockstep else "realtime",
-        bait, shooter, out,
+        bait, shooter, out, adaptive=adaptive, window=window, strategy=strategy,
     )  # fmt: skip
+    if adaptive and adaptive not in ("bait", "shooter"):
+        raise typer.BadParameter(f"--adaptive takes bait or shooter, not {adaptive!r}")
+    seats = plan.policies()
+    view = {"partner": "-"}
+
+    def adapted(status) -> None:  # noqa: ANN001 - an AdapterStatus
+        seats[status.role] = status.policy
+        view["partner"] = (status.partner or "?") + (" (out of library)" if status.out_of_library else "")
+
     with Live(console=console, transient=True) as live:
 
         def scoreboard(state) -> None:  # noqa: ANN001 - a State
+            estimate = f"  partner like {view['partner']}" if adaptive else ""
             live.update(
-                f"[bold]{plan.match}[/] frame {state.frame}/{state.frames}  "
-                f"kills [green]{state.kills}[/]  points {state.points}  bait {bait}  shooter {shooter}"
+                f"[bold]{plan.match}[/] frame {state.frame}/{state.frames}  kills [green]{state.kills}[/]  "
+                f"points {state.points}  bait {seats['bait']}  shooter {seats['shooter']}{estimate}"
             )
 
-        summary, path = run_match(plan, scoreboard)
+        summary, path = run_match(plan, scoreboard, adapted)
     export = export_parquet(load(path), path.with_suffix(".parquet"))
     console.print(
         f"[bold]{plan.match}[/]: {summary.kills} kills in {summary.frame} frames "

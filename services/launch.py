@@ -1,4 +1,5 @@
-"""Starting a whole match on one machine: sim, two agents and the recorder as separate processes.
+"""Starting a whole match on one machine: sim, two agents and the recorder as separate processes,
+and for an adaptive match the adapter that switches one agent's policy.
 
 The sim listens on a free loopback port; every other process connects to it in peer mode and
 listens on a port of its own, so zenoh's gossip links them all directly. No router, no multicast.
@@ -17,11 +18,13 @@ from pathlib import Path
 
 import zenoh
 
+from services.adapter.core import AdapterConfig, Payoff
 from services.recorder.recording import load
 from services.recorder.service import recording_path
+from services.table.table import DEFAULT_TABLE, Table
 from shared import keys
 from shared.bus import BusConfig, free_endpoint, session
-from shared.messages import MessageError, State, Summary, decode
+from shared.messages import AdapterStatus, MessageError, State, Summary, decode
 
 HUMAN = "human"  # a seat's policy key for a person: no agent is started, a gateway plays it
 
@@ -38,6 +41,25 @@ class MatchPlan:
     low_latency: bool = True
     peers: tuple[str, ...] = ()  # endpoints the sim also connects to (a human gateway's session)
     wait_players: float = 10.0  # seconds the sim waits for both seats (people take longer)
+    adaptive: str = ""  # the seat the adaptive agent plays ("" for none): its key is ignored
+    window: int = 400
+    strategy: str = "cem"
+    initial: str = "best-average"
+
+    @property
+    def adapter(self) -> AdapterConfig | None:
+        if not self.adaptive:
+            return None
+        return AdapterConfig(self.adaptive, self.window, self.strategy, self.initial, seed=self.seed)
+
+    def policies(self) -> dict[str, str]:
+        """Each seat's starting policy key; an adaptive seat starts with the adapter's initial policy."""
+        keys_ = {"bait": self.bait, "shooter": self.shooter}
+        if self.adapter is not None:
+            keys_[self.adaptive] = Payoff.from_table(Table.load(DEFAULT_TABLE), self.adaptive).initial(
+                self.adapter
+            )
+        return keys_
 
 
 def service_command(name: str, bus: BusConfig, *args: str) -> list[str]:
@@ -80,9 +102,12 @@ class Processes:
 
 
 def run_match(
-    plan: MatchPlan, on_state: Callable[[State], None] = lambda state: None
+    plan: MatchPlan,
+    on_state: Callable[[State], None] = lambda state: None,
+    on_adapter: Callable[[AdapterStatus], None] = lambda status: None,
 ) -> tuple[Summary, Path]:
-    """Run the match to its end; `on_state` sees up to 10 states a second (for a live scoreboard)."""
+    """Run the match to its end; `on_state` sees up to 10 states a second and `on_adapter` the
+    adapter's reports (for a live scoreboard)."""
     endpoint = free_endpoint()
     sim_bus = BusConfig(listen=(endpoint,), connect=plan.peers, low_latency=plan.low_latency)
     peer_bus = BusConfig(connect=(endpoint,), low_latency=plan.low_latency)
@@ -108,19 +133,34 @@ def run_match(
             return
         shown[0] = time.monotonic()
 
+    def on_adapter_sample(sample: zenoh.Sample) -> None:
+        try:
+            on_adapter(decode(sample.payload.to_bytes(), AdapterStatus))
+        except MessageError:
+            return
+
     match = ["--match", plan.match]
+    policies = plan.policies()
+    recorded = dict(policies)
+    if plan.adapter is not None:
+        recorded[plan.adaptive] = plan.adapter.name
     with Processes() as processes:
         processes.start(
             "sim",
             service_command(
                 "sim", sim_bus, *match, "--seed", str(plan.seed), "--frames", str(plan.frames),
-                "--sim-mode", plan.mode, "--bait", plan.bait, "--shooter", plan.shooter,
+                "--sim-mode", plan.mode, "--bait", recorded["bait"], "--shooter", recorded["shooter"],
                 "--wait-recorder", "10", "--wait-players", str(plan.wait_players),
+                "--wait-adapter", "10" if plan.adapter else "0",
             ),
         )  # fmt: skip
         recorder = service_command("recorder", peer_bus, *match, "--out", str(plan.directory))
         processes.start("recorder", recorder, nice=10)  # it drains a queue: latency is not its job
-        for role, policy in (("bait", plan.bait), ("shooter", plan.shooter)):
+        if plan.adapter is not None:
+            processes.start(
+                "adapter", service_command("adapter", peer_bus, *match, *adapter_args(plan.adapter))
+            )
+        for role, policy in policies.items():
             if policy == HUMAN:
                 continue
             processes.start(
@@ -133,6 +173,7 @@ def run_match(
             subscribers = [
                 z.declare_subscriber(keys.state(plan.match), on_state_sample),
                 z.declare_subscriber(keys.summary(plan.match), on_summary),
+                z.declare_subscriber(keys.adapter(plan.match), on_adapter_sample),
             ]
             while not done.wait(0.2):
                 if processes.children["sim"].poll() is not None:
@@ -148,6 +189,14 @@ def run_match(
         code = processes.children["sim"].returncode
         raise RuntimeError(f"match {plan.match} ended without a summary (sim exit code {code})")
     return summary[0], path
+
+
+def adapter_args(config: AdapterConfig) -> list[str]:
+    """`tsf adapter` options for a config."""
+    return [
+        "--role", config.role, "--window", str(config.window), "--strategy", config.strategy,
+        "--initial", config.initial, "--seed", str(config.seed),
+    ]  # fmt: skip
 
 
 def new_match_id() -> str:

@@ -175,6 +175,51 @@ def ood_threshold(partner_role: str, window: int, path: Path = CALIBRATION) -> f
     return float(thresholds[nearest])
 
 
+class Pairing:
+    """Pairs the partner's action for frame f with the state of frame f, whichever arrives first.
+
+    On the bus the two come from different senders, so either may be first. Each frame is paired
+    once (a repeated action is ignored), and frames more than `keep` behind the newest are
+    forgotten, so a lost message costs one frame and no memory."""
+
+    def __init__(self, keep: int = 90) -> None:
+        self.keep = keep
+        self.states: dict[int, list[float]] = {}
+        self.actions: dict[int, int] = {}
+        self.paired: set[int] = set()
+        self.newest = -1
+
+    def state(self, frame: int, values: list[float]) -> tuple[list[float], int] | None:
+        return self._offer(frame, values, None)
+
+    def action(self, frame: int, action: int) -> tuple[list[float], int] | None:
+        return self._offer(frame, None, action)
+
+    def _offer(
+        self, frame: int, values: list[float] | None, action: int | None
+    ) -> tuple[list[float], int] | None:
+        if frame in self.paired or frame <= self.newest - self.keep:
+            return None
+        if values is not None:
+            self.states.setdefault(frame, values)
+        if action is not None:
+            self.actions.setdefault(frame, action)
+        if frame > self.newest:
+            self.newest = frame
+            self._forget()
+        if frame in self.states and frame in self.actions:
+            self.paired.add(frame)
+            return self.states.pop(frame), self.actions.pop(frame)
+        return None
+
+    def _forget(self) -> None:
+        oldest = self.newest - self.keep
+        for kept in (self.states, self.actions):
+            for frame in [f for f in kept if f <= oldest]:
+                del kept[frame]
+        self.paired = {f for f in self.paired if f > oldest}
+
+
 class Adapter:
     """Turns the partner's per-frame scores into an estimated type and our policy (a library key)."""
 

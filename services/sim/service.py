@@ -13,6 +13,7 @@ import logging
 import statistics
 import threading
 import time
+from collections import Counter
 
 import zenoh
 
@@ -38,11 +39,13 @@ def run_sim(
     wait_players: float = 10.0,
     wait_recorder: float = 0.0,
     step_timeout: float = 1.0,
+    wait_adapter: float = 0.0,
 ) -> Summary:
     """Play one match on the bus and return its summary (also published on the summary key).
 
     Waits up to `wait_players` seconds for both seats and up to `wait_recorder` for a recorder
-    before the first frame; a seat still empty then plays no-op until its player arrives."""
+    before the first frame (and `wait_adapter` for an adapter, in adaptive matches); a seat still
+    empty then plays no-op until its player arrives."""
     if mode not in MODES:
         raise ValueError(f"unknown sim mode {mode!r}; expected one of {MODES}")
     stop = stop or threading.Event()
@@ -50,7 +53,7 @@ def run_sim(
     seats, drops = Seats(), Drops("sim")
     changed = threading.Condition()
     answered_at: dict[tuple[str, int], int] = {}  # (role, frame) -> arrival time, for round trips
-    recorders = [0]
+    observers: Counter[str] = Counter()  # live recorder and adapter tokens
 
     def on_action(sample: zenoh.Sample) -> None:
         arrived = time.perf_counter_ns()
@@ -71,8 +74,8 @@ def run_sim(
     def on_alive(sample: zenoh.Sample) -> None:
         chunks = str(sample.key_expr).split("/")
         with changed:
-            if chunks[-1] == "recorder":
-                recorders[0] += 1 if sample.kind == zenoh.SampleKind.PUT else -1
+            if chunks[-1] in ("recorder", "adapter"):
+                observers[chunks[-1]] += 1 if sample.kind == zenoh.SampleKind.PUT else -1
             elif chunks[-1] in ROLES:
                 (seats.arrive if sample.kind == zenoh.SampleKind.PUT else seats.leave)(chunks[-1])
             changed.notify_all()
@@ -95,10 +98,12 @@ def run_sim(
             z.declare_subscriber(keys.actions(match), on_action),
             z.liveliness().declare_subscriber(keys.seats_alive(match), on_alive, history=True),
             z.liveliness().declare_subscriber(keys.alive(match, "recorder"), on_alive, history=True),
+            z.liveliness().declare_subscriber(keys.alive(match, "adapter"), on_alive, history=True),
         ]
         try:
             wait(lambda: all(seats.present(r) for r in ROLES), wait_players)
-            wait(lambda: recorders[0] > 0, wait_recorder)
+            wait(lambda: observers["recorder"] > 0, wait_recorder)
+            wait(lambda: observers["adapter"] > 0, wait_adapter)
             # At the states' priority: zenoh orders messages only within one priority, so a start
             # put at the default priority could arrive after state 0.
             named = {role: (policies or {}).get(role, "") for role in ROLES}  # the contract wants both

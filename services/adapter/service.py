@@ -1,0 +1,123 @@
+"""The adapter service: a thin shell that feeds the adapter core from a live match and, when the
+core's choice differs from what our agent plays, tells the agent to switch.
+
+It reads what the agent plays from the agent's own actions, so an adapter that (re)starts mid-match
+never switches the agent back to the initial policy: it rebuilds its window from live frames and
+switches only once it has an estimate. If it dies, the agent keeps its current policy.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from pathlib import Path
+
+import zenoh
+
+from services.adapter.core import Adapter, AdapterConfig, Pairing, Payoff, Scorer, ood_threshold
+from services.agent import library
+from services.table.table import DEFAULT_TABLE, Table
+from shared import keys
+from shared.bus import BusConfig, Drops, session
+from shared.messages import Action, AdapterStatus, MessageError, PolicySwitch, State, Summary, decode
+
+log = logging.getLogger("tsf.adapter")
+SENDER = "adapter"
+RESEND_FRAMES = 30  # ask again if the agent still plays another policy this many frames later
+
+
+def build(config: AdapterConfig, table: Path = DEFAULT_TABLE) -> tuple[Adapter, Scorer]:
+    """The core for one adaptive seat: the table's view from that seat and the partner's library."""
+    payoff = Payoff.from_table(Table.load(table), config.role)
+    threshold = ood_threshold(config.partner_role, config.window) if "ood" in config.strategy else None
+    return Adapter(config, payoff, threshold), Scorer([library.load(k) for k in payoff.partners])
+
+
+def run_adapter(
+    bus: BusConfig,
+    match: str,
+    config: AdapterConfig,
+    stop: threading.Event | None = None,
+    status_hz: float = 5.0,
+    table: Path = DEFAULT_TABLE,
+) -> Drops:
+    """Adapt the agent of `config.role` until the match's summary arrives or `stop` is set."""
+    stop = stop or threading.Event()
+    adapter, scorer = build(config, table)
+    partner_role = config.partner_role
+    pairing, drops, lock = Pairing(), Drops(SENDER), threading.Lock()
+    agent = {"policy": "", "asked": "", "asked_at": -RESEND_FRAMES}  # what the agent plays; last request
+    last_status = [0.0]
+
+    with session(bus) as z:
+        switch = z.declare_publisher(keys.policy(match, config.role))
+        status = z.declare_publisher(keys.adapter(match), congestion_control=zenoh.CongestionControl.DROP)
+
+        def feed(pair: tuple[list[float], int] | None, frame: int) -> None:
+            """Score one paired frame, and switch the agent or report when due (under `lock`)."""
+            if pair is not None:
+                adapter.update(scorer(*pair))
+            due = adapter.partner and adapter.policy != agent["policy"]
+            if due and (adapter.policy != agent["asked"] or frame - agent["asked_at"] >= RESEND_FRAMES):
+                reason = f"partner plays like {adapter.partner}" + (
+                    " (out of library: best average)" if adapter.out_of_library else ""
+                )
+                switch.put(PolicySwitch(match, frame, SENDER, config.role, adapter.policy, reason).encode())
+                agent.update(asked=adapter.policy, asked_at=frame)
+                log.info("frame %d: %s; switching the %s to %s", frame, reason, config.role, adapter.policy)
+            elif pair is None or time.monotonic() - last_status[0] < 1.0 / status_hz:
+                return
+            status.put(AdapterStatus(match, frame, SENDER, **adapter.status()).encode())
+            last_status[0] = time.monotonic()
+
+        def on_state(sample: zenoh.Sample) -> None:
+            try:
+                state = decode(sample.payload.to_bytes(), State)
+                if state.match != match:
+                    raise MessageError("mismatch", f"state of {state.match} on {sample.key_expr}")
+            except MessageError as error:
+                drops.drop(str(sample.key_expr), error)
+                return
+            with lock:
+                feed(pairing.state(state.frame, state.obs[partner_role]), state.frame)
+
+        def on_action(sample: zenoh.Sample) -> None:
+            try:
+                action = decode(sample.payload.to_bytes(), Action)
+                if action.match != match or action.role != keys.role_of(sample.key_expr):
+                    raise MessageError(
+                        "mismatch", f"{action.role} action of {action.match} on {sample.key_expr}"
+                    )
+            except (MessageError, ValueError) as error:
+                drops.drop(str(sample.key_expr), error)
+                return
+            with lock:
+                if action.role == config.role:
+                    agent["policy"] = action.policy
+                else:
+                    feed(pairing.action(action.frame, action.action), action.frame)
+
+        def on_summary(sample: zenoh.Sample) -> None:
+            try:
+                decode(sample.payload.to_bytes(), Summary)
+            except MessageError as error:
+                drops.drop(str(sample.key_expr), error)
+                return
+            stop.set()
+
+        subscribers = [
+            z.declare_subscriber(keys.state(match), on_state),
+            z.declare_subscriber(keys.actions(match), on_action),
+            z.declare_subscriber(keys.summary(match), on_summary),
+        ]
+        token = z.liveliness().declare_token(keys.alive(match, "adapter"))
+        try:
+            stop.wait()
+        finally:
+            token.undeclare()
+            for subscriber in subscribers:
+                subscriber.undeclare()
+    if drops.total:
+        log.info("adapter dropped %d bad inputs: %s", drops.total, dict(drops.counts))
+    return drops

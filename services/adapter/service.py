@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import logging
 import threading
-import time
 from pathlib import Path
 
 import zenoh
@@ -48,16 +47,22 @@ def run_adapter(
     partner_role = config.partner_role
     pairing, drops, lock = Pairing(), Drops(SENDER), threading.Lock()
     agent = {"policy": "", "asked": "", "asked_at": -RESEND_FRAMES}  # what the agent plays; last request
-    last_status = [0.0]
+    reported = [-1]  # the adapter's frame count at the last status put
+    latest = [0]  # the newest frame scored
 
     with session(bus) as z:
         switch = z.declare_publisher(keys.policy(match, config.role))
         status = z.declare_publisher(keys.adapter(match), congestion_control=zenoh.CongestionControl.DROP)
 
+        def report(frame: int) -> None:
+            status.put(AdapterStatus(match, frame, SENDER, **adapter.status()).encode())
+            reported[0] = adapter.frames
+
         def feed(pair: tuple[list[float], int] | None, frame: int) -> None:
-            """Score one paired frame, and switch the agent or report when due (under `lock`)."""
+            """Score one paired frame, and switch the agent when due (under `lock`)."""
             if pair is not None:
                 adapter.update(scorer(*pair))
+                latest[0] = frame
             due = adapter.partner and adapter.policy != agent["policy"]
             if due and (adapter.policy != agent["asked"] or frame - agent["asked_at"] >= RESEND_FRAMES):
                 reason = f"partner plays like {adapter.partner}" + (
@@ -66,10 +71,7 @@ def run_adapter(
                 switch.put(PolicySwitch(match, frame, SENDER, config.role, adapter.policy, reason).encode())
                 agent.update(asked=adapter.policy, asked_at=frame)
                 log.info("frame %d: %s; switching the %s to %s", frame, reason, config.role, adapter.policy)
-            elif pair is None or time.monotonic() - last_status[0] < 1.0 / status_hz:
-                return
-            status.put(AdapterStatus(match, frame, SENDER, **adapter.status()).encode())
-            last_status[0] = time.monotonic()
+                report(frame)
 
         def on_state(sample: zenoh.Sample) -> None:
             try:
@@ -113,7 +115,10 @@ def run_adapter(
         ]
         token = z.liveliness().declare_token(keys.alive(match, "adapter"))
         try:
-            stop.wait()
+            while not stop.wait(1.0 / status_hz):  # a modest report rate, whatever the frame rate
+                with lock:
+                    if adapter.frames != reported[0]:
+                        report(latest[0])
         finally:
             token.undeclare()
             for subscriber in subscribers:

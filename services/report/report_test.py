@@ -20,6 +20,7 @@ from services.adapter.cem import log_probs
 from services.agent import library
 from services.recorder.recording import Recording, load
 from services.recorder.recording_test import Script, record_match
+from services.report.load import load_matches
 from services.report.report import Report, build_report
 from services.sim.config import GameConfig
 from services.table.table import Table
@@ -100,6 +101,19 @@ def test_bad_recordings_are_named_and_the_rest_builds(built: tuple[Report, dict[
     page = report.html.read_text()
     assert "truncated (left out)" in page and "garbage (left out)" in page
     assert set(csv(out, "partners")["match"]) == set(paths)
+
+
+def test_a_torn_tail_after_the_summary_is_noted_and_used(
+    built: tuple[Report, dict[str, Path], Path], tmp_path: Path
+) -> None:
+    _, paths, _ = built
+    torn = tmp_path / "torn.tsflog"
+    torn.write_bytes(paths["static-B5-S5"].read_bytes() + b"\x40\x00\x00\x00\x00\x00\x00\x00half a record")
+    matches, problems = load_matches([torn], tmp_path / "pq")
+    assert [m.name for m in matches] == ["torn"] and matches[0].kills_per_minute == pytest.approx(
+        load(paths["static-B5-S5"]).summary.kills_per_minute
+    )
+    assert [(p.name, p.used) for p in problems] == [("torn", True)] and "torn" in problems[0].reason
 
 
 def test_seats_follow_the_partner_rule(built: tuple[Report, dict[str, Path], Path]) -> None:

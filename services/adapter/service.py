@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from pathlib import Path
 
 import zenoh
@@ -40,8 +41,10 @@ def run_adapter(
     stop: threading.Event | None = None,
     status_hz: float = 5.0,
     table: Path = DEFAULT_TABLE,
+    costs: list[float] | None = None,
 ) -> Drops:
-    """Adapt the agent of `config.role` until the match's summary arrives or `stop` is set."""
+    """Adapt the agent of `config.role` until the match's summary arrives or `stop` is set.
+    `costs`, if given, receives the seconds each scored frame took (scoring and update)."""
     stop = stop or threading.Event()
     adapter, scorer = build(config, table)
     partner_role = config.partner_role
@@ -61,8 +64,11 @@ def run_adapter(
         def feed(pair: tuple[list[float], int] | None, frame: int) -> None:
             """Score one paired frame, and switch the agent when due (under `lock`)."""
             if pair is not None:
+                began = time.perf_counter()
                 adapter.update(scorer(*pair))
                 latest[0] = frame
+                if costs is not None:
+                    costs.append(time.perf_counter() - began)
             due = adapter.partner and adapter.policy != agent["policy"]
             if due and (adapter.policy != agent["asked"] or frame - agent["asked_at"] >= RESEND_FRAMES):
                 reason = f"partner plays like {adapter.partner}" + (

@@ -1,0 +1,94 @@
+"""The adapter's per-frame cost with the full library at T = 800 (goal: <= 1 ms per frame).
+
+(a) In-process: one frame's scoring (every library policy of the partner's role) and update, for
+each adaptive seat and strategy, over the frames of a recorded game: mean, p50 and p99.
+(b) As a service under a real-time match: the adapter service (in this process) adapts the
+shooter while a sim and two agents run as processes at 30 Hz; the same per-frame cost as
+measured inside the service, and how many frames it scored.
+
+    .venv/bin/python bench/adapter.py [--frames 900]
+"""
+
+from __future__ import annotations
+
+import argparse
+import threading
+import time
+
+import numpy as np
+
+from services.adapter.core import STRATEGIES, AdapterConfig, other
+from services.adapter.evaluate import play_partner
+from services.adapter.partners import make_partner
+from services.adapter.service import build, run_adapter
+from services.launch import Processes, service_command
+from shared.bus import BusConfig, free_endpoint
+
+WINDOW = 800
+
+
+def in_process(role: str, strategy: str, frames: int) -> np.ndarray:
+    """Seconds per frame of scoring + update for a partner's recorded game."""
+    partner = "B5" if role == "shooter" else "S5"
+    stream = play_partner(
+        make_partner(partner, other(role)), "S5" if role == "shooter" else "B5", 0, role, record=True
+    )
+    adapter, scorer = build(AdapterConfig(role, WINDOW, strategy))
+    costs = []
+    for values, action in list(zip(stream.values, stream.actions, strict=True))[:frames]:
+        began = time.perf_counter()
+        adapter.update(scorer(values, action))
+        costs.append(time.perf_counter() - began)
+    return np.array(costs)
+
+
+def as_service(frames: int) -> tuple[np.ndarray, float]:
+    """Per-frame costs inside the adapter service during a real-time match, and the match's seconds."""
+    match, endpoint = "bench-adapter", free_endpoint()
+    costs: list[float] = []
+    stop = threading.Event()
+    config = AdapterConfig("shooter", WINDOW, "cem")
+    thread = threading.Thread(
+        target=run_adapter,
+        args=(BusConfig(connect=(endpoint,)), match, config, stop),
+        kwargs={"costs": costs},
+    )
+    began = time.monotonic()
+    with Processes() as processes:
+        sim = service_command("sim", BusConfig(listen=(endpoint,)), "--match", match, "--frames", str(frames),
+                              "--wait-adapter", "20")  # fmt: skip
+        processes.start("sim", sim)
+        thread.start()
+        for role, policy in (("bait", "B5"), ("shooter", "S5")):
+            agent = service_command("agent", BusConfig(connect=(endpoint,)), "--match", match, "--role", role,
+                                    "--policy", policy)  # fmt: skip
+            processes.start(role, agent)
+        processes.wait("sim", frames / 30 + 60)
+    stop.set()
+    thread.join()
+    return np.array(costs), time.monotonic() - began
+
+
+def line(label: str, costs: np.ndarray) -> str:
+    ms = costs * 1e3
+    return (
+        f"{label:38s} mean {ms.mean():.3f} ms  p50 {np.percentile(ms, 50):.3f} ms  "
+        f"p99 {np.percentile(ms, 99):.3f} ms  ({len(ms)} frames)"
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=900, help="frames of the real-time match")
+    args = parser.parse_args()
+    print(f"adapter per-frame cost, full library, T = {WINDOW} (goal <= 1 ms)")
+    for role in ("shooter", "bait"):
+        for strategy in STRATEGIES:
+            print(line(f"in-process, {role} seat, {strategy}", in_process(role, strategy, 1800)))
+    costs, seconds = as_service(args.frames)
+    print(line("service, real-time match, shooter, cem", costs))
+    print(f"  the match: {args.frames} frames at 30 Hz in {seconds:.1f} s (with start-up)")
+
+
+if __name__ == "__main__":
+    main()

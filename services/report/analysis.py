@@ -1,9 +1,10 @@
 """The study's analyses over loaded recordings: pure functions from pandas frames to pandas frames.
 
 Who is the partner in a recording (`seats`):
-- an adaptive match (it has adapter statuses): the partner is the seat the adapter watches, the
-  other one from its `role`;
-- a human match (the start names no policy, "", for a seat): the person's seat;
+- an adaptive match: the partner is the seat the adapter watches, the other one from its statuses'
+  `role` (or, with no statuses, from the seat the start record names `adaptive-...`);
+- a human match (the start names no policy for a seat: "", or the launcher's "human"): the
+  person's seat;
 - an agent-agent match: each seat is the partner of the other, so the match gives two rows (or
   one, where the report is told the partner's role).
 
@@ -37,6 +38,8 @@ from services.sim.observation import as_observation
 from services.table.table import Table
 
 ROUND_ENDS = ("kill", "reset")  # the events that end a round (docs/rules.md)
+ADAPTIVE = "adaptive-"  # how an adaptive agent's variant is named
+PERSON = ("", "human")  # what a start record names a person's seat
 SMOOTH = 30  # frames in the log-probability curves' moving mean (one second)
 
 
@@ -57,33 +60,42 @@ class Seat:
     kills_per_minute: float
 
 
+def adaptive_seat(match: Match) -> str | None:
+    """The adaptive agent's seat: the adapter statuses' `role`, else the seat the start record names
+    by the adapter's name (the launcher records an adaptive seat as adaptive-T<window>-<strategy>)."""
+    adapter = match.tables["adapter"]
+    if not adapter.empty:
+        return str(adapter["role"].iloc[0])
+    return next((r for r in ROLES if match.policies[r].startswith(ADAPTIVE)), None)
+
+
+def person_seats(match: Match) -> list[str]:
+    """Seats a person played: the start record names no policy for them ("", or the launcher's "human")."""
+    return [r for r in ROLES if match.policies[r] in PERSON]
+
+
 def seats(match: Match, partner_role: str | None = None) -> list[Seat]:
     """The partner-agent pairings of a match (the rule is in the module docstring)."""
-    policies, adapter = match.policies, match.tables["adapter"]
-    if not adapter.empty:
-        roles = [other(adapter["role"].iloc[0])]
-    elif any(policies[r] == "" for r in ROLES):
-        roles = [r for r in ROLES if policies[r] == ""]
-    else:
-        roles = list(ROLES)
+    policies, adapter, adaptive = match.policies, match.tables["adapter"], adaptive_seat(match)
+    roles = [other(adaptive)] if adaptive else person_seats(match) or list(ROLES)
     out = []
     for role in roles:
         if partner_role not in (None, role):
             continue
         agent_role = other(role)
-        adaptive = not adapter.empty and adapter["role"].iloc[0] == agent_role
-        if adaptive:
-            variant = f"adaptive-T{adapter['window'].iloc[0]}-{adapter['strategy'].iloc[0]}"
+        if agent_role == adaptive and not adapter.empty:
+            variant = f"{ADAPTIVE}T{adapter['window'].iloc[0]}-{adapter['strategy'].iloc[0]}"
         else:
-            variant = policies[agent_role] or "person"
+            variant = "person" if policies[agent_role] in PERSON else policies[agent_role]
+        partner = "person" if policies[role] in PERSON else policies[role]
         out.append(
             Seat(
                 match.name,
                 role,
-                match.meta.get("participant") or policies[role] or "person",
+                match.meta.get("participant") or partner,
                 most_played(match, agent_role),
                 match.meta.get("variant") or variant,
-                adaptive,
+                agent_role == adaptive,
                 match.kills_per_minute,
             )
         )

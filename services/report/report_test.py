@@ -4,6 +4,7 @@ directly from the recordings (services/recorder/recording.load), not from the re
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import shutil
@@ -20,7 +21,8 @@ from services.adapter.cem import log_probs
 from services.agent import library
 from services.recorder.recording import Recording, load
 from services.recorder.recording_test import Script, record_match
-from services.report.load import load_matches
+from services.report.analysis import seats
+from services.report.load import Match, load_matches
 from services.report.report import Report, build_report
 from services.sim.config import GameConfig
 from services.table.table import Table
@@ -129,6 +131,29 @@ def test_seats_follow_the_partner_rule(built: tuple[Report, dict[str, Path], Pat
     assert ("adaptive-B9", "shooter") not in seats
     person = seats[("person-1", "bait")]
     assert (person.partner, person.variant) == ("P01", "S5") and ("person-1", "shooter") not in seats
+
+
+def test_seats_from_the_start_record_alone(
+    tmp_path: Path, built: tuple[Report, dict[str, Path], Path]
+) -> None:
+    """A person's seat named "human" (the launcher's key), and an adaptive seat with no statuses."""
+    _, paths, _ = built
+    [match], _ = load_matches([paths["static-B5-S5"]], tmp_path)
+
+    def announcing(policies: dict[str, str]) -> Match:
+        info = match.tables["match"].assign(policies=json.dumps(policies))
+        return dataclasses.replace(match, tables={**match.tables, "match": info})
+
+    [human] = seats(announcing({"bait": "human", "shooter": "S5"}))
+    assert (human.partner_role, human.partner, human.variant, human.adaptive) == (
+        "bait",
+        "person",
+        "S5",
+        False,
+    )
+    [adaptive] = seats(announcing({"bait": "B5", "shooter": "adaptive-T400-cem"}))
+    assert (adaptive.partner_role, adaptive.variant, adaptive.adaptive) == ("bait", "adaptive-T400-cem", True)
+    assert adaptive.agent == "S5"  # the key behind its actions
 
 
 def test_similarity_vectors_and_performance(built: tuple[Report, dict[str, Path], Path]) -> None:

@@ -147,7 +147,7 @@ def _split_arguments(text: str) -> tuple[str, str]:
 def _external(path: str, role: str) -> Partner:
     module, _, attr = path.partition(":")
     found = getattr(importlib.import_module(module), attr)
-    partner = found if isinstance(found, Partner) else found()
+    partner = found() if isinstance(found, type) or not isinstance(found, Partner) else found
     if not isinstance(partner, Partner):
         raise TypeError(f"{path} is not a partner (key, role, frame, reset, act)")
     if partner.role != role:

@@ -1,0 +1,64 @@
+"""The evaluation core: adaptive games, window arithmetic, following lags and the statistics."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import stats
+
+from services.adapter.core import AdapterConfig
+from services.adapter.evaluate import agent_config, compare, follow_lag, play_partner, variants, windowed
+from services.adapter.partners import make_partner
+from services.table.table import DEFAULT_TABLE, Table
+
+
+def test_windowed_means_match_brute_force() -> None:
+    scores = np.random.default_rng(0).normal(size=(50, 3))
+    means = windowed(scores, 7)
+    assert means.shape == (44, 3)
+    for i in (0, 10, 43):
+        np.testing.assert_allclose(means[i], scores[i : i + 7].mean(axis=0))
+
+
+def test_follow_lag_needs_the_estimate_to_hold() -> None:
+    estimates = np.array([0] * 10 + [1, 0] + [1] * 40)
+    assert follow_lag(estimates, 1, 10, hold=30) == 2
+    assert follow_lag(np.array([0] * 50), 1, 10) is None
+    assert follow_lag(np.array([0] * 45 + [1] * 5), 1, 10) == 35  # held to the end of the game
+
+
+def test_variant_names_round_trip() -> None:
+    names = variants([150, 400], ["cem", "bayes"])
+    assert names == ["adaptive-T150-cem", "adaptive-T400-cem", "adaptive-T400-bayes"]
+    assert agent_config("adaptive-T400-bayes", "bait") == AdapterConfig("bait", 400, "bayes")
+    assert agent_config("S5", "shooter") is None
+
+
+def test_adaptive_game_switches_to_the_best_response_and_is_deterministic() -> None:
+    config = AdapterConfig("shooter", 150)
+    first = play_partner(make_partner("B3", "bait"), config, 4, "shooter")
+    again = play_partner(make_partner("B3", "bait"), config, 4, "shooter")
+    assert first == again
+    assert first.timeline[0][1:] == ("B3", Table.load(DEFAULT_TABLE).best_shooter("B3"))
+    assert first.timeline[0][0] == 150  # decided on the warm-up's last frame, played from the next
+
+
+def test_compare_pairs_by_partner_and_seed() -> None:
+    rng = np.random.default_rng(1)
+    rows, truth = [], {}
+    for partner in ("P1", "P2", "P3"):
+        for seed in range(6):
+            base = rng.normal(5, 1)
+            for agent, shift in (("S1", 0.0), ("S2", -1.0), ("adaptive-T150-cem", 0.5 + rng.normal(0, 0.3))):
+                rows.append(
+                    {"partner": partner, "agent": agent, "seed": seed, "kills_per_minute": base + shift}
+                )
+                truth.setdefault(agent, []).append(base + shift)
+    result = compare(rows)
+    assert result["best_static"] == "S1" and result["units"] == 18
+    test = result["tests"]["adaptive-T150-cem"]
+    expected = stats.ttest_rel(truth["adaptive-T150-cem"], truth["S1"], alternative="greater")
+    assert np.isclose(test["p_t"], expected.pvalue) and test["p_t"] < 1e-6
+    diff = np.array(truth["adaptive-T150-cem"]) - np.array(truth["S1"])
+    assert np.isclose(test["d_z"], diff.mean() / diff.std(ddof=1))
+    assert test["partners_better"] == 3
+    assert np.isclose(result["agents"]["S2"]["mean"], np.mean(truth["S2"]))

@@ -731,5 +731,32 @@ def report_command(
     console.print(f"report: {report.html}  ({len(report.figures)} figures, numbers in {out / 'data'})")
 
 
+@app.command()
+def study(
+    config: Path = typer.Argument(..., help="The study's TOML file (see services/study/configs/)."),
+    out: Path = typer.Option(Path("studies"), help="Studies go to OUT/<name>: progress and recordings."),
+    host: Host = "127.0.0.1",
+    port: Port = 8000,
+) -> None:
+    """Serve a study: participants open the link, consent, get a role and play every agent variant."""
+    from services.study.core import StudyConfig
+    from services.study.runner import run_study
+
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    protocol = StudyConfig.load(config)
+    directory = out / protocol.name
+
+    def show(gateway) -> None:  # noqa: ANN001 - a Gateway
+        console.print(
+            f"[bold]{protocol.name}[/]: {len(protocol.variants)} agents x {protocol.trials} trials of "
+            f"{protocol.trial_seconds:g} s; progress and recordings in {directory}"
+        )
+        console.print(f"participants open [bold]{gateway.url}[/] (Ctrl-C ends the study server)")
+
+    done = run_study(protocol, directory, host, port, stop_on_signals(), show)
+    finished = sum(done.next_trial(p) is None for p in done.participants.values())
+    console.print(f"{len(done.participants)} participants, {finished} finished")
+
+
 if __name__ == "__main__":
     app()

@@ -47,6 +47,8 @@ class Outbox:
         self.frame: str | None = None
         self.control: list[str] = []
         self.wake = asyncio.Event()
+        self.flushed = asyncio.Event()  # set while everything offered has been sent
+        self.flushed.set()
 
     def offer(self, text: str, control: bool = False) -> None:
         """From any thread."""
@@ -57,6 +59,7 @@ class Outbox:
             self.control.append(text)
         else:
             self.frame = text
+        self.flushed.clear()
         self.wake.set()
 
     async def pump(self, ws: ServerConnection) -> None:
@@ -68,6 +71,8 @@ class Outbox:
             control, self.control = self.control, []
             for text in ([frame] if frame else []) + control:
                 await ws.send(text)
+            if not self.wake.is_set():
+                self.flushed.set()
 
 
 class Bridge:

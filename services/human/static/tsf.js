@@ -114,9 +114,15 @@ const handlers = {
   trial(m) {
     tsf.role = m.role;
     tsf.phase = "instructions";
+    const last = m.last === null || m.last === undefined ? "" :
+      `Last game: your team destroyed ${m.last} fortress${m.last === 1 ? "" : "es"}.\n\n`;
     const intro = m.trial === 1 ? instructions(m.role, m.instructions) + "\n\n" : "";
-    show(`Session ${m.session} of ${m.sessions}: trial ${m.trial} of ${m.trials}`,
-      `${intro}Your partner in this session: ${m.agent}.`, "Start", ready);
+    show(`Session ${m.session} of ${m.sessions}: game ${m.trial} of ${m.trials}`,
+      `${last}${intro}Your partner in this session: ${m.agent}.`, "Start", ready);
+  },
+  problem(m) {
+    tsf.phase = "done";
+    show("Something went wrong", m.text);
   },
   done(m) {
     tsf.phase = "done";

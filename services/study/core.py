@@ -1,0 +1,241 @@
+"""The study's pure core: its config, who plays which role, in which order the agents come, what
+is done and what comes next. No web server and no bus (services/study/runner.py is the shell).
+
+The protocol is the original study's: a participant gets a role at random, balanced over
+participants (permuted blocks of two), and plays one session of `trials` one-minute trials with
+each agent variant, the variants in a random order of their own; the agents are shown only as
+"Agent 1".."Agent N", numbered by session. A participant who drops out resumes at the trial that
+was cut short, which is played again as a new attempt (the cut one stays recorded, marked dropped).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import random
+import re
+import secrets
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from services.sim.config import ROLES
+
+NAME = re.compile(r"[A-Za-z0-9_]{1,24}")
+DEFAULT_CONSENT = (
+    "This study is about teamwork between people and computer agents in a video game. You will "
+    "play several one-minute games with different computer teammates. Your key presses and the "
+    "games are recorded under a participant number, not your name. You may stop at any time."
+)
+DEFAULT_END = "Thank you for taking part. You may close this window now."
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One agent the participants meet. `bait` is the agent's policy when the participant plays the
+    shooter, `shooter` when the participant plays the bait; an adaptive variant starts from the
+    adapter's initial policy and switches with the given window and strategy."""
+
+    name: str
+    bait: str = ""
+    shooter: str = ""
+    adaptive: bool = False
+    window: int = 400
+    strategy: str = "cem"
+
+    def plan(self, agent_role: str) -> dict:
+        """The MatchPlan fields that put this variant in `agent_role`'s seat."""
+        if self.adaptive:
+            return {"adaptive": agent_role, "window": self.window, "strategy": self.strategy}
+        return {agent_role: getattr(self, agent_role)}
+
+
+@dataclass(frozen=True)
+class StudyConfig:
+    """A study's protocol: its variants and how many trials of how long; shown texts."""
+
+    name: str
+    variants: tuple[Variant, ...]
+    trials: int = 3
+    trial_seconds: float = 60.0
+    seed: int = 0
+    roles: tuple[str, ...] = ROLES  # the roles participants are given
+    consent: str = DEFAULT_CONSENT
+    end: str = DEFAULT_END
+    instructions: dict[str, str] = field(default_factory=dict)  # role -> text; else the page's own
+
+    def __post_init__(self) -> None:
+        if not NAME.fullmatch(self.name):
+            raise ValueError(f"study name {self.name!r}: use 1-24 letters, digits or '_'")
+        if not self.variants:
+            raise ValueError("a study needs at least one variant")
+        if len({v.name for v in self.variants}) != len(self.variants):
+            raise ValueError("variant names must differ")
+        if self.trials < 1 or self.trial_seconds <= 0:
+            raise ValueError("need at least one trial of positive length")
+        if not self.roles or not set(self.roles) <= set(ROLES):
+            raise ValueError(f"roles must be among {ROLES}")
+        for variant in self.variants:
+            for role in self.roles:
+                agent = partner_role(role)
+                if not variant.adaptive and not getattr(variant, agent):
+                    raise ValueError(f"variant {variant.name} has no {agent} for a {role} participant")
+
+    @property
+    def frames(self) -> int:
+        return round(self.trial_seconds * 30)
+
+    @classmethod
+    def load(cls, path: str | Path) -> StudyConfig:
+        """Read a study's TOML file (services/study/configs/ has the original two experiments)."""
+        data = tomllib.loads(Path(path).read_text())
+        variants = tuple(Variant(**v) for v in data.pop("variants", []))
+        if "roles" in data:
+            data["roles"] = tuple(data["roles"])
+        return cls(variants=variants, **data)
+
+    def hash(self) -> str:
+        text = json.dumps(dataclasses.asdict(self), sort_keys=True)
+        return hashlib.blake2b(text.encode(), digest_size=8).hexdigest()
+
+
+def partner_role(role: str) -> str:
+    return ROLES[1 - ROLES.index(role)]
+
+
+def assigned_role(config: StudyConfig, index: int) -> str:
+    """Participant `index`'s role: permuted blocks over the study's roles, so that the counts never
+    differ by more than one block, and each block's order is random (seeded by the study)."""
+    roles = list(config.roles)
+    block, place = divmod(index, len(roles))
+    random.Random(f"{config.seed}/roles/{block}").shuffle(roles)
+    return roles[place]
+
+
+def variant_order(config: StudyConfig, index: int) -> list[int]:
+    """The order in which participant `index` meets the variants (indices into config.variants)."""
+    order = list(range(len(config.variants)))
+    random.Random(f"{config.seed}/order/{index}").shuffle(order)
+    return order
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One attempt at one trial: where it sits in the protocol, and the match that plays it."""
+
+    participant: str
+    role: str
+    session: int  # 1-based: session k is played with "Agent k"
+    trial: int  # 1-based within the session
+    attempt: int  # 1, or more after drop-outs
+    variant: Variant
+    match: str
+    seed: int
+
+    @property
+    def agent(self) -> str:
+        return f"Agent {self.session}"
+
+
+@dataclass
+class Participant:
+    """One participant's assignment and progress, as stored in the study's file."""
+
+    id: str
+    key: str  # the secret that lets the participant's browser resume
+    index: int
+    role: str
+    order: list[int]
+    consented: bool = True
+    attempts: list[dict] = field(default_factory=list)  # {session, trial, attempt, match, status, kills}
+
+    def done(self, session: int, trial: int) -> bool:
+        return any(
+            a["session"] == session and a["trial"] == trial and a["status"] == "done" for a in self.attempts
+        )
+
+
+class Study:
+    """Participants and their progress, kept in `<directory>/study.json` (rewritten whole after
+    each change, through a temporary file, so a crash never leaves half a file)."""
+
+    def __init__(self, config: StudyConfig, directory: str | Path) -> None:
+        self.config, self.directory = config, Path(directory)
+        self.path = self.directory / "study.json"
+        self.participants: dict[str, Participant] = {}
+        if self.path.exists():
+            saved = json.loads(self.path.read_text())
+            if saved["config"] != config.hash():
+                raise ValueError(f"{self.path} belongs to another version of study {saved['name']!r}")
+            self.participants = {p["id"]: Participant(**p) for p in saved["participants"]}
+
+    def save(self) -> None:
+        self.directory.mkdir(parents=True, exist_ok=True)
+        record = {
+            "name": self.config.name,
+            "config": self.config.hash(),
+            "participants": [dataclasses.asdict(p) for p in self.participants.values()],
+        }
+        temporary = self.path.with_suffix(".tmp")
+        temporary.write_text(json.dumps(record, indent=1))
+        temporary.replace(self.path)
+
+    def arrive(self) -> Participant:
+        """A new participant, who has consented: the next id, a role and an order of variants."""
+        index = len(self.participants)
+        participant = Participant(
+            f"P{index + 1:03d}",
+            secrets.token_urlsafe(9),
+            index,
+            assigned_role(self.config, index),
+            variant_order(self.config, index),
+        )
+        self.participants[participant.id] = participant
+        self.save()
+        return participant
+
+    def resume(self, participant: str, key: str) -> Participant | None:
+        """The participant with this id and key, or None."""
+        found = self.participants.get(participant)
+        return found if found is not None and secrets.compare_digest(found.key, key) else None
+
+    def next_trial(self, participant: Participant) -> Trial | None:
+        """The first trial the participant has not completed, or None when all are done."""
+        for session, variant_index in enumerate(participant.order, start=1):
+            for trial in range(1, self.config.trials + 1):
+                if participant.done(session, trial):
+                    continue
+                attempt = 1 + sum(
+                    a["session"] == session and a["trial"] == trial for a in participant.attempts
+                )
+                match = f"{self.config.name}-{participant.id}-s{session}t{trial}" + (
+                    f"-a{attempt}" if attempt > 1 else ""
+                )
+                seed = int.from_bytes(hashlib.blake2b(match.encode(), digest_size=4).digest(), "big")
+                variant = self.config.variants[variant_index]
+                return Trial(participant.id, participant.role, session, trial, attempt, variant, match, seed)
+        return None
+
+    def record(self, trial: Trial, status: str, kills: int | None = None) -> dict:
+        """Write down how an attempt went (`running`, `done` or `dropped`); returns the sidecar that
+        goes beside the trial's recording."""
+        participant = self.participants[trial.participant]
+        entry = {"session": trial.session, "trial": trial.trial, "attempt": trial.attempt}
+        participant.attempts = [a for a in participant.attempts if {k: a[k] for k in entry} != entry] + [
+            {**entry, "match": trial.match, "status": status, "kills": kills}
+        ]
+        self.save()
+        return {
+            "study": self.config.name,
+            "config": self.config.hash(),
+            "participant": participant.id,
+            "role": participant.role,
+            "variant": trial.variant.name,
+            "agent": trial.agent,
+            **entry,
+            "match": trial.match,
+            "seed": trial.seed,
+            "status": status,
+            "kills": kills,
+        }

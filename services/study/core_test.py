@@ -1,0 +1,113 @@
+"""The study core: config files, balanced roles, per-participant orders, progress and resume."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from collections import Counter
+from pathlib import Path
+
+import pytest
+
+from services.agent.library import keys as library_keys
+from services.study.core import Study, StudyConfig, Variant, assigned_role, variant_order
+
+CONFIGS = Path(__file__).parent / "configs"
+
+
+def config(**changes: object) -> StudyConfig:
+    variants = (Variant("a", "B1", "S1"), Variant("b", "B5", "S5"), Variant("c", adaptive=True, window=150))
+    return dataclasses.replace(StudyConfig("t", variants, trials=2), **changes)
+
+
+@pytest.mark.parametrize("name", ["static", "adaptive"])
+def test_the_shipped_studies_load_and_name_library_policies(name: str) -> None:
+    study = StudyConfig.load(CONFIGS / f"{name}.toml")
+    assert study.name == name and len(study.variants) == 5 and study.trials == 3 and study.frames == 1800
+    for variant in study.variants:
+        if not variant.adaptive:
+            assert variant.bait in library_keys("bait") and variant.shooter in library_keys("shooter")
+    adaptive = [v.window for v in study.variants if v.adaptive]
+    assert adaptive == ([] if name == "static" else [150, 400, 900])
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"name": "bad name"}, "study name"),
+        ({"variants": ()}, "at least one variant"),
+        ({"variants": (Variant("a", "B1", "S1"), Variant("a", "B2", "S2"))}, "names must differ"),
+        ({"variants": (Variant("a", bait="B1"),)}, "no shooter for a bait participant"),
+        ({"trials": 0}, "at least one trial"),
+        ({"roles": ("pilot",)}, "roles must be"),
+    ],
+)
+def test_bad_configs_are_refused(changes: dict, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        config(**changes)
+
+
+def test_roles_are_balanced_and_random() -> None:
+    study = config()
+    roles = [assigned_role(study, i) for i in range(40)]
+    for n in range(0, 40, 2):  # every block of two has one of each
+        assert Counter(roles[n : n + 2]) == Counter({"bait": 1, "shooter": 1})
+    assert roles[0::2] != ["bait"] * 20 and roles[0::2] != ["shooter"] * 20  # the order within varies
+    assert roles == [assigned_role(study, i) for i in range(40)]  # a function of the study's seed
+    assert roles != [assigned_role(config(seed=7), i) for i in range(40)]
+    assert {assigned_role(config(roles=("shooter",)), i) for i in range(5)} == {"shooter"}
+
+
+def test_each_participant_meets_every_variant_once_in_an_order_of_their_own() -> None:
+    study = config()
+    orders = [variant_order(study, i) for i in range(30)]
+    assert all(sorted(order) == [0, 1, 2] for order in orders)
+    assert len({tuple(order) for order in orders}) > 3
+    assert Counter(order[0] for order in orders).keys() == {0, 1, 2}
+
+
+def test_variants_put_their_agent_in_the_partner_seat() -> None:
+    static, adaptive = config().variants[0], config().variants[2]
+    assert static.plan("shooter") == {"shooter": "S1"} and static.plan("bait") == {"bait": "B1"}
+    assert adaptive.plan("bait") == {"adaptive": "bait", "window": 150, "strategy": "cem"}
+
+
+def test_progress_resume_and_drop_outs(tmp_path: Path) -> None:
+    study = Study(config(), tmp_path)
+    first, second = study.arrive(), study.arrive()
+    assert (first.id, second.id) == ("P001", "P002") and {first.role, second.role} == {"bait", "shooter"}
+    trial = study.next_trial(first)
+    assert (trial.session, trial.trial, trial.attempt, trial.agent) == (1, 1, 1, "Agent 1")
+    assert trial.variant == study.config.variants[first.order[0]]
+    assert trial.match == "t-P001-s1t1"
+    study.record(trial, "running")
+    study.record(trial, "dropped")  # the participant walked away
+    again = study.next_trial(first)
+    assert (again.session, again.trial, again.attempt, again.match) == (1, 1, 2, "t-P001-s1t1-a2")
+    assert again.seed != trial.seed
+    sidecar = study.record(again, "done", kills=3)
+    assert sidecar["participant"] == "P001" and sidecar["variant"] == again.variant.name
+    assert sidecar["role"] == first.role and sidecar["session"] == 1 and sidecar["kills"] == 3
+
+    reopened = Study(config(), tmp_path)  # the server restarts: progress is kept
+    back = reopened.resume("P001", first.key)
+    assert (
+        back is not None and reopened.resume("P001", "guess") is None and reopened.resume("P9", "x") is None
+    )
+    following = reopened.next_trial(back)
+    assert (following.session, following.trial, following.attempt) == (1, 2, 1)
+    for session, number in [(1, 2), (2, 1), (2, 2), (3, 1), (3, 2)]:
+        current = reopened.next_trial(back)
+        assert (current.session, current.trial, current.agent) == (session, number, f"Agent {session}")
+        reopened.record(current, "done", kills=0)
+    assert reopened.next_trial(back) is None
+    statuses = [
+        a["status"] for a in json.loads((tmp_path / "study.json").read_text())["participants"][0]["attempts"]
+    ]
+    assert statuses == ["dropped"] + ["done"] * 6
+
+
+def test_a_changed_study_does_not_reuse_another_versions_file(tmp_path: Path) -> None:
+    Study(config(), tmp_path).arrive()
+    with pytest.raises(ValueError, match="another version"):
+        Study(config(trials=3), tmp_path)

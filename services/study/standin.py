@@ -1,0 +1,79 @@
+"""A headless stand-in participant: a policy that goes through the study as a person would, over the
+same WebSocket protocol as the page (consent, ready, held keys), so a whole study runs end to end
+without anyone at a keyboard (tests, and dry runs of a new study config)."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+
+import websockets
+
+from services.agent.library import policy_for
+from services.human.core import action_keys
+from services.sim.observation import as_observation
+
+
+@dataclass
+class StandInReport:
+    """What the stand-in went through."""
+
+    participant: str = ""
+    key: str = ""
+    role: str = ""
+    agents: list[str] = field(default_factory=list)  # the agent label of each trial started
+    kills: list[int] = field(default_factory=list)  # each finished trial's kills
+    states: int = 0
+    done: bool = False
+    refused: str = ""
+
+
+async def stand_in(
+    url: str,
+    policies: dict[str, str] | None = None,
+    resume: tuple[str, str] | None = None,
+    leave_after: int = 0,
+    seed: int = 0,
+) -> StandInReport:
+    """Take part in the study served at `url` (the page's address), playing each role with a policy
+    key (default: the scripted circle bait and mirror shooter). `resume` = (participant, key) comes
+    back as an earlier participant; `leave_after` > 0 drops the connection after that many frames,
+    as a participant who walks away."""
+    policies = policies or {"bait": "circle", "shooter": "mirror"}
+    report = StandInReport()
+    hello: dict = {"type": "hello", "obs": True}
+    if resume:
+        hello.update(participant=resume[0], key=resume[1])
+    policy, held = None, None
+    async with websockets.connect(url.replace("http", "ws", 1).rstrip("/") + "/ws") as ws:
+        await ws.send(json.dumps(hello))
+        async for text in ws:
+            message = json.loads(text)
+            kind = message["type"]
+            if kind == "consent":
+                await ws.send(json.dumps({"type": "consent"}))
+            elif kind == "participant":
+                report.participant, report.key = message["participant"], message["key"]
+            elif kind == "trial":
+                report.role = message["role"]
+                report.agents.append(message["agent"])
+                policy = policy_for(policies[report.role], report.role)
+                policy.reset(seed + len(report.agents))
+                await ws.send(json.dumps({"type": "ready"}))
+            elif kind == "state" and policy is not None and "obs" in message:
+                report.states += 1
+                if leave_after and report.states >= leave_after:
+                    return report
+                keys = action_keys(policy.act(as_observation(message["obs"], policy.frame)))
+                if keys != held:  # a person's keyboard reports changes, not frames
+                    held = keys
+                    await ws.send(json.dumps({"type": "keys", **keys}))
+            elif kind == "end":
+                report.kills.append(message["kills"])
+            elif kind == "done":
+                report.done = True
+                return report
+            elif kind in ("refused", "problem"):
+                report.refused = message.get("reason") or message.get("text", "")
+                return report
+    return report

@@ -13,11 +13,13 @@ import signal
 import socket
 import threading
 from collections import Counter
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 
 import zenoh
+
+from shared.messages import MessageError, Summary, decode
 
 log = logging.getLogger("tsf.bus")
 
@@ -118,6 +120,21 @@ class Drops:
     @property
     def total(self) -> int:
         return sum(self.counts.values())
+
+
+def stop_on_summary(stop: threading.Event, drops: Drops) -> Callable[[zenoh.Sample], None]:
+    """A subscriber callback for a match's summary key: a valid summary sets `stop` (the match is
+    over); anything else is dropped and counted."""
+
+    def on_summary(sample: zenoh.Sample) -> None:
+        try:
+            decode(sample.payload.to_bytes(), Summary)
+        except MessageError as error:
+            drops.drop(str(sample.key_expr), error)
+            return
+        stop.set()
+
+    return on_summary
 
 
 def stop_on_signals() -> threading.Event:

@@ -19,8 +19,8 @@ from services.adapter.core import Adapter, AdapterConfig, Pairing, Payoff, Score
 from services.agent import library
 from services.table.table import DEFAULT_TABLE, Table
 from shared import keys
-from shared.bus import BusConfig, Drops, session
-from shared.messages import Action, AdapterStatus, MessageError, PolicySwitch, State, Summary, decode
+from shared.bus import BusConfig, Drops, session, stop_on_summary
+from shared.messages import Action, AdapterStatus, MessageError, PolicySwitch, State, decode
 
 log = logging.getLogger("tsf.adapter")
 SENDER = "adapter"
@@ -106,18 +106,10 @@ def run_adapter(
                 else:
                     feed(pairing.action(action.frame, action.action), action.frame)
 
-        def on_summary(sample: zenoh.Sample) -> None:
-            try:
-                decode(sample.payload.to_bytes(), Summary)
-            except MessageError as error:
-                drops.drop(str(sample.key_expr), error)
-                return
-            stop.set()
-
         subscribers = [
             z.declare_subscriber(keys.state(match), on_state),
             z.declare_subscriber(keys.actions(match), on_action),
-            z.declare_subscriber(keys.summary(match), on_summary),
+            z.declare_subscriber(keys.summary(match), stop_on_summary(stop, drops)),
         ]
         token = z.liveliness().declare_token(keys.alive(match, "adapter"))
         try:

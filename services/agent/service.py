@@ -9,8 +9,8 @@ import zenoh
 
 from services.agent.player import Player
 from shared import keys
-from shared.bus import BusConfig, Drops, session
-from shared.messages import MessageError, PolicySwitch, State, Summary, decode
+from shared.bus import BusConfig, Drops, session, stop_on_summary
+from shared.messages import MessageError, PolicySwitch, State, decode
 
 log = logging.getLogger("tsf.agent")
 
@@ -48,18 +48,10 @@ def run_agent(
                 return
             log.info("%s switches to %s from the next frame (%s)", sender, message.policy, message.reason)
 
-        def on_summary(sample: zenoh.Sample) -> None:
-            try:
-                decode(sample.payload.to_bytes(), Summary)
-            except MessageError as error:
-                drops.drop(str(sample.key_expr), error)
-                return
-            stop.set()
-
         subscribers = [
             z.declare_subscriber(keys.state(match), on_state),
             z.declare_subscriber(keys.policy(match, role), on_switch),
-            z.declare_subscriber(keys.summary(match), on_summary),
+            z.declare_subscriber(keys.summary(match), stop_on_summary(stop, drops)),
         ]
         token = z.liveliness().declare_token(keys.alive(match, "agent", role))
         try:

@@ -591,10 +591,12 @@ def human(
 def play_command(
     role: str = typer.Option("bait", help="The seat you play: bait or shooter."),
     partner: str = typer.Option(
-        "",
-        help="Who plays the other seat: a policy key (see `tsf library`; default S5 or B9, the best "
-        "partners in the table), or `human` for a person.",
+        "adaptive",
+        help="Who plays the other seat: `adaptive` (the adaptive agent), a policy key (see `tsf "
+        "library`), or `human` for a person.",
     ),
+    window: int = typer.Option(400, min=1, help="--partner adaptive: the window T in frames."),
+    strategy: str = typer.Option("cem", help="--partner adaptive: the adapter's strategy (see tsf match)."),
     seed: int = typer.Option(0, help="The game's seed."),
     duration: float = typer.Option(60.0, min=0.1, help="Game length in seconds (30 frames each)."),
     wait: float = typer.Option(600.0, help="Seconds to wait for the players to press start."),
@@ -610,13 +612,16 @@ def play_command(
     if role not in ("bait", "shooter"):
         raise typer.BadParameter("role is bait or shooter")
     other = "shooter" if role == "bait" else "bait"
-    partner = partner or {"shooter": "S5", "bait": "B9"}[other]
-    if partner != HUMAN:
-        policy_for(partner, other)  # an unknown key fails here, before anyone opens the page
-    seats = {role: HUMAN, other: partner}
+    seats: dict = {role: HUMAN}
+    if partner == "adaptive":
+        seats.update(adaptive=other, window=window, strategy=strategy)
+    else:
+        if partner != HUMAN:
+            policy_for(partner, other)  # an unknown key fails here, before anyone opens the page
+        seats[other] = partner
     plan = MatchPlan(
-        match or new_match_id(), seed, round(duration * 30), "realtime", seats["bait"], seats["shooter"], out,
-        wait_players=wait,
+        match or new_match_id(), seed, round(duration * 30), "realtime", directory=out, wait_players=wait,
+        **seats,
     )  # fmt: skip
 
     def links(urls: dict[str, str]) -> None:

@@ -6,6 +6,9 @@ from __future__ import annotations
 
 import asyncio
 import json
+import re
+import subprocess
+import sys
 import urllib.request
 
 import pytest
@@ -14,6 +17,7 @@ import websockets
 from services.agent.service import run_agent
 from services.human.core import SeatBook
 from services.human.gateway import REFUSED, Gateway, seat_handler
+from services.recorder.recording import load
 from services.sim.config import GameConfig
 from services.sim.service import run_sim
 from shared import keys
@@ -113,3 +117,37 @@ def test_held_keys_play_the_seat_and_a_dropped_connection_leaves_it_idle(bus, ga
     assert all(states[f].applied[0] == 0 for f in range(last_human + 3, 121) if f in states)
     assert frames[-1]["frame"] > frames[0]["frame"]  # the page got the frames as they came
     assert recorded.of(Summary)
+
+
+def test_tsf_play_prints_the_link_and_plays_with_the_adaptive_agent(tmp_path):
+    """`tsf play --role shooter --partner adaptive`, as a person runs it, with a scripted client."""
+    command = [sys.executable, "-m", "services.cli", "play", "--role", "shooter", "--partner", "adaptive"]
+    command += ["--window", "30", "--duration", "3", "--port", "0", "--out", str(tmp_path), "--match", "play"]
+    with subprocess.Popen(command, stdout=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True) as tsf:
+        try:
+            line = tsf.stdout.readline()
+            link = re.search(r"shooter: open (http://\S+)", line)
+            assert link, line
+            host, query = (
+                link.group(1).split("/")[2],
+                dict(p.split("=") for p in link.group(1).split("?")[1].split("&")),
+            )
+
+            async def person() -> dict:
+                async with websockets.connect(f"ws://{host}/ws") as ws:
+                    await ws.send(json.dumps({"type": "join", "role": "shooter", "token": query["token"]}))
+                    await ws.send(json.dumps({"type": "ready"}))
+                    await ws.send(keys_message(right=True, thrust=True))
+                    while (message := json.loads(await ws.recv()))["type"] != "end":
+                        pass
+                    return message
+
+            end = asyncio.run(person())
+            assert tsf.wait(30) == 0
+        finally:
+            tsf.kill()
+    recording = load(tmp_path / "play.tsflog")
+    assert recording.summary.kills == end["kills"] and recording.summary.frame == 90
+    assert recording.start.policies == {"bait": "adaptive-T30-cem", "shooter": "human"}
+    assert recording.adapter and all(status.role == "bait" for status in recording.adapter)
+    assert {a.action for _, a in recording.actions if a.role == "shooter"} == {10}  # right + thrust

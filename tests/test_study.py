@@ -9,13 +9,13 @@ import json
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
-from services.launch import HUMAN
+from services.launch import HUMAN, MatchPlan
 from services.recorder.recording import load
 from services.study.core import StudyConfig, Variant, partner_role
 from services.study.runner import run_study
 from services.study.standin import stand_in
 
-VARIANTS = (Variant("strong", "B5", "S5"), Variant("scripted", "circle", "mirror"))
+VARIANTS = (Variant("strong", "B5", "S5"), Variant("adaptive", adaptive=True, window=30))
 
 
 def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_until):
@@ -63,10 +63,10 @@ def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_unti
             met.append(variant.name)
             recording = load(tmp_path / "recordings" / f"{attempt['match']}.tsflog")
             agent_role = partner_role(participant.role)
-            assert recording.start.policies == {
-                participant.role: HUMAN,
-                agent_role: getattr(variant, agent_role),
-            }
+            adaptive = MatchPlan("x", **variant.plan(agent_role)).adapter
+            agent = adaptive.name if adaptive else getattr(variant, agent_role)
+            assert recording.start.policies == {participant.role: HUMAN, agent_role: agent}
+            assert bool(recording.adapter) == variant.adaptive  # the adapter watched the person
             assert recording.summary.kills == sidecar["kills"]
             human = [a for _, a in recording.actions if a.role == participant.role]
             assert human and all(a.sender == f"human/{participant.role}" for a in human)

@@ -37,10 +37,13 @@ PAGES = {"/": "index.html", "/index.html": "index.html", "/tsf.js": "tsf.js"}
 SOCKET_PATH = "/ws"
 JOIN_TIMEOUT = 60.0  # seconds a new socket has to say who it is
 REFUSED = 4003  # WebSocket close code: seat refused
+CLOSE_TIMEOUT = 1.0  # seconds a closing connection gets to answer (a browser that never does holds exit)
 
 
 class Outbox:
-    """What goes down one socket: control messages in order, and only the newest frame."""
+    """What goes down one socket: control messages in order, and only the newest frame (after the
+    control messages offered with it: a frame after the match's end is harmless, one before its
+    set-up would be drawn with the wrong numbers)."""
 
     def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
         self.loop = loop
@@ -69,7 +72,7 @@ class Outbox:
             self.wake.clear()
             frame, self.frame = self.frame, None
             control, self.control = self.control, []
-            for text in ([frame] if frame else []) + control:
+            for text in control + ([frame] if frame else []):  # set-up before the frame it draws
                 await ws.send(text)
             if not self.wake.is_set():
                 self.flushed.set()
@@ -243,6 +246,7 @@ class Gateway:
                 server = await serve(
                     lambda ws: self.handler(ws, z),
                     self.host, self.port, process_request=serve_page, max_size=MAX_MESSAGE,
+                    close_timeout=CLOSE_TIMEOUT,
                 )  # fmt: skip
                 self.port = server.sockets[0].getsockname()[1]
                 self.ready.set()

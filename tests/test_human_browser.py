@@ -73,6 +73,9 @@ def test_a_person_plays_the_bait_from_the_browser(browser, match, tmp_path):
     shot = page.locator("canvas#game").screenshot(path=str(tmp_path / "page.png"))
     page.wait_for_function("window.tsf.phase === 'ended'", timeout=FRAMES / 30 * 1000 + 20_000)
     assert "Time is up" in page.locator("#title").inner_text()
+    drawn = page.evaluate("window.tsf.drawn")
+    print(f"the page drew {drawn} of the match's {FRAMES} frames")
+    assert drawn >= FRAMES // 2, "the page draws as the frames come (30 a second), not a few"
     summary, path = running.result(timeout=30)
     assert summary.frame == FRAMES
 

@@ -10,6 +10,8 @@ import re
 import subprocess
 import sys
 import urllib.request
+from concurrent.futures import ThreadPoolExecutor
+from urllib.parse import parse_qs, urlsplit
 
 import pytest
 import websockets
@@ -17,6 +19,8 @@ import websockets
 from services.agent.service import run_agent
 from services.human.core import SeatBook
 from services.human.gateway import REFUSED, Gateway, seat_handler
+from services.human.play import play_with_people
+from services.launch import HUMAN, MatchPlan
 from services.recorder.recording import load
 from services.sim.config import GameConfig
 from services.sim.service import run_sim
@@ -119,6 +123,19 @@ def test_held_keys_play_the_seat_and_a_dropped_connection_leaves_it_idle(bus, ga
     assert recorded.of(Summary)
 
 
+async def play_through(link: str, **held: bool) -> dict:
+    """A person who opens `link`, presses start, holds `held` and waits for the match's end."""
+    query = parse_qs(urlsplit(link).query)
+    async with websockets.connect(f"ws://{urlsplit(link).netloc}/ws") as ws:
+        role, token = query["role"][0], query["token"][0]
+        await ws.send(json.dumps({"type": "join", "role": role, "token": token}))
+        await ws.send(keys_message(**held))  # held before the start, so every action plays them
+        await ws.send(json.dumps({"type": "ready"}))
+        while (message := json.loads(await ws.recv()))["type"] != "end":
+            pass
+        return message
+
+
 def test_tsf_play_prints_the_link_and_plays_with_the_adaptive_agent(tmp_path):
     """`tsf play --role shooter --partner adaptive`, as a person runs it, with a scripted client."""
     command = [sys.executable, "-m", "services.cli", "play", "--role", "shooter", "--partner", "adaptive"]
@@ -128,21 +145,7 @@ def test_tsf_play_prints_the_link_and_plays_with_the_adaptive_agent(tmp_path):
             line = tsf.stdout.readline()
             link = re.search(r"shooter: open (http://\S+)", line)
             assert link, line
-            host, query = (
-                link.group(1).split("/")[2],
-                dict(p.split("=") for p in link.group(1).split("?")[1].split("&")),
-            )
-
-            async def person() -> dict:
-                async with websockets.connect(f"ws://{host}/ws") as ws:
-                    await ws.send(json.dumps({"type": "join", "role": "shooter", "token": query["token"]}))
-                    await ws.send(json.dumps({"type": "ready"}))
-                    await ws.send(keys_message(right=True, thrust=True))
-                    while (message := json.loads(await ws.recv()))["type"] != "end":
-                        pass
-                    return message
-
-            end = asyncio.run(person())
+            end = asyncio.run(play_through(link.group(1), right=True, thrust=True))
             assert tsf.wait(30) == 0
         finally:
             tsf.kill()
@@ -151,3 +154,23 @@ def test_tsf_play_prints_the_link_and_plays_with_the_adaptive_agent(tmp_path):
     assert recording.start.policies == {"bait": "adaptive-T30-cem", "shooter": "human"}
     assert recording.adapter and all(status.role == "bait" for status in recording.adapter)
     assert {a.action for _, a in recording.actions if a.role == "shooter"} == {10}  # right + thrust
+
+
+def test_two_people_play_one_match(tmp_path, wait_until):
+    """`--partner human`: both seats from browsers, each with its own link."""
+    plan = MatchPlan("pair", 0, 60, bait=HUMAN, shooter=HUMAN, directory=tmp_path, wait_players=30)
+    links: list[dict[str, str]] = []
+    with ThreadPoolExecutor(1) as pool:
+        running = pool.submit(play_with_people, plan, port=0, on_links=links.append)
+        assert wait_until(lambda: links or running.done(), timeout=30) and links
+
+        async def both() -> list[dict]:
+            return await asyncio.gather(
+                play_through(links[0]["bait"], thrust=True), play_through(links[0]["shooter"], fire=True)
+            )
+
+        ends = asyncio.run(both())
+        summary, path = running.result(timeout=30)
+    assert ends[0] == ends[1] and summary.frame == 60
+    played = {(a.role, a.sender, a.action) for _, a in load(path).actions}
+    assert played == {("bait", "human/bait", 2), ("shooter", "human/shooter", 1)}

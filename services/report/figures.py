@@ -53,8 +53,8 @@ def policy_space(points: pd.DataFrame, variance: pd.DataFrame, path: Path) -> Pa
 
 
 def similarity(similarity: pd.DataFrame, correlations: pd.DataFrame, path: Path) -> Path:
-    """Per role: similarity to the agent's optimal partner policy against team performance."""
-    roles = list(correlations["partner_role"])
+    """Per role with pairs: similarity to the agent's optimal partner policy against team performance."""
+    roles = list(correlations[correlations["n"] > 0]["partner_role"])
     fig, axes = _roles_axes(roles, 4.0)
     for ax, role in zip(axes, roles, strict=False):
         mine = similarity[similarity["partner_role"] == role]
@@ -64,6 +64,8 @@ def similarity(similarity: pd.DataFrame, correlations: pd.DataFrame, path: Path)
         ax.set_title(f"{role} partners: {stat} (n = {c['n']})", fontsize=10)
         ax.set_xlabel("similarity to the optimal policy (mean log-prob)")
         ax.set_ylabel("team kills per minute")
+    if not roles:
+        axes[0].text(0.5, 0.5, "no pair whose agent played a library policy", ha="center", va="center")
     return _save(fig, path)
 
 

@@ -717,7 +717,7 @@ def calibrate_adapter(
 def report_command(
     recordings: list[Path] = typer.Argument(..., help="Recordings (.tsflog); bad ones are named, left out."),
     out: Path = typer.Option(Path("report"), help="Directory for report.html, figures/, data/ and parquet/."),
-    table: Path = typer.Option(Path("services/agent/library/table.json"), help="The self-play table."),
+    table: Path | None = typer.Option(None, help="The self-play table (default: the library's)."),
     partner_role: str = typer.Option(
         "", help="Only this seat is the partner in agent-agent matches (default: each seat in turn)."
     ),
@@ -726,10 +726,13 @@ def report_command(
 ) -> None:
     """The study's figures and numbers from recordings: one self-contained HTML report."""
     from services.report.report import build_report
+    from services.table.table import DEFAULT_TABLE
 
     if partner_role not in ("", "bait", "shooter"):
         raise typer.BadParameter("bait or shooter", param_hint="--partner-role")
-    report = build_report(recordings, out, table, partner_role or None, trial or None, reference_games)
+    report = build_report(
+        recordings, out, table or DEFAULT_TABLE, partner_role or None, trial or None, reference_games
+    )
     for problem in report.problems:
         colour = "yellow" if problem.used else "red"
         console.print(f"[{colour}]{problem.name}: {problem.reason}[/]")

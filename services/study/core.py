@@ -147,7 +147,6 @@ class Participant:
     index: int
     role: str
     order: list[int]
-    consented: bool = True
     attempts: list[dict] = field(default_factory=list)  # {session, trial, attempt, match, status, kills}
 
     def done(self, session: int, trial: int) -> bool:

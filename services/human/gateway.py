@@ -211,8 +211,8 @@ Handler = Callable[[ServerConnection, zenoh.Session], Awaitable[None]]
 class Gateway:
     """The web server and one zenoh session, running in a thread of their own until closed.
 
-    `handler(ws, z)` serves one socket. The session listens on a loopback port of its own
-    (`endpoint`), so a match's sim can connect to it (MatchPlan.peers)."""
+    `handler(ws, z)` serves one socket. The session listens where `bus` says, so that a match's sim
+    can connect to it (MatchPlan.peers)."""
 
     def __init__(self, bus: BusConfig, handler: Handler, host: str = "127.0.0.1", port: int = 8000) -> None:
         self.bus, self.handler, self.host, self.port = bus, handler, host, port
@@ -220,7 +220,6 @@ class Gateway:
         self.ready = threading.Event()
         self.failed: BaseException | None = None
         self.thread = threading.Thread(target=self.loop.run_until_complete, args=(self._run(),), daemon=True)
-        self.z: zenoh.Session | None = None
         self.closing: asyncio.Future | None = None
 
     @property
@@ -238,11 +237,13 @@ class Gateway:
         if self.closing is not None:
             self.loop.call_soon_threadsafe(self.closing.set_result, None)
         self.thread.join(10)
+        if not self.thread.is_alive():
+            self.loop.close()
 
     async def _run(self) -> None:
         try:
             with session(self.bus) as z:
-                self.z, self.closing = z, self.loop.create_future()
+                self.closing = self.loop.create_future()
                 server = await serve(
                     lambda ws: self.handler(ws, z),
                     self.host, self.port, process_request=serve_page, max_size=MAX_MESSAGE,

@@ -1,6 +1,7 @@
 """The study's analyses over loaded recordings: pure functions from pandas frames to pandas frames.
 
 Who is the partner in a recording (`seats`):
+- the participant's seat, where the study sidecar names it (`role`); else
 - an adaptive match: the partner is the seat the adapter watches, the other one from its statuses'
   `role` (or, with no statuses, from the seat the start record names `adaptive-...`);
 - a human match (the start names no policy for a seat: "", or the launcher's "human"): the
@@ -77,7 +78,10 @@ def person_seats(match: Match) -> list[str]:
 def seats(match: Match, partner_role: str | None = None) -> list[Seat]:
     """The partner-agent pairings of a match (the rule is in the module docstring)."""
     policies, adapter, adaptive = match.policies, match.tables["adapter"], adaptive_seat(match)
-    roles = [other(adaptive)] if adaptive else person_seats(match) or list(ROLES)
+    if match.meta.get("role") in ROLES:
+        roles = [match.meta["role"]]
+    else:
+        roles = [other(adaptive)] if adaptive else person_seats(match) or list(ROLES)
     out = []
     for role in roles:
         if partner_role not in (None, role):

@@ -5,8 +5,10 @@ read, has no start or no summary (a truncated log, or a match that never ended),
 does not reproduce its states. A torn tail after the summary, or lost frames that stop the replay
 check, are named too but the recording is still used: its result is known.
 
-A study runner may leave a JSON sidecar beside a recording (`<match>.json`): its `participant`,
-`variant`, `session` and `trial` are used where present (see services/report/analysis.py).
+The study runner (services/study) leaves a JSON sidecar beside each recording, `<match>.study.json`
+(a plain `<match>.json` is read too): its `participant`, `role` (the participant's seat),
+`variant`, `session`, `trial` and `attempt` are used where present (services/report/analysis.py),
+and an attempt whose `status` is not `done` (a participant who dropped out) is named and left out.
 """
 
 from __future__ import annotations
@@ -20,7 +22,8 @@ import pandas as pd
 from services.recorder.recording import TABLES, export_parquet, load, replay
 from services.sim.config import GameConfig
 
-SIDECAR_FIELDS = ("participant", "variant", "session", "trial")
+SIDECAR_FIELDS = ("participant", "role", "variant", "session", "trial", "attempt", "status")
+SIDECARS = (".study.json", ".json")
 
 
 @dataclass(frozen=True)
@@ -90,9 +93,13 @@ def load_matches(paths: list[Path], parquet: Path) -> tuple[list[Match], list[Pr
                 continue
         if not recording.clean:
             problem("the log ends in a torn or corrupt record after the summary", used=True)
+        meta = _sidecar(path)
+        if meta.get("status", "done") != "done":
+            problem(f"the study marked this attempt {meta['status']}")
+            continue
         export_parquet(recording, parquet / name)
         tables = {t: pd.read_parquet(parquet / name / f"{t}.parquet") for t in TABLES}
-        matches.append(Match(name, path, tables, _sidecar(path)))
+        matches.append(Match(name, path, tables, meta))
     return matches, problems
 
 
@@ -106,13 +113,16 @@ def _unique(name: str, taken: set[str]) -> str:
 
 
 def _sidecar(path: Path) -> dict[str, str]:
-    sidecar = path.with_name(path.name.removesuffix(".tsflog") + ".json")
-    if not sidecar.exists():
-        return {}
-    try:
-        record = json.loads(sidecar.read_text())
-    except (OSError, ValueError):
-        return {}
-    if not isinstance(record, dict):
-        return {}
-    return {k: str(record[k]) for k in SIDECAR_FIELDS if record.get(k) not in (None, "")}
+    """The study metadata beside a recording, as text ({} where there is none or it is unreadable)."""
+    stem = path.name.removesuffix(".tsflog")
+    for suffix in SIDECARS:
+        sidecar = path.with_name(stem + suffix)
+        if not sidecar.exists():
+            continue
+        try:
+            record = json.loads(sidecar.read_text())
+        except (OSError, ValueError):
+            return {}
+        if isinstance(record, dict):
+            return {k: str(record[k]) for k in SIDECAR_FIELDS if record.get(k) not in (None, "")}
+    return {}

@@ -73,13 +73,17 @@ def built(tmp_path_factory: pytest.TempPathFactory) -> tuple[Report, dict[str, P
         person, 20, FRAMES, {"bait": "B4", "shooter": "S5"}, {"bait": "", "shooter": "S5"}, (), ()
     )
     record_match(paths[person], script=script)
-    (root / f"{person}.json").write_text(json.dumps({"participant": "P01", "session": 1}))
+    sidecar = {"participant": "P01", "role": "bait", "session": 1, "status": "done"}
+    (root / f"{person}.study.json").write_text(json.dumps(sidecar))
+    dropped = root / "dropped.tsflog"  # a participant who dropped out: the study runner marks it
+    shutil.copy(paths["static-B9-S5"], dropped)
+    (root / "dropped.study.json").write_text(json.dumps({**sidecar, "status": "dropped"}))
     truncated, garbage = root / "truncated.tsflog", root / "garbage.tsflog"
     shutil.copy(paths["static-B5-S5"], truncated)
     with truncated.open("r+b") as f:
         f.truncate(truncated.stat().st_size // 2)
     garbage.write_bytes(b"not a recording at all")
-    report = build_report([*paths.values(), truncated, garbage], root / "out", reference_games=1)
+    report = build_report([*paths.values(), dropped, truncated, garbage], root / "out", reference_games=1)
     return report, paths, root / "out"
 
 
@@ -100,8 +104,9 @@ def test_bad_recordings_are_named_and_the_rest_builds(built: tuple[Report, dict[
     problems = csv(out, "problems").set_index("name")
     assert "no summary" in problems.loc["truncated", "reason"] and not problems.loc["truncated", "used"]
     assert "unreadable" in problems.loc["garbage", "reason"]
+    assert "marked this attempt dropped" in problems.loc["dropped", "reason"]
     page = report.html.read_text()
-    assert "truncated (left out)" in page and "garbage (left out)" in page
+    assert all(f"{name} (left out)" in page for name in ("truncated", "garbage", "dropped"))
     assert set(csv(out, "partners")["match"]) == set(paths)
 
 
@@ -136,7 +141,8 @@ def test_seats_follow_the_partner_rule(built: tuple[Report, dict[str, Path], Pat
 def test_seats_from_the_start_record_alone(
     tmp_path: Path, built: tuple[Report, dict[str, Path], Path]
 ) -> None:
-    """A person's seat named "human" (the launcher's key), and an adaptive seat with no statuses."""
+    """A person's seat named "human" (the launcher's key), an adaptive seat with no statuses, and the
+    participant's seat named by a study sidecar."""
     _, paths, _ = built
     [match], _ = load_matches([paths["static-B5-S5"]], tmp_path)
 
@@ -154,6 +160,10 @@ def test_seats_from_the_start_record_alone(
     [adaptive] = seats(announcing({"bait": "B5", "shooter": "adaptive-T400-cem"}))
     assert (adaptive.partner_role, adaptive.variant, adaptive.adaptive) == ("bait", "adaptive-T400-cem", True)
     assert adaptive.agent == "S5"  # the key behind its actions
+    [participant] = seats(
+        dataclasses.replace(match, meta={"role": "shooter", "participant": "P7", "variant": "v"})
+    )
+    assert (participant.partner_role, participant.partner, participant.variant) == ("shooter", "P7", "v")
 
 
 def test_similarity_vectors_and_performance(built: tuple[Report, dict[str, Path], Path]) -> None:

@@ -9,8 +9,9 @@ The browser protocol is JSON text frames. Up (browser -> gateway):
     {"type": "keys", "left": b, "right": b, "thrust": b, "fire": b}   the held keys, on every change
 
 Down (gateway -> browser): `welcome` (the seat and the arena's geometry) or `refused` (why), then
-`state` (one frame to draw) and `end` (the match's result). The study runner adds its own messages
-(services/study) on the same socket.
+`setup` (the match's own numbers), `state` (one frame to draw) and `end` (the match's result). The
+study runner (services/study/runner.py) uses the same socket with `hello` and `consent` up and its
+own messages down.
 """
 
 from __future__ import annotations

@@ -19,7 +19,9 @@ VARIANTS = (Variant("strong", "B5", "S5"), Variant("adaptive", adaptive=True, wi
 
 
 def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_until):
-    config = StudyConfig("e2e", VARIANTS, trials=1, trial_seconds=1.5, seed=3, end="Bye now.")
+    config = StudyConfig(
+        "e2e", VARIANTS, trials=1, trial_seconds=1.5, seed=3, consent="Agree?", end="Bye now."
+    )
     stop, urls = threading.Event(), []
     with ThreadPoolExecutor(1) as pool:
         server = pool.submit(
@@ -42,6 +44,8 @@ def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_unti
 
     assert back.done and back.role == leaver.role and back.agents == ["Agent 1", "Agent 2"]
     assert other.done and other.participant == "P002" and other.role == partner_role(leaver.role)
+    assert (leaver.consent, other.consent, back.consent) == ("Agree?", "Agree?", "")  # asked once
+    assert back.end == other.end == "Bye now."
     assert len(back.kills) == len(other.kills) == 2
 
     attempts = {p.id: [(a["session"], a["trial"], a["attempt"], a["status"]) for a in p.attempts]

@@ -24,6 +24,8 @@ class StandInReport:
     agents: list[str] = field(default_factory=list)  # the agent label of each trial started
     kills: list[int] = field(default_factory=list)  # each finished trial's kills
     states: int = 0
+    consent: str = ""  # the consent text shown
+    end: str = ""  # the end screen's text
     done: bool = False
     refused: str = ""
 
@@ -51,6 +53,7 @@ async def stand_in(
             message = json.loads(text)
             kind = message["type"]
             if kind == "consent":
+                report.consent = message["text"]
                 await ws.send(json.dumps({"type": "consent"}))
             elif kind == "participant":
                 report.participant, report.key = message["participant"], message["key"]
@@ -71,7 +74,7 @@ async def stand_in(
             elif kind == "end":
                 report.kills.append(message["kills"])
             elif kind == "done":
-                report.done = True
+                report.done, report.end = True, message["text"]
                 return report
             elif kind in ("refused", "problem"):
                 report.refused = message.get("reason") or message.get("text", "")

@@ -23,6 +23,7 @@ from shared.messages import GameEvent, Start, State, Summary
 FRAMES = 300
 PAIRS = [("B9", "S5", 1), ("B2", "S4", 2)]  # a strong and a weak pair, so performance varies
 SPEED = 10.0
+ADAPTIVE, WINDOW = "rr-adaptive", 100  # a match whose shooter is the adaptive agent
 
 
 @pytest.fixture(scope="module")
@@ -32,6 +33,10 @@ def matches(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Summary
     for bait, shooter, seed in PAIRS:
         plan = MatchPlan(f"rr-{bait}-{shooter}", seed, FRAMES, "lockstep", bait, shooter, directory)
         out[plan.match] = run_match(plan)
+    adaptive = MatchPlan(
+        ADAPTIVE, 3, FRAMES, "lockstep", "B5", "S5", directory, adaptive="shooter", window=WINDOW
+    )
+    out[adaptive.match] = run_match(adaptive)
     return out
 
 
@@ -78,13 +83,23 @@ def test_report_from_bus_recordings(matches: dict[str, tuple[Summary, Path]], tm
     assert run.returncode == 0, run.stdout + run.stderr
     assert "cut: no summary" in run.stdout
     partners = pd.read_csv(out / "data" / "partners.csv")
-    assert len(partners) == 2 * len(PAIRS)  # agent-agent: each seat is the other's partner
+    assert len(partners) == 2 * len(PAIRS) + 1  # agent-agent: each seat is the other's partner
     for name, (summary, _) in matches.items():
         mine = partners[partners["match"] == name]
-        assert list(mine["kills_per_minute"]) == pytest.approx([summary.kills_per_minute] * 2)
+        assert list(mine["kills_per_minute"]) == pytest.approx([summary.kills_per_minute] * len(mine))
         assert (mine["frames"] >= FRAMES - 1).all()
+    [adaptive] = partners[partners["match"] == ADAPTIVE].itertuples()
+    assert (adaptive.partner_role, adaptive.partner, adaptive.variant) == (
+        "bait",
+        "B5",
+        f"adaptive-T{WINDOW}-cem",
+    )
+    statuses = load(matches[ADAPTIVE][1]).adapter
+    timeline = pd.read_csv(out / "data" / "adapter.csv", keep_default_na=False)
+    assert statuses and list(timeline["frame"]) == [a.frame for a in statuses]
+    assert list(timeline["policy"]) == [a.policy for a in statuses]
     assert pd.read_csv(out / "data" / "problems.csv")["name"].tolist() == ["cut"]
-    for figure in ("table", "policy_space", "similarity", "logprob", "variants"):
+    for figure in ("table", "policy_space", "similarity", "logprob", "variants", "adapter"):
         with Image.open(out / "figures" / f"{figure}.png") as image:
             assert image.width > 300 and image.height > 200
     assert time.time() - (out / "report.html").stat().st_mtime < 300

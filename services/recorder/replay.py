@@ -59,11 +59,19 @@ def write_video(recording: Recording, path: Path, scale: float = 1.0, every: int
     if path.suffix == ".gif":
         from PIL import Image
 
-        pictures = [Image.fromarray(image) for image in images]
-        if not pictures:
+        pictures = (Image.fromarray(image) for image in images)  # streamed: Pillow keeps only palettes
+        first = next(pictures, None)
+        if first is None:
             raise ValueError(f"{recording.path}: no states to draw")
-        pictures[0].save(path, save_all=True, append_images=pictures[1:], duration=_gif_delay(fps), loop=0)
-        return len(pictures)
+        drawn = [1]
+
+        def rest() -> Iterator:
+            for picture in pictures:
+                drawn[0] += 1
+                yield picture
+
+        first.save(path, save_all=True, append_images=rest(), duration=_gif_delay(fps), loop=0)
+        return drawn[0]
     import imageio_ffmpeg
 
     count, writer = 0, None

@@ -726,13 +726,17 @@ def report_command(
 ) -> None:
     """The study's figures and numbers from recordings: one self-contained HTML report."""
     from services.report.report import build_report
-    from services.table.table import DEFAULT_TABLE
+    from services.table.table import DEFAULT_TABLE, StaleTable
 
     if partner_role not in ("", "bait", "shooter"):
         raise typer.BadParameter("bait or shooter", param_hint="--partner-role")
-    report = build_report(
-        recordings, out, table or DEFAULT_TABLE, partner_role or None, trial or None, reference_games
-    )
+    try:
+        report = build_report(
+            recordings, out, table or DEFAULT_TABLE, partner_role or None, trial or None, reference_games
+        )
+    except StaleTable as error:
+        console.print(f"[red]{error}[/]")
+        raise typer.Exit(1) from None
     for problem in report.problems:
         colour = "yellow" if problem.used else "red"
         console.print(f"[{colour}]{problem.name}: {problem.reason}[/]")

@@ -203,7 +203,9 @@ def policy_space(
             points.append({"role": role, "kind": kind, "name": name, "match": match,
                            "kills_per_minute": kpm, "pc1": pc1, "pc2": pc2})  # fmt: skip
         variance.append({"role": role, "pc1": explained[0], "pc2": explained[1], "points": len(matrix)})
-    return pd.DataFrame(points), pd.DataFrame(variance)
+    point_columns = ["role", "kind", "name", "match", "kills_per_minute", "pc1", "pc2"]
+    variance_columns = ["role", "pc1", "pc2", "points"]
+    return pd.DataFrame(points, columns=point_columns), pd.DataFrame(variance, columns=variance_columns)
 
 
 def similarity_to_optimal(partners: pd.DataFrame, table: Table) -> pd.DataFrame:

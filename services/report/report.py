@@ -61,6 +61,8 @@ def build_report(
     tests = analysis.adaptive_tests(partners, summary)
     timeline = analysis.adapter_timeline(matches)
     trial_match, seat = _trial(matches, partners, trial, partner_role)
+    if trial and seat is None:
+        problems.append(Problem(trial, "", "--trial: no analysed match of that name has a partner", True))
     curves = analysis.curves(trial_match, seat) if seat else pd.DataFrame()
 
     report = Report(out / "report.html", problems=problems)

@@ -289,3 +289,13 @@ def test_figures_and_page(built: tuple[Report, dict[str, Path], Path]) -> None:
     page = report.html.read_text()
     assert page.count("data:image/png;base64,") == len(report.figures)
     assert "Welch" in page and "Pearson" in page
+
+
+def test_a_report_with_nothing_usable_still_builds(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.tsflog"
+    bad.write_bytes(b"TSFLOG1\n" + b"\xff" * 40)  # the magic, then a corrupt first record
+    report = build_report([bad], tmp_path / "out")
+    assert [(p.name, p.used) for p in report.problems] == [("bad", False)]
+    assert "no start record" in report.problems[0].reason
+    assert report.html.exists() and "bad (left out)" in report.html.read_text()
+    assert csv(tmp_path / "out", "partners").empty and csv(tmp_path / "out", "variants").empty

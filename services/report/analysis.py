@@ -287,6 +287,14 @@ def curves(match: Match, seat: Seat, smooth: int = SMOOTH) -> pd.DataFrame:
     return pd.concat(parts, ignore_index=True)
 
 
+def round_means(curves: pd.DataFrame) -> pd.DataFrame:
+    """Each policy's mean log-probability of the partner's actions in each round of the trial."""
+    if curves.empty:
+        return pd.DataFrame(columns=["policy", "round", "frames", "log_prob"])
+    grouped = curves.groupby(["policy", "round"], sort=False)["log_prob"]
+    return grouped.agg(frames="size", log_prob="mean").reset_index()
+
+
 def variants(partners: pd.DataFrame) -> pd.DataFrame:
     """Team performance per agent variant: matches, mean and standard error of kills per minute."""
     rows = []

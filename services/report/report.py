@@ -91,6 +91,7 @@ def build_report(
         "similarity": similarity,
         "correlations": correlations,
         "logprob_curves": curves,
+        "logprob_rounds": analysis.round_means(curves),
         "variants": summary,
         "adaptive_tests": tests,
         "adapter": timeline,
@@ -134,6 +135,12 @@ def _trial(
     return None, None
 
 
+def _per_round(means: pd.DataFrame) -> pd.DataFrame:
+    """Round means laid out as policies x rounds, for reading."""
+    wide = means.pivot(index="policy", columns="round", values="log_prob")
+    return wide.rename(columns=lambda r: f"round {r}").reset_index()
+
+
 def _intro(matches: list[Match], problems: list[Problem]) -> str:
     text = f"{len(matches)} recordings analysed."
     for p in problems:
@@ -173,8 +180,10 @@ def _sections(report: Report, seat: analysis.Seat | None) -> list[Section]:
             Section(
                 "Log-probability curves",
                 f"Match {seat.match}, {seat.partner_role} partner {seat.partner}: each library policy's "
-                "log-probability of the partner's actions (1 s moving mean), rounds shaded alternately.",
+                "log-probability of the partner's actions (1 s moving mean), rounds shaded alternately; "
+                "below, each policy's mean per round (rows: policies, columns: rounds).",
                 f["logprob_curves"],
+                [("Mean log-probability per round", _per_round(d["logprob_rounds"]))],
             )
         )
     sections.append(

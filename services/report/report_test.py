@@ -268,7 +268,12 @@ def test_adapter_timeline_and_curves(built: tuple[Report, dict[str, Path], Path]
     assert mine["log_prob"].to_numpy() == pytest.approx(direct)
     assert mine["smoothed"].iloc[40] == pytest.approx(direct[11:41].mean())
     ends = sorted(e.frame for e in recording.events if e.kind in ("kill", "reset"))
-    assert mine["round"].iloc[-1] == sum(f < FRAMES - 1 for f in ends)
+    assert list(mine["round"]) == [sum(end < frame for end in ends) for frame in mine["frame"]]
+    assert mine["round"].iloc[-1] > 0  # the trial has more than one round
+    rounds = csv(out, "logprob_rounds").query("policy == @key").set_index("round")
+    for number, part in mine.groupby("round"):
+        assert rounds.loc[number, "frames"] == len(part)
+        assert rounds.loc[number, "log_prob"] == pytest.approx(part["log_prob"].mean())
 
 
 def test_figures_and_page(built: tuple[Report, dict[str, Path], Path]) -> None:

@@ -308,34 +308,43 @@ def variants(partners: pd.DataFrame) -> pd.DataFrame:
 
 def adaptive_tests(partners: pd.DataFrame, summary: pd.DataFrame) -> pd.DataFrame:
     """Each adaptive variant against the best static one (the highest mean among static variants
-    with two or more matches): Welch's unequal-variance t-test, two-sided. Welch, because the two
-    groups are different matches (unpaired), of unequal sizes and not known to share a variance."""
+    with two or more matches), two-sided.
+
+    Where every partner played both variants (a within-partner design, as in the study, and as in
+    agent-only sweeps over partners), a paired t-test on each partner's mean: it removes the large
+    differences between partners from the comparison. Otherwise Welch's unequal-variance t-test
+    over matches: the groups are then different partners, of unequal sizes, with no reason to
+    share a variance. The `test` column says which was run."""
+    columns = ["adaptive", "static", "test", "n_adaptive", "n_static", "mean_adaptive", "mean_static",
+               "t", "p", "note"]  # fmt: skip
     static = summary[(~summary["adaptive"]) & (summary["n"] >= 2)]
-    columns = [
-        "adaptive",
-        "static",
-        "n_adaptive",
-        "n_static",
-        "mean_adaptive",
-        "mean_static",
-        "t",
-        "p",
-        "note",
-    ]
     if static.empty:
         return pd.DataFrame(columns=columns)
     best = static.sort_values(["mean", "variant"], ascending=[False, True]).iloc[0]["variant"]
-    b = partners[partners["variant"] == best]["kills_per_minute"].to_numpy(float)
+    b = partners[partners["variant"] == best]
     rows = []
     for variant in summary[summary["adaptive"]]["variant"]:
-        a = partners[partners["variant"] == variant]["kills_per_minute"].to_numpy(float)
-        refusal = (
-            "fewer than 2 adaptive matches" if len(a) < 2
-            else "no variance in either group" if _constant(a) and _constant(b)
-            else ""
-        )  # fmt: skip
-        t, p, note = _test(functools.partial(stats.ttest_ind, equal_var=False), refusal, a, b)
-        values = (variant, best, len(a), len(b), a.mean(), b.mean(), t, p, note)
+        a = partners[partners["variant"] == variant]
+        x, y = a["kills_per_minute"].to_numpy(float), b["kills_per_minute"].to_numpy(float)
+        per_a = a.groupby("partner")["kills_per_minute"].mean()
+        per_b = b.groupby("partner")["kills_per_minute"].mean()
+        if len(per_a) >= 2 and set(per_a.index) == set(per_b.index):
+            test, x, y = (
+                "paired t (partner means)",
+                per_a.sort_index().to_numpy(),
+                per_b.sort_index().to_numpy(),
+            )
+            refusal = "no variance in the differences" if _constant(x - y) else ""
+            t, p, note = _test(stats.ttest_rel, refusal, x, y)
+        else:
+            test = "Welch t"
+            refusal = (
+                "fewer than 2 adaptive matches" if len(x) < 2
+                else "no variance in either group" if _constant(x) and _constant(y)
+                else ""
+            )  # fmt: skip
+            t, p, note = _test(functools.partial(stats.ttest_ind, equal_var=False), refusal, x, y)
+        values = (variant, best, test, len(x), len(y), x.mean(), y.mean(), t, p, note)
         rows.append(dict(zip(columns, values, strict=True)))
     return pd.DataFrame(rows, columns=columns)
 

@@ -101,7 +101,7 @@ def variants(summary: pd.DataFrame, tests: pd.DataFrame, path: Path) -> Path:
     )
     ax.tick_params(axis="x", labelsize=8)
     done = tests.dropna(subset=["p"])
-    title = "; ".join(f"{r.adaptive} vs {r.static}: Welch p = {r.p:.3g}" for r in done.itertuples())
+    title = "; ".join(f"{r.adaptive} vs {r.static}: {r.test}, p = {r.p:.3g}" for r in done.itertuples())
     ax.set_title(title or "adaptive vs static: no test (see the table)", fontsize=9)
     return _save(fig, path)
 

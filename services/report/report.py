@@ -190,7 +190,9 @@ def _sections(report: Report, seat: analysis.Seat | None) -> list[Section]:
         Section(
             "Adaptive vs static",
             "Team performance per agent variant (mean and standard error). Each adaptive variant is tested "
-            "against the best static variant with Welch's t-test (unpaired, unequal variances).",
+            "against the best static variant: a paired t-test on the partners' means where every partner "
+            "played both, else Welch's t-test over matches (unpaired, unequal variances); n counts "
+            "partners or matches accordingly.",
             f["variants"],
             [("Variants", d["variants"]), ("Tests", d["adaptive_tests"])],
         )

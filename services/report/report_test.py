@@ -21,7 +21,7 @@ from services.adapter.cem import log_probs
 from services.agent import library
 from services.recorder.recording import Recording, load
 from services.recorder.recording_test import Script, record_match
-from services.report.analysis import seats
+from services.report.analysis import adaptive_tests, seats, variants
 from services.report.load import Match, load_matches
 from services.report.report import Report, build_report
 from services.sim.config import GameConfig
@@ -238,7 +238,7 @@ def test_adaptive_vs_static(built: tuple[Report, dict[str, Path], Path]) -> None
     statics = variants[(~variants["adaptive"]) & (variants["n"] >= 2)]
     best = statics["mean"].idxmax()
     [test] = tests.itertuples()
-    assert test.static == best
+    assert test.static == best and test.test == "Welch t"  # the partners differ: B4 met no S5
     b = np.array([kpm[m] for m in csv(out, "partners").query("variant == @best")["match"]])
     a = np.array(adaptive)
     se = math.sqrt(a.var(ddof=1) / len(a) + b.var(ddof=1) / len(b))
@@ -304,3 +304,31 @@ def test_a_report_with_nothing_usable_still_builds(tmp_path: Path) -> None:
     assert "no start record" in report.problems[0].reason
     assert report.html.exists() and "bad (left out)" in report.html.read_text()
     assert csv(tmp_path / "out", "partners").empty and csv(tmp_path / "out", "variants").empty
+
+
+def test_paired_test_where_every_partner_met_both() -> None:
+    """Each partner met the adaptive agent and the best static one: the paired t-test on partner means."""
+    kpm = {"B1": (2.0, 1.0), "B2": (5.0, 3.0), "B3": (7.0, 6.5), "B4": (3.0, 3.5)}  # adaptive, static
+    rows = [
+        {
+            "partner": partner,
+            "variant": variant,
+            "adaptive": variant == "adaptive-T400-cem",
+            "kills_per_minute": k,
+        }
+        for partner, pair in kpm.items()
+        for variant, k in zip(("adaptive-T400-cem", "S5"), pair, strict=True)
+    ]
+    rows.append({"partner": "B1", "variant": "S6", "adaptive": False, "kills_per_minute": 0.5})
+    rows.append({"partner": "B2", "variant": "S6", "adaptive": False, "kills_per_minute": 1.5})
+    partners = pd.DataFrame(rows)
+    [test] = adaptive_tests(partners, variants(partners)).itertuples()
+    d = np.array([a - s for a, s in kpm.values()])
+    assert (test.static, test.test, test.n_adaptive, test.n_static) == (
+        "S5",
+        "paired t (partner means)",
+        4,
+        4,
+    )
+    assert test.t == pytest.approx(d.mean() / (d.std(ddof=1) / math.sqrt(len(d))))
+    assert test.p == pytest.approx(2 * stats.t.sf(abs(test.t), len(d) - 1))

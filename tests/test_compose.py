@@ -15,6 +15,7 @@ file valid for Compose v2 as well.
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -26,6 +27,7 @@ from pathlib import Path
 import pytest
 
 from services.recorder.recording import load, replay
+from shared.bus import free_endpoint
 
 ROOT = Path(__file__).resolve().parents[1]
 COMPOSE = ROOT / "compose.yaml"
@@ -101,6 +103,19 @@ def engine(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
             dockerd.wait()
 
 
+def _compose_env(**variables: str) -> dict[str, str]:
+    """The environment of a compose run here: its own project, the offline build on the local base."""
+    return {
+        **os.environ,
+        "COMPOSE_PROJECT_NAME": f"tsftest{uuid.uuid4().hex[:8]}",
+        "TSF_BASE": BASE,
+        "TSF_OFFLINE": "1",
+        "TSF_BUILD_NETWORK": "none",
+        "TSF_IMAGE": IMAGE,
+        **variables,
+    }
+
+
 def _containers(env: dict[str, str]) -> dict[str, str]:
     """Service name -> container id of the compose project in `env`."""
     ids = {}
@@ -132,15 +147,7 @@ def test_compose_up_plays_a_full_adaptive_match(engine: None, tmp_path: Path) ->
     step("base-image", [str(ROOT / "docker/base-image"), BASE], 900)
     step("wheelhouse", [str(ROOT / "docker/wheelhouse")], 900)
     match = f"compose-{uuid.uuid4().hex[:8]}"
-    env = {
-        **os.environ,
-        "COMPOSE_PROJECT_NAME": f"tsftest{uuid.uuid4().hex[:8]}",
-        "TSF_BASE": BASE,
-        "TSF_OFFLINE": "1",
-        "TSF_BUILD_NETWORK": "none",
-        "TSF_IMAGE": IMAGE,
-        "TSF_MATCH": match,
-    }
+    env = _compose_env(TSF_MATCH=match)
     _run(["docker", "image", "rm", "--force", IMAGE], 120)  # `up` must build it from this checkout
     try:
         log = step("up", ["docker-compose", "up", "--no-color"], 900, env)
@@ -175,3 +182,33 @@ def test_compose_up_plays_a_full_adaptive_match(engine: None, tmp_path: Path) ->
     assert recording.adapter, "no AdapterStatus in the recording: the adapter did not run"
     assert {(s.role, s.window) for s in recording.adapter} == {("shooter", 400)}
     assert recording.adapter[-1].filled == 400
+
+
+@pytest.mark.docker
+@pytest.mark.slow
+@pytest.mark.timeout(1800)
+def test_compose_run_starts_sweep_workers_for_a_coordinator_on_the_host(engine: None, tmp_path: Path) -> None:
+    """Two `docker compose run -d worker` containers (they start the router) play the jobs of a
+    `tsf sweep` on the host, which reaches them through the router's published port."""
+    for script in ("docker/base-image", "docker/wheelhouse"):
+        made = _run([str(ROOT / script)], 900)
+        assert made.returncode == 0, _tail(made.stdout + made.stderr)
+    port = free_endpoint().rsplit(":", 1)[1]
+    env = _compose_env(TSF_ROUTER_PORT=port, TSF_SWEEP="compose")
+    try:
+        for _ in range(2):
+            started = _run(["docker-compose", "run", "-d", "worker"], 900, env)
+            assert started.returncode == 0, _tail(started.stdout + started.stderr)
+        table = tmp_path / "table.json"
+        sweep = [sys.executable, "-m", "services.cli", "sweep", "--sweep", "compose", "--workers", "0"]
+        sweep += ["--games", "4", "--chunk", "1", "--baits", "B5", "--shooters", "S5", "--out", str(table)]
+        swept = _run([*sweep, "--connect", f"tcp/127.0.0.1:{port}"], 300)
+        assert swept.returncode == 0, _tail(swept.stdout + swept.stderr)
+        workers = _run(["docker", "ps", "-aq", "--filter", f"name={env['COMPOSE_PROJECT_NAME']}_worker"], 60)
+        assert _run(["docker", "wait", *workers.stdout.split()], 60).returncode == 0  # they stop after it
+        logs = [_run(["docker", "logs", c], 60) for c in workers.stdout.split()]
+    finally:
+        _run(["docker-compose", "--profile", "sweep", "down", "--volumes", "--remove-orphans"], 300, env)
+    done = [int(m) for log in logs for m in re.findall(r"did (\d+) jobs", log.stdout + log.stderr)]
+    assert len(done) == 2 and sum(done) == 4, done  # both workers ran, and together did every job
+    assert table.exists()

@@ -27,6 +27,7 @@ from pathlib import Path
 import pytest
 
 from services.recorder.recording import load, replay
+from shared import keys
 from shared.bus import free_endpoint
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -65,6 +66,23 @@ def test_compose_file_follows_the_compose_specification(tmp_path: Path) -> None:
     broken = tmp_path / "compose.yaml"
     broken.write_text(text.replace("\n  sim:\n", "\n  sim:\n    restart_policy: always\n", 1))
     assert _check_schema(broken).returncode != 0, "the schema check accepts an unknown service key"
+
+
+def test_the_healthcheck_probe_finds_only_a_live_token(bus, wait_until) -> None:  # noqa: ANN001 - conftest's
+    """`tsf alive`, the services' healthcheck, asks the hub as a client: a seat's token there is
+    found; a missing or withdrawn one, or an unreachable hub, is not."""
+    bus.open(listen=True)  # the hub
+    token = bus.open().liveliness().declare_token(keys.alive("probe", "agent", "bait"))
+
+    def probe(role: str, endpoint: str = bus.endpoint) -> int:
+        command = [sys.executable, "-m", "services.cli", "alive", "--match", "probe", "--service", "agent"]
+        return _run([*command, "--role", role, "--connect", endpoint], 60).returncode
+
+    assert probe("bait") == 0
+    assert probe("shooter") == 1
+    assert probe("bait", free_endpoint()) == 1
+    token.undeclare()
+    assert wait_until(lambda: probe("bait") == 1, timeout=10)
 
 
 def _docker_ok() -> bool:

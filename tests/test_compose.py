@@ -230,3 +230,59 @@ def test_compose_run_starts_sweep_workers_for_a_coordinator_on_the_host(engine: 
     done = [int(m) for log in logs for m in re.findall(r"did (\d+) jobs", log.stdout + log.stderr)]
     assert len(done) == 2 and sum(done) == 4, done  # both workers ran, and together did every job
     assert table.exists()
+
+
+@pytest.mark.docker
+@pytest.mark.slow
+@pytest.mark.timeout(1800)
+def test_the_human_profile_seats_a_person_from_the_browser(engine: None, tmp_path: Path) -> None:
+    """`docker compose --profile human up --scale agent-bait=0`: a person plays the bait from Debian's
+    Chromium through the published port, with the adaptive shooter; the recording says so."""
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    if chromium is None:
+        pytest.skip("Debian's chromium is not installed (.ci/run installs it)")
+    sync_api = pytest.importorskip("playwright.sync_api")
+    for script in ("docker/base-image", "docker/wheelhouse"):
+        made = _run([str(ROOT / script)], 900)
+        assert made.returncode == 0, _tail(made.stdout + made.stderr)
+    port, match, frames = free_endpoint().rsplit(":", 1)[1], f"human-{uuid.uuid4().hex[:8]}", 300
+    env = _compose_env(
+        TSF_MATCH=match, TSF_FRAMES=str(frames), TSF_BAIT="human", TSF_HUMAN_TOKEN="t0k", TSF_HUMAN_PORT=port
+    )
+    try:
+        up = ["docker-compose", "--profile", "human", "up", "-d", "--scale", "agent-bait=0"]
+        started = _run(up, 900, env)
+        assert started.returncode == 0, _tail(started.stdout + started.stderr)
+        with sync_api.sync_playwright() as playwright:
+            browser = playwright.chromium.launch(executable_path=chromium, args=["--no-sandbox"])
+            page = browser.new_page()
+            deadline = time.monotonic() + 60
+            while True:  # the gateway's page, once its container serves it
+                try:
+                    page.goto(f"http://127.0.0.1:{port}/?role=bait&token=t0k")
+                    break
+                except sync_api.Error:
+                    assert time.monotonic() < deadline, "the human gateway never served its page"
+                    time.sleep(1)
+            page.wait_for_function("window.tsf.phase === 'instructions'", timeout=30_000)
+            page.keyboard.press("Space")  # start
+            page.wait_for_function("window.tsf.phase === 'playing'", timeout=60_000)
+            page.keyboard.down("ArrowLeft")
+            page.wait_for_timeout(1000)
+            page.keyboard.up("ArrowLeft")
+            page.wait_for_function("window.tsf.phase === 'ended'", timeout=frames / 30 * 1000 + 30_000)
+            browser.close()
+        recorder = _run(["docker-compose", "ps", "-q", "recorder"], 60, env).stdout.strip()
+        assert _run(["docker", "wait", recorder], 60).stdout.strip() == "0"
+        copied = _run(["docker", "cp", f"{recorder}:/recordings/{match}.tsflog", str(tmp_path)], 60)
+        assert copied.returncode == 0, copied.stderr
+    finally:
+        _run(["docker-compose", "--profile", "human", "down", "--volumes", "--remove-orphans"], 300, env)
+
+    recording = load(tmp_path / f"{match}.tsflog")
+    assert recording.summary is not None and recording.summary.frame == frames
+    assert recording.start.policies == {"bait": "human", "shooter": "adaptive-T400-cem"}
+    bait = [a for _, a in recording.actions if a.role == "bait"]
+    assert bait and all(a.sender == "human/bait" for a in bait), "only the person played the bait"
+    assert sum(1 for a in bait if a.action // 4 == 1) >= 15, "about a second of held left arrow arrived"
+    assert recording.adapter, "the adapter watched the person"

@@ -36,7 +36,7 @@ from services.adapter.core import (
     ood_threshold,
     other,
 )
-from services.adapter.partners import SWITCH_AT, Noisy, Partner, Switching, make_partner
+from services.adapter.partners import SWITCH_AT, Noisy, Partner, Switching, group_of, make_partner
 from services.agent import library
 from services.agent.library import batch_probs
 from services.agent.policy import Policy
@@ -194,7 +194,7 @@ def compare(rows: list[dict]) -> dict:
     for r in rows:
         grid.setdefault(r["agent"], {})[(r["partner"], r["seed"])] = r["kills_per_minute"]
     values = {a: np.array([g[u] for u in units]) for a, g in grid.items()}
-    agents = {a: {"mean": float(v.mean()), "stderr": _stderr(v), "n": len(v)} for a, v in values.items()}
+    agents = {a: _summary(v) for a, v in values.items()}
     statics = [a for a in values if not _ADAPTIVE.match(a)]
     best = max(statics, key=lambda a: agents[a]["mean"])
     partners = sorted({u[0] for u in units})
@@ -222,13 +222,28 @@ def compare(rows: list[dict]) -> dict:
             "partners_better": int((by_partner > 0).sum()),
             "partners": len(partners),
         }
+    per_partner = {
+        p: {a: _summary([grid[a][u] for u in units if u[0] == p]) for a in values} for p in partners
+    }
+    groups = {group_of(p) for p in partners}
+    per_group = {
+        g: {a: _summary([grid[a][u] for u in units if group_of(u[0]) == g]) for a in values}
+        for g in sorted(groups)
+    }
     return {
         "units": len(units),
         "partners": len(partners),
         "best_static": best,
         "agents": agents,
         "tests": tests,
+        "per_partner": per_partner,
+        "per_group": per_group,
     }
+
+
+def _summary(values: list[float]) -> dict:
+    array = np.array(values)
+    return {"mean": float(array.mean()), "stderr": _stderr(array), "n": len(array)}
 
 
 # --- identification ------------------------------------------------------------------------------
@@ -409,6 +424,16 @@ def _csv(path: Path, header: list[str], rows: Iterable[Iterable]) -> None:
         writer.writerows(rows)
 
 
+def _group_table(comparison: dict) -> list[str]:
+    groups = list(comparison["per_group"])
+    agents = sorted(comparison["agents"], key=lambda a: (a.startswith("adaptive"), a))
+    rows = [
+        f"| {a} | " + " | ".join(f"{comparison['per_group'][g][a]['mean']:.2f}" for g in groups) + " |"
+        for a in agents
+    ]
+    return ["| agent | " + " | ".join(groups) + " |", "| --- |" + " --- |" * len(groups), *rows]
+
+
 def write_results(
     out: Path, identification_result: dict | None, rows: list[dict], comparison: dict | None
 ) -> Path:
@@ -439,12 +464,25 @@ def write_results(
     if comparison:
         (out / "comparison.json").write_text(json.dumps(comparison, indent=1) + "\n")
         agents = comparison["agents"]
+        _csv(
+            out / "per_partner.csv",
+            ["partner", "group", "agent", "kills_per_minute", "stderr", "games"],
+            (
+                [p, group_of(p), a, f"{v['mean']:.4f}", f"{v['stderr']:.4f}", v["n"]]
+                for p, by_agent in comparison["per_partner"].items()
+                for a, v in by_agent.items()
+            ),
+        )
         lines += [
             f"## Team performance ({comparison['partners']} partners, {comparison['units']} games per agent)",
             "",
             "| agent | kills/min | s.e. |",
             "| --- | --- | --- |",
             *(f"| {a} | {v['mean']:.3f} | {v['stderr']:.3f} |" for a, v in sorted(agents.items())),
+            "",
+            "Mean kills/min by partner group (every partner: per_partner.csv):",
+            "",
+            *_group_table(comparison),
             "",
             f"Best static policy: **{comparison['best_static']}**.",
             "",

@@ -62,3 +62,5 @@ def test_compare_pairs_by_partner_and_seed() -> None:
     assert np.isclose(test["d_z"], diff.mean() / diff.std(ddof=1))
     assert test["partners_better"] == 3
     assert np.isclose(result["agents"]["S2"]["mean"], np.mean(truth["S2"]))
+    assert result["per_partner"]["P2"]["S1"]["n"] == 6 and set(result["per_group"]) == {"outside"}
+    assert np.isclose(result["per_partner"]["P2"]["S1"]["mean"], np.mean(truth["S1"][6:12]))

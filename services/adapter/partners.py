@@ -155,6 +155,16 @@ def _external(path: str, role: str) -> Partner:
     return partner
 
 
+def group_of(name: str) -> str:
+    """A partner's group in the population: its outer wrapper, library, or outside."""
+    call = _CALL.match(name)
+    if call:
+        return {"noisy": "noisy", "delayed": "delayed", "sticky": "sticky", "switch": "switching"}.get(
+            call[1], "outside"
+        )
+    return "library" if name in library.registry() else "outside"
+
+
 def population(role: str) -> dict[str, list[str]]:
     """The default evaluation population of partners of `role`, by group: every library policy,
     its noisy, delayed and sticky stand-ins, switchers between library policies of different

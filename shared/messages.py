@@ -364,6 +364,15 @@ def decode(data: bytes | bytearray | memoryview, expected: type[M]) -> M:
     return _build(_unpack(data), expected)
 
 
+def decode_seat_action(data: bytes | bytearray | memoryview, key: str, match: str) -> Action:
+    """An action that arrived on `key` (tsf/<match>/action/<role>): valid, of this match, and of
+    the seat the key names; else MessageError (a spoofed or misrouted action is a `mismatch`)."""
+    action = decode(data, Action)
+    if action.match != match or key.rsplit("/", 1)[-1] != action.role:
+        raise MessageError("mismatch", f"{action.role} action for {action.match} on {key}")
+    return action
+
+
 def decode_any(data: bytes | bytearray | memoryview) -> Message:
     """Bytes -> a validated message of whichever known type it declares (for the recorder)."""
     record = _unpack(data)

@@ -20,7 +20,7 @@ from services.agent import library
 from services.table.table import DEFAULT_TABLE, Table
 from shared import keys
 from shared.bus import BusConfig, Drops, session, stop_on_summary
-from shared.messages import Action, AdapterStatus, MessageError, PolicySwitch, State, decode
+from shared.messages import AdapterStatus, MessageError, PolicySwitch, State, decode, decode_seat_action
 
 log = logging.getLogger("tsf.adapter")
 SENDER = "adapter"
@@ -92,12 +92,8 @@ def run_adapter(
 
         def on_action(sample: zenoh.Sample) -> None:
             try:
-                action = decode(sample.payload.to_bytes(), Action)
-                if action.match != match or action.role != keys.role_of(sample.key_expr):
-                    raise MessageError(
-                        "mismatch", f"{action.role} action of {action.match} on {sample.key_expr}"
-                    )
-            except (MessageError, ValueError) as error:
+                action = decode_seat_action(sample.payload.to_bytes(), str(sample.key_expr), match)
+            except MessageError as error:
                 drops.drop(str(sample.key_expr), error)
                 return
             with lock:

@@ -22,7 +22,7 @@ from services.sim.engine import Game
 from services.sim.match import Seats, event_messages, start_message, state_message, summary_message
 from shared import keys
 from shared.bus import BusConfig, Drops, session
-from shared.messages import Action, MessageError, Summary, decode
+from shared.messages import MessageError, Summary, decode_seat_action
 
 log = logging.getLogger("tsf.sim")
 MODES = ("realtime", "lockstep")
@@ -58,12 +58,8 @@ def run_sim(
     def on_action(sample: zenoh.Sample) -> None:
         arrived = time.perf_counter_ns()
         try:
-            action = decode(sample.payload.to_bytes(), Action)
-            if action.match != match or action.role != keys.role_of(sample.key_expr):
-                raise MessageError(
-                    "mismatch", f"{action.role} action for {action.match} on {sample.key_expr}"
-                )
-        except (MessageError, ValueError) as error:
+            action = decode_seat_action(sample.payload.to_bytes(), str(sample.key_expr), match)
+        except MessageError as error:
             drops.drop(str(sample.key_expr), error)
             return
         with changed:

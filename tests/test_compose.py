@@ -200,6 +200,12 @@ def test_compose_up_plays_a_full_adaptive_match(engine: None, tmp_path: Path) ->
     assert recording.adapter, "no AdapterStatus in the recording: the adapter did not run"
     assert {(s.role, s.window) for s in recording.adapter} == {("shooter", 400)}
     assert recording.adapter[-1].filled == 400
+    # The adaptive loop through the containers: B6's best response is not the initial S5, so the
+    # adapter switched the shooter, and the shooter agent plays what the adapter chose last.
+    assert recording.switches and {s.sender for s in recording.switches} == {"adapter"}
+    shooter = [a for _, a in recording.actions if a.role == "shooter"]
+    assert shooter[0].policy == "S5" and shooter[-1].policy == recording.adapter[-1].policy
+    assert recording.switches[-1].policy == recording.adapter[-1].policy
 
 
 @pytest.mark.docker

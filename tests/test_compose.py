@@ -5,7 +5,8 @@ The engine test installs Debian's docker.io, docker-compose and debootstrap (doc
 starts dockerd unless one already runs (and then stops it by its pid), builds the base image with
 debootstrap (no image registry is reachable) and the wheelhouse on the host, builds the image with
 no network at all, runs compose.yaml as it ships, and reads the recording the match left in the
-volume. It skips, with the reason, where the engine cannot be installed or started.
+volume; then sweep workers started by `docker compose run`, and a person in Chromium through the
+human profile. They skip, with the reason, where the engine cannot be installed or started.
 
 Compose tool: Debian's docker-compose 1.29.2, signed by the same archive as the engine and needing
 no build plugin; the Compose Specification check (check-jsonschema's vendored schema) keeps the
@@ -121,6 +122,31 @@ def engine(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
             dockerd.wait()
 
 
+def _step(
+    name: str, command: list[str], timeout: float, logs: Path, took: dict[str, float], **env: str
+) -> str:
+    """Run one timed step of the engine tests; its output goes to a log, shown if it fails."""
+    started = time.monotonic()
+    done = _run(command, timeout, {**os.environ, **env}, logs / f"{name}.log")
+    took[name] = time.monotonic() - started
+    log = (logs / f"{name}.log").read_text()
+    assert done.returncode == 0, f"{name} failed:\n{_tail(log, 60)}"
+    return log
+
+
+@pytest.fixture(scope="module")
+def inputs(engine: None, tmp_path_factory: pytest.TempPathFactory) -> dict[str, float]:
+    """What the image is built from, made once: the base image and the wheelhouse (each kept when
+    already there). The test image is removed, so that the first compose command builds it from this
+    checkout. Returns the seconds each step took."""
+    took: dict[str, float] = {}
+    logs = tmp_path_factory.mktemp("inputs")
+    _step("base-image", [str(ROOT / "docker/base-image"), BASE], 900, logs, took)
+    _step("wheelhouse", [str(ROOT / "docker/wheelhouse")], 900, logs, took)
+    _run(["docker", "image", "rm", "--force", IMAGE], 120)
+    return took
+
+
 def _compose_env(**variables: str) -> dict[str, str]:
     """The environment of a compose run here: its own project, the offline build on the local base."""
     return {
@@ -151,24 +177,12 @@ def _inspect(container: str, template: str) -> str:
 @pytest.mark.docker
 @pytest.mark.slow
 @pytest.mark.timeout(1800)
-def test_compose_up_plays_a_full_adaptive_match(engine: None, tmp_path: Path) -> None:
-    took: dict[str, float] = {}
-
-    def step(name: str, command: list[str], timeout: float, env: dict[str, str] | None = None) -> str:
-        started = time.monotonic()
-        done = _run(command, timeout, env, tmp_path / f"{name}.log")
-        took[name] = time.monotonic() - started
-        log = (tmp_path / f"{name}.log").read_text()
-        assert done.returncode == 0, f"{name} failed:\n{_tail(log, 60)}"
-        return log
-
-    step("base-image", [str(ROOT / "docker/base-image"), BASE], 900)
-    step("wheelhouse", [str(ROOT / "docker/wheelhouse")], 900)
+def test_compose_up_plays_a_full_adaptive_match(inputs: dict[str, float], tmp_path: Path) -> None:
+    took = dict(inputs)
     match = f"compose-{uuid.uuid4().hex[:8]}"
     env = _compose_env(TSF_MATCH=match)
-    _run(["docker", "image", "rm", "--force", IMAGE], 120)  # `up` must build it from this checkout
     try:
-        log = step("up", ["docker-compose", "up", "--no-color"], 900, env)
+        log = _step("up", ["docker-compose", "up", "--no-color"], 900, tmp_path, took, **env)
         containers = _containers(env)
         exits = {service: _inspect(c, "{{.State.ExitCode}}") for service, c in containers.items()}
         assert exits == dict.fromkeys(MATCH_SERVICES, "0"), (exits, _tail(log, 60))
@@ -211,12 +225,9 @@ def test_compose_up_plays_a_full_adaptive_match(engine: None, tmp_path: Path) ->
 @pytest.mark.docker
 @pytest.mark.slow
 @pytest.mark.timeout(1800)
-def test_compose_run_starts_sweep_workers_for_a_coordinator_on_the_host(engine: None, tmp_path: Path) -> None:
+def test_compose_run_starts_sweep_workers_for_a_coordinator_on_the_host(inputs: dict, tmp_path: Path) -> None:
     """Two `docker compose run -d worker` containers (they start the router) play the jobs of a
     `tsf sweep` on the host, which reaches them through the router's published port."""
-    for script in ("docker/base-image", "docker/wheelhouse"):
-        made = _run([str(ROOT / script)], 900)
-        assert made.returncode == 0, _tail(made.stdout + made.stderr)
     port = free_endpoint().rsplit(":", 1)[1]
     env = _compose_env(TSF_ROUTER_PORT=port, TSF_SWEEP="compose")
     try:
@@ -241,16 +252,13 @@ def test_compose_run_starts_sweep_workers_for_a_coordinator_on_the_host(engine: 
 @pytest.mark.docker
 @pytest.mark.slow
 @pytest.mark.timeout(1800)
-def test_the_human_profile_seats_a_person_from_the_browser(engine: None, tmp_path: Path) -> None:
+def test_the_human_profile_seats_a_person_from_the_browser(inputs: dict, tmp_path: Path) -> None:
     """`docker compose --profile human up --scale agent-bait=0`: a person plays the bait from Debian's
     Chromium through the published port, with the adaptive shooter; the recording says so."""
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
     if chromium is None:
         pytest.skip("Debian's chromium is not installed (.ci/run installs it)")
     sync_api = pytest.importorskip("playwright.sync_api")
-    for script in ("docker/base-image", "docker/wheelhouse"):
-        made = _run([str(ROOT / script)], 900)
-        assert made.returncode == 0, _tail(made.stdout + made.stderr)
     port, match, frames = free_endpoint().rsplit(":", 1)[1], f"human-{uuid.uuid4().hex[:8]}", 300
     env = _compose_env(
         TSF_MATCH=match, TSF_FRAMES=str(frames), TSF_BAIT="human", TSF_HUMAN_TOKEN="t0k", TSF_HUMAN_PORT=port

@@ -50,7 +50,7 @@ def run_adapter(
     partner_role = config.partner_role
     pairing, drops, lock = Pairing(), Drops(SENDER), threading.Lock()
     agent = {"policy": "", "asked": "", "asked_at": -RESEND_FRAMES}  # what the agent plays; last request
-    reported = [-1]  # the adapter's frame count at the last status put
+    reported = {"frames": -1, "partner": ""}  # the adapter's frame count and estimate at the last status
     latest = [0]  # the newest frame scored
 
     with session(bus) as z:
@@ -59,7 +59,7 @@ def run_adapter(
 
         def report(frame: int) -> None:
             status.put(AdapterStatus(match, frame, SENDER, **adapter.status()).encode())
-            reported[0] = adapter.frames
+            reported.update(frames=adapter.frames, partner=adapter.partner)
 
         def feed(pair: tuple[list[float], int] | None, frame: int) -> None:
             """Score one paired frame, and switch the agent when due (under `lock`)."""
@@ -77,6 +77,8 @@ def run_adapter(
                 switch.put(PolicySwitch(match, frame, SENDER, config.role, adapter.policy, reason).encode())
                 agent.update(asked=adapter.policy, asked_at=frame)
                 log.info("frame %d: %s; switching the %s to %s", frame, reason, config.role, adapter.policy)
+                report(frame)
+            elif adapter.partner != reported["partner"]:  # a new estimate is worth a report at once
                 report(frame)
 
         def on_state(sample: zenoh.Sample) -> None:
@@ -111,7 +113,7 @@ def run_adapter(
         try:
             while not stop.wait(1.0 / status_hz):  # a modest report rate, whatever the frame rate
                 with lock:
-                    if adapter.frames != reported[0]:
+                    if adapter.frames != reported["frames"]:
                         report(latest[0])
         finally:
             token.undeclare()

@@ -560,7 +560,9 @@ Port = Annotated[int, typer.Option(help="Port of the web page (0: any free port)
 @app.command()
 def human(
     match: Match,
-    token: list[str] = typer.Option(..., "--token", help="ROLE=TOKEN: a seat open to people (repeatable)."),
+    token: list[str] | None = typer.Option(
+        None, "--token", help="ROLE=TOKEN: a seat open to people (repeatable; none: spectators only)."
+    ),
     host: Host = "127.0.0.1",
     port: Port = 8000,
     zmode: Mode = "peer",
@@ -571,10 +573,12 @@ def human(
     user: User = "",
     password: Password = "",
 ) -> None:
-    """Run the human gateway: a web page that plays a match's seats from browsers, by seat token."""
+    """Run the human gateway: a web page that plays a match's seats from browsers, by seat token,
+    and shows the match (or its live replay) to spectators."""
     from services.human.gateway import run_human
     from services.human.play import seat_links
 
+    token = token or []
     tokens = dict(t.split("=", 1) for t in token if "=" in t)
     if len(tokens) != len(token):
         raise typer.BadParameter("give each seat as ROLE=TOKEN")
@@ -583,6 +587,7 @@ def human(
     def show(gateway) -> None:  # noqa: ANN001 - a Gateway
         for role, link in seat_links(gateway.url, tokens).items():
             console.print(f"{role}: {link}")
+        console.print(f"watch: {gateway.url}?watch=1")
 
     run_human(bus, match, tokens, host, port, stop_on_signals(), show)
 

@@ -14,9 +14,11 @@ import pytest
 from services.human.core import SeatBook
 from services.human.gateway import Gateway, seat_handler
 from services.human.play import play_with_people, seat_links
-from services.launch import HUMAN, MatchPlan
+from services.launch import HUMAN, MatchPlan, run_match
 from services.recorder.recording import load
+from services.recorder.replay import republish
 from services.sim.config import GameConfig
+from shared.messages import Action
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is not installed")
@@ -111,3 +113,21 @@ def test_a_wrong_seat_token_is_refused_in_the_page(browser, bus):
         page.wait_for_function("window.tsf.phase === 'refused'", timeout=10_000)
         assert page.locator("#title").inner_text() == "Seat refused"
         assert page.locator("#text").inner_text() == "wrong seat token for the bait seat"
+
+
+def test_a_spectator_watches_a_live_replay_in_the_page(browser, bus, tap, tmp_path):
+    """`tsf replay --live` into a gateway: a spectator's page draws the recorded match and its end,
+    and watching puts nothing on the bus."""
+    _, recording = run_match(MatchPlan("watched", 2, 120, "lockstep", "circle", "mirror", tmp_path))
+    recorded = tap(bus.open(listen=True), "watched")
+    with Gateway(bus.config(), seat_handler("watched", SeatBook({})), port=0) as gateway:
+        page = browser.new_page()
+        page.goto(f"{gateway.url}?watch=1")
+        page.wait_for_function("window.tsf.phase === 'waiting'", timeout=10_000)
+        assert page.locator("#title").inner_text() == "Watching"
+        sent = republish(bus.config(), recording, speed=2.0, delay=1.0)
+        page.wait_for_function("window.tsf.phase === 'ended'", timeout=30_000)
+        assert sent > 120 and page.evaluate("window.tsf.frame.frame") == 120
+        assert page.evaluate("window.tsf.drawn") > 30  # frames drawn as they came (at most one per paint)
+        assert page.locator("#title").inner_text() == "Time is up"
+    assert not recorded.of(Action) and not recorded.is_alive("human", "bait")  # watching plays no seat

@@ -5,6 +5,7 @@ shell), so every rule about a person's input is tested directly.
 The browser protocol is JSON text frames. Up (browser -> gateway):
 
     {"type": "join", "role": "bait", "token": "...", "obs": false}   first message, claims a seat
+    {"type": "watch"}                                                 or: watch, playing no seat
     {"type": "ready"}                                                 instructions read: play
     {"type": "keys", "left": b, "right": b, "thrust": b, "fire": b}   the held keys, on every change
 
@@ -75,6 +76,7 @@ def _short_text(v: object) -> bool:
 
 _FIELDS: dict[str, dict[str, Callable[[object], bool]]] = {
     "join": {"role": lambda v: v in ROLES, "token": _short_text, "obs": _is_bool},
+    "watch": {},
     "ready": {},
     "keys": dict.fromkeys(KEYS, _is_bool),
     # the study runner's messages (services/study/runner.py)

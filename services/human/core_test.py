@@ -66,6 +66,9 @@ def test_a_message_type_is_only_taken_where_it_is_expected() -> None:
     assert parse(join, ("join",))["role"] == "bait"
     with pytest.raises(BadInput):
         parse(join, ("ready", "keys"))
+    assert parse('{"type": "watch"}', ("join", "watch")) == {"type": "watch"}
+    with pytest.raises(BadInput, match="shape"):
+        parse('{"type": "watch", "role": "bait"}', ("join", "watch"))  # a spectator claims nothing
 
 
 def test_controls_hold_the_latest_keys_and_count_drops() -> None:

@@ -5,7 +5,9 @@ State from the sim is answered at once, on zenoh's thread, with the seat's lates
 sim stays the clock and a slow browser never delays an action), and handed to the connection as
 the newest frame to draw: a browser that falls behind skips frames, it never queues them. The
 seat's liveliness token is declared once the person is ready and goes when the socket closes, so
-a dropped connection leaves the ship idle (the sim plays no-op) and the match goes on.
+a dropped connection leaves the ship idle (the sim plays no-op) and the match goes on. A
+spectator's connection (`watch`) gets the same frames and plays no seat: it never publishes and
+holds no token, so anyone may watch a match or its live replay (`tsf replay --live`).
 """
 
 from __future__ import annotations
@@ -80,19 +82,26 @@ class Outbox:
 
 class Bridge:
     """One seat of one match on the bus, for one connection: answers each state with the held keys
-    (once the person is ready), forwards frames and the result down, holds the seat's token."""
+    (once the person is ready), forwards frames and the result down, holds the seat's token. With
+    no role it only forwards (a spectator)."""
 
     def __init__(
-        self, z: zenoh.Session, match: str, role: str, controls: Controls, outbox: Outbox, obs: bool = False
+        self,
+        z: zenoh.Session,
+        match: str,
+        role: str | None,
+        controls: Controls,
+        outbox: Outbox,
+        obs: bool = False,
     ) -> None:
         self.z, self.match, self.role, self.controls, self.outbox = z, match, role, controls, outbox
         self.obs = obs  # also send the seat's observation values (for scripted stand-ins)
-        self.sender = f"human/{role}"
+        self.sender = f"human/{role or 'watch'}"
         self.drops = Drops(self.sender)
         self.config = GameConfig()
         self.summary = threading.Event()
         self.token: zenoh.LivelinessToken | None = None
-        self.publisher = z.declare_publisher(
+        self.publisher = role and z.declare_publisher(
             keys.action(match, role), congestion_control=zenoh.CongestionControl.DROP, express=True
         )
         self.subscribers = [
@@ -103,7 +112,7 @@ class Bridge:
 
     def live(self) -> None:
         """The person is ready: take the seat on the bus (the sim waits for it)."""
-        if self.token is None:
+        if self.token is None and self.role is not None:
             self.token = self.z.liveliness().declare_token(keys.alive(self.match, "human", self.role))
 
     def _decode(self, sample: zenoh.Sample, kind: type) -> object | None:
@@ -124,7 +133,7 @@ class Bridge:
             action = Action(self.match, state.frame, self.sender, self.role, self.controls.action, "")
             self.publisher.put(action.encode())
         frame = view(state)
-        if self.obs:
+        if self.obs and self.role is not None:
             frame["obs"] = state.obs[self.role]
         self.outbox.offer(json.dumps(frame, separators=(",", ":")))
 
@@ -146,7 +155,8 @@ class Bridge:
             self.token = None
         for subscriber in self.subscribers:
             subscriber.undeclare()
-        self.publisher.undeclare()
+        if self.publisher:
+            self.publisher.undeclare()
 
 
 async def play_seat(ws: ServerConnection, bridge: Bridge, outbox: Outbox) -> None:
@@ -262,11 +272,15 @@ class Gateway:
 
 
 def seat_handler(match: str, book: SeatBook, done: threading.Event | None = None) -> Handler:
-    """Serve the seats of one match: each socket joins one seat by its token and plays it."""
+    """Serve the seats of one match: each socket joins one seat by its token and plays it, or
+    watches."""
 
     async def handle(ws: ServerConnection, z: zenoh.Session) -> None:
-        join = await receive_first(ws, ("join",))
+        join = await receive_first(ws, ("join", "watch"))
         if join is None:
+            return
+        if join["type"] == "watch":
+            await watch(ws, z, match)
             return
         reason = book.claim(join["role"], join["token"], ws)
         if reason:
@@ -291,6 +305,19 @@ def seat_handler(match: str, book: SeatBook, done: threading.Event | None = None
                 done.set()
 
     return handle
+
+
+async def watch(ws: ServerConnection, z: zenoh.Session, match: str) -> None:
+    """A spectator: the match's frames and result go down, nothing goes on the bus."""
+    outbox = Outbox(asyncio.get_running_loop())
+    bridge = Bridge(z, match, None, Controls(), outbox)
+    try:
+        await ws.send(json.dumps({"type": "welcome", "match": match, "role": None, **setup(bridge.config)}))
+        await play_seat(ws, bridge, outbox)
+    except websockets.ConnectionClosed:
+        pass
+    finally:
+        bridge.close()
 
 
 def run_human(

@@ -1,7 +1,8 @@
 // Team Space Fortress in the browser: draws the frames the gateway sends and sends the held keys.
 // The sim is the clock; this page only draws (once per frame received, so at the game's 30 fps)
-// and reports key changes. Two ways in: a seat link (?role=R&token=T, from `tsf play`) or the
-// study's front door (no token: consent, role, sessions of trials; see services/study/runner.py).
+// and reports key changes. Three ways in: a seat link (?role=R&token=T, from `tsf play`), a
+// spectator's link (?watch=1: a match or its live replay, playing no seat), or the study's front
+// door (no token: consent, role, sessions of trials; see services/study/runner.py).
 "use strict";
 
 const COLOURS = {
@@ -72,6 +73,11 @@ const handlers = {
   welcome(m) {
     tsf.role = m.role;
     tsf.geometry = m;
+    if (m.role === null) {  // a spectator: frames are drawn as they come
+      tsf.phase = "waiting";
+      show("Watching", `Match ${m.match}: waiting for its frames\u2026`);
+      return;
+    }
     tsf.phase = "instructions";
     show(`You play the ${m.role}`, instructions(m.role), "Start", ready);
   },
@@ -135,7 +141,9 @@ function connect() {
   const scheme = location.protocol === "https:" ? "wss://" : "ws://";
   socket = new WebSocket(scheme + location.host + "/ws");
   socket.onopen = () => {
-    if (params.has("token")) {
+    if (params.has("watch")) {
+      send({ type: "watch" });
+    } else if (params.has("token")) {
       send({ type: "join", role: params.get("role") || "", token: params.get("token") });
     } else {
       const saved = JSON.parse(localStorage.getItem("tsf-participant") || "{}");

@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
+import functools
+import inspect
 import logging
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated
 
@@ -44,20 +48,36 @@ Match = Annotated[
 ]
 
 
-def _bus(
-    mode: str,
-    listen: list[str] | None,
-    connect: list[str] | None,
-    multicast: bool,
-    low_latency: bool,
-    user: str,
-    password: str,
-) -> BusConfig:
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
-    listen_default = () if mode == "client" else ("tcp/127.0.0.1:0",)
-    return BusConfig(
-        mode, tuple(listen or listen_default), tuple(connect or ()), multicast, low_latency, user, password
-    )
+BUS_OPTIONS = {  # parameter name: (annotation, default)
+    "zmode": (Mode, "peer"),
+    "listen": (Listen, None),
+    "connect": (Connect, None),
+    "multicast": (Multicast, False),
+    "low_latency": (LowLatency, False),
+    "user": (User, ""),
+    "password": (Password, ""),
+}
+
+
+def bus_options(command: Callable[..., None]) -> Callable[..., None]:
+    """Give a service's command the bus options every service shares; the command receives them as
+    one `bus: BusConfig` (and logging is set up, since services log)."""
+    own = [p for p in inspect.signature(command, eval_str=True).parameters.values() if p.name != "bus"]
+    shared = [
+        inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=default, annotation=annotation)
+        for name, (annotation, default) in BUS_OPTIONS.items()
+    ]
+
+    @functools.wraps(command)
+    def with_bus(**options: object) -> None:
+        mode, listen, connect, multicast, low_latency, user, password = (options.pop(n) for n in BUS_OPTIONS)
+        logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+        listen = listen or (() if mode == "client" else ("tcp/127.0.0.1:0",))
+        bus = BusConfig(mode, tuple(listen), tuple(connect or ()), multicast, low_latency, user, password)
+        command(bus=bus, **options)
+
+    with_bus.__signature__ = inspect.Signature(own + shared)
+    return with_bus
 
 
 @app.command()
@@ -181,6 +201,7 @@ def _keys(text: str, role: str) -> list[str]:
 
 
 @app.command()
+@bus_options
 def sweep(
     games: int = typer.Option(20, min=1, help="Seeded one-minute games per pair (seeds 0..games-1)."),
     baits: str = typer.Option("", help="Comma-separated baits (default: all)."),
@@ -190,13 +211,8 @@ def sweep(
     out: Path = typer.Option(Path("services/agent/library/table.json"), help="Where the table goes."),
     plot: Path | None = typer.Option(None, help="Also draw the heatmap into this PNG."),
     sweep_id: str = typer.Option("table", "--sweep", help="Sweep id: the key namespace tsf/sweep/<id>/..."),
-    zmode: Mode = "peer",
-    listen: Listen = None,
-    connect: Connect = None,
-    multicast: Multicast = False,
-    low_latency: LowLatency = False,
-    user: User = "",
-    password: Password = "",
+    *,
+    bus: BusConfig,
 ) -> None:
     """Coordinate a self-play sweep: measure the table with local and remote workers; resumable."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
@@ -206,8 +222,8 @@ def sweep(
 
     bait_keys, shooter_keys = _keys(baits, "bait"), _keys(shooters, "shooter")
     endpoint = free_endpoint()
-    listen = [*(listen or ()), endpoint] if zmode != "client" else listen
-    bus = _bus(zmode, listen, connect, multicast, low_latency, user, password)
+    if bus.mode != "client":
+        bus = dataclasses.replace(bus, listen=(*bus.listen, endpoint))
     stop = stop_on_signals()
     columns = (BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
     with local_workers(sweep_id, endpoint, workers), Progress(*columns, console=console) as bar:
@@ -228,16 +244,12 @@ def sweep(
 
 
 @app.command()
+@bus_options
 def worker(
     sweep_id: str = typer.Option("table", "--sweep", help="The sweep to work for."),
     worker_id: str = typer.Option("", "--id", help="This worker's name (default: host and pid)."),
-    zmode: Mode = "peer",
-    listen: Listen = None,
-    connect: Connect = None,
-    multicast: Multicast = False,
-    low_latency: LowLatency = False,
-    user: User = "",
-    password: Password = "",
+    *,
+    bus: BusConfig,
 ) -> None:
     """Run a sweep worker: plays the jobs a coordinator hands it, until the coordinator is gone."""
     import os
@@ -246,7 +258,6 @@ def worker(
     from services.table.sweep import run_worker
 
     name = worker_id or f"{socket.gethostname()}-{os.getpid()}".replace(".", "-")
-    bus = _bus(zmode, listen, connect, multicast, low_latency, user, password)
     done = run_worker(bus, sweep_id, name, stop_on_signals())
     logging.getLogger("tsf.worker").info("worker %s did %d jobs", name, done)
 
@@ -288,6 +299,7 @@ def table_command(
 
 
 @app.command()
+@bus_options
 def sim(
     match: Match,
     seed: int = typer.Option(0),
@@ -298,18 +310,12 @@ def sim(
     wait_players: float = typer.Option(10.0, help="Seconds to wait for both seats before starting."),
     wait_recorder: float = typer.Option(0.0, help="Seconds to wait for a recorder before starting."),
     wait_adapter: float = typer.Option(0.0, help="Seconds to wait for an adapter before starting."),
-    zmode: Mode = "peer",
-    listen: Listen = None,
-    connect: Connect = None,
-    multicast: Multicast = False,
-    low_latency: LowLatency = False,
-    user: User = "",
-    password: Password = "",
+    *,
+    bus: BusConfig,
 ) -> None:
     """Run the sim service for one match."""
     from services.sim.service import run_sim
 
-    bus = _bus(zmode, listen, connect, multicast, low_latency, user, password)
     summary = run_sim(
         bus, match, seed, GameConfig(frames=frames), mode, {"bait": bait, "shooter": shooter},
         stop_on_signals(), wait_players, wait_recorder, wait_adapter=wait_adapter,
@@ -320,24 +326,20 @@ def sim(
 
 
 @app.command()
+@bus_options
 def agent(
     match: Match,
     role: str = typer.Option(..., help="bait or shooter"),
     policy: str = typer.Option(..., help="Policy key to play (a library or scripted key)."),
     seed: int = typer.Option(0, help="The match's seed (the policy's seed derives from it)."),
-    zmode: Mode = "peer",
-    listen: Listen = None,
-    connect: Connect = None,
-    multicast: Multicast = False,
-    low_latency: LowLatency = False,
-    user: User = "",
-    password: Password = "",
+    *,
+    bus: BusConfig,
 ) -> None:
     """Run an agent service that plays one seat."""
     from services.agent.service import run_agent
 
     run_agent(
-        _bus(zmode, listen, connect, multicast, low_latency, user, password),
+        bus,
         match,
         role,
         policy,
@@ -347,27 +349,22 @@ def agent(
 
 
 @app.command()
+@bus_options
 def recorder(
     match: Match,
     out: Path = typer.Option(Path("recordings"), help="Directory of the recordings."),
-    zmode: Mode = "peer",
-    listen: Listen = None,
-    connect: Connect = None,
-    multicast: Multicast = False,
-    low_latency: LowLatency = False,
-    user: User = "",
-    password: Password = "",
+    *,
+    bus: BusConfig,
 ) -> None:
     """Run the recorder service for one match."""
     from services.recorder.service import run_recorder
 
-    path = run_recorder(
-        _bus(zmode, listen, connect, multicast, low_latency, user, password), match, out, stop_on_signals()
-    )
+    path = run_recorder(bus, match, out, stop_on_signals())
     logging.getLogger("tsf.recorder").info("recording written to %s", path)
 
 
 @app.command()
+@bus_options
 def adapter(
     match: Match,
     role: str = typer.Option("shooter", help="The seat of the adaptive agent (its partner plays the other)."),
@@ -385,13 +382,8 @@ def adapter(
         0.05, min=0.0, max=0.99, help="bayes: probability of a random partner action."
     ),
     seed: int = typer.Option(0, help="Draws the random initial policy."),
-    zmode: Mode = "peer",
-    listen: Listen = None,
-    connect: Connect = None,
-    multicast: Multicast = False,
-    low_latency: LowLatency = False,
-    user: User = "",
-    password: Password = "",
+    *,
+    bus: BusConfig,
 ) -> None:
     """Run the adapter service: watch the partner, switch the agent of ROLE to the best response."""
     from services.adapter.core import AdapterConfig
@@ -401,9 +393,7 @@ def adapter(
         config = AdapterConfig(role, window, strategy, initial, warmup, dwell, hazard, noise, seed)
     except ValueError as error:
         raise typer.BadParameter(str(error)) from None
-    run_adapter(
-        _bus(zmode, listen, connect, multicast, low_latency, user, password), match, config, stop_on_signals()
-    )
+    run_adapter(bus, match, config, stop_on_signals())
 
 
 @app.command()
@@ -482,6 +472,7 @@ def match_command(
 
 
 @app.command("replay")
+@bus_options
 def replay_command(
     recording: Path = typer.Argument(..., help="A recording (.tsflog)."),
     video: Path | None = typer.Option(None, help="Write the re-simulated match as an .mp4 or .gif."),
@@ -491,13 +482,8 @@ def replay_command(
     speed: float = typer.Option(1.0, min=0.01, help="--live: playback speed (1 = real time)."),
     as_match: str = typer.Option("", "--as", help="--live: publish under this match id (default: its own)."),
     delay: float = typer.Option(1.0, min=0.0, help="--live: seconds to wait for watchers before starting."),
-    zmode: Mode = "peer",
-    listen: Listen = None,
-    connect: Connect = None,
-    multicast: Multicast = False,
-    low_latency: LowLatency = False,
-    user: User = "",
-    password: Password = "",
+    *,
+    bus: BusConfig,
 ) -> None:
     """Re-simulate a recording and check every state hash; optionally write a video or re-broadcast it."""
     from services.recorder.recording import load, replay
@@ -518,7 +504,6 @@ def replay_command(
         count = write_video(loaded, video, scale, every)
         console.print(f"video: {video} ({count} frames)")
     if live:
-        bus = _bus(zmode, listen, connect, multicast, low_latency, user, password)
         sent = republish(bus, recording, as_match or None, speed, delay, stop_on_signals())
         console.print(f"republished {sent} messages")
 
@@ -558,6 +543,7 @@ Port = Annotated[int, typer.Option(help="Port of the web page (0: any free port)
 
 
 @app.command()
+@bus_options
 def human(
     match: Match,
     token: list[str] | None = typer.Option(
@@ -565,13 +551,8 @@ def human(
     ),
     host: Host = "127.0.0.1",
     port: Port = 8000,
-    zmode: Mode = "peer",
-    listen: Listen = None,
-    connect: Connect = None,
-    multicast: Multicast = False,
-    low_latency: LowLatency = False,
-    user: User = "",
-    password: Password = "",
+    *,
+    bus: BusConfig,
 ) -> None:
     """Run the human gateway: a web page that plays a match's seats from browsers, by seat token,
     and shows the match (or its live replay) to spectators."""
@@ -582,7 +563,6 @@ def human(
     tokens = dict(t.split("=", 1) for t in token if "=" in t)
     if len(tokens) != len(token):
         raise typer.BadParameter("give each seat as ROLE=TOKEN")
-    bus = _bus(zmode, listen, connect, multicast, low_latency, user, password)
 
     def show(gateway) -> None:  # noqa: ANN001 - a Gateway
         for role, link in seat_links(gateway.url, tokens).items():

@@ -271,13 +271,15 @@ def test_the_human_profile_seats_a_person_from_the_browser(inputs: dict, tmp_pat
             browser = playwright.chromium.launch(executable_path=chromium, args=["--no-sandbox"])
             page = browser.new_page()
             deadline = time.monotonic() + 60
-            while True:  # the gateway's page, once its container serves it
-                try:
+            while True:  # the gateway's page, once its container serves it (Docker's port proxy
+                try:  # accepts connections before the container listens, so check it is the page)
                     page.goto(f"http://127.0.0.1:{port}/?role=bait&token=t0k")
-                    break
+                    if page.evaluate("typeof window.tsf") == "object":
+                        break
                 except sync_api.Error:
-                    assert time.monotonic() < deadline, "the human gateway never served its page"
-                    time.sleep(1)
+                    pass
+                assert time.monotonic() < deadline, "the human gateway never served its page"
+                time.sleep(1)
             page.wait_for_function("window.tsf.phase === 'instructions'", timeout=30_000)
             page.keyboard.press("Space")  # start
             page.wait_for_function("window.tsf.phase === 'playing'", timeout=60_000)

@@ -245,7 +245,7 @@ class Adapter:
         self.frames += 1
         self.window.push(scores)
         if self.bayes:
-            self._filter(scores)
+            self.forward(scores)
         if self.frames < self.config.warmup_frames:
             return False
         means = self.window.means()
@@ -261,7 +261,7 @@ class Adapter:
             choice = self.payoff.best_average()
         return self._choose(self.payoff.ours[choice])
 
-    def _filter(self, scores: np.ndarray) -> None:
+    def forward(self, scores: np.ndarray) -> None:
         """One forward step of the hidden Markov model, in log space."""
         k, h, eta = len(scores), self.config.hazard_rate, self.config.noise
         belief = np.exp(self.log_belief)

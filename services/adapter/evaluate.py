@@ -260,7 +260,7 @@ def bayes_estimates(scores: np.ndarray, config: AdapterConfig, payoff: Payoff) -
     adapter = Adapter(config, payoff)
     estimates = np.empty(len(scores), dtype=int)
     for t, row in enumerate(scores):
-        adapter._filter(row)
+        adapter.forward(row)
         estimates[t] = int(np.argmax(adapter.log_belief))
     return estimates
 

@@ -20,6 +20,7 @@ import msgpack
 from services.sim.config import N_ACTIONS, ROLES, GameConfig
 from services.sim.engine import DEATH_CAUSES
 from services.sim.observation import SIZE as OBS_SIZE
+from shared import keys
 
 SCHEMA_VERSION = 1
 MAX_BYTES = 64 * 1024
@@ -93,8 +94,8 @@ def _one_of(options: tuple[str, ...]) -> Check:
     return lambda v: v in options
 
 
-def _map(keys: tuple[str, ...], value: Check) -> Check:
-    return lambda v: isinstance(v, dict) and set(v) == set(keys) and all(value(v[k]) for k in keys)
+def _map(names: tuple[str, ...], value: Check) -> Check:
+    return lambda v: isinstance(v, dict) and set(v) == set(names) and all(value(v[k]) for k in names)
 
 
 def _named(value: Check) -> Check:
@@ -368,7 +369,11 @@ def decode_seat_action(data: bytes | bytearray | memoryview, key: str, match: st
     """An action that arrived on `key` (tsf/<match>/action/<role>): valid, of this match, and of
     the seat the key names; else MessageError (a spoofed or misrouted action is a `mismatch`)."""
     action = decode(data, Action)
-    if action.match != match or key.rsplit("/", 1)[-1] != action.role:
+    try:
+        seat = keys.role_of(key)
+    except ValueError:
+        seat = ""
+    if action.match != match or seat != action.role:
         raise MessageError("mismatch", f"{action.role} action for {action.match} on {key}")
     return action
 

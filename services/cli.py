@@ -15,6 +15,7 @@ from rich.console import Console
 from rich.live import Live
 from rich.table import Table
 
+from services.adapter.core import STRATEGIES
 from services.agent.library import policy_for
 from services.sim.calibration import calibrate
 from services.sim.config import GameConfig
@@ -369,7 +370,7 @@ def adapter(
     match: Match,
     role: str = typer.Option("shooter", help="The seat of the adaptive agent (its partner plays the other)."),
     window: int = typer.Option(400, min=1, help="T: frames of partner play the similarity averages over."),
-    strategy: str = typer.Option("cem", help="cem, cem-dwell, cem-ood, bayes or bayes-dwell-ood."),
+    strategy: str = typer.Option("cem", help=f"One of {', '.join(STRATEGIES)}."),
     initial: str = typer.Option(
         "best-average", help="Policy before the first estimate: best-average or random."
     ),
@@ -425,9 +426,7 @@ def match_command(
     out: Path = typer.Option(Path("recordings"), help="Directory of the recordings."),
     adaptive: str = typer.Option("", help="Make this seat (bait or shooter) the adaptive agent."),
     window: int = typer.Option(400, min=1, help="--adaptive: the window T in frames."),
-    strategy: str = typer.Option(
-        "cem", help="--adaptive: cem, cem-dwell, cem-ood, bayes or bayes-dwell-ood."
-    ),
+    strategy: str = typer.Option("cem", help=f"--adaptive: one of {', '.join(STRATEGIES)}."),
 ) -> None:
     """Start a complete match on this machine: sim, two agents and the recorder as processes (and
     with --adaptive, the adapter)."""
@@ -625,9 +624,7 @@ def eval_command(
     role: str = typer.Option("shooter", help="The adaptive agent's seat; the partners play the other."),
     seeds: int = typer.Option(5, min=1, help="Seeded one-minute games per partner and agent."),
     windows: str = typer.Option("150,400,800", help="Windows T of the study's CEM agent (comma-separated)."),
-    strategies: str = typer.Option(
-        "cem,cem-dwell,cem-ood,bayes,bayes-dwell-ood", help="Strategies compared at --strategy-window."
-    ),
+    strategies: str = typer.Option(",".join(STRATEGIES), help="Strategies compared at --strategy-window."),
     strategy_window: int = typer.Option(400, min=1, help="The window of the strategies other than cem."),
     partner: list[str] | None = typer.Option(
         None, help="A partner by name, repeatable (default: the population; see docs/adapter.md)."

@@ -22,13 +22,17 @@ import pymunk
 from services.sim.config import N_ACTIONS, ROLES, GameConfig
 
 DEATH_CAUSES = ("shell", "border", "shield")
+EVENT_KINDS = (
+    *("kill", "death", "shield_hit", "missile", "shell", "lock"),
+    *("fortress_respawn", "reset", "respawn"),
+)
 
 
 class Event(NamedTuple):
     """Something that happened in a frame. `role` is the ship concerned, or '' for the fortress."""
 
     frame: int
-    kind: str  # kill, death, shield_hit, missile, shell, lock, fortress_respawn, reset, respawn
+    kind: str  # one of EVENT_KINDS
     role: str = ""
     detail: str = ""  # death cause, or the locked role
 
@@ -80,7 +84,7 @@ class Ship:
         return self.body.position.y
 
 
-def _hexagon(radius: float) -> list[tuple[float, float]]:
+def hexagon(radius: float) -> list[tuple[float, float]]:
     """Regular hexagon with a vertex on the body's +x axis: the facing and the rear are vertices."""
     return [
         (radius * math.cos(math.radians(60 * k)), radius * math.sin(math.radians(60 * k))) for k in range(6)
@@ -101,8 +105,8 @@ class Game:
         self.rng = random.Random(seed)
         self.space = pymunk.Space()
         self.fortress = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
-        self.shield = pymunk.Poly(self.fortress, _hexagon(c.shield_radius))
-        self.region = pymunk.Poly(self.fortress, _hexagon(c.region_radius))
+        self.shield = pymunk.Poly(self.fortress, hexagon(c.shield_radius))
+        self.region = pymunk.Poly(self.fortress, hexagon(c.region_radius))
         self.space.add(self.fortress, self.shield, self.region)
         self.ships = [Ship(role, self.space, c.ship_radius) for role in ROLES]
         self.bait, self.shooter = self.ships
@@ -426,10 +430,7 @@ class Game:
         return values
 
     def state_hash(self) -> str:
-        """16 hex digits over the exact bits of the state; equal states give equal hashes."""
-        values = self.state_values()
-        packed = struct.pack(f"<{len(values)}d", *values)
-        return hashlib.blake2b(packed, digest_size=8).hexdigest()
+        return hash_values(self.state_values())
 
     def counters(self) -> dict[str, dict]:
         return {ship.role: ship.counters.to_dict() for ship in self.ships}
@@ -437,6 +438,12 @@ class Game:
     def kills_per_minute(self) -> float:
         minutes = self.frame / (self.config.fps * 60.0)
         return self.kills / minutes if minutes else 0.0
+
+
+def hash_values(values: list[float]) -> str:
+    """16 hex digits over the exact bits of a state's values; equal states give equal hashes."""
+    packed = struct.pack(f"<{len(values)}d", *values)
+    return hashlib.blake2b(packed, digest_size=8).hexdigest()
 
 
 def _check_action(role: str, action: object) -> None:

@@ -24,10 +24,20 @@ from pathlib import Path
 
 import numpy as np
 
-from services.agent.policy import N_FIRE, N_THRUST, N_TURN, Policy, RulePolicy, factored_probs
-from services.agent.scripted import MirrorShooter, good_shot, scripted_policy
+from services.agent.policy import (
+    N_FIRE,
+    N_THRUST,
+    N_TURN,
+    Policy,
+    RulePolicy,
+    factored_probs,
+    factored_probs_batch,
+    rule_head_probs,
+    sample,
+)
+from services.agent.scripted import MirrorShooter, good_shot, good_shot_batch, scripted_policy
 from services.sim import observation as ob
-from services.sim.config import N_ACTIONS, ROLES, GameConfig
+from services.sim.config import ROLES, GameConfig
 
 LIBRARY = Path(__file__).parent / "library"
 FLOOR = 1e-3  # weight of the uniform mixed into a network head's softmax
@@ -138,6 +148,25 @@ def rule_heads(recipe: Recipe, obs: np.ndarray, config: GameConfig) -> dict[str,
     return out
 
 
+def rule_heads_batch(recipe: Recipe, observations: np.ndarray, config: GameConfig) -> dict[str, np.ndarray]:
+    """rule_heads() of every row: each head's (rows,) choices."""
+    rows, out = len(observations), {}
+    if recipe.role == "bait":
+        if "thrust" not in recipe.learned:
+            v = observations[:, [ob.SELF + ob.VX, ob.SELF + ob.VY]].astype(np.float64)
+            out["thrust"] = (np.hypot(v[:, 0], v[:, 1]) * ob.VELOCITY_SCALE < recipe.speed_cap).astype(
+                np.int64
+            )
+        if "fire" not in recipe.learned:
+            out["fire"] = np.zeros(rows, np.int64)
+        return out
+    if "thrust" not in recipe.learned:
+        out["thrust"] = _mirror(recipe.speed_cap, config).choose_batch(observations)[:, 1]
+    if "fire" not in recipe.learned:
+        out["fire"] = good_shot_batch(observations, config, 4.0, 40.0).astype(np.int64)
+    return out
+
+
 @cache
 def _mirror(max_speed: float, config: GameConfig) -> MirrorShooter:
     return MirrorShooter(max_speed=max_speed, config=config)
@@ -227,12 +256,10 @@ class LearnedPolicy:
 
     def probs_batch(self, observations: np.ndarray) -> np.ndarray:
         """probs() of every row of an (n, 64) array, with one network pass for all rows."""
-        learned = dict(zip(self.recipe.learned, self.learned_heads(observations), strict=True))
-        out = np.empty((len(observations), N_ACTIONS))
-        for i, obs in enumerate(observations):
-            heads = {name: head[i] for name, head in learned.items()} | self.rule_head_probs(obs)
-            out[i] = factored_probs(*(heads[name] for name in HEADS))
-        return out
+        heads = dict(zip(self.recipe.learned, self.learned_heads(observations), strict=True))
+        for name, choices in rule_heads_batch(self.recipe, observations, self.config).items():
+            heads[name] = rule_head_probs(choices, HEAD_SIZES[name], RulePolicy.EPSILON)
+        return factored_probs_batch(*(heads[name] for name in HEADS))
 
     def act(self, obs: np.ndarray) -> int:
         heads = self.head_probs(obs)
@@ -275,10 +302,17 @@ def load(key: str, config: GameConfig | None = None, root: Path = LIBRARY) -> Po
 
 
 def batch_probs(policy: Policy, observations: np.ndarray) -> np.ndarray:
-    """The (n, 12) distributions of a policy over n observations, batched where the policy can."""
-    if isinstance(policy, LearnedPolicy):
+    """The (n, 12) distributions of a policy over n observations, batched where the policy can
+    (every policy of the project can; a plug-in without `probs_batch` is asked row by row)."""
+    if hasattr(policy, "probs_batch"):
         return policy.probs_batch(observations)
     return np.stack([policy.probs(obs) for obs in observations])
+
+
+def batch_act(policy: Policy, observations: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """One action per observation, drawn from the policy's distribution with the batch's own
+    generator (not the policy's per-game stream: a batch samples all its lanes at once)."""
+    return sample(batch_probs(policy, observations), rng)
 
 
 def policy_for(key: str, role: str) -> Policy:

@@ -15,6 +15,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from services.sim.config import N_ACTIONS
+from services.sim.jit import jitable
 
 N_TURN, N_THRUST, N_FIRE = 3, 2, 2
 
@@ -35,6 +36,25 @@ class Policy(Protocol):
 def factored_probs(turn: np.ndarray, thrust: np.ndarray, fire: np.ndarray) -> np.ndarray:
     """Joint distribution over action = turn * 4 + thrust * 2 + fire from three independent heads."""
     return (turn[:, None, None] * thrust[None, :, None] * fire[None, None, :]).reshape(N_ACTIONS)
+
+
+def factored_probs_batch(turn: np.ndarray, thrust: np.ndarray, fire: np.ndarray) -> np.ndarray:
+    """factored_probs() of every row of the three heads' (rows, n) distributions, the same products."""
+    return (turn[:, :, None, None] * thrust[:, None, :, None] * fire[:, None, None, :]).reshape(-1, N_ACTIONS)
+
+
+def rule_head_probs(choices: np.ndarray, n: int, epsilon: float) -> np.ndarray:
+    """(rows, n) distributions of a rule head: each row's choice with 1 - epsilon, the rest spread."""
+    out = np.full((len(choices), n), epsilon / (n - 1))
+    out[np.arange(len(choices)), choices] = 1.0 - epsilon
+    return out
+
+
+def sample(probs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """One action per row of (rows, 12) distributions: the first action whose cumulative
+    probability exceeds a uniform draw (the last one should rounding leave none)."""
+    below = np.cumsum(probs, axis=1) <= rng.random((len(probs), 1))
+    return np.minimum(below.sum(axis=1), probs.shape[1] - 1)
 
 
 class RulePolicy:
@@ -79,6 +99,18 @@ class RulePolicy:
             heads.append(head)
         return factored_probs(*heads)
 
+    def choose_batch(self, observations: np.ndarray) -> np.ndarray:
+        """choose() of every row, (rows, 3); the project's rules run their compiled form."""
+        return np.array([self.choose(obs) for obs in observations], np.int64).reshape(-1, 3)
+
+    def probs_batch(self, observations: np.ndarray) -> np.ndarray:
+        """probs() of every row of an (n, 64) array."""
+        choices = self.choose_batch(observations)
+        sizes = (N_TURN, N_THRUST, N_FIRE)
+        return factored_probs_batch(
+            *(rule_head_probs(choices[:, k], n, self.epsilon) for k, n in enumerate(sizes))
+        )
+
 
 class UniformPolicy:
     """Every action equally likely: the random baseline."""
@@ -98,7 +130,11 @@ class UniformPolicy:
     def probs(self, obs: np.ndarray) -> np.ndarray:
         return np.full(N_ACTIONS, 1.0 / N_ACTIONS)
 
+    def probs_batch(self, observations: np.ndarray) -> np.ndarray:
+        return np.full((len(observations), N_ACTIONS), 1.0 / N_ACTIONS)
 
+
+@jitable
 def turn_toward(heading_cos: float, heading_sin: float, angle: float, deadband: float = 3.0) -> int:
     """Turn choice (0 none, 1 left, 2 right) that brings the heading toward `angle` (radians)."""
     heading = math.atan2(heading_sin, heading_cos)

@@ -7,6 +7,9 @@
   missile will arrive inside the vulnerability window.
 - `idle`: never acts (a lone-ship baseline for the other seat).
 All read the world-frame observation (services/sim/observation.py).
+
+The rules are plain functions of the observation and numbers (`jitable`): the scalar policies run
+them as Python, and `choose_batch` runs the very same source compiled over a batch of rows.
 """
 
 from __future__ import annotations
@@ -18,10 +21,12 @@ import numpy as np
 from services.agent.policy import RulePolicy, UniformPolicy, turn_toward
 from services.sim import observation as ob
 from services.sim.config import GameConfig
+from services.sim.jit import jitable, njit
 
 _DEFAULTS = GameConfig()
 
 
+@jitable
 def _ship(obs: np.ndarray, block: int) -> tuple[float, float, float, float]:
     """Position (px) and velocity (px/frame) of the ship block starting at `block`."""
     p, v = ob.POSITION_SCALE, ob.VELOCITY_SCALE
@@ -33,25 +38,29 @@ def _ship(obs: np.ndarray, block: int) -> tuple[float, float, float, float]:
     )
 
 
-def seek(obs: np.ndarray, dvx: float, dvy: float, tolerance: float = 0.3) -> tuple[int, int] | None:
-    """(turn, thrust) that bring the own velocity toward (dvx, dvy); None when already there."""
+@jitable
+def seek(obs: np.ndarray, dvx: float, dvy: float, tolerance: float = 0.3) -> tuple[bool, int, int]:
+    """(needed, turn, thrust): the turn and thrust that bring the own velocity toward (dvx, dvy);
+    not needed when it is already there."""
     _, _, vx, vy = _ship(obs, ob.SELF)
     ex, ey = dvx - vx, dvy - vy
     if math.hypot(ex, ey) < tolerance:
-        return None
+        return False, 0, 0
     cos_h, sin_h = float(obs[ob.SELF + ob.COS]), float(obs[ob.SELF + ob.SIN])
     want = math.atan2(ey, ex)
     turn = turn_toward(cos_h, sin_h, want)
     aligned = cos_h * math.cos(want) + sin_h * math.sin(want) > math.cos(math.radians(40))
-    return turn, int(aligned)
+    return True, turn, int(aligned)
 
 
+@jitable
 def orbit_velocity(
     x: float, y: float, radius: float, tangential: float, gain: float = 0.05, max_radial: float = 1.0
 ) -> tuple[float, float]:
     """Velocity that moves along the circle of `radius` about the fortress (ccw for tangential > 0)
     and pulls back onto it gently (a slow radial pull keeps thrust-only ships from overshooting)."""
-    r = math.hypot(x, y) or 1.0
+    r = math.hypot(x, y)
+    r = r if r != 0.0 else 1.0
     ux, uy = x / r, y / r
     radial = max(-max_radial, min(max_radial, gain * (radius - r)))
     return ux * radial - uy * tangential, uy * radial + ux * tangential
@@ -68,6 +77,9 @@ class Idle(RulePolicy):
 
     def choose(self, obs: np.ndarray) -> tuple[int, int, int]:
         return 0, 0, 0
+
+    def choose_batch(self, observations: np.ndarray) -> np.ndarray:
+        return np.zeros((len(observations), 3), np.int64)
 
 
 class CircleBait(RulePolicy):
@@ -87,34 +99,53 @@ class CircleBait(RulePolicy):
         self.radius, self.speed, self.outside = radius, speed, outside
 
     def choose(self, obs: np.ndarray) -> tuple[int, int, int]:
-        x, y, _, _ = _ship(obs, ob.SELF)
-        if obs[ob.FORTRESS + ob.F_ALIVE] > 0.5:
-            dvx, dvy = orbit_velocity(x, y, self.radius, self.speed)
-        else:  # leave the region so the fortress can respawn
-            dvx, dvy = orbit_velocity(x, y, self.outside, 0.0, gain=0.1)
-        ex, ey = self._evade(obs, x, y)
-        steer = seek(obs, dvx + ex, dvy + ey)
-        return (*steer, 0) if steer else (0, 0, 0)
+        return circle_choice(obs, self.radius, self.speed, self.outside)
 
-    @staticmethod
-    def _evade(obs: np.ndarray, x: float, y: float) -> tuple[float, float]:
-        """Sidestep the nearest shell if it will pass within 25 px in the next 20 frames."""
-        base = ob.SHELLS
-        if obs[base + 4] < 0.5:
-            return 0.0, 0.0
-        sx, sy, svx, svy = _ship(obs, base)
-        rx, ry = x - sx, y - sy
-        speed2 = svx * svx + svy * svy or 1.0
-        t = (rx * svx + ry * svy) / speed2  # frames until closest approach
-        if not 0.0 <= t <= 20.0:
-            return 0.0, 0.0
-        mx, my = rx - svx * t, ry - svy * t  # miss vector at closest approach
-        miss = math.hypot(mx, my)
-        if miss > 25.0:
-            return 0.0, 0.0
-        if miss < 1e-6:  # dead on: sidestep to the left of the shell's path
-            mx, my, miss = -svy, svx, math.sqrt(speed2)
-        return 3.0 * mx / miss, 3.0 * my / miss
+    def choose_batch(self, observations: np.ndarray) -> np.ndarray:
+        out = np.empty((len(observations), 3), np.int64)
+        _circle_rows(observations, self.radius, self.speed, self.outside, out)
+        return out
+
+
+@jitable
+def circle_choice(obs: np.ndarray, radius: float, speed: float, outside: float) -> tuple[int, int, int]:
+    """CircleBait's rule: orbit at `radius` while the fortress is up, else leave past `outside`."""
+    x, y, _, _ = _ship(obs, ob.SELF)
+    if obs[ob.FORTRESS + ob.F_ALIVE] > 0.5:
+        dvx, dvy = orbit_velocity(x, y, radius, speed)
+    else:  # leave the region so the fortress can respawn
+        dvx, dvy = orbit_velocity(x, y, outside, 0.0, 0.1)
+    ex, ey = evade(obs, x, y)
+    needed, turn, thrust = seek(obs, dvx + ex, dvy + ey)
+    return (turn, thrust, 0) if needed else (0, 0, 0)
+
+
+@jitable
+def evade(obs: np.ndarray, x: float, y: float) -> tuple[float, float]:
+    """Sidestep the nearest shell if it will pass within 25 px in the next 20 frames."""
+    base = ob.SHELLS
+    if obs[base + 4] < 0.5:
+        return 0.0, 0.0
+    sx, sy, svx, svy = _ship(obs, base)
+    rx, ry = x - sx, y - sy
+    speed2 = svx * svx + svy * svy
+    speed2 = speed2 if speed2 != 0.0 else 1.0
+    t = (rx * svx + ry * svy) / speed2  # frames until closest approach
+    if not 0.0 <= t <= 20.0:
+        return 0.0, 0.0
+    mx, my = rx - svx * t, ry - svy * t  # miss vector at closest approach
+    miss = math.hypot(mx, my)
+    if miss > 25.0:
+        return 0.0, 0.0
+    if miss < 1e-6:  # dead on: sidestep to the left of the shell's path
+        mx, my, miss = -svy, svx, math.sqrt(speed2)
+    return 3.0 * mx / miss, 3.0 * my / miss
+
+
+@njit
+def _circle_rows(observations, radius, speed, outside, out):
+    for i in range(observations.shape[0]):
+        out[i] = circle_choice(observations[i], radius, speed, outside)
 
 
 class MirrorShooter(RulePolicy):
@@ -143,36 +174,101 @@ class MirrorShooter(RulePolicy):
         self.config = config
 
     def choose(self, obs: np.ndarray) -> tuple[int, int, int]:
+        return mirror_choice(obs, *self._numbers())
+
+    def choose_batch(self, observations: np.ndarray) -> np.ndarray:
+        out = np.empty((len(observations), 3), np.int64)
+        _mirror_rows(observations, self._numbers(), out)
+        return out
+
+    def _numbers(self) -> tuple[float, ...]:
+        """mirror_choice's numbers after the observation: this shooter's and the rules'."""
         c = self.config
-        x, y, _, _ = _ship(obs, ob.SELF)
-        bx, by, bvx, bvy = _ship(obs, ob.PARTNER)
-        me = math.atan2(y, x)
-        mirror = math.atan2(-by, -bx)
-        gap = (mirror - me + math.pi) % (2 * math.pi) - math.pi
-        bait_turn_rate = (bx * bvy - by * bvx) / max(bx * bx + by * by, 1.0)  # rad/frame about the fortress
-        tangential = (bait_turn_rate + 0.05 * gap) * self.radius
-        tangential = max(-self.max_speed, min(self.max_speed, tangential))
-        dvx, dvy = orbit_velocity(x, y, self.radius, tangential, gain=0.08)
-        _, _, vx, vy = _ship(obs, ob.SELF)
-        if abs(x + 12 * vx) > c.arena_x - 25 or abs(y + 12 * vy) > c.arena_y - 25:
-            dvx, dvy = -0.02 * x, -0.02 * y  # heading for the border: pull back toward the centre
-        steer = seek(obs, dvx, dvy, tolerance=0.6)
-        if self.placed_distance is None:
-            placed = abs(gap) < math.radians(20) and abs(math.hypot(x, y) - self.radius) < 25.0
-        else:
-            mx, my = self.radius * math.cos(mirror), self.radius * math.sin(mirror)
-            placed = math.hypot(x - mx, y - my) < self.placed_distance
-        if steer is not None and not placed:
-            return (*steer, 0)
-        cos_h, sin_h = float(obs[ob.SELF + ob.COS]), float(obs[ob.SELF + ob.SIN])
-        turn = turn_toward(cos_h, sin_h, math.atan2(-y, -x), deadband=self.aim_tolerance / 2)
-        return turn, 0, int(good_shot(obs, c, self.aim_tolerance, self.rear_tolerance))
+        placed = -1.0 if self.placed_distance is None else self.placed_distance
+        return (
+            *(self.radius, self.max_speed, self.aim_tolerance, self.rear_tolerance, placed),
+            *(c.arena_x, c.arena_y, c.kill_distance, c.missile_speed, float(c.vulnerable_frames)),
+        )
+
+
+@jitable
+def mirror_choice(
+    obs: np.ndarray,
+    radius: float,
+    max_speed: float,
+    aim_tolerance: float,
+    rear_tolerance: float,
+    placed_distance: float,
+    arena_x: float,
+    arena_y: float,
+    kill_distance: float,
+    missile_speed: float,
+    vulnerable_frames: float,
+) -> tuple[int, int, int]:
+    """MirrorShooter's rule. A negative `placed_distance` means placed on its circle (within 20
+    degrees and 25 px), else within that distance of the mirror point."""
+    x, y, _, _ = _ship(obs, ob.SELF)
+    bx, by, bvx, bvy = _ship(obs, ob.PARTNER)
+    me = math.atan2(y, x)
+    mirror = math.atan2(-by, -bx)
+    gap = (mirror - me + math.pi) % (2 * math.pi) - math.pi
+    bait_turn_rate = (bx * bvy - by * bvx) / max(bx * bx + by * by, 1.0)  # rad/frame about the fortress
+    tangential = (bait_turn_rate + 0.05 * gap) * radius
+    tangential = max(-max_speed, min(max_speed, tangential))
+    dvx, dvy = orbit_velocity(x, y, radius, tangential, 0.08)
+    _, _, vx, vy = _ship(obs, ob.SELF)
+    if abs(x + 12 * vx) > arena_x - 25 or abs(y + 12 * vy) > arena_y - 25:
+        dvx, dvy = -0.02 * x, -0.02 * y  # heading for the border: pull back toward the centre
+    needed, turn, thrust = seek(obs, dvx, dvy, 0.6)
+    if placed_distance < 0.0:
+        placed = abs(gap) < math.radians(20) and abs(math.hypot(x, y) - radius) < 25.0
+    else:
+        mx, my = radius * math.cos(mirror), radius * math.sin(mirror)
+        placed = math.hypot(x - mx, y - my) < placed_distance
+    if needed and not placed:
+        return turn, thrust, 0
+    cos_h, sin_h = float(obs[ob.SELF + ob.COS]), float(obs[ob.SELF + ob.SIN])
+    turn = turn_toward(cos_h, sin_h, math.atan2(-y, -x), aim_tolerance / 2)
+    shot = good_shot_at(obs, kill_distance, missile_speed, vulnerable_frames, aim_tolerance, rear_tolerance)
+    return turn, 0, int(shot)
+
+
+@njit
+def _mirror_rows(observations, numbers, out):
+    for i in range(observations.shape[0]):
+        out[i] = mirror_choice(observations[i], *numbers)
 
 
 def good_shot(obs: np.ndarray, config: GameConfig, aim_tolerance: float, rear_tolerance: float) -> bool:
     """Whether a missile fired now flies into the open rear before the vulnerability window shuts:
     the ship faces the fortress within `aim_tolerance` and sits within `rear_tolerance` of the
     rear (degrees). Works in either observation frame."""
+    c = config
+    return good_shot_at(
+        obs, c.kill_distance, c.missile_speed, float(c.vulnerable_frames), aim_tolerance, rear_tolerance
+    )
+
+
+def good_shot_batch(
+    observations: np.ndarray, config: GameConfig, aim_tolerance: float, rear_tolerance: float
+) -> np.ndarray:
+    """good_shot() of every row."""
+    c, out = config, np.empty(len(observations), np.bool_)
+    numbers = (c.kill_distance, c.missile_speed, float(c.vulnerable_frames), aim_tolerance, rear_tolerance)
+    _good_shot_rows(observations, numbers, out)
+    return out
+
+
+@jitable
+def good_shot_at(
+    obs: np.ndarray,
+    kill_distance: float,
+    missile_speed: float,
+    vulnerable_frames: float,
+    aim_tolerance: float,
+    rear_tolerance: float,
+) -> bool:
+    """good_shot() with the rules' numbers spelled out."""
     x, y, _, _ = _ship(obs, ob.SELF)
     cos_h, sin_h = float(obs[ob.SELF + ob.COS]), float(obs[ob.SELF + ob.SIN])
     to_fortress = math.atan2(-y, -x)
@@ -182,14 +278,20 @@ def good_shot(obs: np.ndarray, config: GameConfig, aim_tolerance: float, rear_to
     f = ob.FORTRESS
     rear = math.atan2(-float(obs[f + ob.F_SIN]), -float(obs[f + ob.F_COS]))
     rear_off = abs(math.degrees((math.atan2(y, x) - rear + math.pi) % (2 * math.pi) - math.pi))
-    flight = (math.hypot(x, y) - config.kill_distance) / config.missile_speed
-    window = float(obs[f + ob.F_VULNERABLE]) * config.vulnerable_frames
+    flight = (math.hypot(x, y) - kill_distance) / missile_speed
+    window = float(obs[f + ob.F_VULNERABLE]) * vulnerable_frames
     return bool(
         obs[f + ob.F_ALIVE] > 0.5
         and aim <= aim_tolerance
         and rear_off <= rear_tolerance
         and window >= flight + 1.0
     )
+
+
+@njit
+def _good_shot_rows(observations, numbers, out):
+    for i in range(observations.shape[0]):
+        out[i] = good_shot_at(observations[i], *numbers)
 
 
 SCRIPTED = {"circle": CircleBait, "mirror": MirrorShooter}

@@ -13,8 +13,10 @@ import numpy as np
 import pytest
 
 from services.agent.library import keys, policy_for
+from services.sim import observation as ob
 from services.sim.batch import BatchGame, Rules, _point_distance
-from services.sim.config import GameConfig
+from services.sim.batch_observation import observe
+from services.sim.config import ROLES, GameConfig
 from services.sim.engine import Game
 from services.sim.play import play
 
@@ -147,3 +149,16 @@ def test_a_finished_game_refuses_more_frames() -> None:
     assert batch.done.all()
     with pytest.raises(ValueError, match="game is over after 3 frames"):
         batch.step(np.zeros(2, int), np.zeros(2, int))
+
+
+def test_observations_are_the_scalar_observations_in_both_views() -> None:
+    seeds = [11, 12]
+    streams = library_streams(seeds)
+    batch, games = BatchGame(2, seeds=seeds), [Game(seed=seed) for seed in seeds]
+    for frame in range(streams.shape[1]):
+        for role, view in itertools.product(ROLES, ob.FRAMES):
+            expected = np.stack([ob.observe(game, role, view) for game in games])
+            np.testing.assert_array_equal(observe(batch, role, view), expected)
+        batch.step(streams[:, frame, 0], streams[:, frame, 1])
+        for lane, game in enumerate(games):
+            game.step(*(int(a) for a in streams[lane, frame]))

@@ -11,6 +11,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numba
+from numba.extending import register_jitable
 
 if not numba.config.CACHE_DIR:
     base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
@@ -21,3 +22,9 @@ def njit(function: Callable) -> Callable:
     """Compile `function` in nopython mode, cached; no fastmath, so float arithmetic stays IEEE
     and in source order, as the scalar engine's."""
     return numba.njit(cache=True, nogil=True)(function)
+
+
+def jitable(function: Callable) -> Callable:
+    """A plain Python function that compiled loops may call too: Python runs it as it is (the
+    scalar path keeps its exact arithmetic) and numba compiles the same source for the batch."""
+    return register_jitable(function)

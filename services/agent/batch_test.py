@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from services.agent.library import LearnedPolicy, batch_act, batch_probs, keys, policy_for
-from services.agent.policy import sample
+from services.agent.policy import lane_uniforms, sample
 from services.sim.config import N_ACTIONS, ROLES
 from services.sim.engine import Game
 from services.sim.observation import observe
@@ -45,9 +45,9 @@ def test_batched_probs_are_the_row_by_row_probs(key: str, role: str) -> None:
 
 
 def test_sampling_follows_the_distribution() -> None:
-    rng = np.random.default_rng(0)
-    probs = rng.dirichlet(np.ones(N_ACTIONS), size=4)
-    draws = sample(np.repeat(probs, 20_000, axis=0), rng).reshape(4, 20_000)
+    probs = np.random.default_rng(0).dirichlet(np.ones(N_ACTIONS), size=4)
+    uniforms = lane_uniforms(np.arange(80_000), stream=0, frame=7)
+    draws = sample(np.repeat(probs, 20_000, axis=0), uniforms).reshape(4, 20_000)
     for row, p in zip(draws, probs, strict=True):
         counts = np.bincount(row, minlength=N_ACTIONS) / row.size
         assert np.abs(counts - p).max() < 0.015
@@ -56,7 +56,18 @@ def test_sampling_follows_the_distribution() -> None:
 def test_batched_actions_are_valid_and_the_rule_choice_mostly() -> None:
     policy = policy_for("mirror", "shooter")
     obs = observations("world", "shooter", games=1)
-    actions = batch_act(policy, obs, np.random.default_rng(1))
+    actions = batch_act(policy, obs, lane_uniforms(np.arange(len(obs)), stream=1, frame=0))
     best = batch_probs(policy, obs).argmax(axis=1)
     assert actions.min() >= 0 and actions.max() < N_ACTIONS
     assert (actions == best).mean() > 0.9  # the rule's choice has probability 0.99^3
+
+
+def test_lane_uniforms_are_uniform_and_depend_on_seed_stream_and_frame_only() -> None:
+    seeds = np.arange(50_000)
+    u = lane_uniforms(seeds, stream=0, frame=0)
+    assert u.min() >= 0.0 and u.max() < 1.0
+    assert abs(u.mean() - 0.5) < 0.005 and abs(u.var() - 1 / 12) < 0.002
+    assert np.array_equal(lane_uniforms(seeds[::-1], 0, 0), u[::-1])  # no dependence on the batch
+    others = [lane_uniforms(seeds, 1, 0), lane_uniforms(seeds, 0, 1), lane_uniforms(seeds + 1, 0, 0)]
+    for other in others:
+        assert abs(np.corrcoef(u, other)[0, 1]) < 0.02

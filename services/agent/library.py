@@ -309,10 +309,10 @@ def batch_probs(policy: Policy, observations: np.ndarray) -> np.ndarray:
     return np.stack([policy.probs(obs) for obs in observations])
 
 
-def batch_act(policy: Policy, observations: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """One action per observation, drawn from the policy's distribution with the batch's own
-    generator (not the policy's per-game stream: a batch samples all its lanes at once)."""
-    return sample(batch_probs(policy, observations), rng)
+def batch_act(policy: Policy, observations: np.ndarray, uniforms: np.ndarray) -> np.ndarray:
+    """One action per observation, drawn from the policy's distribution with the given uniforms
+    (policy.lane_uniforms; not the policy's per-game stream: a batch samples all lanes at once)."""
+    return sample(batch_probs(policy, observations), uniforms)
 
 
 def policy_for(key: str, role: str) -> Policy:

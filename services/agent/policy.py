@@ -50,11 +50,31 @@ def rule_head_probs(choices: np.ndarray, n: int, epsilon: float) -> np.ndarray:
     return out
 
 
-def sample(probs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def sample(probs: np.ndarray, uniforms: np.ndarray) -> np.ndarray:
     """One action per row of (rows, 12) distributions: the first action whose cumulative
-    probability exceeds a uniform draw (the last one should rounding leave none)."""
-    below = np.cumsum(probs, axis=1) <= rng.random((len(probs), 1))
+    probability exceeds the row's uniform draw (the last one should rounding leave none)."""
+    below = np.cumsum(probs, axis=1) <= uniforms[:, None]
     return np.minimum(below.sum(axis=1), probs.shape[1] - 1)
+
+
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+
+
+def _mix(z: np.ndarray) -> np.ndarray:
+    """SplitMix64's finaliser: a bijection of 64-bit words that scatters every input bit."""
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return z ^ (z >> np.uint64(31))
+
+
+def lane_uniforms(seeds: np.ndarray, stream: int, frame: int) -> np.ndarray:
+    """One uniform in [0, 1) per game seed for (stream, frame): a counter-based generator, so a
+    batched game's draws depend on its own seed only, never on which lanes share its batch or
+    which worker plays it."""
+    with np.errstate(over="ignore"):
+        key = _mix(np.asarray(seeds).astype(np.uint64) * _GOLDEN + _GOLDEN)
+        z = _mix(key ^ np.uint64((stream << 32) + frame) * _GOLDEN)
+    return (z >> np.uint64(11)).astype(np.float64) * 2.0**-53
 
 
 class RulePolicy:

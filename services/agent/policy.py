@@ -67,13 +67,14 @@ def _mix(z: np.ndarray) -> np.ndarray:
     return z ^ (z >> np.uint64(31))
 
 
-def lane_uniforms(seeds: np.ndarray, stream: int, frame: int) -> np.ndarray:
+def lane_uniforms(seeds: np.ndarray, stream: int, frame: int | np.ndarray) -> np.ndarray:
     """One uniform in [0, 1) per game seed for (stream, frame): a counter-based generator, so a
     batched game's draws depend on its own seed only, never on which lanes share its batch or
     which worker plays it."""
+    counter = np.asarray(frame).astype(np.uint64) + np.uint64(stream << 32)
     with np.errstate(over="ignore"):
         key = _mix(np.asarray(seeds).astype(np.uint64) * _GOLDEN + _GOLDEN)
-        z = _mix(key ^ np.uint64((stream << 32) + frame) * _GOLDEN)
+        z = _mix(key ^ counter * _GOLDEN)
     return (z >> np.uint64(11)).astype(np.float64) * 2.0**-53
 
 

@@ -1,8 +1,9 @@
 """Training the library's learned policies with Stable-Baselines3 (the `train` extra).
 
-`train(key)` follows the policy's registry recipe: a Gymnasium env over the learned heads only
-(the rule heads are filled in by the same rules the loaded policy uses), the recipe's reward, a
-pool of partners from the other role's library, and the recipe's algorithm. The result is exported
+`train(key)` follows the policy's registry recipe: a vectorised env over the learned heads only
+(lanes of the batched engine; the rule heads are filled in by the same rules the loaded policy
+uses), the recipe's reward, a pool of partners from the other role's library, and the recipe's
+algorithm. The result is exported
 to plain arrays (library.py plays it in numpy) and recorded in the manifest with its hash, steps,
 seed, score and the command that made it.
 """
@@ -12,7 +13,6 @@ from __future__ import annotations
 import fcntl
 import json
 import math
-import random
 import shlex
 import sys
 import time
@@ -20,65 +20,60 @@ from collections.abc import Callable
 from importlib.metadata import version
 from pathlib import Path
 
-import gymnasium
 import numpy as np
 import torch as th
 from gymnasium import spaces
 from sb3_contrib import TRPO
 from stable_baselines3 import A2C, DQN, PPO
-from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.logger import configure
+from stable_baselines3.common.vec_env import VecEnv
 
 from services.agent import library
 from services.agent.library import FEATURES, HEAD_SIZES, HEADS, LIBRARY, Recipe
-from services.agent.policy import Policy
 from services.agent.scripted import CircleBait, MirrorShooter
-from services.sim.config import ROLES, GameConfig
-from services.sim.engine import Event, Game
-from services.sim.env import RoleEnv
-from services.sim.observation import observe
+from services.sim.batch import BatchGame
+from services.sim.batch_observation import observe
+from services.sim.config import GameConfig
 from services.sim.play import play, summarize
+from services.sim.vec_env import RoleVectorEnv
 
-# --- rewards -------------------------------------------------------------------------------------
-
-
-def _ship(game: Game, role: str):  # noqa: ANN202 - an engine Ship
-    return game.ships[ROLES.index(role)]
+# --- rewards: one value per lane of a batched game, for the learner's seat -----------------------
 
 
-def region_reward(game: Game, role: str, events: list[Event], weights: dict[str, float]) -> float:
-    ship = _ship(game, role)
-    return float(ship.alive and ship.in_region)
+def region_reward(batch: BatchGame, seat: int, before: np.ndarray, weights: dict[str, float]) -> np.ndarray:
+    s = batch.state
+    return (s.alive[:, seat] & s.in_region[:, seat]).astype(np.float64)
 
 
 def border_bearing_death_reward(
-    game: Game, role: str, events: list[Event], weights: dict[str, float]
-) -> float:
-    ship = _ship(game, role)
-    reward = -weights["death"] * sum(e.kind == "death" and e.role == role for e in events)
-    if ship.alive and ship.in_region:
-        r = math.hypot(ship.x, ship.y) or 1.0
-        h = math.radians(ship.heading)
-        bearing = -(ship.x * math.cos(h) + ship.y * math.sin(h)) / r  # cos of the angle to the fortress
-        reward += weights["border"] * r / game.config.region_radius + weights["bearing"] * bearing
-    return reward
+    batch: BatchGame, seat: int, before: np.ndarray, weights: dict[str, float]
+) -> np.ndarray:
+    s = batch.state
+    x, y = s.x[:, seat], s.y[:, seat]
+    r = np.hypot(x, y)
+    r = np.where(r == 0.0, 1.0, r)
+    h = np.radians(s.heading[:, seat])
+    bearing = -(x * np.cos(h) + y * np.sin(h)) / r  # cos of the angle to the fortress
+    inside = weights["border"] * r / batch.config.region_radius + weights["bearing"] * bearing
+    deaths = batch.event_counts("death", seat)
+    return -weights["death"] * deaths + np.where(s.alive[:, seat] & s.in_region[:, seat], inside, 0.0)
 
 
-def shooter_position_reward(game: Game, role: str, events: list[Event], weights: dict[str, float]) -> float:
-    c = game.config
-    me, bait = _ship(game, role), game.ships[0]
-    reward = weights["kill"] * sum(e.kind == "kill" for e in events)
-    if not me.alive:
-        return reward
-    r = math.hypot(me.x, me.y)
-    if not bait.in_region:
-        return reward + float(c.region_radius < r < c.region_radius + 60.0)
-    rear = math.radians(game.facing + 180.0)
-    off = abs((math.atan2(me.y, me.x) - rear + math.pi) % (2 * math.pi) - math.pi)
-    return reward + float(off < math.radians(40.0) and c.region_radius < r < c.region_radius + 100.0)
+def shooter_position_reward(
+    batch: BatchGame, seat: int, before: np.ndarray, weights: dict[str, float]
+) -> np.ndarray:
+    s, region = batch.state, batch.config.region_radius
+    x, y = s.x[:, seat], s.y[:, seat]
+    r = np.hypot(x, y)
+    rear = np.radians(s.facing + 180.0)
+    off = np.abs((np.arctan2(y, x) - rear + np.pi) % (2 * np.pi) - np.pi)
+    waiting = (region < r) & (r < region + 60.0)  # just outside the region while the bait is out
+    at_rear = (off < np.radians(40.0)) & (region < r) & (r < region + 100.0)
+    placed = np.where(s.in_region[:, 0], at_rear, waiting) & s.alive[:, seat]
+    return weights["kill"] * batch.event_counts("kill") + placed
 
 
-REWARDS: dict[str, Callable[[Game, str, list[Event], dict[str, float]], float]] = {
+REWARDS: dict[str, Callable[[BatchGame, int, np.ndarray, dict[str, float]], np.ndarray]] = {
     "region": region_reward,
     "border-bearing-death": border_bearing_death_reward,
     "shooter-position": shooter_position_reward,
@@ -87,59 +82,68 @@ REWARDS: dict[str, Callable[[Game, str, list[Event], dict[str, float]], float]] 
 # --- the env a recipe trains in ------------------------------------------------------------------
 
 
-class PartnerPool:
-    """Plays one of several partner policies per game, drawn from the game's partner seed."""
+class RecipeVecEnv(VecEnv):
+    """The learned heads of one recipe over lanes of the batched engine, as SB3's vectorised env:
+    the observation is the recipe's feature set, the action the learned heads (Discrete for one,
+    MultiDiscrete for two); the rule heads are the loaded policy's rules, in batch; the partner is
+    drawn per game from the recipe's partners."""
 
-    frame = "world"
+    render_mode = None
 
-    def __init__(self, partners: list[Policy]) -> None:
-        self.partners = partners
-        self.key, self.role = "+".join(p.key for p in partners), partners[0].role
-        self.current = partners[0]
-
-    def reset(self, seed: int | None = None) -> None:
-        self.current = random.Random(seed).choice(self.partners)
-        self.current.reset(seed)
-        self.frame = self.current.frame
-
-    def act(self, obs: np.ndarray) -> int:
-        return self.current.act(obs)
-
-    def probs(self, obs: np.ndarray) -> np.ndarray:
-        return self.current.probs(obs)
-
-
-class RecipeEnv(gymnasium.Env):
-    """The learned heads of one recipe as a Gymnasium env: the observation is the recipe's feature
-    set, the action the learned heads (Discrete for one, MultiDiscrete for two)."""
-
-    def __init__(self, recipe: Recipe, config: GameConfig | None = None) -> None:
+    def __init__(self, recipe: Recipe, n_envs: int, config: GameConfig | None = None) -> None:
         self.recipe = recipe
         self.config = config or GameConfig()
-        partners = PartnerPool([library.load(k, self.config) for k in recipe.partners])
-        weights = dict(recipe.weights)
-        reward = REWARDS[recipe.reward]
-        self.env = RoleEnv(
-            recipe.role, partners, self.config, recipe.frame, lambda g, r, e: reward(g, r, e, weights)
+        partners = [library.load(k, self.config) for k in recipe.partners]
+        weights, reward = dict(recipe.weights), REWARDS[recipe.reward]
+        self.env = RoleVectorEnv(
+            n_envs, recipe.role, partners, self.config, recipe.frame, lambda b, s, p: reward(b, s, p, weights)
         )
         self.features = np.array(FEATURES[recipe.features])
-        bound = self.env.observation_space.high[0]
-        self.observation_space = spaces.Box(-bound, bound, (len(self.features),), np.float32)
+        bound = self.env.single_observation_space.high[0]
         sizes = [HEAD_SIZES[h] for h in recipe.learned]
-        self.action_space = spaces.Discrete(sizes[0]) if len(sizes) == 1 else spaces.MultiDiscrete(sizes)
-        self.obs: np.ndarray | None = None
+        super().__init__(
+            n_envs,
+            spaces.Box(-bound, bound, (len(self.features),), np.float32),
+            spaces.Discrete(sizes[0]) if len(sizes) == 1 else spaces.MultiDiscrete(sizes),
+        )
+        self.obs = np.zeros((n_envs, self.env.single_observation_space.shape[0]), np.float32)
+        self.actions = np.zeros(n_envs, np.int64)
 
-    def reset(self, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
-        super().reset(seed=seed)
-        self.obs, info = self.env.reset(seed=int(self.np_random.integers(2**31 - 1)))
-        return self.obs[self.features], info
+    def reset(self) -> np.ndarray:
+        self.obs, _ = self.env.reset(seed=self._seeds[0])
+        self._reset_seeds()
+        return self.obs[:, self.features]
 
-    def step(self, action: np.ndarray | int) -> tuple[np.ndarray, float, bool, bool, dict]:
-        heads = dict(zip(self.recipe.learned, np.atleast_1d(action).tolist(), strict=True))
-        heads |= library.rule_heads(self.recipe, self.obs, self.config)
-        turn, thrust, fire = (int(heads[h]) for h in HEADS)
-        self.obs, reward, terminated, truncated, info = self.env.step(turn * 4 + thrust * 2 + fire)
-        return self.obs[self.features], reward, terminated, truncated, info
+    def step_async(self, actions: np.ndarray) -> None:
+        self.actions = np.asarray(actions).reshape(self.num_envs, -1)
+
+    def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict]]:
+        heads = dict(zip(self.recipe.learned, self.actions.T, strict=True))
+        heads |= library.rule_heads_batch(self.recipe, self.obs, self.config)
+        action = heads["turn"] * 4 + heads["thrust"] * 2 + heads["fire"]
+        self.obs, rewards, _, truncated, infos = self.env.step(action)
+        out: list[dict] = [{} for _ in range(self.num_envs)]
+        for lane in np.flatnonzero(truncated):
+            out[lane] = {
+                "terminal_observation": infos["final_obs"][lane, self.features],
+                "TimeLimit.truncated": True,
+            }
+        return self.obs[:, self.features], rewards.astype(np.float32), truncated, out
+
+    def close(self) -> None:
+        pass
+
+    def get_attr(self, attr_name: str, indices: object = None) -> list:
+        return [getattr(self, attr_name)] * len(self._get_indices(indices))
+
+    def set_attr(self, attr_name: str, value: object, indices: object = None) -> None:
+        setattr(self, attr_name, value)
+
+    def env_method(self, method_name: str, *args: object, indices: object = None, **kwargs: object) -> list:
+        return [getattr(self, method_name)(*args, **kwargs) for _ in self._get_indices(indices)]
+
+    def env_is_wrapped(self, wrapper_class: type, indices: object = None) -> list[bool]:
+        return [False] * len(self._get_indices(indices))
 
 
 # --- algorithms ----------------------------------------------------------------------------------
@@ -191,8 +195,7 @@ N_ENVS = {"A2C": 16, "PPO": 16, "TRPO": 16, "DQN": 4}
 
 def make_model(recipe: Recipe, seed: int, log_dir: Path | None, config: GameConfig | None = None):  # noqa: ANN201
     """The recipe's algorithm on its env, with the algorithm's settings above."""
-    n_envs = N_ENVS[recipe.algorithm]
-    env = make_vec_env(RecipeEnv, n_envs, seed, env_kwargs={"recipe": recipe, "config": config})
+    env = RecipeVecEnv(recipe, N_ENVS[recipe.algorithm], config)
     kwargs = {"policy_kwargs": {"net_arch": NET}, **HYPERPARAMETERS[recipe.algorithm]}
     model = ALGORITHMS[recipe.algorithm]("MlpPolicy", env, seed=seed, device="cpu", verbose=0, **kwargs)
     if log_dir is not None:
@@ -207,27 +210,26 @@ def demonstrations(recipe: Recipe, games: int, gamma: float, learner=None, first
     """(features, head choices, discounted returns) of games in the recipe's env, labelled by the
     recipe's demonstrator (the scripted policy of its role with its `demonstrator` settings). It
     drives, or, given an SB3 `learner`, the learner does (its own samples) while the demonstrator
-    only labels: DAgger's correction of the states a learner drifts into."""
-    env = RecipeEnv(recipe)
+    only labels: DAgger's correction of the states a learner drifts into. The games are the lanes
+    of one batch, seeded from `first_seed`."""
+    env = RecipeVecEnv(recipe, games)
+    env.seed(first_seed)
     demonstrator = DEMONSTRATORS[recipe.role](**recipe.demonstrator)
-    features, labels, returns = [], [], []
-    for game in range(first_seed, first_seed + games):
-        obs, _ = env.reset(seed=game)
-        rewards, done = [], False
-        while not done:
-            heads = dict(zip(HEADS, demonstrator.choose(observe(env.env.game, recipe.role)), strict=True))
-            label = [heads[h] for h in recipe.learned]
-            features.append(obs)
-            labels.append(label)
-            action = label if learner is None else learner.predict(obs, deterministic=False)[0]
-            obs, reward, _, done, _ = env.step(np.array(action))
-            rewards.append(reward)
-        g, game_returns = 0.0, []
-        for reward in reversed(rewards):
-            g = reward + gamma * g
-            game_returns.append(g)
-        returns += game_returns[::-1]
-    return np.array(features), np.array(labels), np.array(returns, dtype=np.float32)
+    learned = [HEADS.index(h) for h in recipe.learned]
+    obs = env.reset()
+    features, labels, rewards = [], [], []
+    for _ in range(env.config.frames):
+        label = demonstrator.choose_batch(observe(env.env.batch, recipe.role))[:, learned]
+        features.append(obs)
+        labels.append(label)
+        action = label if learner is None else learner.predict(obs, deterministic=False)[0]
+        obs, reward, _, _ = env.step(action)
+        rewards.append(reward)
+    returns, g = np.empty((len(rewards), games), np.float32), np.zeros(games)
+    for t in reversed(range(len(rewards))):
+        g = rewards[t] + gamma * g
+        returns[t] = g
+    return np.concatenate(features), np.concatenate(labels), returns.reshape(-1)
 
 
 def warm_start(model, recipe: Recipe, rounds: int = 3, games: int = 4, epochs: int = 40) -> float:  # noqa: ANN001

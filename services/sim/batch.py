@@ -257,6 +257,14 @@ class BatchGame:
             for kind, seat, cause in self.state.events[lane, :n].tolist()
         ]
 
+    def event_counts(self, kind: str, seat: int | None = None) -> np.ndarray:
+        """Each lane's number of `kind` events in its last frame (of one seat's ship, if given)."""
+        events, n = self.state.events, self.state.n_events
+        hits = (events[:, :, 0] == EVENT_KINDS.index(kind)) & (np.arange(events.shape[1]) < n[:, None])
+        if seat is not None:
+            hits &= events[:, :, 1] == seat
+        return hits.sum(axis=1)
+
     def state_values(self, lane: int) -> list[float]:
         """The lane's full state in `Game.state_values()` order."""
         s, i = self.state, lane

@@ -25,7 +25,7 @@ def play_batch(
     batch = BatchGame(len(seeds), config, seeds)
     keys = np.asarray(seeds)
     while not batch.done[0]:
-        frame = int(batch.state.frame[0])
+        frame = batch.state.frame
         actions = [
             sample(policy.probs_batch(observe(batch, role, policy.frame)), lane_uniforms(keys, seat, frame))
             for seat, (role, policy) in enumerate(zip(ROLES, (bait, shooter), strict=True))

@@ -1,0 +1,108 @@
+"""One role's seat in many games at once: a Gymnasium `VectorEnv` over the batched engine.
+
+The learner plays `role` in every lane; the partner seat is played by one policy, or by a pool
+(each game draws its partner from its own seed). Partners answer in batch (`probs_batch`) and
+their actions are drawn with `lane_uniforms`, so a lane's game depends on its seed only. Games end
+by truncation after `config.frames` and restart at once with a fresh seed (Gymnasium's same-step
+autoreset: the finished game's last observation is in `infos["final_obs"]`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from services.agent.policy import Policy, lane_uniforms, sample
+from services.sim.batch import BatchGame
+from services.sim.batch_observation import observe
+from services.sim.config import N_ACTIONS, ROLES, GameConfig
+from services.sim.env import observation_space
+
+# A batched reward: (batch, the learner's seat, points before the frame) -> (lanes,) rewards.
+BatchReward = Callable[[BatchGame, int, np.ndarray], np.ndarray]
+PARTNER_DRAW = 2  # lane_uniforms stream that picks a game's partner from a pool
+
+
+def team_points(batch: BatchGame, seat: int, before: np.ndarray) -> np.ndarray:
+    """The default reward: the team's change in points, as RoleEnv's."""
+    return (batch.state.points - before).astype(np.float64)
+
+
+class RoleVectorEnv(VectorEnv):
+    """`num_envs` games of `role` against `partners`; actions are (num_envs,) ints 0..11."""
+
+    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
+
+    def __init__(
+        self,
+        num_envs: int,
+        role: str,
+        partners: Policy | list[Policy],
+        config: GameConfig | None = None,
+        view: str = "world",
+        reward: BatchReward = team_points,
+    ) -> None:
+        if role not in ROLES:
+            raise ValueError(f"unknown role {role!r}; expected one of {ROLES}")
+        self.partners = partners if isinstance(partners, list) else [partners]
+        for partner in self.partners:
+            if partner.role == role:
+                raise ValueError(f"the partner policy {partner.key!r} plays {role}, the seat being trained")
+        self.num_envs, self.role, self.seat = num_envs, role, ROLES.index(role)
+        self.config = config or GameConfig()
+        self.view, self.reward = view, reward
+        self.single_observation_space = observation_space(self.config)
+        self.single_action_space = spaces.Discrete(N_ACTIONS)
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        self.batch: BatchGame | None = None
+        self.partner_of = np.zeros(num_envs, np.int64)  # each lane's index into partners
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+        super().reset(seed=seed)
+        self.batch = BatchGame(self.num_envs, self.config, self._seeds(self.num_envs))
+        self._draw_partners(np.arange(self.num_envs))
+        return observe(self.batch, self.role, self.view), {}
+
+    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict]:
+        batch = self.batch
+        mine = np.asarray(actions)
+        theirs = self.partner_actions()
+        before = batch.state.points.copy()
+        batch.step(*((mine, theirs) if self.seat == 0 else (theirs, mine)))
+        rewards = self.reward(batch, self.seat, before)
+        truncated = batch.done.copy()
+        obs = observe(batch, self.role, self.view)
+        infos: dict = {}
+        if truncated.any():
+            lanes = np.flatnonzero(truncated)
+            infos = {"final_obs": obs.copy(), "_final_obs": truncated}
+            batch.reset(lanes, self._seeds(len(lanes)))
+            self._draw_partners(lanes)
+            obs = observe(batch, self.role, self.view)
+        return obs, rewards, np.zeros(self.num_envs, np.bool_), truncated, infos
+
+    def partner_actions(self) -> np.ndarray:
+        """Every lane's partner action for the current frame."""
+        batch, seat = self.batch, 1 - self.seat
+        uniforms = lane_uniforms(batch.seeds, seat, batch.state.frame)
+        actions = np.empty(self.num_envs, np.int64)
+        views: dict[str, np.ndarray] = {}
+        for index, partner in enumerate(self.partners):
+            lanes = np.flatnonzero(self.partner_of == index)
+            if lanes.size:
+                if partner.frame not in views:
+                    views[partner.frame] = observe(batch, ROLES[seat], partner.frame)
+                actions[lanes] = sample(partner.probs_batch(views[partner.frame][lanes]), uniforms[lanes])
+        return actions
+
+    def _seeds(self, n: int) -> np.ndarray:
+        return self.np_random.integers(2**31 - 1, size=n)
+
+    def _draw_partners(self, lanes: np.ndarray) -> None:
+        u = lane_uniforms(self.batch.seeds[lanes], PARTNER_DRAW, 0)
+        self.partner_of[lanes] = (u * len(self.partners)).astype(np.int64)

@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from services.agent import library
+from services.sim.batch_play import play_batch
 from services.sim.config import GameConfig
-from services.sim.play import play
 
 TABLE_VERSION = 1
 DEFAULT_TABLE = library.LIBRARY / "table.json"
@@ -37,7 +37,7 @@ class Job:
         return f"{self.bait}-{self.shooter}-{self.seeds[0]}-{len(self.seeds)}"
 
 
-def jobs(baits: list[str], shooters: list[str], games: int, chunk: int = 10) -> list[Job]:
+def jobs(baits: list[str], shooters: list[str], games: int, chunk: int = 20) -> list[Job]:
     """Every pair's seeds 0..games-1, cut into chunks of at most `chunk` games."""
     return [
         Job(b, s, tuple(range(start, min(start + chunk, games))))
@@ -48,9 +48,10 @@ def jobs(baits: list[str], shooters: list[str], games: int, chunk: int = 10) -> 
 
 
 def run_job(job: Job, config: GameConfig | None = None) -> list[float]:
-    """Kills per minute of each of the job's games (policies loaded fresh, so nothing carries over)."""
+    """Kills per minute of each of the job's games, played as lanes of one batch (policies loaded
+    fresh, so nothing carries over; each game depends on its seed only, see batch_play)."""
     bait, shooter = library.load(job.bait, config), library.load(job.shooter, config)
-    return [play(bait, shooter, seed, config).kills_per_minute for seed in job.seeds]
+    return [result.kills_per_minute for result in play_batch(bait, shooter, list(job.seeds), config)]
 
 
 @dataclass(frozen=True)

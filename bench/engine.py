@@ -15,6 +15,7 @@ Pin to cores for per-core figures, e.g. `taskset -c 1`. Run alone: other load sk
 from __future__ import annotations
 
 import argparse
+import multiprocessing
 import os
 import random
 import time
@@ -80,7 +81,7 @@ def self_play(games: int) -> int:
 
 def batched_self_play(games: int, cores: int = 2) -> float:
     os.environ["OPENBLAS_NUM_THREADS"] = "1"  # one core per process: BLAS threads would only contend
-    with ProcessPoolExecutor(cores) as pool:
+    with ProcessPoolExecutor(cores, mp_context=multiprocessing.get_context("spawn")) as pool:
         list(pool.map(self_play, [2] * cores))  # warm: imports, compiled loops
         start = time.perf_counter()
         frames = sum(pool.map(self_play, [games] * cores))

@@ -16,9 +16,9 @@ import numpy as np
 
 from services.agent import library
 from services.agent.scripted import CircleBait, MirrorShooter
-from services.sim.config import ROLES
 from services.sim.observation import as_observation, world_values
 from services.sim.play import play
+from shared.game import ROLES
 
 
 def sample_states(n: int = 64) -> dict[str, list[list[float]]]:

@@ -16,11 +16,11 @@ from rich.live import Live
 from rich.table import Table
 
 from services.adapter.core import STRATEGIES
+from services.agent.calibration import calibrate
 from services.agent.library import policy_for
-from services.sim.calibration import calibrate
-from services.sim.config import GameConfig
 from services.sim.play import play, summarize
 from shared.bus import BusConfig, stop_on_signals
+from shared.game import FPS, ROLES, GameConfig, other
 
 app = typer.Typer(no_args_is_help=True, add_completion=False, help="Team Space Fortress.")
 console = Console()
@@ -87,7 +87,7 @@ def game(
     shooter: str = typer.Option("mirror", help="Shooter seat's policy key."),
     seed: int = typer.Option(0, help="Seed of the first game; game i uses seed + i."),
     games: int = typer.Option(1, min=1, help="Number of games."),
-    frames: int = typer.Option(GameConfig.frames, min=1, help="Frames per game (30 per second)."),
+    frames: int = typer.Option(GameConfig.frames, min=1, help=f"Frames per game ({FPS} per second)."),
 ) -> None:
     """Play headless games in-process between two policies and print the score."""
     config = GameConfig(frames=frames)
@@ -175,7 +175,7 @@ def diversity(
 
     for role, partner in (("bait", bait_partner), ("shooter", shooter_partner)):
         keys = library.keys(role)
-        partner_role = "shooter" if role == "bait" else "bait"
+        partner_role = other(role)
         m = cem_matrix([library.load(k) for k in keys], policy_for(partner, partner_role), list(range(games)))
         table = Table(title=f"{role}s with {partner}: mean log-probability of row's actions under column")
         for column in ("", *keys):
@@ -305,7 +305,7 @@ def sim(
     match: Match,
     seed: int = typer.Option(0),
     frames: int = typer.Option(GameConfig.frames, min=1),
-    mode: str = typer.Option("realtime", "--sim-mode", help="realtime (30 Hz) or lockstep."),
+    mode: str = typer.Option("realtime", "--sim-mode", help=f"realtime ({FPS} Hz) or lockstep."),
     bait: str = typer.Option("", help="Bait's policy key, for the record."),
     shooter: str = typer.Option("", help="Shooter's policy key, for the record."),
     wait_players: float = typer.Option(10.0, help="Seconds to wait for both seats before starting."),
@@ -416,7 +416,7 @@ def router(
 @app.command("match")
 def match_command(
     seed: int = typer.Option(0, help="The game's seed."),
-    duration: float = typer.Option(60.0, min=0.1, help="Game length in seconds (30 frames each)."),
+    duration: float = typer.Option(60.0, min=0.1, help=f"Game length in seconds ({FPS} frames each)."),
     bait: str = typer.Option("circle", help="Bait agent's policy key."),
     shooter: str = typer.Option("mirror", help="Shooter agent's policy key."),
     lockstep: bool = typer.Option(
@@ -434,10 +434,10 @@ def match_command(
     from services.recorder.recording import export_parquet, load
 
     plan = MatchPlan(
-        match or new_match_id(), seed, round(duration * 30), "lockstep" if lockstep else "realtime",
+        match or new_match_id(), seed, round(duration * FPS), "lockstep" if lockstep else "realtime",
         bait, shooter, out, adaptive=adaptive, window=window, strategy=strategy,
     )  # fmt: skip
-    if adaptive and adaptive not in ("bait", "shooter"):
+    if adaptive and adaptive not in ROLES:
         raise typer.BadParameter(f"--adaptive takes bait or shooter, not {adaptive!r}")
     seats = plan.policies()
     view = {"partner": "-"}
@@ -582,7 +582,7 @@ def play_command(
     window: int = typer.Option(400, min=1, help="--partner adaptive: the window T in frames."),
     strategy: str = typer.Option("cem", help="--partner adaptive: the adapter's strategy (see tsf match)."),
     seed: int = typer.Option(0, help="The game's seed."),
-    duration: float = typer.Option(60.0, min=0.1, help="Game length in seconds (30 frames each)."),
+    duration: float = typer.Option(60.0, min=0.1, help=f"Game length in seconds ({FPS} frames each)."),
     wait: float = typer.Option(600.0, help="Seconds to wait for the players to press start."),
     host: Host = "127.0.0.1",
     port: Port = 8000,
@@ -593,18 +593,18 @@ def play_command(
     from services.human.play import play_with_people
     from services.launch import HUMAN, MatchPlan, new_match_id
 
-    if role not in ("bait", "shooter"):
+    if role not in ROLES:
         raise typer.BadParameter("role is bait or shooter")
-    other = "shooter" if role == "bait" else "bait"
+    partner_role = other(role)
     seats: dict = {role: HUMAN}
     if partner == "adaptive":
-        seats.update(adaptive=other, window=window, strategy=strategy)
+        seats.update(adaptive=partner_role, window=window, strategy=strategy)
     else:
         if partner != HUMAN:
-            policy_for(partner, other)  # an unknown key fails here, before anyone opens the page
-        seats[other] = partner
+            policy_for(partner, partner_role)  # an unknown key fails here, before anyone opens the page
+        seats[partner_role] = partner
     plan = MatchPlan(
-        match or new_match_id(), seed, round(duration * 30), "realtime", directory=out, wait_players=wait,
+        match or new_match_id(), seed, round(duration * FPS), "realtime", directory=out, wait_players=wait,
         **seats,
     )  # fmt: skip
 
@@ -642,7 +642,6 @@ def eval_command(
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
 
     from services.adapter import evaluate, figures
-    from services.adapter.core import other
     from services.adapter.partners import SWITCH_AT, population
     from services.agent import library
 
@@ -672,7 +671,7 @@ def eval_command(
         keys = library.keys(other(role))
         first, second = keys[0], keys[len(keys) // 2]
         scores = evaluate.switch_scores(first, second, 0, role)
-        title = f"Partner noisy(switch({first},{second})), switching at {SWITCH_AT / 30:.0f} s"
+        title = f"Partner noisy(switch({first},{second})), switching at {SWITCH_AT / FPS:.0f} s"
         figures.logprob_curves(scores, keys, min(window_list), title, out / "logprob_curves.png", SWITCH_AT)
     if comparison:
         figures.adaptive_vs_static(comparison, out / "adaptive_vs_static.png")
@@ -710,7 +709,7 @@ def report_command(
     from services.report.report import build_report
     from services.table.table import DEFAULT_TABLE, StaleTable
 
-    if partner_role not in ("", "bait", "shooter"):
+    if partner_role not in ("", *ROLES):
         raise typer.BadParameter("bait or shooter", param_hint="--partner-role")
     try:
         report = build_report(

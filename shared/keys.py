@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import re
 
-from services.sim.config import ROLES
+from shared.game import check_role
 
 PREFIX = "tsf"
 SERVICES = ("sim", "agent", "recorder", "adapter", "human")
@@ -32,22 +32,16 @@ def check_match(match: str) -> str:
     return match
 
 
-def _role(role: str) -> str:
-    if role not in ROLES:
-        raise ValueError(f"unknown role {role!r}; expected one of {ROLES}")
-    return role
-
-
 def state(match: str) -> str:
     return f"{PREFIX}/{check_match(match)}/state"
 
 
 def action(match: str, role: str) -> str:
-    return f"{PREFIX}/{check_match(match)}/action/{_role(role)}"
+    return f"{PREFIX}/{check_match(match)}/action/{check_role(role)}"
 
 
 def policy(match: str, role: str) -> str:
-    return f"{PREFIX}/{check_match(match)}/policy/{_role(role)}"
+    return f"{PREFIX}/{check_match(match)}/policy/{check_role(role)}"
 
 
 def start(match: str) -> str:
@@ -71,7 +65,7 @@ def alive(match: str, service: str, role: str | None = None) -> str:
     if service not in SERVICES:
         raise ValueError(f"unknown service {service!r}; expected one of {SERVICES}")
     key = f"{PREFIX}/{check_match(match)}/alive/{service}"
-    return f"{key}/{_role(role)}" if role is not None else key
+    return f"{key}/{check_role(role)}" if role is not None else key
 
 
 def actions(match: str) -> str:
@@ -113,4 +107,4 @@ def _worker(worker: str) -> str:
 
 def role_of(key: str) -> str:
     """The role named by the last chunk of an action, policy or alive key."""
-    return _role(str(key).rsplit("/", 1)[-1])
+    return check_role(str(key).rsplit("/", 1)[-1])

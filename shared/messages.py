@@ -17,27 +17,12 @@ from typing import Any, ClassVar, TypeVar
 
 import msgpack
 
-from services.sim.config import N_ACTIONS, ROLES, GameConfig
-from services.sim.engine import DEATH_CAUSES
-from services.sim.observation import SIZE as OBS_SIZE
 from shared import keys
+from shared.game import DEATH_CAUSES, EVENT_KINDS, N_ACTIONS, OBS_SIZE, ROLES, GameConfig
 
 SCHEMA_VERSION = 1
 MAX_BYTES = 64 * 1024
 MAX_FRAME = 10**9
-EVENT_KINDS = (
-    "kill",
-    "death",
-    "shield_hit",
-    "missile",
-    "shell",
-    "lock",
-    "fortress_respawn",
-    "reset",
-    "respawn",
-    "match_start",
-    "match_end",
-)
 
 
 class MessageError(ValueError):

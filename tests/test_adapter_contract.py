@@ -15,7 +15,6 @@ from services.adapter.service import run_adapter
 from services.agent import library
 from services.agent.service import run_agent
 from services.launch import adapter_args
-from services.sim.config import GameConfig
 from services.sim.engine import Game
 from services.sim.match import state_message
 from services.sim.observation import observe
@@ -23,6 +22,7 @@ from services.sim.play import policy_seed
 from services.sim.service import run_sim
 from services.table.table import DEFAULT_TABLE, Table
 from shared import keys
+from shared.game import GameConfig
 from shared.messages import Action, AdapterStatus, PolicySwitch, State, Summary
 
 BLOCK = {"congestion_control": zenoh.CongestionControl.BLOCK}

@@ -9,11 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from services.agent.policy import Policy
-from services.sim.config import GameConfig
 from services.sim.engine import Game
 from services.sim.observation import as_observation, world_values
 from services.sim.play import play
+from shared.game import ROLES, GameConfig, Policy, bait_first
 
 
 def log_probs(policy: Policy, states: list[list[float]], actions: list[int]) -> np.ndarray:
@@ -32,9 +31,9 @@ def rollout(
 
     def trace(game: Game, bait_action: int, shooter_action: int) -> None:
         states.append(world_values(game, role))
-        actions.append(bait_action if role == "bait" else shooter_action)
+        actions.append((bait_action, shooter_action)[ROLES.index(role)])
 
-    pair = (policy, partner) if role == "bait" else (partner, policy)
+    pair = bait_first(role, policy, partner)
     play(*pair, seed, config, trace)
     return states, actions
 

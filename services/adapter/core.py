@@ -31,19 +31,13 @@ from pathlib import Path
 import numpy as np
 
 from services.agent.library import batch_probs
-from services.agent.policy import Policy
-from services.sim.config import N_ACTIONS, ROLES
 from services.sim.observation import as_observation
 from services.table.table import Table
+from shared.game import N_ACTIONS, Policy, check_role, other
 
 STRATEGIES = ("cem", "cem-dwell", "cem-ood", "bayes", "bayes-dwell-ood")
 INITIAL = ("best-average", "random")
 CALIBRATION = Path(__file__).parent / "calibration.json"
-
-
-def other(role: str) -> str:
-    """The other seat."""
-    return ROLES[1 - ROLES.index(role)]
 
 
 @dataclass(frozen=True)
@@ -61,8 +55,7 @@ class AdapterConfig:
     seed: int = 0  # draws the random initial policy
 
     def __post_init__(self) -> None:
-        if self.role not in ROLES:
-            raise ValueError(f"unknown role {self.role!r}; expected one of {ROLES}")
+        check_role(self.role)
         if self.strategy not in STRATEGIES:
             raise ValueError(f"unknown strategy {self.strategy!r}; expected one of {STRATEGIES}")
         if self.initial not in INITIAL:

@@ -34,17 +34,15 @@ from services.adapter.core import (
     Payoff,
     Scorer,
     ood_threshold,
-    other,
 )
 from services.adapter.partners import SWITCH_AT, Noisy, Partner, Switching, group_of, make_partner
 from services.agent import library
 from services.agent.library import batch_probs
-from services.agent.policy import Policy
-from services.sim.config import ROLES, GameConfig
 from services.sim.engine import Game
 from services.sim.observation import as_observation, observe, world_values
 from services.sim.play import policy_seed, switch_seed
 from services.table.table import DEFAULT_TABLE, Table
+from shared.game import ROLES, GameConfig, Policy, bait_first, other
 
 FOLLOW_HOLD = 30  # frames the estimate must stay on the new type to count as following it
 _ADAPTIVE = re.compile(r"^adaptive-T(\d+)-([a-z-]+)$")
@@ -117,7 +115,7 @@ def play_partner(
             ours.reset(switch_seed(seed, role, game.frame + 1))
             outcome.switches += 1
             outcome.timeline.append((game.frame + 1, adapter.partner, adapter.policy))
-        pair = (partner_action, our_action) if partner_role == "bait" else (our_action, partner_action)
+        pair = bait_first(partner_role, partner_action, our_action)
         game.step(*pair)
     outcome.kills_per_minute = game.kills_per_minute()
     return outcome

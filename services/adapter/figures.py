@@ -12,6 +12,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402 - after choosing the file-only backend
 import numpy as np  # noqa: E402
 
+from shared.game import FPS  # noqa: E402
+
 GOALS = {150: 0.80, 400: 0.95, 800: 0.99}
 
 
@@ -58,9 +60,9 @@ def logprob_curves(
     means = (sums - shifted) / counts
     fig, ax = plt.subplots(figsize=(7, 4))
     for i, key in enumerate(keys):
-        ax.plot(np.arange(len(scores)) / 30.0, means[:, i], label=key, linewidth=1.2)
+        ax.plot(np.arange(len(scores)) / FPS, means[:, i], label=key, linewidth=1.2)
     if mark:
-        ax.axvline(mark / 30.0, color="black", linestyle=":", linewidth=1)
+        ax.axvline(mark / FPS, color="black", linestyle=":", linewidth=1)
     ax.set(xlabel="time (s)", ylabel=f"mean log-probability over the last {window} frames")
     ax.set_title(title, fontsize=10)
     ax.legend(ncol=3, fontsize=7)

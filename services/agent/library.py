@@ -24,10 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
-from services.agent.policy import N_FIRE, N_THRUST, N_TURN, Policy, RulePolicy, factored_probs
+from services.agent.policy import RulePolicy, factored_probs
 from services.agent.scripted import MirrorShooter, good_shot, scripted_policy
 from services.sim import observation as ob
-from services.sim.config import N_ACTIONS, ROLES, GameConfig
+from shared.game import N_ACTIONS, N_FIRE, N_THRUST, N_TURN, ROLES, GameConfig, Policy, join_action
 
 LIBRARY = Path(__file__).parent / "library"
 FLOOR = 1e-3  # weight of the uniform mixed into a network head's softmax
@@ -237,7 +237,7 @@ class LearnedPolicy:
     def act(self, obs: np.ndarray) -> int:
         heads = self.head_probs(obs)
         turn, thrust, fire = (self._sample(heads[name]) for name in HEADS)
-        return turn * 4 + thrust * 2 + fire
+        return join_action(turn, thrust, fire)
 
     def _sample(self, p: np.ndarray) -> int:
         u, total = self.rng.random(), 0.0

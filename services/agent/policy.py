@@ -1,39 +1,20 @@
-"""The policy interface every player of TSF implements: library, scripted, random or human proxy.
+"""Building blocks of policies: factored distributions, rule-based and uniform play.
 
-A policy is reset with a seed, reads the observation vector of its role (in the frame it names),
-returns an action, and returns the full distribution over the 12 actions it samples from. The
-distribution is what the adapter's cross-entropy metric reads, so it must be the real sampling
-distribution and never zero anywhere.
+The `Policy` protocol itself is part of the game's vocabulary (shared/game.py).
 """
 
 from __future__ import annotations
 
 import math
 import random
-from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from services.sim.config import N_ACTIONS
-
-N_TURN, N_THRUST, N_FIRE = 3, 2, 2
-
-
-@runtime_checkable
-class Policy(Protocol):
-    key: str
-    role: str
-    frame: str  # the observation frame it reads: "world" or "role"
-
-    def reset(self, seed: int | None = None) -> None: ...
-
-    def act(self, obs: np.ndarray) -> int: ...
-
-    def probs(self, obs: np.ndarray) -> np.ndarray: ...
+from shared.game import N_ACTIONS, N_FIRE, N_THRUST, N_TURN, join_action
 
 
 def factored_probs(turn: np.ndarray, thrust: np.ndarray, fire: np.ndarray) -> np.ndarray:
-    """Joint distribution over action = turn * 4 + thrust * 2 + fire from three independent heads."""
+    """Joint distribution over the actions (shared.game.join_action) from three independent heads."""
     return (turn[:, None, None] * thrust[None, :, None] * fire[None, None, :]).reshape(N_ACTIONS)
 
 
@@ -69,7 +50,7 @@ class RulePolicy:
             thrust = 1 - thrust
         if rng.random() < eps:
             fire = 1 - fire
-        return turn * 4 + thrust * 2 + fire
+        return join_action(turn, thrust, fire)
 
     def probs(self, obs: np.ndarray) -> np.ndarray:
         heads = []

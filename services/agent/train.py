@@ -31,13 +31,12 @@ from stable_baselines3.common.logger import configure
 
 from services.agent import library
 from services.agent.library import FEATURES, HEAD_SIZES, HEADS, LIBRARY, Recipe
-from services.agent.policy import Policy
 from services.agent.scripted import CircleBait, MirrorShooter
-from services.sim.config import ROLES, GameConfig
 from services.sim.engine import Event, Game
 from services.sim.env import RoleEnv
 from services.sim.observation import observe
 from services.sim.play import play, summarize
+from shared.game import ROLES, GameConfig, Policy, bait_first, join_action
 
 # --- rewards -------------------------------------------------------------------------------------
 
@@ -138,7 +137,7 @@ class RecipeEnv(gymnasium.Env):
         heads = dict(zip(self.recipe.learned, np.atleast_1d(action).tolist(), strict=True))
         heads |= library.rule_heads(self.recipe, self.obs, self.config)
         turn, thrust, fire = (int(heads[h]) for h in HEADS)
-        self.obs, reward, terminated, truncated, info = self.env.step(turn * 4 + thrust * 2 + fire)
+        self.obs, reward, terminated, truncated, info = self.env.step(join_action(turn, thrust, fire))
         return self.obs[self.features], reward, terminated, truncated, info
 
 
@@ -291,7 +290,7 @@ def score(key: str, partner: str, games: int, config: GameConfig | None = None, 
     """Kills/min of a library policy with a partner (from the shipped library) over seeded games."""
     policy = library.load(key, config, root)
     other = library.load(partner, config)
-    pair = (policy, other) if policy.role == "bait" else (other, policy)
+    pair = bait_first(policy.role, policy, other)
     s = summarize([play(*pair, seed, config) for seed in range(games)])
     return {"partner": partner, "games": s.games, "kills_per_minute": s.mean, "stderr": s.stderr}
 

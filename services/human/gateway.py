@@ -28,9 +28,9 @@ from websockets.datastructures import Headers
 from websockets.http11 import Request, Response
 
 from services.human.core import MAX_MESSAGE, BadInput, Controls, SeatBook, end, parse, setup, view
-from services.sim.config import GameConfig
 from shared import keys
 from shared.bus import BusConfig, Drops, session
+from shared.game import GameConfig
 from shared.messages import Action, MessageError, Start, State, Summary, decode
 
 log = logging.getLogger("tsf.human")

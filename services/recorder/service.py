@@ -15,9 +15,9 @@ from pathlib import Path
 import zenoh
 
 from services.recorder.log import GapTracker, LogWriter
-from services.sim.config import ROLES
 from shared import keys
 from shared.bus import BusConfig, Drops, session
+from shared.game import ROLES
 from shared.messages import Message, MessageError, State, Summary, decode_any
 
 log = logging.getLogger("tsf.recorder")

@@ -32,20 +32,15 @@ from scipy import stats
 
 from services.adapter.cem import cem_matrix
 from services.agent import library
-from services.agent.policy import Policy
 from services.report.load import Match
-from services.sim.config import ROLES, GameConfig
 from services.sim.observation import as_observation
 from services.table.table import Table
+from shared.game import FPS, ROLES, GameConfig, Policy, other
 
 ROUND_ENDS = ("kill", "reset")  # the events that end a round (docs/rules.md)
 ADAPTIVE = "adaptive-"  # how an adaptive agent's variant is named
 PERSON = ("", "human")  # what a start record names a person's seat
-SMOOTH = 30  # frames in the log-probability curves' moving mean (one second)
-
-
-def other(role: str) -> str:
-    return ROLES[1 - ROLES.index(role)]
+SMOOTH = FPS  # frames in the log-probability curves' moving mean (one second)
 
 
 @dataclass(frozen=True)

@@ -24,8 +24,8 @@ from services.recorder.recording_test import Script, record_match
 from services.report.analysis import adaptive_tests, seats, variants
 from services.report.load import Match, load_matches
 from services.report.report import Report, build_report
-from services.sim.config import GameConfig
 from services.table.table import Table
+from shared.game import GameConfig
 from shared.messages import AdapterStatus, PolicySwitch
 
 FRAMES = 450  # 15 s: long enough for the weak pairs to score less than the strong ones

@@ -17,11 +17,11 @@ from collections import Counter
 
 import zenoh
 
-from services.sim.config import ROLES, GameConfig
 from services.sim.engine import Game
 from services.sim.match import Seats, event_messages, start_message, state_message, summary_message
 from shared import keys
 from shared.bus import BusConfig, Drops, session
+from shared.game import ROLES, GameConfig
 from shared.messages import MessageError, Summary, decode_seat_action
 
 log = logging.getLogger("tsf.sim")

@@ -20,7 +20,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from services.sim.config import ROLES
+from shared.game import FPS, ROLES, other
 
 NAME = re.compile(r"[A-Za-z0-9_]{1,24}")
 DEFAULT_CONSENT = (
@@ -78,13 +78,13 @@ class StudyConfig:
             raise ValueError(f"roles must be among {ROLES}")
         for variant in self.variants:
             for role in self.roles:
-                agent = partner_role(role)
+                agent = other(role)
                 if not variant.adaptive and not getattr(variant, agent):
                     raise ValueError(f"variant {variant.name} has no {agent} for a {role} participant")
 
     @property
     def frames(self) -> int:
-        return round(self.trial_seconds * 30)
+        return round(self.trial_seconds * FPS)
 
     @classmethod
     def load(cls, path: str | Path) -> StudyConfig:
@@ -98,10 +98,6 @@ class StudyConfig:
     def hash(self) -> str:
         text = json.dumps(dataclasses.asdict(self), sort_keys=True)
         return hashlib.blake2b(text.encode(), digest_size=8).hexdigest()
-
-
-def partner_role(role: str) -> str:
-    return ROLES[1 - ROLES.index(role)]
 
 
 def assigned_role(config: StudyConfig, index: int) -> str:

@@ -30,8 +30,9 @@ from websockets.asyncio.server import ServerConnection
 from services.human.core import BadInput, Controls
 from services.human.gateway import Bridge, Gateway, Handler, Outbox, receive_first, refuse
 from services.launch import HUMAN, MatchPlan, run_match
-from services.study.core import Participant, Study, StudyConfig, Trial, partner_role
+from services.study.core import Participant, Study, StudyConfig, Trial
 from shared.bus import BusConfig, free_endpoint
+from shared.game import other
 
 log = logging.getLogger("tsf.study")
 PROBLEM = "The game could not be started. Please tell the experimenter."
@@ -116,7 +117,7 @@ def study_handler(study: Study, endpoint: str, low_latency: bool = True) -> Hand
         participant left (the match then runs out with their ship idle, and is marked dropped)."""
         plan = MatchPlan(
             trial.match, trial.seed, config.frames, directory=recordings, peers=(endpoint,),
-            low_latency=low_latency, **{trial.role: HUMAN}, **trial.variant.plan(partner_role(trial.role)),
+            low_latency=low_latency, **{trial.role: HUMAN}, **trial.variant.plan(other(trial.role)),
         )  # fmt: skip
         bridge = Bridge(z, trial.match, trial.role, socket.controls, socket.outbox, obs)
         bridge.live()

@@ -23,10 +23,10 @@ from pathlib import Path
 import zenoh
 
 from services.agent import library
-from services.sim.config import GameConfig
 from services.table.table import Job, Table, assemble, jobs, run_job
 from shared import keys
 from shared.bus import BusConfig, Drops, session
+from shared.game import GameConfig
 from shared.messages import MessageError, SweepJob, SweepResult, decode
 
 log = logging.getLogger("tsf.sweep")

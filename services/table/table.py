@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from services.agent import library
-from services.sim.config import GameConfig
 from services.sim.play import play
+from shared.game import GameConfig
 
 TABLE_VERSION = 1
 DEFAULT_TABLE = library.LIBRARY / "table.json"

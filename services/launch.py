@@ -18,10 +18,9 @@ from pathlib import Path
 
 import zenoh
 
-from services.adapter.core import AdapterConfig, Payoff
+from services.adapter.core import AdapterConfig
 from services.recorder.recording import load
 from services.recorder.service import recording_path
-from services.table.table import DEFAULT_TABLE, Table
 from shared import keys
 from shared.bus import BusConfig, free_endpoint, session
 from shared.messages import AdapterStatus, MessageError, State, Summary, decode
@@ -41,24 +40,13 @@ class MatchPlan:
     low_latency: bool = True
     peers: tuple[str, ...] = ()  # endpoints the sim also connects to (a human gateway's session)
     wait_players: float = 10.0  # seconds the sim waits for both seats (people take longer)
-    adaptive: str = ""  # the seat the adaptive agent plays ("" for none): its key is ignored
-    window: int = 400
-    strategy: str = "cem"
-    initial: str = "best-average"
-
-    @property
-    def adapter(self) -> AdapterConfig | None:
-        if not self.adaptive:
-            return None
-        return AdapterConfig(self.adaptive, self.window, self.strategy, self.initial, seed=self.seed)
+    adapter: AdapterConfig | None = None  # the adaptive agent, in the seat it names (that key is ignored)
 
     def policies(self) -> dict[str, str]:
         """Each seat's starting policy key; an adaptive seat starts with the adapter's initial policy."""
         keys_ = {"bait": self.bait, "shooter": self.shooter}
         if self.adapter is not None:
-            keys_[self.adaptive] = Payoff.from_table(Table.load(DEFAULT_TABLE), self.adaptive).initial(
-                self.adapter
-            )
+            keys_[self.adapter.role] = self.adapter.initial_policy()
         return keys_
 
 
@@ -143,7 +131,7 @@ def run_match(
     policies = plan.policies()
     recorded = dict(policies)
     if plan.adapter is not None:
-        recorded[plan.adaptive] = plan.adapter.name
+        recorded[plan.adapter.role] = plan.adapter.name
     with Processes() as processes:
         processes.start(
             "sim",
@@ -157,9 +145,7 @@ def run_match(
         recorder = service_command("recorder", peer_bus, *match, "--out", str(plan.directory))
         processes.start("recorder", recorder, nice=10)  # it drains a queue: latency is not its job
         if plan.adapter is not None:
-            processes.start(
-                "adapter", service_command("adapter", peer_bus, *match, *adapter_args(plan.adapter))
-            )
+            processes.start("adapter", service_command("adapter", peer_bus, *match, *plan.adapter.to_args()))
         for role, policy in policies.items():
             if policy == HUMAN:
                 continue
@@ -189,14 +175,6 @@ def run_match(
         code = processes.children["sim"].returncode
         raise RuntimeError(f"match {plan.match} ended without a summary (sim exit code {code})")
     return summary[0], path
-
-
-def adapter_args(config: AdapterConfig) -> list[str]:
-    """`tsf adapter` options for a config."""
-    return [
-        "--role", config.role, "--window", str(config.window), "--strategy", config.strategy,
-        "--initial", config.initial, "--seed", str(config.seed),
-    ]  # fmt: skip
 
 
 def new_match_id() -> str:

@@ -9,14 +9,14 @@ import json
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
-from services.launch import HUMAN, MatchPlan
+from services.launch import HUMAN
 from services.recorder.recording import load
 from services.study.core import StudyConfig, Variant
 from services.study.runner import run_study
 from services.study.standin import stand_in
 from shared.game import other
 
-VARIANTS = (Variant("strong", "B5", "S5"), Variant("adaptive", adaptive=True, window=30))
+VARIANTS = (Variant("strong", "B5", "S5"), Variant("adaptive", adapter="adaptive-T30-cem"))
 
 
 def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_until):
@@ -68,10 +68,10 @@ def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_unti
             met.append(variant.name)
             recording = load(tmp_path / "recordings" / f"{attempt['match']}.tsflog")
             agent_role = other(participant.role)
-            adaptive = MatchPlan("x", **variant.plan(agent_role)).adapter
+            adaptive = variant.adaptive(agent_role, 0)
             agent = adaptive.name if adaptive else getattr(variant, agent_role)
             assert recording.start.policies == {participant.role: HUMAN, agent_role: agent}
-            assert bool(recording.adapter) == variant.adaptive  # the adapter watched the person
+            assert bool(recording.adapter) == bool(variant.adapter)  # the adapter watched the person
             assert recording.summary.kills == sidecar["kills"]
             human = [a for _, a in recording.actions if a.role == participant.role]
             assert human and all(a.sender == f"human/{participant.role}" for a in human)

@@ -25,34 +25,44 @@ from __future__ import annotations
 import json
 import math
 import random
-from dataclasses import dataclass
+import re
+from dataclasses import dataclass, field, fields
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from services.agent.library import batch_probs
 from services.sim.observation import as_observation
-from services.table.table import Table
+from services.table.table import DEFAULT_TABLE, Table
 from shared.game import N_ACTIONS, Policy, check_role, other
 
 STRATEGIES = ("cem", "cem-dwell", "cem-ood", "bayes", "bayes-dwell-ood")
 INITIAL = ("best-average", "random")
 CALIBRATION = Path(__file__).parent / "calibration.json"
+ADAPTIVE = "adaptive-"  # how every adaptive agent's name begins
+_NAME = re.compile(rf"^{ADAPTIVE}T(\d+)-([a-z-]+)$")
+
+
+def _option(default: object, help: str) -> Any:
+    """A config field with its command-line help (services/cli.py builds the options from these)."""
+    return field(default=default, metadata={"help": help})
 
 
 @dataclass(frozen=True)
 class AdapterConfig:
-    """How an adaptive agent adapts. Zero means "the default derived from the window"."""
+    """The adaptive agent, whole: every launcher, study variant, command line and report reads or
+    names it through this value. Zero means "the default derived from the window"."""
 
-    role: str = "shooter"  # the adaptive agent's seat; the partner plays the other
-    window: int = 400  # T, frames of partner play the CEM averages over
-    strategy: str = "cem"
-    initial: str = "best-average"
-    warmup: int = 0  # frames before the first estimate (default: min(T, 150), 5 s)
-    dwell: int = 0  # -dwell strategies: frames a new choice must hold (default: max(15, T // 10))
-    hazard: float = 0.0  # bayes: per-frame switching probability (default: 1 / T)
-    noise: float = 0.05  # bayes: probability that the partner's action is a uniform slip
-    seed: int = 0  # draws the random initial policy
+    role: str = _option("shooter", "The adaptive agent's seat; the partner plays the other.")
+    window: int = _option(400, "T: frames of partner play the similarity averages over.")
+    strategy: str = _option("cem", f"One of {', '.join(STRATEGIES)}.")
+    initial: str = _option("best-average", f"Policy before the first estimate: {' or '.join(INITIAL)}.")
+    warmup: int = _option(0, "Frames before the first estimate (0: min(T, 150), 5 s).")
+    dwell: int = _option(0, "-dwell strategies: frames a new choice must hold (0: max(15, T/10)).")
+    hazard: float = _option(0.0, "bayes: per-frame switching probability (0: 1/T).")
+    noise: float = _option(0.05, "bayes: probability that the partner's action is a uniform slip.")
+    seed: int = _option(0, "Draws the random initial policy.")
 
     def __post_init__(self) -> None:
         check_role(self.role)
@@ -83,8 +93,29 @@ class AdapterConfig:
 
     @property
     def name(self) -> str:
-        """The variant's name in results: adaptive-T<window>-<strategy>."""
-        return f"adaptive-T{self.window}-{self.strategy}"
+        """The name a recording, a result table or a study gives this agent: adaptive-T<window>-<strategy>."""
+        return f"{ADAPTIVE}T{self.window}-{self.strategy}"
+
+    @classmethod
+    def parse(cls, name: str, **fields: object) -> AdapterConfig | None:
+        """The config a name stands for (window and strategy from the name, other fields from
+        `fields`), or None for any other name (a static policy's key, a person)."""
+        found = _NAME.match(name)
+        return cls(window=int(found[1]), strategy=found[2], **fields) if found else None
+
+    def to_args(self) -> list[str]:
+        """The same config as `tsf adapter` options: one per field, so that none is dropped."""
+        return [arg for f in fields(self) for arg in (f"--{f.name}", str(getattr(self, f.name)))]
+
+    def initial_policy(self, table: Path = DEFAULT_TABLE) -> str:
+        """What our agent plays before the first estimate."""
+        return Payoff.load(self.role, table).initial(self)
+
+    def build(self, payoff: Payoff | None = None) -> Adapter:
+        """The adapter core this config describes (`payoff`: the shipped table seen from our seat)."""
+        payoff = payoff or Payoff.load(self.role)
+        threshold = ood_threshold(self.partner_role, self.window) if "ood" in self.strategy else None
+        return Adapter(self, payoff, threshold)
 
 
 @dataclass(frozen=True)
@@ -94,6 +125,11 @@ class Payoff:
     partners: tuple[str, ...]
     ours: tuple[str, ...]
     values: np.ndarray
+
+    @classmethod
+    def load(cls, role: str, table: Path = DEFAULT_TABLE) -> Payoff:
+        """A table file seen from our seat `role`."""
+        return cls.from_table(Table.load(table), role)
 
     @classmethod
     def from_table(cls, table: Table, role: str) -> Payoff:

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import zenoh
 
-from services.adapter.core import Adapter, AdapterConfig, Pairing, Payoff, Scorer, ood_threshold
+from services.adapter.core import Adapter, AdapterConfig, Pairing, Payoff, Scorer
 from services.agent import library
-from services.table.table import DEFAULT_TABLE, Table
+from services.table.table import DEFAULT_TABLE
 from shared import keys
 from shared.bus import BusConfig, Drops, session, stop_on_summary
 from shared.messages import AdapterStatus, MessageError, PolicySwitch, State, decode, decode_seat_action
@@ -29,9 +29,8 @@ RESEND_FRAMES = 30  # ask again if the agent still plays another policy this man
 
 def build(config: AdapterConfig, table: Path = DEFAULT_TABLE) -> tuple[Adapter, Scorer]:
     """The core for one adaptive seat: the table's view from that seat and the partner's library."""
-    payoff = Payoff.from_table(Table.load(table), config.role)
-    threshold = ood_threshold(config.partner_role, config.window) if "ood" in config.strategy else None
-    return Adapter(config, payoff, threshold), Scorer([library.load(k) for k in payoff.partners])
+    payoff = Payoff.load(config.role, table)
+    return config.build(payoff), Scorer([library.load(k) for k in payoff.partners])
 
 
 def run_adapter(

@@ -31,6 +31,7 @@ import pandas as pd
 from scipy import stats
 
 from services.adapter.cem import cem_matrix
+from services.adapter.core import AdapterConfig
 from services.agent import library
 from services.report.load import Match
 from services.sim.observation import as_observation
@@ -38,7 +39,6 @@ from services.table.table import Table
 from shared.game import FPS, ROLES, GameConfig, Policy, other
 
 ROUND_ENDS = ("kill", "reset")  # the events that end a round (docs/rules.md)
-ADAPTIVE = "adaptive-"  # how an adaptive agent's variant is named
 PERSON = ("", "human")  # what a start record names a person's seat
 SMOOTH = FPS  # frames in the log-probability curves' moving mean (one second)
 
@@ -62,7 +62,7 @@ def adaptive_seat(match: Match) -> str | None:
     adapter = match.tables["adapter"]
     if not adapter.empty:
         return str(adapter["role"].iloc[0])
-    return next((r for r in ROLES if match.policies[r].startswith(ADAPTIVE)), None)
+    return next((r for r in ROLES if AdapterConfig.parse(match.policies[r]) is not None), None)
 
 
 def person_seats(match: Match) -> list[str]:
@@ -83,7 +83,8 @@ def seats(match: Match, partner_role: str | None = None) -> list[Seat]:
             continue
         agent_role = other(role)
         if agent_role == adaptive and not adapter.empty:
-            variant = f"{ADAPTIVE}T{adapter['window'].iloc[0]}-{adapter['strategy'].iloc[0]}"
+            window, strategy = int(adapter["window"].iloc[0]), str(adapter["strategy"].iloc[0])
+            variant = AdapterConfig(agent_role, window, strategy).name
         else:
             variant = "person" if policies[agent_role] in PERSON else policies[agent_role]
         partner = "person" if policies[role] in PERSON else policies[role]

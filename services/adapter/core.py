@@ -1,8 +1,8 @@
 """The adapter's pure core: which library policy is the partner like, and what should we play.
 
 Every frame, each library policy of the partner's role scores the partner's action in the state
-the partner saw (`Scorer`: log pi_k(a_t | s_t)). A strategy turns those scores into an estimated
-partner type C and our policy D (`Adapter`):
+the partner saw (`Scorer`: log pi_k(a_t | s_t), the similarity score of cem.log_probs). A strategy
+turns those scores into an estimated partner type C and our policy D (`Adapter`):
 
 - `cem` (the study's): C is the policy with the highest mean log-probability over the last T
   frames (the window, `Window`); D is the best response to C in the self-play table P.
@@ -32,8 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from services.agent.library import batch_probs
-from services.sim.observation import as_observation
+from services.adapter.cem import log_probs
 from services.table.table import DEFAULT_TABLE, Table
 from shared.game import N_ACTIONS, Policy, check_role, other
 
@@ -184,17 +183,14 @@ class Scorer:
     def __init__(self, policies: list[Policy]) -> None:
         self.policies = policies
         self.keys = tuple(p.key for p in policies)
-        self.frames = sorted({p.frame for p in policies})
 
     def __call__(self, values: list[float] | np.ndarray, action: int) -> np.ndarray:
-        obs = {frame: as_observation(values, frame) for frame in self.frames}
-        return np.log([p.probs(obs[p.frame])[action] for p in self.policies])
+        """(K,) scores of one frame (a batch of one evaluates exactly as a single observation)."""
+        return log_probs(self.policies, [values], [action])[0]
 
     def batch(self, values: np.ndarray, actions: np.ndarray) -> np.ndarray:
-        """(n, K) scores of n frames, one batched probability evaluation per policy."""
-        obs = {f: np.stack([as_observation(v, f) for v in values]) for f in self.frames}
-        rows = np.arange(len(actions))
-        return np.log(np.stack([batch_probs(p, obs[p.frame])[rows, actions] for p in self.policies], axis=1))
+        """(n, K) scores of n frames."""
+        return log_probs(self.policies, values, actions)
 
 
 def ood_threshold(partner_role: str, window: int, path: Path = CALIBRATION) -> float:

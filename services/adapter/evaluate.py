@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from services.adapter.cem import log_probs
 from services.adapter.core import (
     CALIBRATION,
     Adapter,
@@ -35,9 +36,8 @@ from services.adapter.core import (
 )
 from services.adapter.partners import SWITCH_AT, Noisy, Partner, Switching, group_of, make_partner
 from services.agent import library
-from services.agent.library import batch_probs
 from services.sim.engine import Game
-from services.sim.observation import as_observation, observe, world_values
+from services.sim.observation import observe, world_values
 from services.sim.play import policy_seed, switch_seed
 from services.table.table import DEFAULT_TABLE
 from shared.game import ROLES, GameConfig, Policy, bait_first, other
@@ -344,9 +344,7 @@ def _self_scores(key: str, teammate: str, seed: int) -> np.ndarray:
     policy = library.load(key)
     partner_role = other(policy.role)
     outcome = play_partner(make_partner(key, policy.role), teammate, seed, partner_role, record=True)
-    obs = np.stack([as_observation(v, policy.frame) for v in outcome.values])
-    probs = batch_probs(policy, obs)
-    return np.log(probs[np.arange(len(outcome.actions)), outcome.actions])
+    return log_probs([policy], outcome.values, outcome.actions)[:, 0]
 
 
 def calibrate(

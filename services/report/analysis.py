@@ -30,11 +30,10 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from services.adapter.cem import cem_matrix
+from services.adapter import cem
 from services.adapter.core import AdapterConfig
 from services.agent import library
 from services.report.load import Match
-from services.sim.observation import as_observation
 from services.table.table import Table
 from shared.game import FPS, ROLES, GameConfig, Policy, other
 
@@ -117,15 +116,7 @@ def partner_stream(match: Match, role: str) -> pd.DataFrame:
 
 def log_probs(stream: pd.DataFrame, policies: list[Policy]) -> np.ndarray:
     """(frames, policies): log pi(a_t | s_t) of each policy for each pair of a partner's stream."""
-    out = np.empty((len(stream), len(policies)))
-    actions = stream["action"].to_numpy()
-    observed = {}
-    for j, policy in enumerate(policies):
-        if policy.frame not in observed:
-            observed[policy.frame] = np.stack([as_observation(list(o), policy.frame) for o in stream["obs"]])
-        probs = library.batch_probs(policy, observed[policy.frame])
-        out[:, j] = np.log(probs[np.arange(len(stream)), actions])
-    return out
+    return cem.log_probs(policies, [list(o) for o in stream["obs"]], stream["action"].to_numpy())
 
 
 def library_policies(role: str, config: GameConfig) -> dict[str, Policy]:
@@ -163,7 +154,7 @@ def reference_vectors(role: str, table: Table, games: int, config: GameConfig) -
     matrix of docs/library.md)."""
     policies = library_policies(role, config)
     partner = library.load(reference_partner(table, role), config)
-    matrix = cem_matrix(list(policies.values()), partner, list(range(games)), config)
+    matrix = cem.cem_matrix(list(policies.values()), partner, list(range(games)), config)
     return pd.DataFrame(matrix, index=list(policies), columns=list(policies))
 
 

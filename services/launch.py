@@ -16,14 +16,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-import zenoh
-
 from services.adapter.core import AdapterConfig
 from services.recorder.recording import load
 from services.recorder.service import recording_path
 from shared import keys
-from shared.bus import BusConfig, free_endpoint, session
-from shared.messages import AdapterStatus, MessageError, State, Summary, decode
+from shared.bus import BusConfig, free_endpoint, session, subscribe
+from shared.messages import AdapterStatus, State, Summary
 
 HUMAN = "human"  # a seat's policy key for a person: no agent is started, a gateway plays it
 
@@ -102,30 +100,17 @@ def run_match(
     summary: list[Summary] = []
     done = threading.Event()
 
-    def on_summary(sample: zenoh.Sample) -> None:
-        try:
-            summary.append(decode(sample.payload.to_bytes(), Summary))
-        except MessageError:
-            return
+    def on_summary(message: Summary) -> None:
+        summary.append(message)
         done.set()
 
     shown = [0.0]
 
-    def on_state_sample(sample: zenoh.Sample) -> None:
+    def on_state_shown(state: State) -> None:
         """At most 10 updates a second: the scoreboard shares the CPU with the match."""
-        if time.monotonic() - shown[0] < 0.1:
-            return
-        try:
-            on_state(decode(sample.payload.to_bytes(), State))
-        except MessageError:
-            return
-        shown[0] = time.monotonic()
-
-    def on_adapter_sample(sample: zenoh.Sample) -> None:
-        try:
-            on_adapter(decode(sample.payload.to_bytes(), AdapterStatus))
-        except MessageError:
-            return
+        if time.monotonic() - shown[0] >= 0.1:
+            on_state(state)
+            shown[0] = time.monotonic()
 
     match = ["--match", plan.match]
     policies = plan.policies()
@@ -155,17 +140,15 @@ def run_match(
                     "agent", peer_bus, *match, "--role", role, "--policy", policy, "--seed", str(plan.seed)
                 ),
             )
-        with session(peer_bus) as z:
-            subscribers = [
-                z.declare_subscriber(keys.state(plan.match), on_state_sample),
-                z.declare_subscriber(keys.summary(plan.match), on_summary),
-                z.declare_subscriber(keys.adapter(plan.match), on_adapter_sample),
-            ]
+        with (
+            session(peer_bus) as z,
+            subscribe(z, keys.state(plan.match), State, on_state_shown),
+            subscribe(z, keys.summary(plan.match), Summary, on_summary),
+            subscribe(z, keys.adapter(plan.match), AdapterStatus, on_adapter),
+        ):
             while not done.wait(0.2):
                 if processes.children["sim"].poll() is not None:
                     break
-            for subscriber in subscribers:
-                subscriber.undeclare()
         processes.wait("sim", 10)
         processes.wait("recorder", 10)
     path = recording_path(plan.directory, plan.match)

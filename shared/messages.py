@@ -355,12 +355,17 @@ def decode_seat_action(data: bytes | bytearray | memoryview, key: str, match: st
     the seat the key names; else MessageError (a spoofed or misrouted action is a `mismatch`)."""
     action = decode(data, Action)
     try:
-        seat = keys.role_of(key)
+        seat = keys.parse(key).role
     except ValueError:
         seat = ""
     if action.match != match or seat != action.role:
         raise MessageError("mismatch", f"{action.role} action for {action.match} on {key}")
     return action
+
+
+def seat_actions(match: str) -> Callable[[bytes | bytearray | memoryview, str], Action]:
+    """decode_seat_action for one match, as a subscriber's decoder (shared.bus.subscribe)."""
+    return lambda data, key: decode_seat_action(data, key, match)
 
 
 def decode_any(data: bytes | bytearray | memoryview) -> Message:

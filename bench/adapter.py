@@ -17,12 +17,13 @@ import time
 
 import numpy as np
 
-from services.adapter.core import STRATEGIES, AdapterConfig, other
+from services.adapter.core import STRATEGIES, AdapterConfig
 from services.adapter.evaluate import play_partner
 from services.adapter.partners import make_partner
 from services.adapter.service import build, run_adapter
 from services.launch import Processes, service_command
 from shared.bus import BusConfig, free_endpoint
+from shared.game import FPS, other
 
 WINDOW = 800
 
@@ -63,7 +64,7 @@ def as_service(frames: int) -> tuple[np.ndarray, float]:
             agent = service_command("agent", BusConfig(connect=(endpoint,)), "--match", match, "--role", role,
                                     "--policy", policy)  # fmt: skip
             processes.start(role, agent)
-        processes.wait("sim", frames / 30 + 60)
+        processes.wait("sim", frames / FPS + 60)
     stop.set()
     thread.join()
     return np.array(costs), time.monotonic() - began

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from services.launch import MatchPlan, run_match
 from services.recorder.recording import load
+from shared.game import FPS
 
 
 def main() -> None:
@@ -22,7 +23,7 @@ def main() -> None:
     parser.add_argument("--lockstep-frames", type=int, default=1800)
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as directory:
-        plan = MatchPlan("bench-rt", frames=round(args.seconds * 30), directory=Path(directory))
+        plan = MatchPlan("bench-rt", frames=round(args.seconds * FPS), directory=Path(directory))
         summary, _ = run_match(plan)
         t = summary.timing
         print(f"real time, {summary.frame} frames:")

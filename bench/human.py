@@ -26,6 +26,7 @@ import websockets
 from services.human.play import play_with_people
 from services.launch import HUMAN, MatchPlan
 from services.recorder.recording import load
+from shared.game import FPS
 
 
 async def browser(link: str) -> int:
@@ -51,7 +52,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=20.0, help="length of the match")
     args = parser.parse_args()
-    frames = round(args.seconds * 30)
+    frames = round(args.seconds * FPS)
     links: list[dict[str, str]] = []
     ready = threading.Event()
     with tempfile.TemporaryDirectory() as directory, ThreadPoolExecutor(1) as pool:

@@ -16,9 +16,10 @@ import numpy as np
 
 from services.agent import library
 from services.agent.scripted import CircleBait, MirrorShooter
-from services.sim.config import ROLES
 from services.sim.observation import as_observation, world_values
 from services.sim.play import play
+from services.sim.sampling import batch_probs
+from shared.game import ROLES
 
 
 def sample_states(n: int = 64) -> dict[str, list[list[float]]]:
@@ -64,9 +65,7 @@ def report(role: str, states: list[list[float]], repeat: int) -> None:
         print(f"  (a) {p.key:3s} one observation: {t * 1e6:7.1f} us")
     t_all = per_call(lambda: [p.probs(obs[p.key]) for p in policies], repeat)
     print(f"  (b) all {len(policies)}, one observation: {t_all * 1e6:7.1f} us")
-    t_batch = per_call(
-        lambda: [library.batch_probs(p, batches[p.key]) for p in policies], max(repeat // 20, 5)
-    )
+    t_batch = per_call(lambda: [batch_probs(p, batches[p.key]) for p in policies], max(repeat // 20, 5))
     n = len(states)
     per_obs = t_batch / n * 1e6
     print(f"  (c) all {len(policies)}, batch of {n}: {t_batch * 1e3:.2f} ms = {per_obs:.1f} us each")

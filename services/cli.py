@@ -15,12 +15,12 @@ from rich.console import Console
 from rich.live import Live
 from rich.table import Table
 
-from services.adapter.core import STRATEGIES
+from services.adapter.core import STRATEGIES, AdapterConfig
+from services.agent.calibration import calibrate
 from services.agent.library import policy_for
-from services.sim.calibration import calibrate
-from services.sim.config import GameConfig
 from services.sim.play import play, summarize
 from shared.bus import BusConfig, stop_on_signals
+from shared.game import FPS, ROLES, GameConfig, other
 
 app = typer.Typer(no_args_is_help=True, add_completion=False, help="Team Space Fortress.")
 console = Console()
@@ -81,13 +81,54 @@ def bus_options(command: Callable[..., None]) -> Callable[..., None]:
     return with_bus
 
 
+AdapterFactory = Callable[..., AdapterConfig]
+
+
+def adapter_options(*fixed: str) -> Callable[[Callable[..., None]], Callable[..., None]]:
+    """Give a command one option per AdapterConfig field, but the `fixed` ones it sets itself; the
+    command receives them as `adapter(**fixed) -> AdapterConfig`, which reports a bad value as a bad
+    parameter. The options are the config's fields, defaults and help, so none can be dropped."""
+    fields = [f for f in dataclasses.fields(AdapterConfig) if f.name not in fixed]
+
+    def decorate(command: Callable[..., None]) -> Callable[..., None]:
+        own = [
+            p for p in inspect.signature(command, eval_str=True).parameters.values() if p.name != "adapter"
+        ]
+        added = [
+            inspect.Parameter(
+                f.name,
+                inspect.Parameter.KEYWORD_ONLY,
+                default=f.default,
+                annotation=Annotated[type(f.default), typer.Option(help=f.metadata["help"])],
+            )
+            for f in fields
+        ]
+
+        @functools.wraps(command)
+        def with_adapter(**options: object) -> None:
+            chosen = {f.name: options.pop(f.name) for f in fields}
+
+            def adapter(**given: object) -> AdapterConfig:
+                try:
+                    return AdapterConfig(**chosen, **given)
+                except ValueError as error:
+                    raise typer.BadParameter(str(error)) from None
+
+            command(adapter=adapter, **options)
+
+        with_adapter.__signature__ = inspect.Signature(own + added)
+        return with_adapter
+
+    return decorate
+
+
 @app.command()
 def game(
     bait: str = typer.Option("circle", help="Bait seat's policy key."),
     shooter: str = typer.Option("mirror", help="Shooter seat's policy key."),
     seed: int = typer.Option(0, help="Seed of the first game; game i uses seed + i."),
     games: int = typer.Option(1, min=1, help="Number of games."),
-    frames: int = typer.Option(GameConfig.frames, min=1, help="Frames per game (30 per second)."),
+    frames: int = typer.Option(GameConfig.frames, min=1, help=f"Frames per game ({FPS} per second)."),
 ) -> None:
     """Play headless games in-process between two policies and print the score."""
     config = GameConfig(frames=frames)
@@ -175,7 +216,7 @@ def diversity(
 
     for role, partner in (("bait", bait_partner), ("shooter", shooter_partner)):
         keys = library.keys(role)
-        partner_role = "shooter" if role == "bait" else "bait"
+        partner_role = other(role)
         m = cem_matrix([library.load(k) for k in keys], policy_for(partner, partner_role), list(range(games)))
         table = Table(title=f"{role}s with {partner}: mean log-probability of row's actions under column")
         for column in ("", *keys):
@@ -305,7 +346,7 @@ def sim(
     match: Match,
     seed: int = typer.Option(0),
     frames: int = typer.Option(GameConfig.frames, min=1),
-    mode: str = typer.Option("realtime", "--sim-mode", help="realtime (30 Hz) or lockstep."),
+    mode: str = typer.Option("realtime", "--sim-mode", help=f"realtime ({FPS} Hz) or lockstep."),
     bait: str = typer.Option("", help="Bait's policy key, for the record."),
     shooter: str = typer.Option("", help="Shooter's policy key, for the record."),
     wait_players: float = typer.Option(10.0, help="Seconds to wait for both seats before starting."),
@@ -331,7 +372,11 @@ def sim(
 def agent(
     match: Match,
     role: str = typer.Option(..., help="bait or shooter"),
-    policy: str = typer.Option(..., help="Policy key to play (a library or scripted key)."),
+    policy: str = typer.Option(
+        ...,
+        help="Policy key to play (a library or scripted key), or an adaptive agent's name "
+        "(adaptive-T<window>-<strategy>) to start with its initial policy.",
+    ),
     seed: int = typer.Option(0, help="The match's seed (the policy's seed derives from it)."),
     *,
     bus: BusConfig,
@@ -339,14 +384,8 @@ def agent(
     """Run an agent service that plays one seat."""
     from services.agent.service import run_agent
 
-    run_agent(
-        bus,
-        match,
-        role,
-        policy,
-        seed,
-        stop_on_signals(),
-    )
+    adaptive = AdapterConfig.parse(policy, role=role, seed=seed)
+    run_agent(bus, match, role, adaptive.initial_policy() if adaptive else policy, seed, stop_on_signals())
 
 
 @app.command()
@@ -366,35 +405,12 @@ def recorder(
 
 @app.command()
 @bus_options
-def adapter(
-    match: Match,
-    role: str = typer.Option("shooter", help="The seat of the adaptive agent (its partner plays the other)."),
-    window: int = typer.Option(400, min=1, help="T: frames of partner play the similarity averages over."),
-    strategy: str = typer.Option("cem", help=f"One of {', '.join(STRATEGIES)}."),
-    initial: str = typer.Option(
-        "best-average", help="Policy before the first estimate: best-average or random."
-    ),
-    warmup: int = typer.Option(0, min=0, help="Frames before the first estimate (0: min(T, 150))."),
-    dwell: int = typer.Option(0, min=0, help="-dwell strategies: frames a new choice must hold (0: T/10)."),
-    hazard: float = typer.Option(
-        0.0, min=0.0, max=0.99, help="bayes: per-frame switching probability (0: 1/T)."
-    ),
-    noise: float = typer.Option(
-        0.05, min=0.0, max=0.99, help="bayes: probability of a random partner action."
-    ),
-    seed: int = typer.Option(0, help="Draws the random initial policy."),
-    *,
-    bus: BusConfig,
-) -> None:
+@adapter_options()
+def adapter(match: Match, *, adapter: AdapterFactory, bus: BusConfig) -> None:
     """Run the adapter service: watch the partner, switch the agent of ROLE to the best response."""
-    from services.adapter.core import AdapterConfig
     from services.adapter.service import run_adapter
 
-    try:
-        config = AdapterConfig(role, window, strategy, initial, warmup, dwell, hazard, noise, seed)
-    except ValueError as error:
-        raise typer.BadParameter(str(error)) from None
-    run_adapter(bus, match, config, stop_on_signals())
+    run_adapter(bus, match, adapter(), stop_on_signals())
 
 
 @app.command()
@@ -414,9 +430,10 @@ def router(
 
 
 @app.command("match")
+@adapter_options("role", "seed")
 def match_command(
     seed: int = typer.Option(0, help="The game's seed."),
-    duration: float = typer.Option(60.0, min=0.1, help="Game length in seconds (30 frames each)."),
+    duration: float = typer.Option(60.0, min=0.1, help=f"Game length in seconds ({FPS} frames each)."),
     bait: str = typer.Option("circle", help="Bait agent's policy key."),
     shooter: str = typer.Option("mirror", help="Shooter agent's policy key."),
     lockstep: bool = typer.Option(
@@ -425,20 +442,20 @@ def match_command(
     match: str = typer.Option("", help="Match id (default: from the clock)."),
     out: Path = typer.Option(Path("recordings"), help="Directory of the recordings."),
     adaptive: str = typer.Option("", help="Make this seat (bait or shooter) the adaptive agent."),
-    window: int = typer.Option(400, min=1, help="--adaptive: the window T in frames."),
-    strategy: str = typer.Option("cem", help=f"--adaptive: one of {', '.join(STRATEGIES)}."),
+    *,
+    adapter: AdapterFactory,
 ) -> None:
     """Start a complete match on this machine: sim, two agents and the recorder as processes (and
-    with --adaptive, the adapter)."""
+    with --adaptive, the adapter, set by the adapter options)."""
     from services.launch import MatchPlan, new_match_id, run_match
     from services.recorder.recording import export_parquet, load
 
-    plan = MatchPlan(
-        match or new_match_id(), seed, round(duration * 30), "lockstep" if lockstep else "realtime",
-        bait, shooter, out, adaptive=adaptive, window=window, strategy=strategy,
-    )  # fmt: skip
-    if adaptive and adaptive not in ("bait", "shooter"):
+    if adaptive and adaptive not in ROLES:
         raise typer.BadParameter(f"--adaptive takes bait or shooter, not {adaptive!r}")
+    plan = MatchPlan(
+        match or new_match_id(), seed, round(duration * FPS), "lockstep" if lockstep else "realtime",
+        bait, shooter, out, adapter=adapter(role=adaptive, seed=seed) if adaptive else None,
+    )  # fmt: skip
     seats = plan.policies()
     view = {"partner": "-"}
 
@@ -572,6 +589,7 @@ def human(
 
 
 @app.command("play")
+@adapter_options("role", "seed")
 def play_command(
     role: str = typer.Option("bait", help="The seat you play: bait or shooter."),
     partner: str = typer.Option(
@@ -579,32 +597,32 @@ def play_command(
         help="Who plays the other seat: `adaptive` (the adaptive agent), a policy key (see `tsf "
         "library`), or `human` for a person.",
     ),
-    window: int = typer.Option(400, min=1, help="--partner adaptive: the window T in frames."),
-    strategy: str = typer.Option("cem", help="--partner adaptive: the adapter's strategy (see tsf match)."),
     seed: int = typer.Option(0, help="The game's seed."),
-    duration: float = typer.Option(60.0, min=0.1, help="Game length in seconds (30 frames each)."),
+    duration: float = typer.Option(60.0, min=0.1, help=f"Game length in seconds ({FPS} frames each)."),
     wait: float = typer.Option(600.0, help="Seconds to wait for the players to press start."),
     host: Host = "127.0.0.1",
     port: Port = 8000,
     match: str = typer.Option("", help="Match id (default: from the clock)."),
     out: Path = typer.Option(Path("recordings"), help="Directory of the recordings."),
+    *,
+    adapter: AdapterFactory,
 ) -> None:
     """Play a match from a browser, with an agent or another person; prints the link(s) to open."""
     from services.human.play import play_with_people
     from services.launch import HUMAN, MatchPlan, new_match_id
 
-    if role not in ("bait", "shooter"):
+    if role not in ROLES:
         raise typer.BadParameter("role is bait or shooter")
-    other = "shooter" if role == "bait" else "bait"
+    partner_role = other(role)
     seats: dict = {role: HUMAN}
     if partner == "adaptive":
-        seats.update(adaptive=other, window=window, strategy=strategy)
+        seats["adapter"] = adapter(role=partner_role, seed=seed)
     else:
         if partner != HUMAN:
-            policy_for(partner, other)  # an unknown key fails here, before anyone opens the page
-        seats[other] = partner
+            policy_for(partner, partner_role)  # an unknown key fails here, before anyone opens the page
+        seats[partner_role] = partner
     plan = MatchPlan(
-        match or new_match_id(), seed, round(duration * 30), "realtime", directory=out, wait_players=wait,
+        match or new_match_id(), seed, round(duration * FPS), "realtime", directory=out, wait_players=wait,
         **seats,
     )  # fmt: skip
 
@@ -625,7 +643,9 @@ def eval_command(
     seeds: int = typer.Option(5, min=1, help="Seeded one-minute games per partner and agent."),
     windows: str = typer.Option("150,400,800", help="Windows T of the study's CEM agent (comma-separated)."),
     strategies: str = typer.Option(",".join(STRATEGIES), help="Strategies compared at --strategy-window."),
-    strategy_window: int = typer.Option(400, min=1, help="The window of the strategies other than cem."),
+    strategy_window: int = typer.Option(
+        AdapterConfig.window, min=1, help="The window of the strategies other than cem."
+    ),
     partner: list[str] | None = typer.Option(
         None, help="A partner by name, repeatable (default: the population; see docs/adapter.md)."
     ),
@@ -642,7 +662,6 @@ def eval_command(
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
 
     from services.adapter import evaluate, figures
-    from services.adapter.core import other
     from services.adapter.partners import SWITCH_AT, population
     from services.agent import library
 
@@ -672,7 +691,7 @@ def eval_command(
         keys = library.keys(other(role))
         first, second = keys[0], keys[len(keys) // 2]
         scores = evaluate.switch_scores(first, second, 0, role)
-        title = f"Partner noisy(switch({first},{second})), switching at {SWITCH_AT / 30:.0f} s"
+        title = f"Partner noisy(switch({first},{second})), switching at {SWITCH_AT / FPS:.0f} s"
         figures.logprob_curves(scores, keys, min(window_list), title, out / "logprob_curves.png", SWITCH_AT)
     if comparison:
         figures.adaptive_vs_static(comparison, out / "adaptive_vs_static.png")
@@ -710,7 +729,7 @@ def report_command(
     from services.report.report import build_report
     from services.table.table import DEFAULT_TABLE, StaleTable
 
-    if partner_role not in ("", "bait", "shooter"):
+    if partner_role not in ("", *ROLES):
         raise typer.BadParameter("bait or shooter", param_hint="--partner-role")
     try:
         report = build_report(

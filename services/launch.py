@@ -16,15 +16,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-import zenoh
-
-from services.adapter.core import AdapterConfig, Payoff
+from services.adapter.core import AdapterConfig
 from services.recorder.recording import load
 from services.recorder.service import recording_path
-from services.table.table import DEFAULT_TABLE, Table
 from shared import keys
-from shared.bus import BusConfig, free_endpoint, session
-from shared.messages import AdapterStatus, MessageError, State, Summary, decode
+from shared.bus import BusConfig, free_endpoint, session, subscribe
+from shared.messages import AdapterStatus, State, Summary
 
 HUMAN = "human"  # a seat's policy key for a person: no agent is started, a gateway plays it
 
@@ -41,24 +38,13 @@ class MatchPlan:
     low_latency: bool = True
     peers: tuple[str, ...] = ()  # endpoints the sim also connects to (a human gateway's session)
     wait_players: float = 10.0  # seconds the sim waits for both seats (people take longer)
-    adaptive: str = ""  # the seat the adaptive agent plays ("" for none): its key is ignored
-    window: int = 400
-    strategy: str = "cem"
-    initial: str = "best-average"
-
-    @property
-    def adapter(self) -> AdapterConfig | None:
-        if not self.adaptive:
-            return None
-        return AdapterConfig(self.adaptive, self.window, self.strategy, self.initial, seed=self.seed)
+    adapter: AdapterConfig | None = None  # the adaptive agent, in the seat it names (that key is ignored)
 
     def policies(self) -> dict[str, str]:
         """Each seat's starting policy key; an adaptive seat starts with the adapter's initial policy."""
         keys_ = {"bait": self.bait, "shooter": self.shooter}
         if self.adapter is not None:
-            keys_[self.adaptive] = Payoff.from_table(Table.load(DEFAULT_TABLE), self.adaptive).initial(
-                self.adapter
-            )
+            keys_[self.adapter.role] = self.adapter.initial_policy()
         return keys_
 
 
@@ -114,36 +100,23 @@ def run_match(
     summary: list[Summary] = []
     done = threading.Event()
 
-    def on_summary(sample: zenoh.Sample) -> None:
-        try:
-            summary.append(decode(sample.payload.to_bytes(), Summary))
-        except MessageError:
-            return
+    def on_summary(message: Summary) -> None:
+        summary.append(message)
         done.set()
 
     shown = [0.0]
 
-    def on_state_sample(sample: zenoh.Sample) -> None:
+    def on_state_shown(state: State) -> None:
         """At most 10 updates a second: the scoreboard shares the CPU with the match."""
-        if time.monotonic() - shown[0] < 0.1:
-            return
-        try:
-            on_state(decode(sample.payload.to_bytes(), State))
-        except MessageError:
-            return
-        shown[0] = time.monotonic()
-
-    def on_adapter_sample(sample: zenoh.Sample) -> None:
-        try:
-            on_adapter(decode(sample.payload.to_bytes(), AdapterStatus))
-        except MessageError:
-            return
+        if time.monotonic() - shown[0] >= 0.1:
+            on_state(state)
+            shown[0] = time.monotonic()
 
     match = ["--match", plan.match]
     policies = plan.policies()
     recorded = dict(policies)
     if plan.adapter is not None:
-        recorded[plan.adaptive] = plan.adapter.name
+        recorded[plan.adapter.role] = plan.adapter.name
     with Processes() as processes:
         processes.start(
             "sim",
@@ -157,9 +130,7 @@ def run_match(
         recorder = service_command("recorder", peer_bus, *match, "--out", str(plan.directory))
         processes.start("recorder", recorder, nice=10)  # it drains a queue: latency is not its job
         if plan.adapter is not None:
-            processes.start(
-                "adapter", service_command("adapter", peer_bus, *match, *adapter_args(plan.adapter))
-            )
+            processes.start("adapter", service_command("adapter", peer_bus, *match, *plan.adapter.to_args()))
         for role, policy in policies.items():
             if policy == HUMAN:
                 continue
@@ -169,17 +140,15 @@ def run_match(
                     "agent", peer_bus, *match, "--role", role, "--policy", policy, "--seed", str(plan.seed)
                 ),
             )
-        with session(peer_bus) as z:
-            subscribers = [
-                z.declare_subscriber(keys.state(plan.match), on_state_sample),
-                z.declare_subscriber(keys.summary(plan.match), on_summary),
-                z.declare_subscriber(keys.adapter(plan.match), on_adapter_sample),
-            ]
+        with (
+            session(peer_bus) as z,
+            subscribe(z, keys.state(plan.match), State, on_state_shown),
+            subscribe(z, keys.summary(plan.match), Summary, on_summary),
+            subscribe(z, keys.adapter(plan.match), AdapterStatus, on_adapter),
+        ):
             while not done.wait(0.2):
                 if processes.children["sim"].poll() is not None:
                     break
-            for subscriber in subscribers:
-                subscriber.undeclare()
         processes.wait("sim", 10)
         processes.wait("recorder", 10)
     path = recording_path(plan.directory, plan.match)
@@ -189,14 +158,6 @@ def run_match(
         code = processes.children["sim"].returncode
         raise RuntimeError(f"match {plan.match} ended without a summary (sim exit code {code})")
     return summary[0], path
-
-
-def adapter_args(config: AdapterConfig) -> list[str]:
-    """`tsf adapter` options for a config."""
-    return [
-        "--role", config.role, "--window", str(config.window), "--strategy", config.strategy,
-        "--initial", config.initial, "--seed", str(config.seed),
-    ]  # fmt: skip
 
 
 def new_match_id() -> str:

@@ -19,7 +19,8 @@ from dataclasses import dataclass
 
 import zenoh
 
-from shared.messages import MessageError, Summary, decode
+from shared import keys
+from shared.messages import M, Summary, decode
 
 log = logging.getLogger("tsf.bus")
 
@@ -122,19 +123,37 @@ class Drops:
         return sum(self.counts.values())
 
 
-def stop_on_summary(stop: threading.Event, drops: Drops) -> Callable[[zenoh.Sample], None]:
-    """A subscriber callback for a match's summary key: a valid summary sets `stop` (the match is
-    over); anything else is dropped and counted."""
+Decoder = Callable[[bytes, str], M]  # (payload, key) -> a valid message, or MessageError
 
-    def on_summary(sample: zenoh.Sample) -> None:
+
+def subscribe(
+    z: zenoh.Session,
+    key: str,
+    kind: type[M] | Decoder[M],
+    handler: Callable[[M], None],
+    drops: Drops | None = None,
+) -> zenoh.Subscriber:
+    """Subscribe `handler` to the valid messages on `key`. Decoding and validation happen here, once:
+    `kind` is the message type, or a decoder that also reads the key (decode_seat_action). Input that
+    fails, or that the handler refuses by raising ValueError (MessageError for a contract reason), is
+    counted in `drops` by reason and dropped. Use the subscriber as a context manager to undeclare it
+    (publishers that callbacks use are left to the session's close: undeclaring one mid-put fails)."""
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        where = str(sample.key_expr)
         try:
-            decode(sample.payload.to_bytes(), Summary)
-        except MessageError as error:
-            drops.drop(str(sample.key_expr), error)
-            return
-        stop.set()
+            data = sample.payload.to_bytes()
+            handler(decode(data, kind) if isinstance(kind, type) else kind(data, where))
+        except ValueError as error:
+            if drops is not None:
+                drops.drop(where, error)
 
-    return on_summary
+    return z.declare_subscriber(key, on_sample)
+
+
+def stop_on_summary(z: zenoh.Session, match: str, stop: threading.Event, drops: Drops) -> zenoh.Subscriber:
+    """Set `stop` when the match's valid summary arrives (the match is over)."""
+    return subscribe(z, keys.summary(match), Summary, lambda _: stop.set(), drops)
 
 
 def stop_on_signals() -> threading.Event:

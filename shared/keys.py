@@ -17,8 +17,9 @@ tsf/sweep/<sweep>/result            workers -> coordinator: SweepResults
 from __future__ import annotations
 
 import re
+from typing import NamedTuple
 
-from services.sim.config import ROLES
+from shared.game import check_role
 
 PREFIX = "tsf"
 SERVICES = ("sim", "agent", "recorder", "adapter", "human")
@@ -32,22 +33,16 @@ def check_match(match: str) -> str:
     return match
 
 
-def _role(role: str) -> str:
-    if role not in ROLES:
-        raise ValueError(f"unknown role {role!r}; expected one of {ROLES}")
-    return role
-
-
 def state(match: str) -> str:
     return f"{PREFIX}/{check_match(match)}/state"
 
 
 def action(match: str, role: str) -> str:
-    return f"{PREFIX}/{check_match(match)}/action/{_role(role)}"
+    return f"{PREFIX}/{check_match(match)}/action/{check_role(role)}"
 
 
 def policy(match: str, role: str) -> str:
-    return f"{PREFIX}/{check_match(match)}/policy/{_role(role)}"
+    return f"{PREFIX}/{check_match(match)}/policy/{check_role(role)}"
 
 
 def start(match: str) -> str:
@@ -71,7 +66,7 @@ def alive(match: str, service: str, role: str | None = None) -> str:
     if service not in SERVICES:
         raise ValueError(f"unknown service {service!r}; expected one of {SERVICES}")
     key = f"{PREFIX}/{check_match(match)}/alive/{service}"
-    return f"{key}/{_role(role)}" if role is not None else key
+    return f"{key}/{check_role(role)}" if role is not None else key
 
 
 def actions(match: str) -> str:
@@ -111,6 +106,36 @@ def _worker(worker: str) -> str:
     return worker if worker == "*" else check_match(worker)
 
 
-def role_of(key: str) -> str:
-    """The role named by the last chunk of an action, policy or alive key."""
-    return _role(str(key).rsplit("/", 1)[-1])
+class Key(NamedTuple):
+    """The parts of a key: `match` is the match id (or the sweep id), `kind` the chunk after it."""
+
+    match: str
+    kind: str  # state, start, event, summary, adapter, action, policy, alive; or a sweep's kinds
+    role: str = ""  # the seat an action, policy or seat's alive key names
+    service: str = ""  # the service an alive key names
+    worker: str = ""  # the worker a sweep's worker or job key names
+
+
+_PLAIN = ("state", "start", "event", "summary", "adapter")  # tsf/<match>/<kind>
+_SEAT = ("action", "policy")  # tsf/<match>/<kind>/<role>
+
+
+def parse(key: object) -> Key:
+    """The inverse of the builders above: the parts of any concrete key they make; else ValueError."""
+    chunks = str(key).split("/")
+    if len(chunks) >= 4 and chunks[:2] == [PREFIX, "sweep"]:
+        _, _, sweep, kind, *rest = chunks
+        if kind in ("coordinator", "result") and not rest:
+            return Key(check_match(sweep), kind)
+        if kind in ("worker", "job") and len(rest) == 1:
+            return Key(check_match(sweep), kind, worker=check_match(rest[0]))
+    if len(chunks) >= 3 and chunks[0] == PREFIX:
+        _, match, kind, *rest = chunks
+        if kind in _PLAIN and not rest:
+            return Key(check_match(match), kind)
+        if kind in _SEAT and len(rest) == 1:
+            return Key(check_match(match), kind, role=check_role(rest[0]))
+        if kind == "alive" and rest and rest[0] in SERVICES and len(rest) <= 2:
+            role = check_role(rest[1]) if len(rest) == 2 else ""
+            return Key(check_match(match), kind, role=role, service=rest[0])
+    raise ValueError(f"not a key of the system: {key!r}")

@@ -77,12 +77,41 @@ def test_unknown_service(service: str) -> None:
         keys.alive(M, service)
 
 
-def test_role_of() -> None:
-    for role in ("bait", "shooter"):
-        assert keys.role_of(keys.action(M, role)) == role
-        assert keys.role_of(keys.policy(M, role)) == role
-        assert keys.role_of(keys.alive(M, "agent", role)) == role
-    assert keys.role_of("bait") == "bait"
-    for bad in (keys.state(M), keys.alive(M, "sim"), keys.actions(M), ""):
-        with pytest.raises(ValueError):
-            keys.role_of(bad)
+@pytest.mark.parametrize(
+    ("key", "parts"),
+    [
+        (keys.state(M), keys.Key(M, "state")),
+        (keys.summary(M), keys.Key(M, "summary")),
+        (keys.action(M, "bait"), keys.Key(M, "action", role="bait")),
+        (keys.policy(M, "shooter"), keys.Key(M, "policy", role="shooter")),
+        (keys.alive(M, "sim"), keys.Key(M, "alive", service="sim")),
+        (keys.alive(M, "human", "shooter"), keys.Key(M, "alive", role="shooter", service="human")),
+        (keys.sweep_coordinator("s1"), keys.Key("s1", "coordinator")),
+        (keys.sweep_worker("s1", "w-2"), keys.Key("s1", "worker", worker="w-2")),
+        (keys.sweep_job("s1", "w-2"), keys.Key("s1", "job", worker="w-2")),
+        (keys.sweep_result("s1"), keys.Key("s1", "result")),
+        ("tsf/sweep/state", keys.Key("sweep", "state")),  # a match may be called sweep
+    ],
+)
+def test_parse_inverts_every_builder(key: str, parts: keys.Key) -> None:
+    assert keys.parse(key) == parts
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        keys.actions(M),
+        keys.everything(M),
+        "tsf/m/state/extra",
+        "tsf/m/action",
+        "tsf/m/action/pilot",
+        "tsf/m/alive/ghost",
+        "tsf/m/alive/agent/bait/x",
+        "other/m/state",
+        "bait",
+        "",
+    ],
+)
+def test_parse_refuses_what_no_builder_makes(bad: str) -> None:
+    with pytest.raises(ValueError):
+        keys.parse(bad)

@@ -17,27 +17,12 @@ from typing import Any, ClassVar, TypeVar
 
 import msgpack
 
-from services.sim.config import N_ACTIONS, ROLES, GameConfig
-from services.sim.engine import DEATH_CAUSES
-from services.sim.observation import SIZE as OBS_SIZE
 from shared import keys
+from shared.game import DEATH_CAUSES, EVENT_KINDS, N_ACTIONS, OBS_SIZE, ROLES, GameConfig
 
 SCHEMA_VERSION = 1
 MAX_BYTES = 64 * 1024
 MAX_FRAME = 10**9
-EVENT_KINDS = (
-    "kill",
-    "death",
-    "shield_hit",
-    "missile",
-    "shell",
-    "lock",
-    "fortress_respawn",
-    "reset",
-    "respawn",
-    "match_start",
-    "match_end",
-)
 
 
 class MessageError(ValueError):
@@ -370,12 +355,17 @@ def decode_seat_action(data: bytes | bytearray | memoryview, key: str, match: st
     the seat the key names; else MessageError (a spoofed or misrouted action is a `mismatch`)."""
     action = decode(data, Action)
     try:
-        seat = keys.role_of(key)
+        seat = keys.parse(key).role
     except ValueError:
         seat = ""
     if action.match != match or seat != action.role:
         raise MessageError("mismatch", f"{action.role} action for {action.match} on {key}")
     return action
+
+
+def seat_actions(match: str) -> Callable[[bytes | bytearray | memoryview, str], Action]:
+    """decode_seat_action for one match, as a subscriber's decoder (shared.bus.subscribe)."""
+    return lambda data, key: decode_seat_action(data, key, match)
 
 
 def decode_any(data: bytes | bytearray | memoryview) -> Message:

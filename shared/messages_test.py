@@ -12,10 +12,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from services.sim.config import GameConfig
 from services.sim.engine import Game
 from services.sim.match import start_message, state_message, summary_message
-from services.sim.observation import SIZE as OBS_SIZE
+from shared.game import OBS_SIZE, GameConfig
 from shared.messages import (
     MAX_BYTES,
     SCHEMA_VERSION,

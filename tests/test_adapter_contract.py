@@ -14,8 +14,6 @@ from services.adapter.core import AdapterConfig, Scorer
 from services.adapter.service import run_adapter
 from services.agent import library
 from services.agent.service import run_agent
-from services.launch import adapter_args
-from services.sim.config import GameConfig
 from services.sim.engine import Game
 from services.sim.match import state_message
 from services.sim.observation import observe
@@ -23,6 +21,7 @@ from services.sim.play import policy_seed
 from services.sim.service import run_sim
 from services.table.table import DEFAULT_TABLE, Table
 from shared import keys
+from shared.game import GameConfig
 from shared.messages import Action, AdapterStatus, PolicySwitch, State, Summary
 
 BLOCK = {"congestion_control": zenoh.CongestionControl.BLOCK}
@@ -109,7 +108,7 @@ def test_killing_the_adapter_leaves_the_match_and_the_agent_intact(bus, tap, spa
     match = "adapt-kill"
     recorded = tap(bus.open(listen=True), match)
     config = AdapterConfig("shooter", window=60)
-    first = spawn("adapter", bus.config(), "--match", match, *adapter_args(config))
+    first = spawn("adapter", bus.config(), "--match", match, *config.to_args())
     assert wait_until(lambda: recorded.is_alive("adapter"), timeout=20)
     spawn("agent", bus.config(), "--match", match, "--role", "bait", "--policy", "B3")
     spawn("agent", bus.config(), "--match", match, "--role", "shooter", "--policy", "S5")
@@ -119,7 +118,7 @@ def test_killing_the_adapter_leaves_the_match_and_the_agent_intact(bus, tap, spa
     first.wait()
     assert wait_until(lambda: not recorded.is_alive("adapter"), timeout=10)
     killed_at = recorded.of(State)[-1].frame
-    second = spawn("adapter", bus.config(), "--match", match, *adapter_args(config))
+    second = spawn("adapter", bus.config(), "--match", match, *config.to_args())
     assert wait_until(lambda: recorded.of(Summary), timeout=30)
     assert sim.wait(10) == 0
     states = recorded.of(State)

@@ -11,12 +11,12 @@ import zenoh
 
 from services.agent.library import policy_for
 from services.agent.service import run_agent
-from services.sim.config import ROLES, GameConfig
 from services.sim.engine import Game
 from services.sim.match import state_message, summary_message
 from services.sim.observation import observe
 from services.sim.play import policy_seed
 from shared import keys
+from shared.game import ROLES, GameConfig
 from shared.messages import Action, PolicySwitch, Summary
 
 MATCH, SEED, FRAMES = "agent", 5, 30

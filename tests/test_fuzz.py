@@ -16,13 +16,13 @@ from services.agent.scripted import CircleBait, MirrorShooter
 from services.agent.service import run_agent
 from services.recorder.recording import load, replay
 from services.recorder.service import run_recorder
-from services.sim.config import ROLES, GameConfig
 from services.sim.engine import Game
 from services.sim.match import start_message, state_message, summary_message
 from services.sim.observation import observe
 from services.sim.play import policy_seed
 from services.sim.service import run_sim
 from shared import keys
+from shared.game import ROLES, GameConfig
 from shared.messages import Action, GameEvent, MessageError, PolicySwitch, State, Summary, decode
 
 SEED, FRAMES = 4, 40

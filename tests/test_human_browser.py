@@ -17,7 +17,7 @@ from services.human.play import play_with_people, seat_links
 from services.launch import HUMAN, MatchPlan, run_match
 from services.recorder.recording import load
 from services.recorder.replay import republish
-from services.sim.config import GameConfig
+from shared.game import GameConfig
 from shared.messages import Action
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")

@@ -22,9 +22,9 @@ from services.human.gateway import REFUSED, Gateway, seat_handler
 from services.human.play import play_with_people
 from services.launch import HUMAN, MatchPlan
 from services.recorder.recording import load
-from services.sim.config import GameConfig
 from services.sim.service import run_sim
 from shared import keys
+from shared.game import GameConfig
 from shared.messages import Action, State, Summary
 
 MATCH = "human"

@@ -13,8 +13,8 @@ from services.agent.scripted import CircleBait, MirrorShooter
 from services.launch import MatchPlan, run_match
 from services.recorder.recording import load, replay
 from services.recorder.service import recording_path
-from services.sim.config import ROLES, GameConfig
 from services.sim.play import play
+from shared.game import ROLES, GameConfig
 from shared.messages import State, Summary
 
 SEED = 6  # a seed whose 150-frame game has points and deaths to compare (no kill is that quick)

@@ -12,10 +12,10 @@ import zenoh
 from services.recorder.log import read_log
 from services.recorder.recording import load
 from services.recorder.service import run_recorder
-from services.sim.config import ROLES, GameConfig
 from services.sim.engine import Game
 from services.sim.match import start_message, state_message, summary_message
 from shared import keys
+from shared.game import ROLES, GameConfig
 from shared.messages import Action, GameEvent, PolicySwitch
 
 MATCH, SEED = "rec", 3

@@ -15,6 +15,7 @@ import pandas as pd
 import pytest
 from PIL import Image
 
+from services.adapter.core import AdapterConfig
 from services.launch import MatchPlan, run_match
 from services.recorder.recording import load
 from services.recorder.replay import republish
@@ -34,7 +35,14 @@ def matches(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Summary
         plan = MatchPlan(f"rr-{bait}-{shooter}", seed, FRAMES, "lockstep", bait, shooter, directory)
         out[plan.match] = run_match(plan)
     adaptive = MatchPlan(
-        ADAPTIVE, 3, FRAMES, "lockstep", "B5", "S5", directory, adaptive="shooter", window=WINDOW
+        ADAPTIVE,
+        3,
+        FRAMES,
+        "lockstep",
+        "B5",
+        "S5",
+        directory,
+        adapter=AdapterConfig("shooter", WINDOW, seed=3),
     )
     out[adaptive.match] = run_match(adaptive)
     return out

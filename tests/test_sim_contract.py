@@ -11,10 +11,10 @@ import msgpack
 import pytest
 import zenoh
 
-from services.sim.config import ROLES, GameConfig
 from services.sim.engine import Game
 from services.sim.service import run_sim
 from shared import keys
+from shared.game import ROLES, GameConfig
 from shared.messages import MAX_BYTES, Action, GameEvent, Start, State, Summary, decode
 
 SEED = 11

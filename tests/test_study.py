@@ -9,13 +9,14 @@ import json
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
-from services.launch import HUMAN, MatchPlan
+from services.launch import HUMAN
 from services.recorder.recording import load
-from services.study.core import StudyConfig, Variant, partner_role
+from services.study.core import StudyConfig, Variant
 from services.study.runner import run_study
 from services.study.standin import stand_in
+from shared.game import other
 
-VARIANTS = (Variant("strong", "B5", "S5"), Variant("adaptive", adaptive=True, window=30))
+VARIANTS = (Variant("strong", "B5", "S5"), Variant("adaptive", adapter="adaptive-T30-cem"))
 
 
 def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_until):
@@ -35,7 +36,7 @@ def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_unti
             refused = asyncio.run(stand_in(url, resume=(leaver.participant, "not-the-key")))
             assert refused.refused == "unknown participant or resume key"
             back = asyncio.run(stand_in(url, resume=(leaver.participant, leaver.key)))
-            other = asyncio.run(stand_in(url))
+            second = asyncio.run(stand_in(url))
             dropped = tmp_path / "recordings" / "e2e-P001-s1t1.study.json"
             assert wait_until(dropped.exists, timeout=20), "the cut trial runs out and is written down"
         finally:
@@ -43,10 +44,10 @@ def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_unti
         study = server.result(timeout=10)
 
     assert back.done and back.role == leaver.role and back.agents == ["Agent 1", "Agent 2"]
-    assert other.done and other.participant == "P002" and other.role == partner_role(leaver.role)
-    assert (leaver.consent, other.consent, back.consent) == ("Agree?", "Agree?", "")  # asked once
-    assert back.end == other.end == "Bye now."
-    assert len(back.kills) == len(other.kills) == 2
+    assert second.done and second.participant == "P002" and second.role == other(leaver.role)
+    assert (leaver.consent, second.consent, back.consent) == ("Agree?", "Agree?", "")  # asked once
+    assert back.end == second.end == "Bye now."
+    assert len(back.kills) == len(second.kills) == 2
 
     attempts = {p.id: [(a["session"], a["trial"], a["attempt"], a["status"]) for a in p.attempts]
                 for p in study.participants.values()}  # fmt: skip
@@ -66,11 +67,11 @@ def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_unti
             variant = next(v for v in VARIANTS if v.name == sidecar["variant"])
             met.append(variant.name)
             recording = load(tmp_path / "recordings" / f"{attempt['match']}.tsflog")
-            agent_role = partner_role(participant.role)
-            adaptive = MatchPlan("x", **variant.plan(agent_role)).adapter
+            agent_role = other(participant.role)
+            adaptive = variant.adaptive(agent_role, 0)
             agent = adaptive.name if adaptive else getattr(variant, agent_role)
             assert recording.start.policies == {participant.role: HUMAN, agent_role: agent}
-            assert bool(recording.adapter) == variant.adaptive  # the adapter watched the person
+            assert bool(recording.adapter) == bool(variant.adapter)  # the adapter watched the person
             assert recording.summary.kills == sidecar["kills"]
             human = [a for _, a in recording.actions if a.role == participant.role]
             assert human and all(a.sender == f"human/{participant.role}" for a in human)

@@ -7,19 +7,27 @@ publishes), so that each policy reads them in its own observation frame.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
-from services.agent.policy import Policy
-from services.sim.config import GameConfig
 from services.sim.engine import Game
 from services.sim.observation import as_observation, world_values
 from services.sim.play import play
+from services.sim.sampling import batch_probs
+from shared.game import ROLES, GameConfig, Policy, bait_first
 
 
-def log_probs(policy: Policy, states: list[list[float]], actions: list[int]) -> np.ndarray:
-    """log pi(a_t | s_t) for every frame t of a player's (world-frame state, action) stream."""
-    frame = policy.frame
-    return np.log([policy.probs(as_observation(s, frame))[a] for s, a in zip(states, actions, strict=True)])
+def log_probs(
+    policies: Sequence[Policy], states: Sequence[Sequence[float]], actions: Sequence[int]
+) -> np.ndarray:
+    """The similarity score, (n, K): log pi_k(a_t | s_t) of a player's n (world-frame state values,
+    action) pairs under each of K policies. Every policy reads the states in its own frame, and its
+    probabilities come from one batched evaluation (library.batch_probs) over all n states."""
+    frames = {p.frame for p in policies}
+    observed = {f: np.stack([as_observation(s, f) for s in states]) for f in sorted(frames)}
+    rows = np.arange(len(actions))
+    return np.log(np.stack([batch_probs(p, observed[p.frame])[rows, actions] for p in policies], axis=1))
 
 
 def rollout(
@@ -32,9 +40,9 @@ def rollout(
 
     def trace(game: Game, bait_action: int, shooter_action: int) -> None:
         states.append(world_values(game, role))
-        actions.append(bait_action if role == "bait" else shooter_action)
+        actions.append((bait_action, shooter_action)[ROLES.index(role)])
 
-    pair = (policy, partner) if role == "bait" else (partner, policy)
+    pair = bait_first(role, policy, partner)
     play(*pair, seed, config, trace)
     return states, actions
 
@@ -49,6 +57,5 @@ def cem_matrix(
         streams = [rollout(player, partner, seed, config) for seed in seeds]
         states = [s for stream in streams for s in stream[0]]
         actions = [a for stream in streams for a in stream[1]]
-        for j, judge in enumerate(policies):
-            m[i, j] = log_probs(judge, states, actions).mean()
+        m[i] = log_probs(policies, states, actions).mean(axis=0)
     return m

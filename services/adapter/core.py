@@ -1,8 +1,8 @@
 """The adapter's pure core: which library policy is the partner like, and what should we play.
 
 Every frame, each library policy of the partner's role scores the partner's action in the state
-the partner saw (`Scorer`: log pi_k(a_t | s_t)). A strategy turns those scores into an estimated
-partner type C and our policy D (`Adapter`):
+the partner saw (`Scorer`: log pi_k(a_t | s_t), the similarity score of cem.log_probs). A strategy
+turns those scores into an estimated partner type C and our policy D (`Adapter`):
 
 - `cem` (the study's): C is the policy with the highest mean log-probability over the last T
   frames (the window, `Window`); D is the best response to C in the self-play table P.
@@ -25,44 +25,46 @@ from __future__ import annotations
 import json
 import math
 import random
-from dataclasses import dataclass
+import re
+from dataclasses import dataclass, field, fields
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from services.agent.library import batch_probs
-from services.agent.policy import Policy
-from services.sim.config import N_ACTIONS, ROLES
-from services.sim.observation import as_observation
-from services.table.table import Table
+from services.adapter.cem import log_probs
+from services.table.table import DEFAULT_TABLE, Table
+from shared.game import N_ACTIONS, Policy, check_role, other
 
 STRATEGIES = ("cem", "cem-dwell", "cem-ood", "bayes", "bayes-dwell-ood")
 INITIAL = ("best-average", "random")
 CALIBRATION = Path(__file__).parent / "calibration.json"
+ADAPTIVE = "adaptive-"  # how every adaptive agent's name begins
+_NAME = re.compile(rf"^{ADAPTIVE}T(\d+)-([a-z-]+)$")
 
 
-def other(role: str) -> str:
-    """The other seat."""
-    return ROLES[1 - ROLES.index(role)]
+def _option(default: object, help: str) -> Any:
+    """A config field with its command-line help (services/cli.py builds the options from these)."""
+    return field(default=default, metadata={"help": help})
 
 
 @dataclass(frozen=True)
 class AdapterConfig:
-    """How an adaptive agent adapts. Zero means "the default derived from the window"."""
+    """The adaptive agent, whole: every launcher, study variant, command line and report reads or
+    names it through this value. Zero means "the default derived from the window"."""
 
-    role: str = "shooter"  # the adaptive agent's seat; the partner plays the other
-    window: int = 400  # T, frames of partner play the CEM averages over
-    strategy: str = "cem"
-    initial: str = "best-average"
-    warmup: int = 0  # frames before the first estimate (default: min(T, 150), 5 s)
-    dwell: int = 0  # -dwell strategies: frames a new choice must hold (default: max(15, T // 10))
-    hazard: float = 0.0  # bayes: per-frame switching probability (default: 1 / T)
-    noise: float = 0.05  # bayes: probability that the partner's action is a uniform slip
-    seed: int = 0  # draws the random initial policy
+    role: str = _option("shooter", "The adaptive agent's seat; the partner plays the other.")
+    window: int = _option(400, "T: frames of partner play the similarity averages over.")
+    strategy: str = _option("cem", f"One of {', '.join(STRATEGIES)}.")
+    initial: str = _option("best-average", f"Policy before the first estimate: {' or '.join(INITIAL)}.")
+    warmup: int = _option(0, "Frames before the first estimate (0: min(T, 150), 5 s).")
+    dwell: int = _option(0, "-dwell strategies: frames a new choice must hold (0: max(15, T/10)).")
+    hazard: float = _option(0.0, "bayes: per-frame switching probability (0: 1/T).")
+    noise: float = _option(0.05, "bayes: probability that the partner's action is a uniform slip.")
+    seed: int = _option(0, "Draws the random initial policy.")
 
     def __post_init__(self) -> None:
-        if self.role not in ROLES:
-            raise ValueError(f"unknown role {self.role!r}; expected one of {ROLES}")
+        check_role(self.role)
         if self.strategy not in STRATEGIES:
             raise ValueError(f"unknown strategy {self.strategy!r}; expected one of {STRATEGIES}")
         if self.initial not in INITIAL:
@@ -90,8 +92,29 @@ class AdapterConfig:
 
     @property
     def name(self) -> str:
-        """The variant's name in results: adaptive-T<window>-<strategy>."""
-        return f"adaptive-T{self.window}-{self.strategy}"
+        """The name a recording, a result table or a study gives this agent: adaptive-T<window>-<strategy>."""
+        return f"{ADAPTIVE}T{self.window}-{self.strategy}"
+
+    @classmethod
+    def parse(cls, name: str, **fields: object) -> AdapterConfig | None:
+        """The config a name stands for (window and strategy from the name, other fields from
+        `fields`), or None for any other name (a static policy's key, a person)."""
+        found = _NAME.match(name)
+        return cls(window=int(found[1]), strategy=found[2], **fields) if found else None
+
+    def to_args(self) -> list[str]:
+        """The same config as `tsf adapter` options: one per field, so that none is dropped."""
+        return [arg for f in fields(self) for arg in (f"--{f.name}", str(getattr(self, f.name)))]
+
+    def initial_policy(self, table: Path = DEFAULT_TABLE) -> str:
+        """What our agent plays before the first estimate."""
+        return Payoff.load(self.role, table).initial(self)
+
+    def build(self, payoff: Payoff | None = None) -> Adapter:
+        """The adapter core this config describes (`payoff`: the shipped table seen from our seat)."""
+        payoff = payoff or Payoff.load(self.role)
+        threshold = ood_threshold(self.partner_role, self.window) if "ood" in self.strategy else None
+        return Adapter(self, payoff, threshold)
 
 
 @dataclass(frozen=True)
@@ -101,6 +124,11 @@ class Payoff:
     partners: tuple[str, ...]
     ours: tuple[str, ...]
     values: np.ndarray
+
+    @classmethod
+    def load(cls, role: str, table: Path = DEFAULT_TABLE) -> Payoff:
+        """A table file seen from our seat `role`."""
+        return cls.from_table(Table.load(table), role)
 
     @classmethod
     def from_table(cls, table: Table, role: str) -> Payoff:
@@ -155,17 +183,14 @@ class Scorer:
     def __init__(self, policies: list[Policy]) -> None:
         self.policies = policies
         self.keys = tuple(p.key for p in policies)
-        self.frames = sorted({p.frame for p in policies})
 
     def __call__(self, values: list[float] | np.ndarray, action: int) -> np.ndarray:
-        obs = {frame: as_observation(values, frame) for frame in self.frames}
-        return np.log([p.probs(obs[p.frame])[action] for p in self.policies])
+        """(K,) scores of one frame (a batch of one evaluates exactly as a single observation)."""
+        return log_probs(self.policies, [values], [action])[0]
 
     def batch(self, values: np.ndarray, actions: np.ndarray) -> np.ndarray:
-        """(n, K) scores of n frames, one batched probability evaluation per policy."""
-        obs = {f: np.stack([as_observation(v, f) for v in values]) for f in self.frames}
-        rows = np.arange(len(actions))
-        return np.log(np.stack([batch_probs(p, obs[p.frame])[rows, actions] for p in self.policies], axis=1))
+        """(n, K) scores of n frames."""
+        return log_probs(self.policies, values, actions)
 
 
 def ood_threshold(partner_role: str, window: int, path: Path = CALIBRATION) -> float:

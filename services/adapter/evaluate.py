@@ -18,7 +18,6 @@ from __future__ import annotations
 import csv
 import json
 import math
-import re
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from functools import cache
@@ -27,27 +26,23 @@ from pathlib import Path
 
 import numpy as np
 
+from services.adapter.cem import log_probs
 from services.adapter.core import (
     CALIBRATION,
     Adapter,
     AdapterConfig,
     Payoff,
     Scorer,
-    ood_threshold,
-    other,
 )
 from services.adapter.partners import SWITCH_AT, Noisy, Partner, Switching, group_of, make_partner
 from services.agent import library
-from services.agent.library import batch_probs
-from services.agent.policy import Policy
-from services.sim.config import ROLES, GameConfig
 from services.sim.engine import Game
-from services.sim.observation import as_observation, observe, world_values
+from services.sim.observation import observe, world_values
 from services.sim.play import policy_seed, switch_seed
-from services.table.table import DEFAULT_TABLE, Table
+from services.table.table import DEFAULT_TABLE
+from shared.game import ROLES, GameConfig, Policy, bait_first, other
 
 FOLLOW_HOLD = 30  # frames the estimate must stay on the new type to count as following it
-_ADAPTIVE = re.compile(r"^adaptive-T(\d+)-([a-z-]+)$")
 
 
 @dataclass(frozen=True)
@@ -62,15 +57,9 @@ class Setup:
 
 @cache
 def setup(role: str, table: Path = DEFAULT_TABLE) -> Setup:
-    payoff = Payoff.from_table(Table.load(table), role)
+    payoff = Payoff.load(role, table)
     scorer = Scorer([library.load(k) for k in payoff.partners])
     return Setup(role, payoff, scorer, {k: library.load(k) for k in payoff.ours})
-
-
-def agent_config(name: str, role: str) -> AdapterConfig | None:
-    """The adaptive variant named `adaptive-T<window>-<strategy>`, or None for a static key."""
-    found = _ADAPTIVE.match(name)
-    return AdapterConfig(role, int(found[1]), found[2]) if found else None
 
 
 @dataclass
@@ -98,8 +87,7 @@ def play_partner(
     partner.reset(policy_seed(seed, partner_role))
     adapter = None
     if isinstance(agent, AdapterConfig):
-        threshold = ood_threshold(partner_role, agent.window) if "ood" in agent.strategy else None
-        adapter = Adapter(agent, s.payoff, threshold)
+        adapter = agent.build(s.payoff)
         agent = adapter.policy
     ours = s.ours[agent]
     ours.reset(policy_seed(seed, role))
@@ -117,7 +105,7 @@ def play_partner(
             ours.reset(switch_seed(seed, role, game.frame + 1))
             outcome.switches += 1
             outcome.timeline.append((game.frame + 1, adapter.partner, adapter.policy))
-        pair = (partner_action, our_action) if partner_role == "bait" else (our_action, partner_action)
+        pair = bait_first(partner_role, partner_action, our_action)
         game.step(*pair)
     outcome.kills_per_minute = game.kills_per_minute()
     return outcome
@@ -154,7 +142,7 @@ def _star(job: tuple[Callable, tuple]) -> object:
 
 
 def _team_game(partner: str, agent: str, seed: int, role: str) -> dict:
-    config = agent_config(agent, role)
+    config = AdapterConfig.parse(agent, role=role)
     outcome = play_partner(make_partner(partner, other(role)), config or agent, seed, role)
     return {
         "partner": partner,
@@ -195,7 +183,7 @@ def compare(rows: list[dict]) -> dict:
         grid.setdefault(r["agent"], {})[(r["partner"], r["seed"])] = r["kills_per_minute"]
     values = {a: np.array([g[u] for u in units]) for a, g in grid.items()}
     agents = {a: _summary(v) for a, v in values.items()}
-    statics = [a for a in values if not _ADAPTIVE.match(a)]
+    statics = [a for a in values if AdapterConfig.parse(a) is None]
     best = max(statics, key=lambda a: agents[a]["mean"])
     partners = sorted({u[0] for u in units})
 
@@ -204,7 +192,7 @@ def compare(rows: list[dict]) -> dict:
 
     tests = {}
     for a in values:
-        if not _ADAPTIVE.match(a):
+        if AdapterConfig.parse(a) is None:
             continue
         diff = values[a] - values[best]
         by_partner = partner_means(a) - partner_means(best)
@@ -356,9 +344,7 @@ def _self_scores(key: str, teammate: str, seed: int) -> np.ndarray:
     policy = library.load(key)
     partner_role = other(policy.role)
     outcome = play_partner(make_partner(key, policy.role), teammate, seed, partner_role, record=True)
-    obs = np.stack([as_observation(v, policy.frame) for v in outcome.values])
-    probs = batch_probs(policy, obs)
-    return np.log(probs[np.arange(len(outcome.actions)), outcome.actions])
+    return log_probs([policy], outcome.values, outcome.actions)[:, 0]
 
 
 def calibrate(
@@ -410,7 +396,9 @@ def write_calibration(result: dict, path: Path = CALIBRATION) -> Path:
     return path
 
 
-def variants(windows: list[int], strategies: list[str], strategy_window: int = 400) -> list[str]:
+def variants(
+    windows: list[int], strategies: list[str], strategy_window: int = AdapterConfig.window
+) -> list[str]:
     """The study's CEM at every window, and every other strategy at `strategy_window`."""
     names = [AdapterConfig(window=w, strategy="cem").name for w in windows]
     names += [AdapterConfig(window=strategy_window, strategy=s).name for s in strategies if s != "cem"]
@@ -426,7 +414,7 @@ def _csv(path: Path, header: list[str], rows: Iterable[Iterable]) -> None:
 
 def _group_table(comparison: dict) -> list[str]:
     groups = list(comparison["per_group"])
-    agents = sorted(comparison["agents"], key=lambda a: (a.startswith("adaptive"), a))
+    agents = sorted(comparison["agents"], key=lambda a: (AdapterConfig.parse(a) is not None, a))
     rows = [
         f"| {a} | " + " | ".join(f"{comparison['per_group'][g][a]['mean']:.2f}" for g in groups) + " |"
         for a in agents

@@ -6,7 +6,7 @@ import numpy as np
 from scipy import stats
 
 from services.adapter.core import AdapterConfig
-from services.adapter.evaluate import agent_config, compare, follow_lag, play_partner, variants, windowed
+from services.adapter.evaluate import compare, follow_lag, play_partner, variants, windowed
 from services.adapter.partners import make_partner
 from services.table.table import DEFAULT_TABLE, Table
 
@@ -29,8 +29,8 @@ def test_follow_lag_needs_the_estimate_to_hold() -> None:
 def test_variant_names_round_trip() -> None:
     names = variants([150, 400], ["cem", "bayes"])
     assert names == ["adaptive-T150-cem", "adaptive-T400-cem", "adaptive-T400-bayes"]
-    assert agent_config("adaptive-T400-bayes", "bait") == AdapterConfig("bait", 400, "bayes")
-    assert agent_config("S5", "shooter") is None
+    assert AdapterConfig.parse("adaptive-T400-bayes", role="bait") == AdapterConfig("bait", 400, "bayes")
+    assert AdapterConfig.parse("S5", role="shooter") is None
 
 
 def test_adaptive_game_switches_to_the_best_response_and_is_deterministic() -> None:

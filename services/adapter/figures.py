@@ -12,6 +12,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402 - after choosing the file-only backend
 import numpy as np  # noqa: E402
 
+from services.adapter.core import ADAPTIVE  # noqa: E402
+from shared.game import FPS  # noqa: E402
+
 GOALS = {150: 0.80, 400: 0.95, 800: 0.99}
 
 
@@ -30,15 +33,15 @@ def accuracy_vs_window(identification: dict, path: Path) -> Path:
 
 def adaptive_vs_static(comparison: dict, path: Path) -> Path:
     agents = comparison["agents"]
-    names = sorted(agents, key=lambda a: (a.startswith("adaptive"), a))
+    names = sorted(agents, key=lambda a: (a.startswith(ADAPTIVE), a))
     means = [agents[a]["mean"] for a in names]
     errors = [agents[a]["stderr"] for a in names]
-    colors = ["tab:orange" if a.startswith("adaptive") else "tab:blue" for a in names]
+    colors = ["tab:orange" if a.startswith(ADAPTIVE) else "tab:blue" for a in names]
     fig, ax = plt.subplots(figsize=(max(6, 0.6 * len(names)), 4))
     ax.bar(range(len(names)), means, yerr=errors, color=colors, capsize=3)
     best = comparison["best_static"]
     ax.axhline(agents[best]["mean"], color="grey", linestyle="--", linewidth=1, label=f"best static ({best})")
-    ax.set_xticks(range(len(names)), [a.removeprefix("adaptive-") for a in names], rotation=45, ha="right")
+    ax.set_xticks(range(len(names)), [a.removeprefix(ADAPTIVE) for a in names], rotation=45, ha="right")
     ax.set_ylabel("team kills / min (mean ± s.e.)")
     ax.set_title(
         f"{comparison['partners']} partners × seeds = {comparison['units']} games per agent", fontsize=10
@@ -58,9 +61,9 @@ def logprob_curves(
     means = (sums - shifted) / counts
     fig, ax = plt.subplots(figsize=(7, 4))
     for i, key in enumerate(keys):
-        ax.plot(np.arange(len(scores)) / 30.0, means[:, i], label=key, linewidth=1.2)
+        ax.plot(np.arange(len(scores)) / FPS, means[:, i], label=key, linewidth=1.2)
     if mark:
-        ax.axvline(mark / 30.0, color="black", linestyle=":", linewidth=1)
+        ax.axvline(mark / FPS, color="black", linestyle=":", linewidth=1)
     ax.set(xlabel="time (s)", ylabel=f"mean log-probability over the last {window} frames")
     ax.set_title(title, fontsize=10)
     ax.legend(ncol=3, fontsize=7)

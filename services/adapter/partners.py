@@ -26,7 +26,7 @@ import numpy as np
 
 from services.agent import library
 from services.agent.library import policy_for
-from services.sim.config import N_ACTIONS
+from shared.game import N_ACTIONS
 
 NOISE = 0.1
 DELAY = 6  # frames

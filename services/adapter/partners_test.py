@@ -16,7 +16,7 @@ from services.adapter.partners import (
     make_partner,
     population,
 )
-from services.sim.config import N_ACTIONS
+from shared.game import N_ACTIONS
 
 
 class Counting:

@@ -15,12 +15,12 @@ from pathlib import Path
 
 import zenoh
 
-from services.adapter.core import Adapter, AdapterConfig, Pairing, Payoff, Scorer, ood_threshold
+from services.adapter.core import Adapter, AdapterConfig, Pairing, Payoff, Scorer
 from services.agent import library
-from services.table.table import DEFAULT_TABLE, Table
+from services.table.table import DEFAULT_TABLE
 from shared import keys
-from shared.bus import BusConfig, Drops, session, stop_on_summary
-from shared.messages import AdapterStatus, MessageError, PolicySwitch, State, decode, decode_seat_action
+from shared.bus import BusConfig, Drops, session, stop_on_summary, subscribe
+from shared.messages import Action, AdapterStatus, MessageError, PolicySwitch, State, seat_actions
 
 log = logging.getLogger("tsf.adapter")
 SENDER = "adapter"
@@ -29,9 +29,8 @@ RESEND_FRAMES = 30  # ask again if the agent still plays another policy this man
 
 def build(config: AdapterConfig, table: Path = DEFAULT_TABLE) -> tuple[Adapter, Scorer]:
     """The core for one adaptive seat: the table's view from that seat and the partner's library."""
-    payoff = Payoff.from_table(Table.load(table), config.role)
-    threshold = ood_threshold(config.partner_role, config.window) if "ood" in config.strategy else None
-    return Adapter(config, payoff, threshold), Scorer([library.load(k) for k in payoff.partners])
+    payoff = Payoff.load(config.role, table)
+    return config.build(payoff), Scorer([library.load(k) for k in payoff.partners])
 
 
 def run_adapter(
@@ -81,44 +80,29 @@ def run_adapter(
             elif adapter.partner != reported["partner"]:  # a new estimate is worth a report at once
                 report(frame)
 
-        def on_state(sample: zenoh.Sample) -> None:
-            try:
-                state = decode(sample.payload.to_bytes(), State)
-                if state.match != match:
-                    raise MessageError("mismatch", f"state of {state.match} on {sample.key_expr}")
-            except MessageError as error:
-                drops.drop(str(sample.key_expr), error)
-                return
+        def on_state(state: State) -> None:
+            if state.match != match:
+                raise MessageError("mismatch", f"state of {state.match} on {keys.state(match)}")
             with lock:
                 feed(pairing.state(state.frame, state.obs[partner_role]), state.frame)
 
-        def on_action(sample: zenoh.Sample) -> None:
-            try:
-                action = decode_seat_action(sample.payload.to_bytes(), str(sample.key_expr), match)
-            except MessageError as error:
-                drops.drop(str(sample.key_expr), error)
-                return
+        def on_action(action: Action) -> None:
             with lock:
                 if action.role == config.role:
                     agent["policy"] = action.policy
                 else:
                     feed(pairing.action(action.frame, action.action), action.frame)
 
-        subscribers = [
-            z.declare_subscriber(keys.state(match), on_state),
-            z.declare_subscriber(keys.actions(match), on_action),
-            z.declare_subscriber(keys.summary(match), stop_on_summary(stop, drops)),
-        ]
-        token = z.liveliness().declare_token(keys.alive(match, "adapter"))
-        try:
+        with (
+            subscribe(z, keys.state(match), State, on_state, drops),
+            subscribe(z, keys.actions(match), seat_actions(match), on_action, drops),
+            stop_on_summary(z, match, stop, drops),
+            z.liveliness().declare_token(keys.alive(match, "adapter")),
+        ):
             while not stop.wait(1.0 / status_hz):  # a modest report rate, whatever the frame rate
                 with lock:
                     if adapter.frames != reported["frames"]:
                         report(latest[0])
-        finally:
-            token.undeclare()
-            for subscriber in subscribers:
-                subscriber.undeclare()
     if drops.total:
         log.info("adapter dropped %d bad inputs: %s", drops.total, dict(drops.counts))
     return drops

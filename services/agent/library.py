@@ -24,20 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
-from services.agent.policy import (
-    N_FIRE,
-    N_THRUST,
-    N_TURN,
-    Policy,
-    RulePolicy,
-    factored_probs,
-    factored_probs_batch,
-    rule_head_probs,
-    sample,
-)
+from services.agent.policy import RulePolicy, factored_probs, factored_probs_batch, rule_head_probs
 from services.agent.scripted import MirrorShooter, good_shot, good_shot_batch, scripted_policy
 from services.sim import observation as ob
-from services.sim.config import ROLES, GameConfig
+from services.sim.sampling import batch_probs, sample
+from shared.game import N_FIRE, N_THRUST, N_TURN, ROLES, GameConfig, Policy, join_action
 
 LIBRARY = Path(__file__).parent / "library"
 FLOOR = 1e-3  # weight of the uniform mixed into a network head's softmax
@@ -264,7 +255,7 @@ class LearnedPolicy:
     def act(self, obs: np.ndarray) -> int:
         heads = self.head_probs(obs)
         turn, thrust, fire = (self._sample(heads[name]) for name in HEADS)
-        return turn * 4 + thrust * 2 + fire
+        return join_action(turn, thrust, fire)
 
     def _sample(self, p: np.ndarray) -> int:
         u, total = self.rng.random(), 0.0
@@ -301,17 +292,9 @@ def load(key: str, config: GameConfig | None = None, root: Path = LIBRARY) -> Po
     return LearnedPolicy(recipe, network, config)
 
 
-def batch_probs(policy: Policy, observations: np.ndarray) -> np.ndarray:
-    """The (n, 12) distributions of a policy over n observations, batched where the policy can
-    (every policy of the project can; a plug-in without `probs_batch` is asked row by row)."""
-    if hasattr(policy, "probs_batch"):
-        return policy.probs_batch(observations)
-    return np.stack([policy.probs(obs) for obs in observations])
-
-
 def batch_act(policy: Policy, observations: np.ndarray, uniforms: np.ndarray) -> np.ndarray:
     """One action per observation, drawn from the policy's distribution with the given uniforms
-    (policy.lane_uniforms; not the policy's per-game stream: a batch samples all lanes at once)."""
+    (sampling.lane_uniforms; not the policy's per-game stream: a batch samples all lanes at once)."""
     return sample(batch_probs(policy, observations), uniforms)
 
 

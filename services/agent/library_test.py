@@ -10,10 +10,9 @@ import numpy as np
 import pytest
 
 from services.agent import library
-from services.agent.policy import Policy
-from services.sim.config import N_ACTIONS, ROLES, GameConfig
 from services.sim.engine import Game
 from services.sim.observation import observe
+from shared.game import N_ACTIONS, ROLES, GameConfig, Policy
 
 KEYS = library.keys()
 

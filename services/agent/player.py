@@ -6,9 +6,9 @@ import threading
 from collections.abc import Callable
 
 from services.agent.library import policy_for
-from services.agent.policy import Policy
 from services.sim.observation import as_observation
 from services.sim.play import policy_seed, switch_seed
+from shared.game import Policy
 from shared.messages import Action, State
 
 PolicyLoader = Callable[[str, str], Policy]

@@ -9,10 +9,10 @@ import pytest
 
 from services.agent.library import policy_for
 from services.agent.player import Player
-from services.sim.config import N_ACTIONS, GameConfig
 from services.sim.engine import Game
 from services.sim.match import state_message
 from services.sim.play import policy_seed
+from shared.game import N_ACTIONS, GameConfig
 from shared.messages import Action, State, decode
 
 M = "m1"

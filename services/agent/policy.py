@@ -1,40 +1,21 @@
-"""The policy interface every player of TSF implements: library, scripted, random or human proxy.
+"""Building blocks of policies: factored distributions, rule-based and uniform play.
 
-A policy is reset with a seed, reads the observation vector of its role (in the frame it names),
-returns an action, and returns the full distribution over the 12 actions it samples from. The
-distribution is what the adapter's cross-entropy metric reads, so it must be the real sampling
-distribution and never zero anywhere.
+The `Policy` protocol itself is part of the game's vocabulary (shared/game.py).
 """
 
 from __future__ import annotations
 
 import math
 import random
-from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from services.sim.config import N_ACTIONS
 from services.sim.jit import jitable
-
-N_TURN, N_THRUST, N_FIRE = 3, 2, 2
-
-
-@runtime_checkable
-class Policy(Protocol):
-    key: str
-    role: str
-    frame: str  # the observation frame it reads: "world" or "role"
-
-    def reset(self, seed: int | None = None) -> None: ...
-
-    def act(self, obs: np.ndarray) -> int: ...
-
-    def probs(self, obs: np.ndarray) -> np.ndarray: ...
+from shared.game import N_ACTIONS, N_FIRE, N_THRUST, N_TURN, join_action
 
 
 def factored_probs(turn: np.ndarray, thrust: np.ndarray, fire: np.ndarray) -> np.ndarray:
-    """Joint distribution over action = turn * 4 + thrust * 2 + fire from three independent heads."""
+    """Joint distribution over the actions (shared.game.join_action) from three independent heads."""
     return (turn[:, None, None] * thrust[None, :, None] * fire[None, None, :]).reshape(N_ACTIONS)
 
 
@@ -48,34 +29,6 @@ def rule_head_probs(choices: np.ndarray, n: int, epsilon: float) -> np.ndarray:
     out = np.full((len(choices), n), epsilon / (n - 1))
     out[np.arange(len(choices)), choices] = 1.0 - epsilon
     return out
-
-
-def sample(probs: np.ndarray, uniforms: np.ndarray) -> np.ndarray:
-    """One action per row of (rows, 12) distributions: the first action whose cumulative
-    probability exceeds the row's uniform draw (the last one should rounding leave none)."""
-    below = np.cumsum(probs, axis=1) <= uniforms[:, None]
-    return np.minimum(below.sum(axis=1), probs.shape[1] - 1)
-
-
-_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
-
-
-def _mix(z: np.ndarray) -> np.ndarray:
-    """SplitMix64's finaliser: a bijection of 64-bit words that scatters every input bit."""
-    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-    return z ^ (z >> np.uint64(31))
-
-
-def lane_uniforms(seeds: np.ndarray, stream: int, frame: int | np.ndarray) -> np.ndarray:
-    """One uniform in [0, 1) per game seed for (stream, frame): a counter-based generator, so a
-    batched game's draws depend on its own seed only, never on which lanes share its batch or
-    which worker plays it."""
-    counter = np.asarray(frame).astype(np.uint64) + np.uint64(stream << 32)
-    with np.errstate(over="ignore"):
-        key = _mix(np.asarray(seeds).astype(np.uint64) * _GOLDEN + _GOLDEN)
-        z = _mix(key ^ counter * _GOLDEN)
-    return (z >> np.uint64(11)).astype(np.float64) * 2.0**-53
 
 
 class RulePolicy:
@@ -110,7 +63,7 @@ class RulePolicy:
             thrust = 1 - thrust
         if rng.random() < eps:
             fire = 1 - fire
-        return turn * 4 + thrust * 2 + fire
+        return join_action(turn, thrust, fire)
 
     def probs(self, obs: np.ndarray) -> np.ndarray:
         heads = []

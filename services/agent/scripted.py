@@ -20,8 +20,8 @@ import numpy as np
 
 from services.agent.policy import RulePolicy, UniformPolicy, turn_toward
 from services.sim import observation as ob
-from services.sim.config import GameConfig
 from services.sim.jit import jitable, njit
+from shared.game import GameConfig
 
 _DEFAULTS = GameConfig()
 

@@ -9,8 +9,8 @@ import zenoh
 
 from services.agent.player import Player
 from shared import keys
-from shared.bus import BusConfig, Drops, session, stop_on_summary
-from shared.messages import MessageError, PolicySwitch, State, decode
+from shared.bus import BusConfig, Drops, session, stop_on_summary, subscribe
+from shared.messages import MessageError, PolicySwitch, State
 
 log = logging.getLogger("tsf.agent")
 
@@ -29,35 +29,20 @@ def run_agent(
             keys.action(match, role), congestion_control=zenoh.CongestionControl.DROP, express=True
         )
 
-        def on_state(sample: zenoh.Sample) -> None:
-            try:
-                state = decode(sample.payload.to_bytes(), State)
-            except MessageError as error:
-                drops.drop(str(sample.key_expr), error)
-                return
+        def on_state(state: State) -> None:
             publisher.put(player.act(state, sender).encode())
 
-        def on_switch(sample: zenoh.Sample) -> None:
-            try:
-                message = decode(sample.payload.to_bytes(), PolicySwitch)
-                if message.role != role:
-                    raise MessageError("mismatch", f"switch for {message.role} on {role}'s key")
-                player.switch(message.policy)
-            except ValueError as error:  # MessageError, or an unknown policy key
-                drops.drop(str(sample.key_expr), error)
-                return
+        def on_switch(message: PolicySwitch) -> None:
+            if message.role != role:
+                raise MessageError("mismatch", f"switch for {message.role} on {role}'s key")
+            player.switch(message.policy)  # an unknown policy key raises ValueError: dropped
             log.info("%s switches to %s from the next frame (%s)", sender, message.policy, message.reason)
 
-        subscribers = [
-            z.declare_subscriber(keys.state(match), on_state),
-            z.declare_subscriber(keys.policy(match, role), on_switch),
-            z.declare_subscriber(keys.summary(match), stop_on_summary(stop, drops)),
-        ]
-        token = z.liveliness().declare_token(keys.alive(match, "agent", role))
-        try:
+        with (
+            subscribe(z, keys.state(match), State, on_state, drops),
+            subscribe(z, keys.policy(match, role), PolicySwitch, on_switch, drops),
+            stop_on_summary(z, match, stop, drops),
+            z.liveliness().declare_token(keys.alive(match, "agent", role)),
+        ):
             stop.wait()
-        finally:
-            token.undeclare()
-            for subscriber in subscribers:
-                subscriber.undeclare()
     return drops

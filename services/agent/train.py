@@ -33,9 +33,9 @@ from services.agent.library import FEATURES, HEAD_SIZES, HEADS, LIBRARY, Recipe
 from services.agent.scripted import CircleBait, MirrorShooter
 from services.sim.batch import BatchGame
 from services.sim.batch_observation import observe
-from services.sim.config import GameConfig
 from services.sim.play import play, summarize
 from services.sim.vec_env import RoleVectorEnv
+from shared.game import GameConfig, bait_first, join_action
 
 # --- rewards: one value per lane of a batched game, for the learner's seat -----------------------
 
@@ -120,7 +120,7 @@ class RecipeVecEnv(VecEnv):
     def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict]]:
         heads = dict(zip(self.recipe.learned, self.actions.T, strict=True))
         heads |= library.rule_heads_batch(self.recipe, self.obs, self.config)
-        action = heads["turn"] * 4 + heads["thrust"] * 2 + heads["fire"]
+        action = join_action(*(heads[h] for h in HEADS))
         self.obs, rewards, _, truncated, infos = self.env.step(action)
         out: list[dict] = [{} for _ in range(self.num_envs)]
         for lane in np.flatnonzero(truncated):
@@ -293,7 +293,7 @@ def score(key: str, partner: str, games: int, config: GameConfig | None = None, 
     """Kills/min of a library policy with a partner (from the shipped library) over seeded games."""
     policy = library.load(key, config, root)
     other = library.load(partner, config)
-    pair = (policy, other) if policy.role == "bait" else (other, policy)
+    pair = bait_first(policy.role, policy, other)
     s = summarize([play(*pair, seed, config) for seed in range(games)])
     return {"partner": partner, "games": s.games, "kills_per_minute": s.mean, "stderr": s.stderr}
 

@@ -24,7 +24,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from services.sim.config import ROLES, GameConfig, join_action
+from shared.game import ROLES, GameConfig, join_action, split_action
 from shared.messages import State, Summary
 
 KEYS = ("left", "right", "thrust", "fire")
@@ -93,8 +93,8 @@ def keys_action(keys: dict[str, bool]) -> int:
 
 def action_keys(action: int) -> dict[str, bool]:
     """The key state that plays `action` (what a scripted stand-in presses)."""
-    turn = action // 4
-    return {"left": turn == 1, "right": turn == 2, "thrust": bool(action & 2), "fire": bool(action & 1)}
+    turn, thrust, fire = split_action(action)
+    return {"left": turn == 1, "right": turn == 2, "thrust": bool(thrust), "fire": bool(fire)}
 
 
 class RateLimit:

@@ -18,9 +18,9 @@ from services.human.core import (
     parse,
     view,
 )
-from services.sim.config import GameConfig, split_action
 from services.sim.engine import Game
 from services.sim.match import state_message
+from shared.game import GameConfig, split_action
 
 
 def keys(**held: bool) -> dict[str, bool]:

@@ -28,10 +28,10 @@ from websockets.datastructures import Headers
 from websockets.http11 import Request, Response
 
 from services.human.core import MAX_MESSAGE, BadInput, Controls, SeatBook, end, parse, setup, view
-from services.sim.config import GameConfig
 from shared import keys
-from shared.bus import BusConfig, Drops, session
-from shared.messages import Action, MessageError, Start, State, Summary, decode
+from shared.bus import BusConfig, Drops, session, subscribe
+from shared.game import GameConfig
+from shared.messages import Action, Message, MessageError, Start, State, Summary
 
 log = logging.getLogger("tsf.human")
 STATIC = Path(__file__).parent / "static"
@@ -100,35 +100,30 @@ class Bridge:
         self.drops = Drops(self.sender)
         self.config = GameConfig()
         self.summary = threading.Event()
+        self.declared = contextlib.ExitStack()  # everything below, undeclared together by close()
+        declare = self.declared.enter_context
         self.token: zenoh.LivelinessToken | None = None
-        self.publisher = role and z.declare_publisher(
-            keys.action(match, role), congestion_control=zenoh.CongestionControl.DROP, express=True
+        self.publisher = role and declare(
+            z.declare_publisher(
+                keys.action(match, role), congestion_control=zenoh.CongestionControl.DROP, express=True
+            )
         )
-        self.subscribers = [
-            z.declare_subscriber(keys.state(match), self._on_state),
-            z.declare_subscriber(keys.start(match), self._on_start),
-            z.declare_subscriber(keys.summary(match), self._on_summary),
-        ]
+        declare(subscribe(z, keys.state(match), State, self._on_state, self.drops))
+        declare(subscribe(z, keys.start(match), Start, self._on_start, self.drops))
+        declare(subscribe(z, keys.summary(match), Summary, self._on_summary, self.drops))
 
     def live(self) -> None:
         """The person is ready: take the seat on the bus (the sim waits for it)."""
         if self.token is None and self.role is not None:
-            self.token = self.z.liveliness().declare_token(keys.alive(self.match, "human", self.role))
+            token = self.z.liveliness().declare_token(keys.alive(self.match, "human", self.role))
+            self.token = self.declared.enter_context(token)
 
-    def _decode(self, sample: zenoh.Sample, kind: type) -> object | None:
-        try:
-            message = decode(sample.payload.to_bytes(), kind)
-            if message.match != self.match:
-                raise MessageError("mismatch", f"{message.match} on {sample.key_expr}")
-        except MessageError as error:
-            self.drops.drop(str(sample.key_expr), error)
-            return None
-        return message
+    def _check(self, message: Message) -> None:
+        if message.match != self.match:
+            raise MessageError("mismatch", f"{message.TYPE} of {message.match} in match {self.match}")
 
-    def _on_state(self, sample: zenoh.Sample) -> None:
-        state = self._decode(sample, State)
-        if state is None:
-            return
+    def _on_state(self, state: State) -> None:
+        self._check(state)
         if self.token is not None:
             action = Action(self.match, state.frame, self.sender, self.role, self.controls.action, "")
             self.publisher.put(action.encode())
@@ -137,26 +132,19 @@ class Bridge:
             frame["obs"] = state.obs[self.role]
         self.outbox.offer(json.dumps(frame, separators=(",", ":")))
 
-    def _on_start(self, sample: zenoh.Sample) -> None:
-        start = self._decode(sample, Start)
-        if start is not None:
-            self.config = GameConfig.from_dict(start.config)
-            self.outbox.offer(json.dumps({"type": "setup", **setup(self.config)}), control=True)
+    def _on_start(self, start: Start) -> None:
+        self._check(start)
+        self.config = GameConfig.from_dict(start.config)
+        self.outbox.offer(json.dumps({"type": "setup", **setup(self.config)}), control=True)
 
-    def _on_summary(self, sample: zenoh.Sample) -> None:
-        summary = self._decode(sample, Summary)
-        if summary is not None:
-            self.outbox.offer(json.dumps(end(summary)), control=True)
-            self.summary.set()
+    def _on_summary(self, summary: Summary) -> None:
+        self._check(summary)
+        self.outbox.offer(json.dumps(end(summary)), control=True)
+        self.summary.set()
 
     def close(self) -> None:
-        if self.token is not None:
-            self.token.undeclare()
-            self.token = None
-        for subscriber in self.subscribers:
-            subscriber.undeclare()
-        if self.publisher:
-            self.publisher.undeclare()
+        self.declared.close()
+        self.token = None
 
 
 async def play_seat(ws: ServerConnection, bridge: Bridge, outbox: Outbox) -> None:

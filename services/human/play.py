@@ -10,8 +10,8 @@ from pathlib import Path
 from services.human.core import SeatBook
 from services.human.gateway import Gateway, seat_handler
 from services.launch import HUMAN, MatchPlan, run_match
-from services.sim.config import ROLES
 from shared.bus import BusConfig, free_endpoint
+from shared.game import ROLES
 from shared.messages import State, Summary
 
 

@@ -11,8 +11,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from services.recorder.log import read_log
-from services.sim.config import GameConfig
 from services.sim.engine import Game
+from shared.game import GameConfig
 from shared.messages import (
     Action,
     AdapterStatus,

@@ -13,10 +13,10 @@ import pytest
 from services.agent.player import Player
 from services.recorder.log import GapTracker, LogWriter
 from services.recorder.recording import TABLES, Recording, export_parquet, load, read_parquet, replay
-from services.sim.config import ROLES, GameConfig
 from services.sim.engine import Game
 from services.sim.match import event_messages, start_message, state_message, summary_message
 from shared import keys
+from shared.game import ROLES, GameConfig
 from shared.messages import AdapterStatus, PolicySwitch, State
 
 M = "rec-1"

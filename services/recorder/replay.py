@@ -19,10 +19,10 @@ import numpy as np
 
 from services.recorder.log import read_log
 from services.recorder.recording import Recording, simulate
-from services.sim.config import GameConfig
 from services.sim.render import render
 from shared import keys
 from shared.bus import BusConfig, session
+from shared.game import GameConfig
 from shared.messages import AdapterStatus, GameEvent, Message, MessageError, Start, State, Summary, decode_any
 
 VIDEO_FORMATS = (".gif", ".mp4")

@@ -13,10 +13,10 @@ from PIL import Image
 from services.recorder.recording import load
 from services.recorder.recording_test import FRAMES, M, record_match
 from services.recorder.replay import frames, schedule, write_video
-from services.sim.config import GameConfig
 from services.sim.engine import Game
 from services.sim.render import render
 from shared import keys
+from shared.game import GameConfig
 from shared.messages import Action, GameEvent, PolicySwitch, Start, State, Summary, decode_any
 
 

@@ -15,9 +15,9 @@ from pathlib import Path
 import zenoh
 
 from services.recorder.log import GapTracker, LogWriter
-from services.sim.config import ROLES
 from shared import keys
 from shared.bus import BusConfig, Drops, session
+from shared.game import ROLES
 from shared.messages import Message, MessageError, State, Summary, decode_any
 
 log = logging.getLogger("tsf.recorder")
@@ -74,16 +74,11 @@ def run_recorder(
             log.warning("cut a torn tail of %d bytes from %s", writer.cut_bytes, path)
         drainer = threading.Thread(target=drain, args=(writer, GapTracker(last)), daemon=True)
         drainer.start()
-        with session(bus) as z:
-            subscriber = z.declare_subscriber(keys.everything(match), on_sample)
+        with session(bus) as z, z.declare_subscriber(keys.everything(match), on_sample):
             _wait_for_seats(z, match, wait_seats, stop)
-            token = z.liveliness().declare_token(keys.alive(match, "recorder"))
-            try:
+            with z.liveliness().declare_token(keys.alive(match, "recorder")):
                 stop.wait()
                 time.sleep(0.5)  # actions still in flight after the summary (they come over other links)
-            finally:
-                token.undeclare()
-                subscriber.undeclare()
         inbox.put(_DONE)
         drainer.join()
     return path
@@ -95,16 +90,13 @@ def _wait_for_seats(z: zenoh.Session, match: str, timeout: float, stop: threadin
     seen: set[str] = set()
 
     def on_seat(sample: zenoh.Sample) -> None:
-        role = str(sample.key_expr).rsplit("/", 1)[-1]
+        role = keys.parse(sample.key_expr).role
         (seen.add if sample.kind == zenoh.SampleKind.PUT else seen.discard)(role)
 
-    watcher = z.liveliness().declare_subscriber(keys.seats_alive(match), on_seat, history=True)
     deadline = time.monotonic() + timeout
-    try:
+    with z.liveliness().declare_subscriber(keys.seats_alive(match), on_seat, history=True):
         while not seen >= set(ROLES) and time.monotonic() < deadline and not stop.wait(0.005):
             pass
-    finally:
-        watcher.undeclare()
 
 
 def _frame(data: bytes) -> int:
@@ -117,8 +109,11 @@ def _frame(data: bytes) -> int:
 def _check_key(key: str, message: Message, match: str) -> None:
     """A valid message is still bad input on a key that does not carry its type, or for another match
     or seat (as the sim and agents judge it): recorded, it would pass for a state, action, ..."""
-    chunks = key.split("/")  # tsf/<match>/<kind>[/<role>], and each kind is named for its type
-    if len(chunks) < 3 or chunks[2] != message.TYPE:
+    try:
+        parts = keys.parse(key)  # each kind of key is named for the type it carries
+    except ValueError:
+        parts = None
+    if parts is None or parts.kind != message.TYPE:
         raise MessageError("type", f"{message.TYPE} on {key}")
-    if message.match != match or (len(chunks) > 3 and getattr(message, "role", None) != chunks[3]):
+    if message.match != match or (parts.role and getattr(message, "role", None) != parts.role):
         raise MessageError("mismatch", f"{message.TYPE} for {message.match} on {key}")

@@ -30,22 +30,16 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from services.adapter.cem import cem_matrix
+from services.adapter import cem
+from services.adapter.core import AdapterConfig
 from services.agent import library
-from services.agent.policy import Policy
 from services.report.load import Match
-from services.sim.config import ROLES, GameConfig
-from services.sim.observation import as_observation
 from services.table.table import Table
+from shared.game import FPS, ROLES, GameConfig, Policy, other
 
 ROUND_ENDS = ("kill", "reset")  # the events that end a round (docs/rules.md)
-ADAPTIVE = "adaptive-"  # how an adaptive agent's variant is named
 PERSON = ("", "human")  # what a start record names a person's seat
-SMOOTH = 30  # frames in the log-probability curves' moving mean (one second)
-
-
-def other(role: str) -> str:
-    return ROLES[1 - ROLES.index(role)]
+SMOOTH = FPS  # frames in the log-probability curves' moving mean (one second)
 
 
 @dataclass(frozen=True)
@@ -67,7 +61,7 @@ def adaptive_seat(match: Match) -> str | None:
     adapter = match.tables["adapter"]
     if not adapter.empty:
         return str(adapter["role"].iloc[0])
-    return next((r for r in ROLES if match.policies[r].startswith(ADAPTIVE)), None)
+    return next((r for r in ROLES if AdapterConfig.parse(match.policies[r]) is not None), None)
 
 
 def person_seats(match: Match) -> list[str]:
@@ -88,7 +82,8 @@ def seats(match: Match, partner_role: str | None = None) -> list[Seat]:
             continue
         agent_role = other(role)
         if agent_role == adaptive and not adapter.empty:
-            variant = f"{ADAPTIVE}T{adapter['window'].iloc[0]}-{adapter['strategy'].iloc[0]}"
+            window, strategy = int(adapter["window"].iloc[0]), str(adapter["strategy"].iloc[0])
+            variant = AdapterConfig(agent_role, window, strategy).name
         else:
             variant = "person" if policies[agent_role] in PERSON else policies[agent_role]
         partner = "person" if policies[role] in PERSON else policies[role]
@@ -121,15 +116,7 @@ def partner_stream(match: Match, role: str) -> pd.DataFrame:
 
 def log_probs(stream: pd.DataFrame, policies: list[Policy]) -> np.ndarray:
     """(frames, policies): log pi(a_t | s_t) of each policy for each pair of a partner's stream."""
-    out = np.empty((len(stream), len(policies)))
-    actions = stream["action"].to_numpy()
-    observed = {}
-    for j, policy in enumerate(policies):
-        if policy.frame not in observed:
-            observed[policy.frame] = np.stack([as_observation(list(o), policy.frame) for o in stream["obs"]])
-        probs = library.batch_probs(policy, observed[policy.frame])
-        out[:, j] = np.log(probs[np.arange(len(stream)), actions])
-    return out
+    return cem.log_probs(policies, [list(o) for o in stream["obs"]], stream["action"].to_numpy())
 
 
 def library_policies(role: str, config: GameConfig) -> dict[str, Policy]:
@@ -167,7 +154,7 @@ def reference_vectors(role: str, table: Table, games: int, config: GameConfig) -
     matrix of docs/library.md)."""
     policies = library_policies(role, config)
     partner = library.load(reference_partner(table, role), config)
-    matrix = cem_matrix(list(policies.values()), partner, list(range(games)), config)
+    matrix = cem.cem_matrix(list(policies.values()), partner, list(range(games)), config)
     return pd.DataFrame(matrix, index=list(policies), columns=list(policies))
 
 

@@ -20,7 +20,7 @@ from pathlib import Path
 import pandas as pd
 
 from services.recorder.recording import TABLES, export_parquet, load, replay
-from services.sim.config import GameConfig
+from shared.game import GameConfig
 
 SIDECAR_FIELDS = ("participant", "role", "variant", "session", "trial", "attempt", "status")
 SIDECARS = (".study.json", ".json")

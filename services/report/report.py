@@ -15,9 +15,9 @@ import pandas as pd
 from services.report import analysis, figures
 from services.report.html import Section, write_html
 from services.report.load import Match, Problem, load_matches
-from services.sim.config import GameConfig
 from services.table.plot import heatmap
 from services.table.table import DEFAULT_TABLE, Table
+from shared.game import GameConfig
 
 REFERENCE_GAMES = 2
 

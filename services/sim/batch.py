@@ -21,9 +21,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from services.sim.config import N_ACTIONS, ROLES, GameConfig
-from services.sim.engine import DEATH_CAUSES, EVENT_KINDS, Event, hash_values, hexagon
+from services.sim.engine import Event, hash_values, hexagon
 from services.sim.jit import njit
+from shared.game import DEATH_CAUSES, EVENT_KINDS, N_ACTIONS, ROLES, GameConfig, split_action
 
 KILL, DEATH, SHIELD_HIT, MISSILE, SHELL, LOCK, FORTRESS_RESPAWN, RESET, RESPAWN = (
     EVENT_KINDS.index(kind)
@@ -74,6 +74,7 @@ class Rules(NamedTuple):
     two_pi: float
     shield_planes: np.ndarray  # (6, 4): the hexagon's vertices and edge normals, body frame
     region_planes: np.ndarray
+    heads: np.ndarray  # (N_ACTIONS, 3): split_action of every action, for the compiled loop
 
     @classmethod
     def of(cls, c: GameConfig) -> Rules:
@@ -87,6 +88,7 @@ class Rules(NamedTuple):
             spawns[:, 2].copy(), c.spawn_jitter_px, c.spawn_jitter_deg, c.points_kill, c.points_death,
             c.points_shield_hit, math.cos(math.radians(30)), 2.0 * math.pi,
             _planes(c.shield_radius), _planes(c.region_radius),
+            np.array([split_action(a) for a in range(N_ACTIONS)], dtype=np.int64),
         )  # fmt: skip
 
 
@@ -471,7 +473,7 @@ def _steer_ships(a, r, actions):
             if not a.alive[i, s]:
                 continue
             action = actions[i, s]
-            turn, thrust, fire = action // 4, (action >> 1) & 1, action & 1
+            turn, thrust, fire = r.heads[action]
             if turn == 1:
                 a.heading[i, s] = (a.heading[i, s] + r.ship_turn) % 360.0
             elif turn == 2:

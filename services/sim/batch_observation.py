@@ -13,8 +13,8 @@ import numpy as np
 
 from services.sim import observation as ob
 from services.sim.batch import BatchGame
-from services.sim.config import ROLES
 from services.sim.jit import njit
+from shared.game import OBS_SIZE, ROLES
 
 _PAIRS = np.array(ob._PAIRS, dtype=np.int64)
 
@@ -25,7 +25,7 @@ def observe(batch: BatchGame, role: str, view: str = "world") -> np.ndarray:
         raise ValueError(f"unknown role {role!r}; expected one of {ROLES}")
     if view not in ob.FRAMES:
         raise ValueError(f"unknown observation view {view!r}; expected one of {ob.FRAMES}")
-    values = np.empty((batch.n, ob.SIZE), np.float64)
+    values = np.empty((batch.n, OBS_SIZE), np.float64)
     c = batch.config
     _world_values(
         batch.state, ROLES.index(role), c.vulnerable_frames, c.fortress_fire_interval, c.frames, values

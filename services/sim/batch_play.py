@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from services.agent.policy import Policy, lane_uniforms, sample
 from services.sim.batch import BatchGame
 from services.sim.batch_observation import observe
-from services.sim.config import ROLES, GameConfig
 from services.sim.play import GameResult
+from services.sim.sampling import batch_probs, lane_uniforms, sample
+from shared.game import ROLES, GameConfig, Policy
 
 
 def play_batch(
@@ -27,7 +27,7 @@ def play_batch(
     while not batch.done[0]:
         frame = batch.state.frame
         actions = [
-            sample(policy.probs_batch(observe(batch, role, policy.frame)), lane_uniforms(keys, seat, frame))
+            sample(batch_probs(policy, observe(batch, role, policy.frame)), lane_uniforms(keys, seat, frame))
             for seat, (role, policy) in enumerate(zip(ROLES, (bait, shooter), strict=True))
         ]
         batch.step(*actions)

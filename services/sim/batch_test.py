@@ -16,9 +16,9 @@ from services.agent.library import keys, policy_for
 from services.sim import observation as ob
 from services.sim.batch import BatchGame, Rules, _point_distance
 from services.sim.batch_observation import observe
-from services.sim.config import ROLES, GameConfig
 from services.sim.engine import Game
 from services.sim.play import play
+from shared.game import ROLES, GameConfig
 
 
 def assert_same_games(seeds: list[int], streams: np.ndarray, config: GameConfig | None = None) -> None:

@@ -19,20 +19,14 @@ from typing import NamedTuple
 
 import pymunk
 
-from services.sim.config import N_ACTIONS, ROLES, GameConfig
-
-DEATH_CAUSES = ("shell", "border", "shield")
-EVENT_KINDS = (
-    *("kill", "death", "shield_hit", "missile", "shell", "lock"),
-    *("fortress_respawn", "reset", "respawn"),
-)
+from shared.game import DEATH_CAUSES, N_ACTIONS, ROLES, GameConfig, split_action
 
 
 class Event(NamedTuple):
     """Something that happened in a frame. `role` is the ship concerned, or '' for the fortress."""
 
     frame: int
-    kind: str  # one of EVENT_KINDS
+    kind: str  # one of shared.game.EVENT_KINDS
     role: str = ""
     detail: str = ""  # death cause, or the locked role
 
@@ -216,7 +210,7 @@ class Game:
 
     def _steer(self, ship: Ship, action: int) -> None:
         c = self.config
-        turn, thrust, fire = action // 4, (action >> 1) & 1, action & 1
+        turn, thrust, fire = split_action(action)
         if turn == 1:
             ship.heading = (ship.heading + c.ship_turn) % 360.0
         elif turn == 2:

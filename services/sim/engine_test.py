@@ -16,8 +16,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from services.sim.config import GameConfig, join_action, split_action
 from services.sim.engine import Event, Game, Ship
+from shared.game import GameConfig, join_action, split_action
 
 EXACT = GameConfig().replace(spawn_jitter_px=0.0, spawn_jitter_deg=0.0)
 NOOP, FIRE, THRUST, LEFT, RIGHT = 0, 1, 2, 4, 8

@@ -17,12 +17,11 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
-from services.agent.policy import Policy
-from services.sim.config import N_ACTIONS, ROLES, GameConfig
 from services.sim.engine import Event, Game
-from services.sim.observation import FRAMES, POSITION_SCALE, SIZE, VELOCITY_SCALE, observe
+from services.sim.observation import FRAMES, POSITION_SCALE, VELOCITY_SCALE, observe
 from services.sim.play import policy_seed
 from services.sim.render import render
+from shared.game import FPS, N_ACTIONS, OBS_SIZE, ROLES, GameConfig, Policy, bait_first, check_role
 
 Reward = Callable[[Game, str, list[Event]], float]
 RENDER_MODES = ("rgb_array",)
@@ -37,7 +36,7 @@ def observation_space(config: GameConfig) -> spaces.Box:
     reach = math.hypot(config.arena_x + margin, config.arena_y + margin) / POSITION_SCALE
     speed = max(config.ship_max_speed, config.missile_speed, config.shell_speed) / VELOCITY_SCALE
     bound = math.ceil(max(reach, speed, 1.0))
-    return spaces.Box(-bound, bound, (SIZE,), np.float32)
+    return spaces.Box(-bound, bound, (OBS_SIZE,), np.float32)
 
 
 def _game_seed(rng: np.random.Generator, seed: int | None) -> int:
@@ -60,7 +59,7 @@ def _check_modes(frame: str, render_mode: str | None) -> None:
 class TSFParallelEnv(ParallelEnv):
     """Both ships, stepped together; each agent observes in the env's frame and gets the team reward."""
 
-    metadata = {"name": "tsf_v0", "render_modes": list(RENDER_MODES), "render_fps": 30}
+    metadata = {"name": "tsf_v0", "render_modes": list(RENDER_MODES), "render_fps": FPS}
 
     def __init__(
         self, config: GameConfig | None = None, frame: str = "world", render_mode: str | None = None
@@ -116,7 +115,7 @@ class RoleEnv(gymnasium.Env):
     """One role's seat; the partner policy plays the other seat, reading its own observation frame,
     and is reset at each reset with the seed play() would give it."""
 
-    metadata = {"render_modes": list(RENDER_MODES), "render_fps": 30}
+    metadata = {"render_modes": list(RENDER_MODES), "render_fps": FPS}
 
     def __init__(
         self,
@@ -127,8 +126,7 @@ class RoleEnv(gymnasium.Env):
         reward: Reward | None = None,
         render_mode: str | None = None,
     ) -> None:
-        if role not in ROLES:
-            raise ValueError(f"unknown role {role!r}; expected one of {ROLES}")
+        check_role(role)
         if partner.role == role:
             raise ValueError(f"the partner policy {partner.key!r} plays {role}, the seat being trained")
         _check_modes(frame, render_mode)
@@ -151,7 +149,7 @@ class RoleEnv(gymnasium.Env):
         game = self.game
         before = game.points
         partner_action = self.partner.act(observe(game, self.partner.role, self.partner.frame))
-        actions = (action, partner_action) if self.role == "bait" else (partner_action, action)
+        actions = bait_first(self.role, action, partner_action)
         events = game.step(*actions)
         if self.reward is None:
             reward = float(game.points - before)

@@ -5,10 +5,12 @@ from pettingzoo.test import parallel_api_test, parallel_seed_test
 
 from services.agent.policy import UniformPolicy
 from services.agent.scripted import CircleBait, Idle, MirrorShooter
-from services.sim.config import GameConfig
+from services.sim import observation
+from services.sim.engine import Game
 from services.sim.env import RoleEnv, TSFParallelEnv
 from services.sim.observation import FRAMES, observe
 from services.sim.play import play
+from shared.game import OBS_SIZE, GameConfig
 
 SHORT = GameConfig(frames=200)
 
@@ -124,3 +126,8 @@ def test_render_gives_an_image_only_in_rgb_array_mode():
     plain = TSFParallelEnv()
     plain.reset(seed=0)
     assert plain.render() is None
+
+
+def test_the_observation_layout_fills_the_contracts_size():
+    assert observation.TIME + 1 == OBS_SIZE
+    assert observe(Game(SHORT, 1), "bait").shape == (OBS_SIZE,)

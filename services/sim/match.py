@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import time
 
-from services.sim.config import ROLES
 from services.sim.engine import Game
 from services.sim.observation import world_values
+from shared.game import ROLES
 from shared.messages import Action, GameEvent, Start, State, Summary
 
 NOOP = 0

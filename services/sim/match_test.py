@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-from services.sim.config import GameConfig
 from services.sim.engine import Game
 from services.sim.match import NOOP, Seats, event_messages, start_message, state_message, summary_message
 from services.sim.observation import world_values
+from shared.game import GameConfig
 from shared.messages import Action, GameEvent, Start, State, Summary, decode
 
 M = "m1"

@@ -1,6 +1,6 @@
 """Observations: the full numeric state as one fixed-length vector per role.
 
-Layout (64 float32, documented in docs/observation.md; the offsets below are the contract):
+Layout (OBS_SIZE = 64 float32, documented in docs/observation.md; the offsets below are the contract):
 
     [0:8)    self      x, y, vx, vy, cos heading, sin heading, alive, in region
     [8:16)   partner   same fields as self
@@ -22,8 +22,8 @@ import math
 
 import numpy as np
 
-from services.sim.config import ROLES
 from services.sim.engine import Game
+from shared.game import ROLES, check_role, other
 
 POSITION_SCALE = 100.0
 VELOCITY_SCALE = 10.0
@@ -38,7 +38,6 @@ FORTRESS = PARTNER + SHIP_SIZE
 SHELLS = FORTRESS + 7
 MISSILES = SHELLS + N_SHELLS * PROJECTILE_SIZE
 TIME = MISSILES + N_MISSILES * PROJECTILE_SIZE
-SIZE = TIME + 1
 
 # Field offsets inside a ship block and inside the fortress block.
 X, Y, VX, VY, COS, SIN, ALIVE, IN_REGION = range(SHIP_SIZE)
@@ -66,10 +65,8 @@ def as_observation(values: list[float], frame: str = "world") -> np.ndarray:
 
 def world_values(game: Game, role: str) -> list[float]:
     """The observation of `role` in the world frame, as float64 values in the documented layout."""
-    if role not in ROLES:
-        raise ValueError(f"unknown role {role!r}; expected one of {ROLES}")
-    me = ROLES.index(role)
-    ship, partner = game.ships[me], game.ships[1 - me]
+    me, them = ROLES.index(check_role(role)), ROLES.index(other(role))
+    ship, partner = game.ships[me], game.ships[them]
     sx, sy = ship.body.position
     p, v = 1.0 / POSITION_SCALE, 1.0 / VELOCITY_SCALE
     out: list[float] = []
@@ -94,7 +91,7 @@ def world_values(game: Game, role: str) -> list[float]:
         float(game.fortress_alive),
         game.vulnerable / c.vulnerable_frames,
         float(game.lock == me),
-        float(game.lock == 1 - me),
+        float(game.lock == them),
         min(game.since_shell / c.fortress_fire_interval, 1.0),
     ]
     shells = sorted(game.shells, key=lambda s: (s[0] - sx) ** 2 + (s[1] - sy) ** 2)[:N_SHELLS]

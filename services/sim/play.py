@@ -7,10 +7,9 @@ import statistics
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from services.agent.policy import Policy
-from services.sim.config import ROLES, GameConfig
 from services.sim.engine import Game
 from services.sim.observation import observe
+from shared.game import ROLES, GameConfig, Policy
 
 
 @dataclass(frozen=True)

@@ -17,12 +17,12 @@ from collections import Counter
 
 import zenoh
 
-from services.sim.config import ROLES, GameConfig
 from services.sim.engine import Game
 from services.sim.match import Seats, event_messages, start_message, state_message, summary_message
 from shared import keys
-from shared.bus import BusConfig, Drops, session
-from shared.messages import MessageError, Summary, decode_seat_action
+from shared.bus import BusConfig, Drops, session, subscribe
+from shared.game import ROLES, GameConfig
+from shared.messages import Action, Summary, seat_actions
 
 log = logging.getLogger("tsf.sim")
 MODES = ("realtime", "lockstep")
@@ -55,25 +55,23 @@ def run_sim(
     answered_at: dict[tuple[str, int], int] = {}  # (role, frame) -> arrival time, for round trips
     observers: Counter[str] = Counter()  # live recorder and adapter tokens
 
-    def on_action(sample: zenoh.Sample) -> None:
+    def on_action(action: Action) -> None:
         arrived = time.perf_counter_ns()
-        try:
-            action = decode_seat_action(sample.payload.to_bytes(), str(sample.key_expr), match)
-        except MessageError as error:
-            drops.drop(str(sample.key_expr), error)
-            return
         with changed:
             if seats.offer(action):
                 answered_at.setdefault((action.role, action.frame), arrived)
             changed.notify_all()
 
     def on_alive(sample: zenoh.Sample) -> None:
-        chunks = str(sample.key_expr).split("/")
+        try:
+            key = keys.parse(sample.key_expr)
+        except ValueError:  # a token none of our services declares
+            return
         with changed:
-            if chunks[-1] in ("recorder", "adapter"):
-                observers[chunks[-1]] += 1 if sample.kind == zenoh.SampleKind.PUT else -1
-            elif chunks[-1] in ROLES:
-                (seats.arrive if sample.kind == zenoh.SampleKind.PUT else seats.leave)(chunks[-1])
+            if key.role:
+                (seats.arrive if sample.kind == zenoh.SampleKind.PUT else seats.leave)(key.role)
+            elif key.service in ("recorder", "adapter"):
+                observers[key.service] += 1 if sample.kind == zenoh.SampleKind.PUT else -1
             changed.notify_all()
 
     def wait(condition, timeout: float) -> None:  # noqa: ANN001 - a predicate
@@ -86,17 +84,17 @@ def run_sim(
                 changed.wait(min(left, 0.05))
 
     with session(bus) as z:
-        token = z.liveliness().declare_token(keys.alive(match, "sim"))
         fast = {"congestion_control": zenoh.CongestionControl.DROP, "express": True}
         state_pub = z.declare_publisher(keys.state(match), priority=zenoh.Priority.REAL_TIME, **fast)
         event_pub = z.declare_publisher(keys.event(match), **fast)
-        subscribers = [
-            z.declare_subscriber(keys.actions(match), on_action),
-            z.liveliness().declare_subscriber(keys.seats_alive(match), on_alive, history=True),
-            z.liveliness().declare_subscriber(keys.alive(match, "recorder"), on_alive, history=True),
-            z.liveliness().declare_subscriber(keys.alive(match, "adapter"), on_alive, history=True),
-        ]
-        try:
+        liveliness = z.liveliness()
+        with (
+            liveliness.declare_token(keys.alive(match, "sim")),
+            subscribe(z, keys.actions(match), seat_actions(match), on_action, drops),
+            liveliness.declare_subscriber(keys.seats_alive(match), on_alive, history=True),
+            liveliness.declare_subscriber(keys.alive(match, "recorder"), on_alive, history=True),
+            liveliness.declare_subscriber(keys.alive(match, "adapter"), on_alive, history=True),
+        ):
             wait(lambda: all(seats.present(r) for r in ROLES), wait_players)
             wait(lambda: observers["recorder"] > 0, wait_recorder)
             wait(lambda: observers["adapter"] > 0, wait_adapter)
@@ -135,10 +133,6 @@ def run_sim(
             z.put(keys.summary(match), summary.encode())
             time.sleep(0.2)  # let the last puts leave before the session closes
             return summary
-        finally:
-            for subscriber in subscribers:
-                subscriber.undeclare()
-            token.undeclare()
 
 
 def _timing(trips: list[float], ticks: list[float], period: float) -> dict[str, float]:

@@ -16,11 +16,11 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from services.agent.policy import Policy, lane_uniforms, sample
 from services.sim.batch import BatchGame
 from services.sim.batch_observation import observe
-from services.sim.config import N_ACTIONS, ROLES, GameConfig
 from services.sim.env import observation_space
+from services.sim.sampling import batch_probs, lane_uniforms, sample
+from shared.game import N_ACTIONS, ROLES, GameConfig, Policy
 
 # A batched reward: (batch, the learner's seat, points before the frame) -> (lanes,) rewards.
 BatchReward = Callable[[BatchGame, int, np.ndarray], np.ndarray]
@@ -97,7 +97,7 @@ class RoleVectorEnv(VectorEnv):
             if lanes.size:
                 if partner.frame not in views:
                     views[partner.frame] = observe(batch, ROLES[seat], partner.frame)
-                actions[lanes] = sample(partner.probs_batch(views[partner.frame][lanes]), uniforms[lanes])
+                actions[lanes] = sample(batch_probs(partner, views[partner.frame][lanes]), uniforms[lanes])
         return actions
 
     def _seeds(self, n: int) -> np.ndarray:

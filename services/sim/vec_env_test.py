@@ -7,9 +7,9 @@ import pytest
 
 from services.agent.library import policy_for
 from services.sim import observation as ob
-from services.sim.config import GameConfig
 from services.sim.engine import Game
 from services.sim.vec_env import RoleVectorEnv
+from shared.game import GameConfig
 
 SHORT = GameConfig().replace(frames=90)
 

@@ -20,7 +20,8 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from services.sim.config import ROLES
+from services.adapter.core import AdapterConfig
+from shared.game import FPS, ROLES, other
 
 NAME = re.compile(r"[A-Za-z0-9_]{1,24}")
 DEFAULT_CONSENT = (
@@ -34,21 +35,26 @@ DEFAULT_END = "Thank you for taking part. You may close this window now."
 @dataclass(frozen=True)
 class Variant:
     """One agent the participants meet. `bait` is the agent's policy when the participant plays the
-    shooter, `shooter` when the participant plays the bait; an adaptive variant starts from the
-    adapter's initial policy and switches with the given window and strategy."""
+    shooter, `shooter` when the participant plays the bait; an adaptive variant names its adaptive
+    agent instead (`adapter = "adaptive-T400-cem"`, services/adapter/core.py AdapterConfig)."""
 
     name: str
     bait: str = ""
     shooter: str = ""
-    adaptive: bool = False
-    window: int = 400
-    strategy: str = "cem"
+    adapter: str = ""
 
-    def plan(self, agent_role: str) -> dict:
-        """The MatchPlan fields that put this variant in `agent_role`'s seat."""
-        if self.adaptive:
-            return {"adaptive": agent_role, "window": self.window, "strategy": self.strategy}
-        return {agent_role: getattr(self, agent_role)}
+    def __post_init__(self) -> None:
+        if self.adapter and self.adaptive(ROLES[0], 0) is None:
+            raise ValueError(f"variant {self.name}: {self.adapter!r} names no adaptive agent")
+
+    def adaptive(self, agent_role: str, seed: int) -> AdapterConfig | None:
+        """The adaptive agent this variant plays in `agent_role`'s seat, or None for a static one."""
+        return AdapterConfig.parse(self.adapter, role=agent_role, seed=seed)
+
+    def plan(self, agent_role: str, seed: int) -> dict:
+        """The MatchPlan fields that put this variant in `agent_role`'s seat in a game of `seed`."""
+        adapter = self.adaptive(agent_role, seed)
+        return {"adapter": adapter} if adapter else {agent_role: getattr(self, agent_role)}
 
 
 @dataclass(frozen=True)
@@ -78,13 +84,13 @@ class StudyConfig:
             raise ValueError(f"roles must be among {ROLES}")
         for variant in self.variants:
             for role in self.roles:
-                agent = partner_role(role)
-                if not variant.adaptive and not getattr(variant, agent):
+                agent = other(role)
+                if not variant.adapter and not getattr(variant, agent):
                     raise ValueError(f"variant {variant.name} has no {agent} for a {role} participant")
 
     @property
     def frames(self) -> int:
-        return round(self.trial_seconds * 30)
+        return round(self.trial_seconds * FPS)
 
     @classmethod
     def load(cls, path: str | Path) -> StudyConfig:
@@ -98,10 +104,6 @@ class StudyConfig:
     def hash(self) -> str:
         text = json.dumps(dataclasses.asdict(self), sort_keys=True)
         return hashlib.blake2b(text.encode(), digest_size=8).hexdigest()
-
-
-def partner_role(role: str) -> str:
-    return ROLES[1 - ROLES.index(role)]
 
 
 def assigned_role(config: StudyConfig, index: int) -> str:

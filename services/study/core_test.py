@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from services.adapter.core import AdapterConfig
 from services.agent.library import keys as library_keys
 from services.study.core import Study, StudyConfig, Variant, assigned_role, variant_order
 
@@ -16,7 +17,7 @@ CONFIGS = Path(__file__).parent / "configs"
 
 
 def config(**changes: object) -> StudyConfig:
-    variants = (Variant("a", "B1", "S1"), Variant("b", "B5", "S5"), Variant("c", adaptive=True, window=150))
+    variants = (Variant("a", "B1", "S1"), Variant("b", "B5", "S5"), Variant("c", adapter="adaptive-T150-cem"))
     return dataclasses.replace(StudyConfig("t", variants, trials=2), **changes)
 
 
@@ -25,9 +26,9 @@ def test_the_shipped_studies_load_and_name_library_policies(name: str) -> None:
     study = StudyConfig.load(CONFIGS / f"{name}.toml")
     assert study.name == name and len(study.variants) == 5 and study.trials == 3 and study.frames == 1800
     for variant in study.variants:
-        if not variant.adaptive:
+        if not variant.adapter:
             assert variant.bait in library_keys("bait") and variant.shooter in library_keys("shooter")
-    adaptive = [v.window for v in study.variants if v.adaptive]
+    adaptive = [v.adaptive("shooter", 0).window for v in study.variants if v.adapter]
     assert adaptive == ([] if name == "static" else [150, 400, 900])
 
 
@@ -68,8 +69,13 @@ def test_each_participant_meets_every_variant_once_in_an_order_of_their_own() ->
 
 def test_variants_put_their_agent_in_the_partner_seat() -> None:
     static, adaptive = config().variants[0], config().variants[2]
-    assert static.plan("shooter") == {"shooter": "S1"} and static.plan("bait") == {"bait": "B1"}
-    assert adaptive.plan("bait") == {"adaptive": "bait", "window": 150, "strategy": "cem"}
+    assert static.plan("shooter", 7) == {"shooter": "S1"} and static.plan("bait", 7) == {"bait": "B1"}
+    assert adaptive.plan("bait", 7) == {"adapter": AdapterConfig("bait", 150, "cem", seed=7)}
+
+
+def test_a_variant_names_an_adaptive_agent_or_none() -> None:
+    with pytest.raises(ValueError, match="names no adaptive agent"):
+        Variant("x", adapter="adaptive-400")
 
 
 def test_progress_resume_and_drop_outs(tmp_path: Path) -> None:

@@ -30,8 +30,9 @@ from websockets.asyncio.server import ServerConnection
 from services.human.core import BadInput, Controls
 from services.human.gateway import Bridge, Gateway, Handler, Outbox, receive_first, refuse
 from services.launch import HUMAN, MatchPlan, run_match
-from services.study.core import Participant, Study, StudyConfig, Trial, partner_role
+from services.study.core import Participant, Study, StudyConfig, Trial
 from shared.bus import BusConfig, free_endpoint
+from shared.game import other
 
 log = logging.getLogger("tsf.study")
 PROBLEM = "The game could not be started. Please tell the experimenter."
@@ -114,9 +115,10 @@ def study_handler(study: Study, endpoint: str, low_latency: bool = True) -> Hand
     async def play(socket: Socket, z: zenoh.Session, trial: Trial, obs: bool) -> dict | None:
         """Run one trial with the participant in their seat; returns the sidecar, or None if the
         participant left (the match then runs out with their ship idle, and is marked dropped)."""
+        seats = {trial.role: HUMAN, **trial.variant.plan(other(trial.role), trial.seed)}
         plan = MatchPlan(
             trial.match, trial.seed, config.frames, directory=recordings, peers=(endpoint,),
-            low_latency=low_latency, **{trial.role: HUMAN}, **trial.variant.plan(partner_role(trial.role)),
+            low_latency=low_latency, **seats,
         )  # fmt: skip
         bridge = Bridge(z, trial.match, trial.role, socket.controls, socket.outbox, obs)
         bridge.live()

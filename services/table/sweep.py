@@ -23,11 +23,11 @@ from pathlib import Path
 import zenoh
 
 from services.agent import library
-from services.sim.config import GameConfig
 from services.table.table import Job, Table, assemble, jobs, run_job
 from shared import keys
-from shared.bus import BusConfig, Drops, session
-from shared.messages import MessageError, SweepJob, SweepResult, decode
+from shared.bus import BusConfig, Drops, session, subscribe
+from shared.game import GameConfig
+from shared.messages import MessageError, SweepJob, SweepResult
 
 log = logging.getLogger("tsf.sweep")
 Progress = Callable[[int, int], None]  # (jobs done, jobs in all)
@@ -153,28 +153,23 @@ def run_sweep(
     with session(bus) as z, open(journal, "a") as journal_file:
 
         def on_worker(sample: zenoh.Sample) -> None:
-            worker = str(sample.key_expr).rsplit("/", 1)[-1]
+            worker = keys.parse(sample.key_expr).worker
             if sample.kind == zenoh.SampleKind.PUT:
                 log.info("worker %s is up", worker)
                 state.worker_up(worker)
             else:
                 state.worker_down(worker)
 
-        def on_result(sample: zenoh.Sample) -> None:
-            try:
-                result = decode(sample.payload.to_bytes(), SweepResult)
-                if result.job not in state.jobs:
-                    raise MessageError("unknown_job", f"no job {result.job!r} in this sweep")
-            except MessageError as error:
-                drops.drop(str(sample.key_expr), error)
-                return
+        def on_result(result: SweepResult) -> None:
+            if result.job not in state.jobs:
+                raise MessageError("unknown_job", f"no job {result.job!r} in this sweep")
             worker = result.sender.rsplit("/", 1)[-1]
             if result.error:
                 log.error("worker %s cannot run %s: %s", worker, result.job, result.error)
                 state.failed(worker, result.job)
             elif len(result.kills_per_minute) != len(state.jobs[result.job].seeds):
                 drops.drop(
-                    str(sample.key_expr), MessageError("shape", f"{result.job}: wrong number of games")
+                    keys.sweep_result(sweep), MessageError("shape", f"{result.job}: wrong number of games")
                 )
                 state.failed(worker, result.job)
             elif state.result(worker, result.job, result.kills_per_minute):
@@ -183,10 +178,11 @@ def run_sweep(
                     journal_file.write(json.dumps(record) + "\n")
                     journal_file.flush()
 
-        result_sub = z.declare_subscriber(keys.sweep_result(sweep), on_result)
-        worker_sub = z.liveliness().declare_subscriber(keys.sweep_worker(sweep), on_worker, history=True)
-        token = z.liveliness().declare_token(keys.sweep_coordinator(sweep))
-        try:
+        with (
+            subscribe(z, keys.sweep_result(sweep), SweepResult, on_result, drops),
+            z.liveliness().declare_subscriber(keys.sweep_worker(sweep), on_worker, history=True),
+            z.liveliness().declare_token(keys.sweep_coordinator(sweep)),
+        ):
             while not state.finished and not stop.is_set():
                 for worker, job in state.assignments(time.monotonic(), job_timeout):
                     seeds = list(job.seeds)
@@ -198,10 +194,6 @@ def run_sweep(
                     progress(len(state.done), len(state.jobs))
                 with state.changed:
                     state.changed.wait(0.5)
-        finally:
-            token.undeclare()
-            worker_sub.undeclare()
-            result_sub.undeclare()
     if progress is not None:
         progress(len(state.done), len(state.jobs))
     if not state.finished:
@@ -238,12 +230,6 @@ def run_worker(bus: BusConfig, sweep: str, worker: str, stop: threading.Event | 
     done = 0
     with session(bus) as z:
 
-        def on_job(sample: zenoh.Sample) -> None:
-            try:
-                inbox.put(decode(sample.payload.to_bytes(), SweepJob))
-            except MessageError as error:
-                drops.drop(str(sample.key_expr), error)
-
         def on_coordinator(sample: zenoh.Sample) -> None:
             if sample.kind == zenoh.SampleKind.PUT:
                 coordinator_seen.set()
@@ -251,14 +237,13 @@ def run_worker(bus: BusConfig, sweep: str, worker: str, stop: threading.Event | 
                 log.info("the coordinator of sweep %s is gone; worker %s stops", sweep, worker)
                 stop.set()
 
-        job_sub = z.declare_subscriber(keys.sweep_job(sweep, worker), on_job)
-        coordinator_sub = z.liveliness().declare_subscriber(
-            keys.sweep_coordinator(sweep), on_coordinator, history=True
-        )
-        token = z.liveliness().declare_token(keys.sweep_worker(sweep, worker))
-        publisher = z.declare_publisher(keys.sweep_result(sweep))
         sender = f"worker/{worker}"
-        try:
+        publisher = z.declare_publisher(keys.sweep_result(sweep))
+        with (
+            subscribe(z, keys.sweep_job(sweep, worker), SweepJob, inbox.put, drops),
+            z.liveliness().declare_subscriber(keys.sweep_coordinator(sweep), on_coordinator, history=True),
+            z.liveliness().declare_token(keys.sweep_worker(sweep, worker)),
+        ):
             while not stop.is_set():
                 try:
                     job = inbox.get(timeout=0.2)
@@ -276,8 +261,4 @@ def run_worker(bus: BusConfig, sweep: str, worker: str, stop: threading.Event | 
                     result = SweepResult(sweep, 0, sender, job.job, values, "", time.monotonic() - started)
                     done += 1
                 publisher.put(result.encode())
-        finally:
-            token.undeclare()
-            coordinator_sub.undeclare()
-            job_sub.undeclare()
     return done

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from services.agent import library
 from services.sim.batch_play import play_batch
-from services.sim.config import GameConfig
+from shared.game import GameConfig
 
 TABLE_VERSION = 1
 DEFAULT_TABLE = library.LIBRARY / "table.json"

@@ -10,10 +10,10 @@ import pytest
 
 from services.agent import library
 from services.sim.batch_play import play_batch
-from services.sim.config import GameConfig
 from services.sim.play import play, summarize
 from services.table.sweep import Coordinator, read_journal
 from services.table.table import StaleTable, Table, assemble, jobs, run_job
+from shared.game import GameConfig
 
 BAITS, SHOOTERS = ["B4", "B5"], ["S4", "S6"]
 

@@ -1,7 +1,10 @@
-"""The one immutable config that holds every number of the game.
+"""The game's vocabulary and its rule numbers: the one module every layer stands on.
 
-Defaults follow docs/rules.md; numbers the original team game never published are marked
-*(assumption)* there. Any re-tuning is written in the rules page with its measurement.
+Roles, the other seat, the bait-first seat order, the action encoding, event kinds, death causes,
+the observation's size, the frame rate, the `Policy` protocol and `GameConfig` live here and
+nowhere else. It imports nothing of the project (docs/architecture.md; tests/test_layers.py).
+GameConfig is here rather than beside the engine because the wire contract validates it: the
+Start message carries the config a match is replayed with.
 """
 
 from __future__ import annotations
@@ -11,16 +14,85 @@ import hashlib
 import json
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol, TypeVar, runtime_checkable
 
-ROLES: tuple[str, str] = ("bait", "shooter")
-N_ACTIONS = 12
+if TYPE_CHECKING:
+    import numpy as np
+
+ROLES: tuple[str, str] = ("bait", "shooter")  # also the seat order: the bait first, everywhere
+FPS = 30  # frames per second of game time
+N_TURN, N_THRUST, N_FIRE = 3, 2, 2  # choices of each action head; turn 0 none, 1 left (ccw), 2 right
+N_ACTIONS = N_TURN * N_THRUST * N_FIRE
+DEATH_CAUSES = ("shell", "border", "shield")
+# What the engine reports in a frame (services/sim/engine.py Event), then the sim's match markers.
+EVENT_KINDS = (
+    "kill",
+    "death",
+    "shield_hit",
+    "missile",
+    "shell",
+    "lock",
+    "fortress_respawn",
+    "reset",
+    "respawn",
+    "match_start",
+    "match_end",
+)
+OBS_SIZE = 64  # float values per observation; the layout is services/sim/observation.py
+
+T = TypeVar("T")
+
+
+def check_role(role: str) -> str:
+    if role not in ROLES:
+        raise ValueError(f"unknown role {role!r}; expected one of {ROLES}")
+    return role
+
+
+def other(role: str) -> str:
+    """The other seat."""
+    return ROLES[1 - ROLES.index(check_role(role))]
+
+
+def bait_first(role: str, mine: T, partners: T) -> tuple[T, T]:
+    """A pair of one seat's value and its partner's, in seat order (the bait's first)."""
+    return (mine, partners) if check_role(role) == ROLES[0] else (partners, mine)
+
+
+def split_action(action: int) -> tuple[int, int, int]:
+    """Action index -> (turn, thrust, fire)."""
+    return action // 4, (action >> 1) & 1, action & 1
+
+
+def join_action(turn: int, thrust: int, fire: int) -> int:
+    return turn * 4 + thrust * 2 + fire
+
+
+@runtime_checkable
+class Policy(Protocol):
+    """What every player of TSF implements: library, scripted, random or human proxy.
+
+    A policy is reset with a seed, reads the observation vector of its role (in the view it names),
+    returns an action, and returns the full distribution over the N_ACTIONS actions it samples
+    from. The distribution is what the adapter's similarity score reads, so it must be the real
+    sampling distribution and never zero anywhere."""
+
+    key: str
+    role: str
+    frame: str  # the observation frame it reads: "world" or "role"
+
+    def reset(self, seed: int | None = None) -> None: ...
+
+    def act(self, obs: np.ndarray) -> int: ...
+
+    def probs(self, obs: np.ndarray) -> np.ndarray: ...
 
 
 @dataclass(frozen=True)
 class GameConfig:
     """Every rule number of a TSF game (pixels, frames, degrees)."""
 
-    fps: int = 30
+    fps: int = FPS
     frames: int = 1800
     # Arena: nothing wraps; leaving it is a border death.
     arena_x: float = 355.0
@@ -107,12 +179,3 @@ def _same_kind(value: object, default: object) -> bool:
     if isinstance(default, int):
         return isinstance(value, int)
     return math.isfinite(value)
-
-
-def split_action(action: int) -> tuple[int, int, int]:
-    """Action index -> (turn, thrust, fire); turn 0 none, 1 left (ccw), 2 right."""
-    return action // 4, (action >> 1) & 1, action & 1
-
-
-def join_action(turn: int, thrust: int, fire: int) -> int:
-    return turn * 4 + thrust * 2 + fire

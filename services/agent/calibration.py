@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from services.agent.scripted import scripted_policy
-from services.sim.config import GameConfig
 from services.sim.play import Summary, play, summarize
+from shared.game import GameConfig
 
 # (label, bait seat's policy, shooter seat's policy)
 PAIRS = (

@@ -69,36 +69,36 @@ def eval_command(
 
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
 
-    from services.adapter import evaluate, figures
+    from services.adapter import figures, identification, results, team
     from services.adapter.partners import SWITCH_AT, population
     from services.agent import library
 
     workers = workers or os.cpu_count() or 1
     window_list = [int(w) for w in windows.split(",") if w.strip()]
     partners = partner or [p for group in population(other(role)).values() for p in group]
-    agents = library.keys(role) + evaluate.variants(window_list, strategies.split(","), strategy_window)
+    agents = library.keys(role) + team.variants(window_list, strategies.split(","), strategy_window)
     columns = (BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
     ident, rows, comparison = None, [], None
     with Progress(*columns, console=console) as bar:
         if identify:
             task = bar.add_task("identification", total=None)
-            ident = evaluate.identification(
+            ident = identification.identification(
                 role, window_list, list(range(identify_seeds)), workers,
                 lambda done, total: bar.update(task, completed=done, total=total),
             )  # fmt: skip
         if performance:
             task = bar.add_task("team games", total=None)
-            rows = evaluate.team(
+            rows = team.team(
                 role, partners, agents, list(range(seeds)), workers,
                 lambda done, total: bar.update(task, completed=done, total=total),
             )  # fmt: skip
-            comparison = evaluate.compare(rows)
-    summary = evaluate.write_results(out, ident, rows, comparison)
+            comparison = team.compare(rows)
+    summary = results.write_results(out, ident, rows, comparison)
     if ident:
         figures.accuracy_vs_window(ident, out / "identification.png")
         keys = library.keys(other(role))
         first, second = keys[0], keys[len(keys) // 2]
-        scores = evaluate.switch_scores(first, second, 0, role)
+        scores = identification.switch_scores(first, second, 0, role)
         title = f"Partner noisy(switch({first},{second})), switching at {SWITCH_AT / FPS:.0f} s"
         figures.logprob_curves(scores, keys, min(window_list), title, out / "logprob_curves.png", SWITCH_AT)
     if comparison:
@@ -114,7 +114,7 @@ def calibrate_adapter(
     """Measure the adapter's out-of-library thresholds into services/adapter/calibration.json."""
     import os
 
-    from services.adapter.evaluate import calibrate, write_calibration
+    from services.adapter.thresholds import calibrate, write_calibration
 
     result = calibrate(workers=workers or os.cpu_count() or 1)
     for role, thresholds in result["thresholds"].items():

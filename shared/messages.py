@@ -97,9 +97,10 @@ _SENDER = _text(r"[A-Za-z0-9_.:/-]{1,64}")
 _MATCH = _text(r"[A-Za-z0-9_-]{1,64}")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Message:
-    """The envelope every message carries."""
+    """The envelope every message carries. Every message is built by keyword: with up to a dozen
+    fields, a positional call would silently accept fields in the wrong order."""
 
     TYPE: ClassVar[str] = ""
     CHECKS: ClassVar[dict[str, Check]] = {}
@@ -114,7 +115,7 @@ class Message:
         return msgpack.packb(record, use_bin_type=True)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class State(Message):
     """One frame of the game, published by the sim after stepping.
 
@@ -151,7 +152,7 @@ class State(Message):
     sent_ns: int = 0
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Action(Message):
     """A player's action for the state of `frame`, from an agent (`policy` = its key) or a human."""
 
@@ -167,7 +168,7 @@ class Action(Message):
     policy: str = ""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class PolicySwitch(Message):
     """Tells the agent of `role` to play library policy `policy` from the next frame on."""
 
@@ -179,7 +180,7 @@ class PolicySwitch(Message):
     reason: str = ""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class GameEvent(Message):
     """Something that happened in a frame (services/sim/engine.py Event), or the match's start/end."""
 
@@ -217,7 +218,7 @@ def _config(value: Any) -> bool:
     return True
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Start(Message):
     """The match's set-up, published by the sim when it starts: enough to replay it."""
 
@@ -235,7 +236,7 @@ class Start(Message):
     policies: dict[str, str] = field(default_factory=dict)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Summary(Message):
     """The match result, published once by the sim when the match ends."""
 
@@ -257,7 +258,7 @@ class Summary(Message):
     timing: dict[str, float] = field(default_factory=dict)  # round trip and tick jitter, ms
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class AdapterStatus(Message):
     """The adapter's view of the partner, published a few times a second and on every switch.
 
@@ -279,12 +280,12 @@ class AdapterStatus(Message):
         "out_of_library": _bool,
     }
 
-    role: str = "shooter"
-    strategy: str = "cem"
-    window: int = 400
-    filled: int = 0
-    partner: str = ""
-    policy: str = "S1"
+    role: str
+    strategy: str
+    window: int
+    filled: int
+    partner: str
+    policy: str
     scores: dict[str, float] = field(default_factory=dict)
     belief: dict[str, float] = field(default_factory=dict)
     out_of_library: bool = False
@@ -294,7 +295,7 @@ _POLICY_KEY = _text(r"[A-Z][0-9]{1,2}")
 _HASH = _text(r"[0-9a-f]{16}")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class SweepJob(Message):
     """A sweep coordinator's job for one worker: play a pair over some seeds. `match` carries the
     sweep id; `library` and `config` are the hashes the worker's own copies must have."""
@@ -317,7 +318,7 @@ class SweepJob(Message):
     config: str = "0" * 16
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class SweepResult(Message):
     """A worker's answer to a job: kills/min per seed, in the job's seed order, or why it could not."""
 

@@ -80,13 +80,30 @@ def test_malformed_partner_actions_are_dropped_and_never_averaged(bus, tap, back
         action = partner.act(observe(game, "bait", partner.frame))
         bad = [
             b"\xc1 not msgpack",
-            Action(match, frame, "agent/shooter", "shooter", 3, "S5").encode(),  # wrong seat for the key
-            msgpack.packb({**_record(Action(match, frame, "human", "bait", 0, "")), "action": 99}),
-            Action("other", frame, "agent/bait", "bait", 1, "B5").encode(),  # another match
+            Action(
+                match=match, frame=frame, sender="agent/shooter", role="shooter", action=3, policy="S5"
+            ).encode(),  # wrong seat for the key
+            msgpack.packb(
+                {
+                    **_record(
+                        Action(match=match, frame=frame, sender="human", role="bait", action=0, policy="")
+                    ),
+                    "action": 99,
+                }
+            ),
+            Action(
+                match="other", frame=frame, sender="agent/bait", role="bait", action=1, policy="B5"
+            ).encode(),  # another match
         ]
         for data in bad if frame % 4 == 0 else []:
             z.put(bait_key, data, **BLOCK)
-        z.put(bait_key, Action(match, frame, "agent/bait", "bait", action, "B5").encode(), **BLOCK)
+        z.put(
+            bait_key,
+            Action(
+                match=match, frame=frame, sender="agent/bait", role="bait", action=action, policy="B5"
+            ).encode(),
+            **BLOCK,
+        )
         valid.append((state.obs["bait"], action))
         game.step(action, 0)
     assert wait_until(

@@ -86,7 +86,9 @@ def test_a_policy_switch_applies_from_the_next_state(seat, wait_until):
     sim, agent = seat("shooter", "mirror")
     for _ in range(10):
         sim.step(wait_until)
-    switch = PolicySwitch(MATCH, 9, "adapter", "shooter", "idle", "test")
+    switch = PolicySwitch(
+        match=MATCH, frame=9, sender="adapter", role="shooter", policy="idle", reason="test"
+    )
     sim.put(keys.policy(MATCH, "shooter"), switch.encode())
     # zenoh-python runs each subscriber's callbacks in a thread of its own, so the agent orders a
     # switch and a state only by when it handles them: the switch is given a moment, as between frames.
@@ -103,12 +105,20 @@ def test_bad_input_is_counted_and_the_agent_keeps_playing(seat, wait_until):
     bad = [
         (keys.state(MATCH), b"\xc1 not msgpack", "undecodable"),
         (keys.state(MATCH), msgpack.packb({"v": 1, "type": "state", "match": MATCH}), "shape"),
-        (keys.state(MATCH), Action(MATCH, 3, "x").encode(), "type"),
+        (keys.state(MATCH), Action(match=MATCH, frame=3, sender="x").encode(), "type"),
         (keys.summary(MATCH), b"\xc1", "undecodable"),
-        (keys.summary(MATCH), Summary(MATCH, 3, "sim", kills=-1).encode(), "range"),
+        (keys.summary(MATCH), Summary(match=MATCH, frame=3, sender="sim", kills=-1).encode(), "range"),
         (policy_key, msgpack.packb("idle"), "shape"),
-        (policy_key, PolicySwitch(MATCH, 3, "x", "shooter", "idle").encode(), "mismatch"),
-        (policy_key, PolicySwitch(MATCH, 3, "x", "bait", "no-such-policy").encode(), "ValueError"),
+        (
+            policy_key,
+            PolicySwitch(match=MATCH, frame=3, sender="x", role="shooter", policy="idle").encode(),
+            "mismatch",
+        ),
+        (
+            policy_key,
+            PolicySwitch(match=MATCH, frame=3, sender="x", role="bait", policy="no-such-policy").encode(),
+            "ValueError",
+        ),
     ]
     for frame in range(6):
         for key, data, reason in bad if frame % 2 else []:

@@ -43,9 +43,9 @@ VALID = {  # one valid record of each type: corrupted, or sent where another typ
     for m in (
         start_message(_game, "m", "sim", "lockstep", POLICIES),
         state_message(_game, "m", "sim", (0, 0)),
-        Action("m", 0, "x", "bait", 3, "circle"),
-        PolicySwitch("m", 0, "x", "bait", "idle"),
-        GameEvent("m", 0, "sim", "kill", "shooter"),
+        Action(match="m", frame=0, sender="x", role="bait", action=3, policy="circle"),
+        PolicySwitch(match="m", frame=0, sender="x", role="bait", policy="idle"),
+        GameEvent(match="m", frame=0, sender="sim", kind="kill", role="shooter"),
         summary_message(_game, "m", "sim", {}, {}),
     )
 }

@@ -45,7 +45,12 @@ class FakeMatch:
                 self.state_at[frame] = len(self.sent)
                 self.put(keys.state(MATCH), state_message(self.game, MATCH, "sim", (frame % 12, 3)).encode())
             for role, action in (("bait", frame % 12), ("shooter", 3)):
-                self.put(keys.action(MATCH, role), Action(MATCH, frame, "agent", role, action, "p").encode())
+                self.put(
+                    keys.action(MATCH, role),
+                    Action(
+                        match=MATCH, frame=frame, sender="agent", role=role, action=action, policy="p"
+                    ).encode(),
+                )
             self.game.step(frame % 12, 3)
 
     def summary(self) -> None:
@@ -90,17 +95,35 @@ def test_everything_valid_exactly_once_a_gap_for_the_hole_and_no_garbage(recorde
     match.frames(4)
     match.put(keys.state(MATCH), b"\xc1 garbage", valid=False)
     match.put(keys.event(MATCH), msgpack.packb({"v": 1, "type": "event", "kind": "kill"}), valid=False)
-    match.put(keys.action(MATCH, "bait"), Action(MATCH, 5, "x", "bait", 99).encode(), valid=False)
+    match.put(
+        keys.action(MATCH, "bait"),
+        Action(match=MATCH, frame=5, sender="x", role="bait", action=99).encode(),
+        valid=False,
+    )
     match.put(f"tsf/{MATCH}/elsewhere", msgpack.packb([1, 2]), valid=False)
     # Valid messages where they do not belong: a state on an action key, an action on the state key,
     # the bait's action on the shooter's key, another match's state.
     state = state_message(match.game, MATCH, "sim", (0, 0))
     match.put(keys.action(MATCH, "bait"), state.encode(), valid=False)
-    match.put(keys.state(MATCH), Action(MATCH, 5, "x", "bait", 1).encode(), valid=False)
-    match.put(keys.action(MATCH, "shooter"), Action(MATCH, 5, "x", "bait", 1).encode(), valid=False)
+    match.put(
+        keys.state(MATCH),
+        Action(match=MATCH, frame=5, sender="x", role="bait", action=1).encode(),
+        valid=False,
+    )
+    match.put(
+        keys.action(MATCH, "shooter"),
+        Action(match=MATCH, frame=5, sender="x", role="bait", action=1).encode(),
+        valid=False,
+    )
     match.put(keys.state(MATCH), dataclasses.replace(state, match="other").encode(), valid=False)
-    match.put(keys.event(MATCH), GameEvent(MATCH, 4, "sim", "kill", "shooter", "test").encode())
-    match.put(keys.policy(MATCH, "bait"), PolicySwitch(MATCH, 4, "adapter", "bait", "idle").encode())
+    match.put(
+        keys.event(MATCH),
+        GameEvent(match=MATCH, frame=4, sender="sim", kind="kill", role="shooter", detail="test").encode(),
+    )
+    match.put(
+        keys.policy(MATCH, "bait"),
+        PolicySwitch(match=MATCH, frame=4, sender="adapter", role="bait", policy="idle").encode(),
+    )
     match.frames(9, skip=(5, 6))
     match.summary()
     path = future.result(timeout=5)  # it stops by itself after the summary

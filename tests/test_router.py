@@ -75,13 +75,18 @@ def test_spoofed_puts_are_dropped_and_the_match_is_unchanged(
         def spoof() -> None:  # a logged-in bait agent tries to write what is not its own
             frame = 0
             while not done.is_set():
-                spoofer.put(keys.state(MATCH), State(MATCH, frame, "spoof", frames=FRAMES).encode())
                 spoofer.put(
-                    keys.action(MATCH, "shooter"), Action(MATCH, frame, "spoof", "shooter", 5).encode()
+                    keys.state(MATCH), State(match=MATCH, frame=frame, sender="spoof", frames=FRAMES).encode()
+                )
+                spoofer.put(
+                    keys.action(MATCH, "shooter"),
+                    Action(match=MATCH, frame=frame, sender="spoof", role="shooter", action=5).encode(),
                 )
                 spoofer.put(
                     keys.policy(MATCH, "shooter"),
-                    PolicySwitch(MATCH, frame, "spoof", "shooter", "idle").encode(),
+                    PolicySwitch(
+                        match=MATCH, frame=frame, sender="spoof", role="shooter", policy="idle"
+                    ).encode(),
                 )
                 frame += 1
                 done.wait(0.005)

@@ -56,7 +56,15 @@ class Hands:
     def answer(self, state: State, roles: tuple[str, ...] = ROLES) -> None:
         for role in roles:
             self.put(
-                role, Action(self.match, state.frame, "test", role, act(role, state.frame), "hand").encode()
+                role,
+                Action(
+                    match=self.match,
+                    frame=state.frame,
+                    sender="test",
+                    role=role,
+                    action=act(role, state.frame),
+                    policy="hand",
+                ).encode(),
             )
 
     def play(self, frames: int, before=None, roles=lambda frame: ROLES) -> list[State]:  # noqa: ANN001

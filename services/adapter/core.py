@@ -12,7 +12,7 @@ turns those scores into an estimated partner type C and our policy D (`Adapter`)
 - `-dwell`: a new D must stay the choice for `dwell` frames before the agent switches to it, so
   that the agent does not flap between policies on noise.
 - `-ood`: when the best window score is far below what library policies score on their own play
-  (calibration.json, see `calibrate` in evaluate.py), the partner is out of library: we play the
+  (calibration.json, see `calibrate` in thresholds.py), the partner is out of library: we play the
   policy with the best average table entry and say so.
 
 Until `warmup` frames are seen, no estimate is made and the agent plays its initial policy:

@@ -6,8 +6,10 @@ import numpy as np
 from scipy import stats
 
 from services.adapter.core import AdapterConfig
-from services.adapter.evaluate import compare, follow_lag, play_partner, variants, windowed
+from services.adapter.evaluate import play_partner
+from services.adapter.identification import follow_lag, windowed
 from services.adapter.partners import make_partner
+from services.adapter.team import compare, variants
 from services.table.table import DEFAULT_TABLE, Table
 
 

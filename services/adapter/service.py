@@ -57,7 +57,7 @@ def run_adapter(
         status = z.declare_publisher(keys.adapter(match), congestion_control=zenoh.CongestionControl.DROP)
 
         def report(frame: int) -> None:
-            status.put(AdapterStatus(match, frame, SENDER, **adapter.status()).encode())
+            status.put(AdapterStatus(match=match, frame=frame, sender=SENDER, **adapter.status()).encode())
             reported.update(frames=adapter.frames, partner=adapter.partner)
 
         def feed(pair: tuple[list[float], int] | None, frame: int) -> None:
@@ -73,7 +73,16 @@ def run_adapter(
                 reason = f"partner plays like {adapter.partner}" + (
                     " (out of library: best average)" if adapter.out_of_library else ""
                 )
-                switch.put(PolicySwitch(match, frame, SENDER, config.role, adapter.policy, reason).encode())
+                switch.put(
+                    PolicySwitch(
+                        match=match,
+                        frame=frame,
+                        sender=SENDER,
+                        role=config.role,
+                        policy=adapter.policy,
+                        reason=reason,
+                    ).encode()
+                )
                 agent.update(asked=adapter.policy, asked_at=frame)
                 log.info("frame %d: %s; switching the %s to %s", frame, reason, config.role, adapter.policy)
                 report(frame)

@@ -44,4 +44,11 @@ class Player:
                 self.policy.reset(switch_seed(self.seed, self.role, state.frame))
             policy = self.policy
         action = policy.act(as_observation(state.obs[self.role], policy.frame))
-        return Action(state.match, state.frame, sender, self.role, action, policy.key)
+        return Action(
+            match=state.match,
+            frame=state.frame,
+            sender=sender,
+            role=self.role,
+            action=action,
+            policy=policy.key,
+        )

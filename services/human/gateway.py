@@ -125,7 +125,14 @@ class Bridge:
     def _on_state(self, state: State) -> None:
         self._check(state)
         if self.token is not None:
-            action = Action(self.match, state.frame, self.sender, self.role, self.controls.action, "")
+            action = Action(
+                match=self.match,
+                frame=state.frame,
+                sender=self.sender,
+                role=self.role,
+                action=self.controls.action,
+                policy="",
+            )
             self.publisher.put(action.encode())
         frame = view(state)
         if self.obs and self.role is not None:

@@ -25,9 +25,18 @@ FRAMES = 60
 POLICIES = {"bait": "circle", "shooter": "mirror"}
 SWITCH_AT = 30  # the bait switches to idle before answering this frame
 ADAPTER = AdapterStatus(
-    M, SWITCH_AT, "adapter", "shooter", "cem", 20, 20, "B5", "S5", {"B5": -0.5, "B1": -3.0}
+    match=M,
+    frame=SWITCH_AT,
+    sender="adapter",
+    role="shooter",
+    strategy="cem",
+    window=20,
+    filled=20,
+    partner="B5",
+    policy="S5",
+    scores={"B5": -0.5, "B1": -3.0},
 )
-SWITCH = PolicySwitch(M, SWITCH_AT, "operator", "bait", "idle", "test")
+SWITCH = PolicySwitch(match=M, frame=SWITCH_AT, sender="operator", role="bait", policy="idle", reason="test")
 
 
 @dataclass(frozen=True)

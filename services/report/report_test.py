@@ -43,13 +43,24 @@ def adaptive_script(name: str, partner: str, seed: int) -> Script:
         """The adapter's status at `frame` (`filled` frames of its window seen)."""
         scores = {estimate: -0.5} if estimate else {}
         return AdapterStatus(
-            name, frame, "adapter", "shooter", "cem", WINDOW, filled, estimate, policy, scores
+            match=name,
+            frame=frame,
+            sender="adapter",
+            role="shooter",
+            strategy="cem",
+            window=WINDOW,
+            filled=filled,
+            partner=estimate,
+            policy=policy,
+            scores=scores,
         )
 
     return Script(
         name, seed, FRAMES, {"bait": partner, "shooter": "S1"},
         statuses=(status(0, 0, "", "S1"), *(status(f, WINDOW, partner, best) for f in (WINDOW, 2 * WINDOW))),
-        switches=(PolicySwitch(name, WINDOW, "adapter", "shooter", best, "partner"),),
+        switches=(PolicySwitch(
+            match=name, frame=WINDOW, sender="adapter", role="shooter", policy=best, reason="partner"
+        ),),
     )  # fmt: skip
 
 

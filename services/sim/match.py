@@ -49,14 +49,22 @@ class Seats:
 
 
 def start_message(game: Game, match: str, sender: str, mode: str, policies: dict[str, str]) -> Start:
-    return Start(match, game.frame, sender, game.seed, mode, game.config.to_dict(), policies)
+    return Start(
+        match=match,
+        frame=game.frame,
+        sender=sender,
+        seed=game.seed,
+        mode=mode,
+        config=game.config.to_dict(),
+        policies=policies,
+    )
 
 
 def state_message(game: Game, match: str, sender: str, applied: tuple[int, int]) -> State:
     return State(
-        match,
-        game.frame,
-        sender,
+        match=match,
+        frame=game.frame,
+        sender=sender,
         obs={role: world_values(game, role) for role in ROLES},
         ships=[[s.x, s.y, s.vx, s.vy, s.heading, float(s.alive)] for s in game.ships],
         fortress=[game.facing, float(game.fortress_alive), game.vulnerable, game.lock, game.since_shell],
@@ -72,16 +80,19 @@ def state_message(game: Game, match: str, sender: str, applied: tuple[int, int])
 
 
 def event_messages(game: Game, match: str, sender: str) -> list[GameEvent]:
-    return [GameEvent(match, e.frame, sender, e.kind, e.role, e.detail) for e in game.events]
+    return [
+        GameEvent(match=match, frame=e.frame, sender=sender, kind=e.kind, role=e.role, detail=e.detail)
+        for e in game.events
+    ]
 
 
 def summary_message(
     game: Game, match: str, sender: str, drops: dict[str, int], timing: dict[str, float]
 ) -> Summary:
     return Summary(
-        match,
-        game.frame,
-        sender,
+        match=match,
+        frame=game.frame,
+        sender=sender,
         kills=game.kills,
         kills_per_minute=game.kills_per_minute(),
         points=game.points,

@@ -12,7 +12,9 @@ M = "m1"
 
 
 def act(seats: Seats, role: str, frame: int, action: int) -> bool:
-    return seats.offer(Action(M, frame, "agent", role, action, "circle"))
+    return seats.offer(
+        Action(match=M, frame=frame, sender="agent", role=role, action=action, policy="circle")
+    )
 
 
 def seated(*roles: str) -> Seats:

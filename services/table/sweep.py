@@ -23,7 +23,7 @@ from pathlib import Path
 import zenoh
 
 from services.agent import library
-from services.table.table import Job, Table, assemble, jobs, run_job
+from services.table.table import CHUNK, Job, Table, assemble, jobs, run_job
 from shared import keys
 from shared.bus import BusConfig, Drops, session, subscribe
 from shared.game import GameConfig
@@ -135,7 +135,7 @@ def run_sweep(
     baits: list[str],
     shooters: list[str],
     games: int,
-    chunk: int = 10,
+    chunk: int = CHUNK,
     progress: Progress | None = None,
     stop: threading.Event | None = None,
     job_timeout: float = 900.0,
@@ -187,7 +187,15 @@ def run_sweep(
                 for worker, job in state.assignments(time.monotonic(), job_timeout):
                     seeds = list(job.seeds)
                     message = SweepJob(
-                        sweep, 0, "sweep", job.id, job.bait, job.shooter, seeds, library_hash, config_hash
+                        match=sweep,
+                        frame=0,
+                        sender="sweep",
+                        job=job.id,
+                        bait=job.bait,
+                        shooter=job.shooter,
+                        seeds=seeds,
+                        library=library_hash,
+                        config=config_hash,
                     )
                     z.put(keys.sweep_job(sweep, worker), message.encode())
                 if progress is not None:
@@ -255,10 +263,20 @@ def run_worker(bus: BusConfig, sweep: str, worker: str, stop: threading.Event | 
                         f"library/rules {library_hash}/{config_hash} here, {job.library}/{job.config} "
                         "in the sweep: update this worker's checkout"
                     )
-                    result = SweepResult(sweep, 0, sender, job.job, [], error)
+                    result = SweepResult(
+                        match=sweep, frame=0, sender=sender, job=job.job, kills_per_minute=[], error=error
+                    )
                 else:
                     values = run_job(Job(job.bait, job.shooter, tuple(job.seeds)))
-                    result = SweepResult(sweep, 0, sender, job.job, values, "", time.monotonic() - started)
+                    result = SweepResult(
+                        match=sweep,
+                        frame=0,
+                        sender=sender,
+                        job=job.job,
+                        kills_per_minute=values,
+                        error="",
+                        seconds=time.monotonic() - started,
+                    )
                     done += 1
                 publisher.put(result.encode())
     return done

@@ -37,7 +37,10 @@ class Job:
         return f"{self.bait}-{self.shooter}-{self.seeds[0]}-{len(self.seeds)}"
 
 
-def jobs(baits: list[str], shooters: list[str], games: int, chunk: int = 20) -> list[Job]:
+CHUNK = 20  # games per job, played as the lanes of one batch: a whole cell at the default 20 games
+
+
+def jobs(baits: list[str], shooters: list[str], games: int, chunk: int = CHUNK) -> list[Job]:
     """Every pair's seeds 0..games-1, cut into chunks of at most `chunk` games."""
     return [
         Job(b, s, tuple(range(start, min(start + chunk, games))))

@@ -1,0 +1,122 @@
+"""`tsf` commands for measuring the adaptive agent and the library it reads: diversity, eval,
+calibrate-adapter."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+from rich.table import Table
+
+from services.adapter.core import STRATEGIES, AdapterConfig
+from services.agent.library import policy_for
+from services.options import console
+from shared.game import FPS, other
+
+commands = typer.Typer()
+
+
+@commands.command()
+def diversity(
+    games: int = typer.Option(5, min=1, help="Seeded games of each policy."),
+    bait_partner: str = typer.Option("S4", help="The shooter every bait plays with."),
+    shooter_partner: str = typer.Option("B1", help="The bait every shooter plays with."),
+    out: Path | None = typer.Option(None, help="Write the two matrices as CSV files into this directory."),
+) -> None:
+    """The library's CEM matrices: mean log-probability of policy i's actions under policy j."""
+    from services.adapter.cem import cem_matrix
+    from services.agent import library
+
+    for role, partner in (("bait", bait_partner), ("shooter", shooter_partner)):
+        keys = library.keys(role)
+        partner_role = other(role)
+        m = cem_matrix([library.load(k) for k in keys], policy_for(partner, partner_role), list(range(games)))
+        table = Table(title=f"{role}s with {partner}: mean log-probability of row's actions under column")
+        for column in ("", *keys):
+            table.add_column(column)
+        for key, row in zip(keys, m, strict=True):
+            cells = (f"[bold]{v:.2f}[/]" if k == key else f"{v:.2f}" for k, v in zip(keys, row, strict=True))
+            table.add_row(key, *cells)
+        console.print(table)
+        if out is not None:
+            out.mkdir(parents=True, exist_ok=True)
+            header = ",".join(["policy", *keys])
+            rows = [",".join([k, *(f"{v:.4f}" for v in row)]) for k, row in zip(keys, m, strict=True)]
+            (out / f"cem_{role}.csv").write_text("\n".join([header, *rows]) + "\n")
+
+
+@commands.command("eval")
+def eval_command(
+    role: str = typer.Option("shooter", help="The adaptive agent's seat; the partners play the other."),
+    seeds: int = typer.Option(5, min=1, help="Seeded one-minute games per partner and agent."),
+    windows: str = typer.Option("150,400,800", help="Windows T of the study's CEM agent (comma-separated)."),
+    strategies: str = typer.Option(",".join(STRATEGIES), help="Strategies compared at --strategy-window."),
+    strategy_window: int = typer.Option(
+        AdapterConfig.window, min=1, help="The window of the strategies other than cem."
+    ),
+    partner: list[str] | None = typer.Option(
+        None, help="A partner by name, repeatable (default: the population; see docs/adapter.md)."
+    ),
+    identify_seeds: int = typer.Option(3, min=1, help="Games per library partner for identification."),
+    identify: bool = typer.Option(True, help="Measure identification accuracy."),
+    performance: bool = typer.Option(True, help="Measure team performance."),
+    workers: int = typer.Option(0, min=0, help="Processes (default: one per core)."),
+    out: Path = typer.Option(Path("docs/eval"), help="Directory for the numbers, figures and summary."),
+) -> None:
+    """Evaluate the adaptive agent in-process: identification, team performance, the test against
+    the best static policy, and the figures."""
+    import os
+
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
+
+    from services.adapter import figures, identification, results, team
+    from services.adapter.partners import SWITCH_AT, population
+    from services.agent import library
+
+    workers = workers or os.cpu_count() or 1
+    window_list = [int(w) for w in windows.split(",") if w.strip()]
+    partners = partner or [p for group in population(other(role)).values() for p in group]
+    agents = library.keys(role) + team.variants(window_list, strategies.split(","), strategy_window)
+    columns = (BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
+    ident, rows, comparison = None, [], None
+    with Progress(*columns, console=console) as bar:
+        if identify:
+            task = bar.add_task("identification", total=None)
+            ident = identification.identification(
+                role, window_list, list(range(identify_seeds)), workers,
+                lambda done, total: bar.update(task, completed=done, total=total),
+            )  # fmt: skip
+        if performance:
+            task = bar.add_task("team games", total=None)
+            rows = team.team(
+                role, partners, agents, list(range(seeds)), workers,
+                lambda done, total: bar.update(task, completed=done, total=total),
+            )  # fmt: skip
+            comparison = team.compare(rows)
+    summary = results.write_results(out, ident, rows, comparison)
+    if ident:
+        figures.accuracy_vs_window(ident, out / "identification.png")
+        keys = library.keys(other(role))
+        first, second = keys[0], keys[len(keys) // 2]
+        scores = identification.switch_scores(first, second, 0, role)
+        title = f"Partner noisy(switch({first},{second})), switching at {SWITCH_AT / FPS:.0f} s"
+        figures.logprob_curves(scores, keys, min(window_list), title, out / "logprob_curves.png", SWITCH_AT)
+    if comparison:
+        figures.adaptive_vs_static(comparison, out / "adaptive_vs_static.png")
+    console.print(summary.read_text())
+    console.print(f"written to {out}")
+
+
+@commands.command("calibrate-adapter")
+def calibrate_adapter(
+    workers: int = typer.Option(0, min=0, help="Processes (default: one per core)."),
+) -> None:
+    """Measure the adapter's out-of-library thresholds into services/adapter/calibration.json."""
+    import os
+
+    from services.adapter.thresholds import calibrate, write_calibration
+
+    result = calibrate(workers=workers or os.cpu_count() or 1)
+    for role, thresholds in result["thresholds"].items():
+        console.print(f"{role}: " + ", ".join(f"T={t}: {v:.2f}" for t, v in thresholds.items()))
+    console.print(f"written to {write_calibration(result)}")

@@ -1,0 +1,97 @@
+"""Writing an evaluation's numbers: JSON and CSV behind every figure, and a Markdown summary."""
+
+from __future__ import annotations
+
+import csv
+import json
+from collections.abc import Iterable
+from pathlib import Path
+
+from services.adapter.core import (
+    AdapterConfig,
+)
+from services.adapter.partners import group_of
+
+
+def _csv(path: Path, header: list[str], rows: Iterable[Iterable]) -> None:
+    with path.open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(header)
+        writer.writerows(rows)
+
+
+def _group_table(comparison: dict) -> list[str]:
+    groups = list(comparison["per_group"])
+    agents = sorted(comparison["agents"], key=lambda a: (AdapterConfig.parse(a) is not None, a))
+    rows = [
+        f"| {a} | " + " | ".join(f"{comparison['per_group'][g][a]['mean']:.2f}" for g in groups) + " |"
+        for a in agents
+    ]
+    return ["| agent | " + " | ".join(groups) + " |", "| --- |" + " --- |" * len(groups), *rows]
+
+
+def write_results(
+    out: Path, identification_result: dict | None, rows: list[dict], comparison: dict | None
+) -> Path:
+    """Every number behind the figures, as JSON and CSV, and a Markdown summary (summary.md)."""
+    out.mkdir(parents=True, exist_ok=True)
+    lines = ["# Adapter evaluation", ""]
+    if identification_result:
+        (out / "identification.json").write_text(json.dumps(identification_result, indent=1) + "\n")
+        keys = identification_result["partners"]
+        lines += [
+            "## Identification (library partners, 10 % action noise)",
+            "",
+            "| T | CEM accuracy | filter accuracy | CEM follows within T/2 | median frames to follow |",
+            "| --- | --- | --- | --- | --- |",
+        ]
+        for window, r in identification_result["windows"].items():
+            confusion = ([k, *row] for k, row in zip(keys, r["confusion"], strict=True))
+            _csv(out / f"confusion_T{window}.csv", ["true \\ estimated", *keys], confusion)
+            follow = r["follow"]
+            lines.append(
+                f"| {window} | {r['accuracy']:.3f} | {r['bayes_accuracy']:.3f} | "
+                f"{follow['within_half_window']:.2f} ({follow['followed']}/{follow['switches']} followed) | "
+                f"{follow['median_frames']} |"
+            )
+        lines.append("")
+    if rows:
+        _csv(out / "team.csv", list(rows[0]), (r.values() for r in rows))
+    if comparison:
+        (out / "comparison.json").write_text(json.dumps(comparison, indent=1) + "\n")
+        agents = comparison["agents"]
+        _csv(
+            out / "per_partner.csv",
+            ["partner", "group", "agent", "kills_per_minute", "stderr", "games"],
+            (
+                [p, group_of(p), a, f"{v['mean']:.4f}", f"{v['stderr']:.4f}", v["n"]]
+                for p, by_agent in comparison["per_partner"].items()
+                for a, v in by_agent.items()
+            ),
+        )
+        lines += [
+            f"## Team performance ({comparison['partners']} partners, {comparison['units']} games per agent)",
+            "",
+            "| agent | kills/min | s.e. |",
+            "| --- | --- | --- |",
+            *(f"| {a} | {v['mean']:.3f} | {v['stderr']:.3f} |" for a, v in sorted(agents.items())),
+            "",
+            "Mean kills/min by partner group (every partner: per_partner.csv):",
+            "",
+            *_group_table(comparison),
+            "",
+            f"Best static policy: **{comparison['best_static']}**.",
+            "",
+            "| adaptive | difference | d_z | p (paired t) | p (Wilcoxon) | p (partners) | partners better |",
+            "| --- | --- | --- | --- | --- | --- | --- |",
+            *(
+                f"| {a} | {t['mean_difference']:+.3f} ± {t['stderr']:.3f} | {t['d_z']:+.3f} | "
+                f"{t['p_t']:.3g} | {t['p_wilcoxon']:.3g} | {t['p_t_partners']:.3g} | "
+                f"{t['partners_better']}/{t['partners']} |"
+                for a, t in comparison["tests"].items()
+            ),
+            "",
+        ]
+    path = out / "summary.md"
+    path.write_text("\n".join(lines))
+    return path

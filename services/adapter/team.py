@@ -1,0 +1,119 @@
+"""Team performance: kills/min of every partner of a population with every static policy of our
+role and with adaptive variants, over the same seeds (so results pair by partner and seed), and
+`compare`: each adaptive variant against the best single static policy over the population."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from services.adapter.core import (
+    AdapterConfig,
+)
+from services.adapter.evaluate import play_partner, run_parallel
+from services.adapter.partners import group_of, make_partner
+from shared.game import other
+
+
+def _team_game(partner: str, agent: str, seed: int, role: str) -> dict:
+    config = AdapterConfig.parse(agent, role=role)
+    outcome = play_partner(make_partner(partner, other(role)), config or agent, seed, role)
+    return {
+        "partner": partner,
+        "agent": agent,
+        "seed": seed,
+        "kills_per_minute": outcome.kills_per_minute,
+        "switches": outcome.switches,
+    }
+
+
+def team(
+    role: str,
+    partners: list[str],
+    agents: list[str],
+    seeds: list[int],
+    workers: int = 1,
+    progress: Callable[[int, int], None] | None = None,
+) -> list[dict]:
+    """Kills/min of every (partner, agent, seed); agents are static keys or adaptive variant names."""
+    tasks = [(p, a, s, role) for p in partners for a in agents for s in seeds]
+    return run_parallel(_team_game, tasks, workers, progress)
+
+
+def _stderr(values: np.ndarray) -> float:
+    return float(values.std(ddof=1) / math.sqrt(len(values))) if len(values) > 1 else 0.0
+
+
+def compare(rows: list[dict]) -> dict:
+    """Each agent's mean and standard error over the population, and each adaptive variant against
+    the best static policy (chosen on this same data, which favours the static side): a one-sided
+    paired t-test and a Wilcoxon signed-rank test over (partner, seed) pairs, the same t-test over
+    partner means (seeds averaged), and the effect size d_z = mean difference / sd of differences."""
+    from scipy import stats
+
+    units = sorted({(r["partner"], r["seed"]) for r in rows})
+    grid: dict[str, dict[tuple[str, int], float]] = {}
+    for r in rows:
+        grid.setdefault(r["agent"], {})[(r["partner"], r["seed"])] = r["kills_per_minute"]
+    values = {a: np.array([g[u] for u in units]) for a, g in grid.items()}
+    agents = {a: _summary(v) for a, v in values.items()}
+    statics = [a for a in values if AdapterConfig.parse(a) is None]
+    best = max(statics, key=lambda a: agents[a]["mean"])
+    partners = sorted({u[0] for u in units})
+
+    def partner_means(a: str) -> np.ndarray:
+        return np.array([np.mean([grid[a][u] for u in units if u[0] == p]) for p in partners])
+
+    tests = {}
+    for a in values:
+        if AdapterConfig.parse(a) is None:
+            continue
+        diff = values[a] - values[best]
+        by_partner = partner_means(a) - partner_means(best)
+        nonzero = diff[diff != 0]
+        tests[a] = {
+            "mean_difference": float(diff.mean()),
+            "stderr": _stderr(diff),
+            "d_z": float(diff.mean() / diff.std(ddof=1)) if diff.std(ddof=1) > 0 else 0.0,
+            "t": float(stats.ttest_rel(values[a], values[best]).statistic),
+            "p_t": float(stats.ttest_rel(values[a], values[best], alternative="greater").pvalue),
+            "p_wilcoxon": float(stats.wilcoxon(nonzero, alternative="greater").pvalue)
+            if len(nonzero)
+            else 1.0,
+            "p_t_partners": float(stats.ttest_1samp(by_partner, 0.0, alternative="greater").pvalue),
+            "partners_better": int((by_partner > 0).sum()),
+            "partners": len(partners),
+        }
+    per_partner = {
+        p: {a: _summary([grid[a][u] for u in units if u[0] == p]) for a in values} for p in partners
+    }
+    groups = {group_of(p) for p in partners}
+    per_group = {
+        g: {a: _summary([grid[a][u] for u in units if group_of(u[0]) == g]) for a in values}
+        for g in sorted(groups)
+    }
+    return {
+        "units": len(units),
+        "partners": len(partners),
+        "best_static": best,
+        "agents": agents,
+        "tests": tests,
+        "per_partner": per_partner,
+        "per_group": per_group,
+    }
+
+
+def _summary(values: list[float]) -> dict:
+    array = np.array(values)
+    return {"mean": float(array.mean()), "stderr": _stderr(array), "n": len(array)}
+
+
+def variants(
+    windows: list[int], strategies: list[str], strategy_window: int = AdapterConfig.window
+) -> list[str]:
+    """The study's CEM at every window, and every other strategy at `strategy_window`."""
+    names = [AdapterConfig(window=w, strategy="cem").name for w in windows]
+    names += [AdapterConfig(window=strategy_window, strategy=s).name for s in strategies if s != "cem"]
+    return list(dict.fromkeys(names))

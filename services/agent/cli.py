@@ -1,0 +1,97 @@
+"""`tsf` commands for playing and training policies in-process: game, calibrate, train, library."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+from rich.table import Table
+
+from services.agent.calibration import calibrate
+from services.agent.library import policy_for
+from services.options import console
+from services.sim.play import play, summarize
+from shared.game import FPS, GameConfig
+
+commands = typer.Typer()
+
+
+@commands.command()
+def game(
+    bait: str = typer.Option("circle", help="Bait seat's policy key."),
+    shooter: str = typer.Option("mirror", help="Shooter seat's policy key."),
+    seed: int = typer.Option(0, help="Seed of the first game; game i uses seed + i."),
+    games: int = typer.Option(1, min=1, help="Number of games."),
+    frames: int = typer.Option(GameConfig.frames, min=1, help=f"Frames per game ({FPS} per second)."),
+) -> None:
+    """Play headless games in-process between two policies and print the score."""
+    config = GameConfig(frames=frames)
+    results = []
+    for s in range(seed, seed + games):
+        result = play(policy_for(bait, "bait"), policy_for(shooter, "shooter"), s, config)
+        results.append(result)
+        deaths = {role: sum(c["deaths"].values()) for role, c in result.counters.items()}
+        console.print(
+            f"game seed={s}: {result.kills} kills in {result.frames} frames "
+            f"({result.kills_per_minute:.1f}/min), points {result.points}, deaths {deaths}"
+        )
+    if games > 1:
+        console.print(f"{bait} + {shooter}: {summarize(results)}")
+
+
+@commands.command("calibrate")
+def calibrate_command(games: int = typer.Option(20, min=2, help="Seeded one-minute games per pair.")) -> None:
+    """Score the calibration pairs of the rules page (mean and standard error of kills/min)."""
+    table = Table(title=f"Calibration: kills per minute over {games} seeded one-minute games")
+    for column in ("pair", "bait seat", "shooter seat", "kills/min", "s.e."):
+        table.add_column(column)
+    for label, bait, shooter, summary in calibrate(games):
+        table.add_row(label, bait, shooter, f"{summary.mean:.2f}", f"{summary.stderr:.2f}")
+    console.print(table)
+
+
+@commands.command()
+def train(
+    keys: list[str] = typer.Argument(None, help="Library keys to train (default: every learned policy)."),
+    steps: int | None = typer.Option(None, min=1, help="Environment steps (default: the recipe's)."),
+    seed: int | None = typer.Option(None, help="Training seed (default: the recipe's)."),
+    log_dir: Path = typer.Option(Path("runs"), help="CSV training logs go to LOG_DIR/KEY."),
+    score_games: int = typer.Option(10, min=0, help="Games scored with the first partner after training."),
+) -> None:
+    """Train library policies by their registry recipes (needs the `train` extra)."""
+    from services.agent import library
+    from services.agent.train import train as train_policy
+
+    todo = keys or [k for k, r in library.registry().items() if r.algorithm]
+    for key in todo:
+        console.print(f"[bold]training {key}[/]: {library.registry()[key].description}")
+        entry = train_policy(key, steps, seed, log_dir / key, score_games=score_games)
+        score = entry.get("score")
+        console.print(f"  {entry['file']} sha256 {entry['sha256'][:12]} in {entry['seconds']} s")
+        if score:
+            console.print(
+                f"  {score['kills_per_minute']:.2f} ± {score['stderr']:.2f} kills/min with {score['partner']}"
+            )
+
+
+def _score_text(score: dict) -> str:
+    return f"{score['kills_per_minute']:.2f} ± {score['stderr']:.2f} kills/min with {score['partner']}"
+
+
+@commands.command("library")
+def library_command() -> None:
+    """List the policy library: recipe, training record and score of each policy."""
+    from services.agent import library
+
+    manifest = library.manifest()
+    table = Table(title=f"Policy library (manifest {library.manifest_hash()})")
+    for column in ("key", "role", "family", "algorithm", "steps", "seed", "score"):
+        table.add_column(column)
+    for key, recipe in library.registry().items():
+        entry = manifest.get(key, {})
+        score = entry.get("score")
+        steps = entry.get("steps", "untrained" if recipe.algorithm else "-")
+        seed = str(entry.get("seed", "-"))
+        score = _score_text(score) if score else "-"
+        table.add_row(key, recipe.role, recipe.family, recipe.algorithm or "rule", str(steps), seed, score)
+    console.print(table)

@@ -1,0 +1,187 @@
+"""`tsf` commands for whole matches and the people in them: match, play, study, replay."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import typer
+from rich.live import Live
+
+from services.agent.library import policy_for
+from services.options import AdapterFactory, Host, Port, adapter_options, bus_options, console
+from shared.bus import BusConfig, stop_on_signals
+from shared.game import FPS, ROLES, other
+
+commands = typer.Typer()
+
+
+@commands.command("match")
+@adapter_options("role", "seed")
+def match_command(
+    seed: int = typer.Option(0, help="The game's seed."),
+    duration: float = typer.Option(60.0, min=0.1, help=f"Game length in seconds ({FPS} frames each)."),
+    bait: str = typer.Option("circle", help="Bait agent's policy key."),
+    shooter: str = typer.Option("mirror", help="Shooter agent's policy key."),
+    lockstep: bool = typer.Option(
+        False, help="Lockstep (as fast as the agents answer) instead of real time."
+    ),
+    match: str = typer.Option("", help="Match id (default: from the clock)."),
+    out: Path = typer.Option(Path("recordings"), help="Directory of the recordings."),
+    adaptive: str = typer.Option("", help="Make this seat (bait or shooter) the adaptive agent."),
+    *,
+    adapter: AdapterFactory,
+) -> None:
+    """Start a complete match on this machine: sim, two agents and the recorder as processes (and
+    with --adaptive, the adapter, set by the adapter options)."""
+    from services.launch import MatchPlan, new_match_id, run_match
+    from services.recorder.recording import export_parquet, load
+
+    if adaptive and adaptive not in ROLES:
+        raise typer.BadParameter(f"--adaptive takes bait or shooter, not {adaptive!r}")
+    plan = MatchPlan(
+        match or new_match_id(), seed, round(duration * FPS), "lockstep" if lockstep else "realtime",
+        bait, shooter, out, adapter=adapter(role=adaptive, seed=seed) if adaptive else None,
+    )  # fmt: skip
+    seats = plan.policies()
+    view = {"partner": "-"}
+
+    def adapted(status) -> None:  # noqa: ANN001 - an AdapterStatus
+        seats[status.role] = status.policy
+        view["partner"] = (status.partner or "?") + (" (out of library)" if status.out_of_library else "")
+
+    with Live(console=console, transient=True) as live:
+
+        def scoreboard(state) -> None:  # noqa: ANN001 - a State
+            estimate = f"  partner like {view['partner']}" if adaptive else ""
+            live.update(
+                f"[bold]{plan.match}[/] frame {state.frame}/{state.frames}  kills [green]{state.kills}[/]  "
+                f"points {state.points}  bait {seats['bait']}  shooter {seats['shooter']}{estimate}"
+            )
+
+        summary, path = run_match(plan, scoreboard, adapted)
+    export = export_parquet(load(path), path.with_suffix(".parquet"))
+    console.print(
+        f"[bold]{plan.match}[/]: {summary.kills} kills in {summary.frame} frames "
+        f"= {summary.kills_per_minute:.2f} kills/min, points {summary.points}"
+    )
+    for role, counters in summary.counters.items():
+        deaths = ", ".join(f"{cause} {n}" for cause, n in counters["deaths"].items())
+        hits = counters["shield_hits"]
+        console.print(f"  {role}: kills {counters['kills']}, deaths by cause: {deaths}, shield hits {hits}")
+    if summary.timing:
+        console.print("  timing (ms): " + ", ".join(f"{k} {v:.2f}" for k, v in summary.timing.items()))
+    console.print(f"  recording: {path}  (Parquet: {export['states'].parent})")
+
+
+@commands.command("play")
+@adapter_options("role", "seed")
+def play_command(
+    role: str = typer.Option("bait", help="The seat you play: bait or shooter."),
+    partner: str = typer.Option(
+        "adaptive",
+        help="Who plays the other seat: `adaptive` (the adaptive agent), a policy key (see `tsf "
+        "library`), or `human` for a person.",
+    ),
+    seed: int = typer.Option(0, help="The game's seed."),
+    duration: float = typer.Option(60.0, min=0.1, help=f"Game length in seconds ({FPS} frames each)."),
+    wait: float = typer.Option(600.0, help="Seconds to wait for the players to press start."),
+    host: Host = "127.0.0.1",
+    port: Port = 8000,
+    match: str = typer.Option("", help="Match id (default: from the clock)."),
+    out: Path = typer.Option(Path("recordings"), help="Directory of the recordings."),
+    *,
+    adapter: AdapterFactory,
+) -> None:
+    """Play a match from a browser, with an agent or another person; prints the link(s) to open."""
+    from services.human.play import play_with_people
+    from services.launch import HUMAN, MatchPlan, new_match_id
+
+    if role not in ROLES:
+        raise typer.BadParameter("role is bait or shooter")
+    partner_role = other(role)
+    seats: dict = {role: HUMAN}
+    if partner == "adaptive":
+        seats["adapter"] = adapter(role=partner_role, seed=seed)
+    else:
+        if partner != HUMAN:
+            policy_for(partner, partner_role)  # an unknown key fails here, before anyone opens the page
+        seats[partner_role] = partner
+    plan = MatchPlan(
+        match or new_match_id(), seed, round(duration * FPS), "realtime", directory=out, wait_players=wait,
+        **seats,
+    )  # fmt: skip
+
+    def links(urls: dict[str, str]) -> None:
+        for seat, url in urls.items():
+            console.print(f"[bold]{seat}[/]: open {url}")
+
+    summary, path = play_with_people(plan, host, port, links)
+    console.print(
+        f"[bold]{plan.match}[/]: {summary.kills} kills in {summary.frame} frames "
+        f"= {summary.kills_per_minute:.2f} kills/min, points {summary.points}; recording: {path}"
+    )
+
+
+@commands.command()
+def study(
+    config: Path = typer.Argument(..., help="The study's TOML file (see services/study/configs/)."),
+    out: Path = typer.Option(Path("studies"), help="Studies go to OUT/<name>: progress and recordings."),
+    host: Host = "127.0.0.1",
+    port: Port = 8000,
+) -> None:
+    """Serve a study: participants open the link, consent, get a role and play every agent variant."""
+    from services.study.core import StudyConfig
+    from services.study.runner import run_study
+
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    protocol = StudyConfig.load(config)
+    directory = out / protocol.name
+
+    def show(gateway) -> None:  # noqa: ANN001 - a Gateway
+        console.print(
+            f"[bold]{protocol.name}[/]: {len(protocol.variants)} agents x {protocol.trials} trials of "
+            f"{protocol.trial_seconds:g} s; progress and recordings in {directory}"
+        )
+        console.print(f"participants open [bold]{gateway.url}[/] (Ctrl-C ends the study server)")
+
+    done = run_study(protocol, directory, host, port, stop_on_signals(), show)
+    finished = sum(done.next_trial(p) is None for p in done.participants.values())
+    console.print(f"{len(done.participants)} participants, {finished} finished")
+
+
+@commands.command("replay")
+@bus_options
+def replay_command(
+    recording: Path = typer.Argument(..., help="A recording (.tsflog)."),
+    video: Path | None = typer.Option(None, help="Write the re-simulated match as an .mp4 or .gif."),
+    scale: float = typer.Option(1.0, min=0.1, help="Video pixels per world pixel."),
+    every: int = typer.Option(1, min=1, help="Video: draw every N-th frame (the video keeps real speed)."),
+    live: bool = typer.Option(False, "--live", help="Put the match back on the bus at the game's pace."),
+    speed: float = typer.Option(1.0, min=0.01, help="--live: playback speed (1 = real time)."),
+    as_match: str = typer.Option("", "--as", help="--live: publish under this match id (default: its own)."),
+    delay: float = typer.Option(1.0, min=0.0, help="--live: seconds to wait for watchers before starting."),
+    *,
+    bus: BusConfig,
+) -> None:
+    """Re-simulate a recording and check every state hash; optionally write a video or re-broadcast it."""
+    from services.recorder.recording import load, replay
+    from services.recorder.replay import republish, write_video
+
+    loaded = load(recording)
+    try:
+        mismatches = replay(loaded)
+    except ValueError as error:
+        console.print(f"[red]{error}[/]")
+        raise typer.Exit(1) from None
+    tail = "" if loaded.clean else " [yellow](the log ends in a torn or corrupt record)[/]"
+    if mismatches:
+        console.print(f"[red]{recording}: {len(mismatches)} states differ, first at frame {mismatches[0]}[/]")
+        raise typer.Exit(1)
+    console.print(f"{recording}: all {len(loaded.states)} states reproduce their hashes{tail}")
+    if video is not None:
+        count = write_video(loaded, video, scale, every)
+        console.print(f"video: {video} ({count} frames)")
+    if live:
+        sent = republish(bus, recording, as_match or None, speed, delay, stop_on_signals())
+        console.print(f"republished {sent} messages")

@@ -1,0 +1,166 @@
+"""`tsf` commands that run one service each, for matches spread over processes or machines: sim,
+agent, recorder, adapter, human, router, and the alive probe."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from services.adapter.core import AdapterConfig
+from services.options import AdapterFactory, Connect, Host, Match, Port, adapter_options, bus_options, console
+from shared.bus import BusConfig, stop_on_signals
+from shared.game import FPS, GameConfig
+
+commands = typer.Typer()
+
+
+@commands.command()
+@bus_options
+def sim(
+    match: Match,
+    seed: int = typer.Option(0),
+    frames: int = typer.Option(GameConfig.frames, min=1),
+    mode: str = typer.Option("realtime", "--sim-mode", help=f"realtime ({FPS} Hz) or lockstep."),
+    bait: str = typer.Option("", help="Bait's policy key, for the record."),
+    shooter: str = typer.Option("", help="Shooter's policy key, for the record."),
+    wait_players: float = typer.Option(10.0, help="Seconds to wait for both seats before starting."),
+    wait_recorder: float = typer.Option(0.0, help="Seconds to wait for a recorder before starting."),
+    wait_adapter: float = typer.Option(0.0, help="Seconds to wait for an adapter before starting."),
+    *,
+    bus: BusConfig,
+) -> None:
+    """Run the sim service for one match."""
+    from services.sim.service import run_sim
+
+    summary = run_sim(
+        bus, match, seed, GameConfig(frames=frames), mode, {"bait": bait, "shooter": shooter},
+        stop_on_signals(), wait_players, wait_recorder, wait_adapter=wait_adapter,
+    )  # fmt: skip
+    logging.getLogger("tsf.sim").info(
+        "match %s over: %d kills in %d frames; timing %s", match, summary.kills, summary.frame, summary.timing
+    )
+
+
+@commands.command()
+@bus_options
+def agent(
+    match: Match,
+    role: str = typer.Option(..., help="bait or shooter"),
+    policy: str = typer.Option(
+        ...,
+        help="Policy key to play (a library or scripted key), or an adaptive agent's name "
+        "(adaptive-T<window>-<strategy>) to start with its initial policy.",
+    ),
+    seed: int = typer.Option(0, help="The match's seed (the policy's seed derives from it)."),
+    *,
+    bus: BusConfig,
+) -> None:
+    """Run an agent service that plays one seat."""
+    from services.agent.service import run_agent
+
+    adaptive = AdapterConfig.parse(policy, role=role, seed=seed)
+    run_agent(bus, match, role, adaptive.initial_policy() if adaptive else policy, seed, stop_on_signals())
+
+
+@commands.command()
+@bus_options
+def recorder(
+    match: Match,
+    out: Path = typer.Option(Path("recordings"), help="Directory of the recordings."),
+    *,
+    bus: BusConfig,
+) -> None:
+    """Run the recorder service for one match."""
+    from services.recorder.service import run_recorder
+
+    path = run_recorder(bus, match, out, stop_on_signals())
+    logging.getLogger("tsf.recorder").info("recording written to %s", path)
+
+
+@commands.command()
+@bus_options
+@adapter_options()
+def adapter(match: Match, *, adapter: AdapterFactory, bus: BusConfig) -> None:
+    """Run the adapter service: watch the partner, switch the agent of ROLE to the best response."""
+    from services.adapter.service import run_adapter
+
+    run_adapter(bus, match, adapter(), stop_on_signals())
+
+
+@commands.command()
+@bus_options
+def human(
+    match: Match,
+    token: list[str] | None = typer.Option(
+        None, "--token", help="ROLE=TOKEN: a seat open to people (repeatable; none: spectators only)."
+    ),
+    host: Host = "127.0.0.1",
+    port: Port = 8000,
+    *,
+    bus: BusConfig,
+) -> None:
+    """Run the human gateway: a web page that plays a match's seats from browsers, by seat token,
+    and shows the match (or its live replay) to spectators."""
+    from services.human.gateway import run_human
+    from services.human.play import seat_links
+
+    token = token or []
+    tokens = dict(t.split("=", 1) for t in token if "=" in t)
+    if len(tokens) != len(token):
+        raise typer.BadParameter("give each seat as ROLE=TOKEN")
+
+    def show(gateway) -> None:  # noqa: ANN001 - a Gateway
+        for role, link in seat_links(gateway.url, tokens).items():
+            console.print(f"{role}: {link}")
+        console.print(f"watch: {gateway.url}?watch=1")
+
+    run_human(bus, match, tokens, host, port, stop_on_signals(), show)
+
+
+@commands.command()
+def router(
+    listen: Annotated[list[str] | None, typer.Option("--listen", help="Endpoint (repeatable).")] = None,
+    credentials: Path | None = typer.Option(
+        None, help="Dictionary file of `user:password` lines: turns on log-in and access control."
+    ),
+) -> None:
+    """Run a zenoh router (a Python session in router mode) for matches across machines."""
+    from services.router import run_router
+
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    endpoints = tuple(listen or ("tcp/0.0.0.0:7447",))
+    logging.getLogger("tsf.router").info("routing on %s%s", endpoints, " (secured)" if credentials else "")
+    run_router(endpoints, credentials, stop_on_signals())
+
+
+@commands.command()
+def alive(
+    match: Match,
+    service: str = typer.Option(..., help="sim, agent, recorder, adapter or human."),
+    role: str = typer.Option("", help="The seat, for an agent or a human."),
+    connect: Connect = None,
+    timeout: float = typer.Option(2.0, help="Seconds to wait for the bus."),
+) -> None:
+    """Exit 0 if the service's liveliness token is on the bus, else 1 (a container healthcheck).
+
+    Asks as a zenoh client of the endpoint it connects to (default: this host's tcp/127.0.0.1:7447),
+    so the probe never joins the match's mesh of peers."""
+    import zenoh
+
+    from shared import keys
+    from shared.bus import session
+
+    key = keys.alive(match, service, role or None)
+    bus = BusConfig("client", (), tuple(connect or ("tcp/127.0.0.1:7447",)), wait_router=timeout)
+    try:
+        with session(bus) as z:
+            found = any(reply.ok is not None for reply in z.liveliness().get(key, timeout=timeout))
+    except zenoh.ZError as error:
+        console.print(f"cannot reach the bus: {error}")
+        found = False
+    console.print(f"{key}: {'alive' if found else 'not on the bus'}")
+    if not found:
+        raise typer.Exit(1)

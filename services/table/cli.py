@@ -32,7 +32,7 @@ def sweep(
     baits: str = typer.Option("", help="Comma-separated baits (default: all)."),
     shooters: str = typer.Option("", help="Comma-separated shooters (default: all)."),
     workers: int = typer.Option(2, min=0, help="Worker processes to start here (0: only remote workers)."),
-    chunk: int = typer.Option(20, min=1, help="Games per job, played as the lanes of one batch (table.CHUNK)."),
+    chunk: int = typer.Option(20, min=1, help="Games per job, played as the lanes of one batch."),
     out: Path = typer.Option(Path("services/agent/library/table.json"), help="Where the table goes."),
     plot: Path | None = typer.Option(None, help="Also draw the heatmap into this PNG."),
     sweep_id: str = typer.Option("table", "--sweep", help="Sweep id: the key namespace tsf/sweep/<id>/..."),

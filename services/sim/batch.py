@@ -21,7 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from services.sim.engine import Event, hash_values, hexagon
+from services.sim.engine import Event, fortress_turn, hash_values, hexagon, in_rear_arc, steer
 from services.sim.jit import njit
 from shared.game import DEATH_CAUSES, EVENT_KINDS, N_ACTIONS, ROLES, GameConfig, split_action
 
@@ -353,11 +353,6 @@ def _reset_lanes(a, r, lanes):
 
 
 @njit
-def _angle_diff(a, b):
-    return (a - b + 180.0) % 360.0 - 180.0
-
-
-@njit
 def _point_distance(planes, facing, px, py):
     """pymunk's Poly.point_query(p).distance for the hexagon on the fortress body at `facing`:
     Chipmunk's body transform (a = d = cos, b = sin, c = -sin, no translation) applied to the
@@ -396,13 +391,6 @@ def _in_hexagon(planes, radius, cos30, facing, x, y):
     if d2 <= apothem * apothem:
         return True
     return _point_distance(planes, facing, x, y) <= 0.0
-
-
-@njit
-def _in_rear_arc(rear_arc, facing, x, y):
-    rear = facing + 180.0
-    bearing = math.degrees(math.atan2(y, x))
-    return abs(_angle_diff(bearing, rear)) <= rear_arc / 2.0
 
 
 # ---------------------------------------------------------------------- set-up and resets
@@ -474,23 +462,10 @@ def _steer_ships(a, r, actions):
                 continue
             action = actions[i, s]
             turn, thrust, fire = r.heads[action]
-            if turn == 1:
-                a.heading[i, s] = (a.heading[i, s] + r.ship_turn) % 360.0
-            elif turn == 2:
-                a.heading[i, s] = (a.heading[i, s] - r.ship_turn) % 360.0
-            rad = math.radians(a.heading[i, s])
-            cos_h, sin_h = math.cos(rad), math.sin(rad)
-            vx, vy = a.vx[i, s], a.vy[i, s]
-            if thrust:
-                vx += r.ship_thrust * cos_h
-                vy += r.ship_thrust * sin_h
-            vx *= r.ship_drag
-            vy *= r.ship_drag
-            speed2 = vx * vx + vy * vy
-            if speed2 > r.ship_max_speed * r.ship_max_speed:
-                scale = r.ship_max_speed / math.sqrt(speed2)
-                vx *= scale
-                vy *= scale
+            a.heading[i, s], vx, vy, cos_h, sin_h = steer(
+                a.heading[i, s], a.vx[i, s], a.vy[i, s], turn, thrust,
+                r.ship_turn, r.ship_thrust, r.ship_drag, r.ship_max_speed,
+            )  # fmt: skip
             a.vx[i, s], a.vy[i, s] = vx, vy
             if a.cooldown[i, s] > 0:
                 a.cooldown[i, s] -= 1
@@ -568,7 +543,7 @@ def _resolve_missiles(a, r):
             d2 = x * x + y * y
             keep = True
             if d2 <= reach * reach:
-                through_opening = a.vulnerable[i] > 0 and _in_rear_arc(r.rear_arc, a.facing[i], x, y)
+                through_opening = a.vulnerable[i] > 0 and in_rear_arc(a.facing[i], x, y, r.rear_arc)
                 if d2 <= r.kill_distance * r.kill_distance and through_opening:
                     if killed_by[i] < 0:
                         killed_by[i] = int(a.missiles[i, k, 4])
@@ -642,9 +617,7 @@ def _fortress_act(a, r, i):
     if target < 0:
         return
     bearing = math.degrees(math.atan2(a.y[i, target], a.x[i, target]))
-    error = _angle_diff(bearing, a.facing[i])
-    low = error if error < r.fortress_turn else r.fortress_turn  # min(fortress_turn, error)
-    turn = low if low > -r.fortress_turn else -r.fortress_turn  # max(-fortress_turn, low)
+    turn, error = fortress_turn(a.facing[i], bearing, r.fortress_turn)
     if turn != 0.0:
         a.facing[i] = (a.facing[i] + turn) % 360.0
         error -= turn

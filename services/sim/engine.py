@@ -19,6 +19,7 @@ from typing import NamedTuple
 
 import pymunk
 
+from services.sim.jit import jitable
 from shared.game import DEATH_CAUSES, N_ACTIONS, ROLES, GameConfig, split_action
 
 
@@ -85,9 +86,61 @@ def hexagon(radius: float) -> list[tuple[float, float]]:
     ]
 
 
-def _angle_diff(a: float, b: float) -> float:
+# The formulas below are shared with the batched engine (batch.py), which compiles the same source.
+
+
+@jitable
+def angle_diff(a: float, b: float) -> float:
     """Signed smallest difference a - b in degrees, in [-180, 180)."""
     return (a - b + 180.0) % 360.0 - 180.0
+
+
+@jitable
+def steer(
+    heading: float,
+    vx: float,
+    vy: float,
+    turn: int,
+    thrust: int,
+    c_turn: float,
+    c_thrust: float,
+    drag: float,
+    cap: float,
+) -> tuple[float, float, float, float, float]:
+    """One frame of a ship's turn, thrust, drag and speed cap: (heading, vx, vy, cos, sin of heading)."""
+    if turn == 1:
+        heading = (heading + c_turn) % 360.0
+    elif turn == 2:
+        heading = (heading - c_turn) % 360.0
+    rad = math.radians(heading)
+    cos_h, sin_h = math.cos(rad), math.sin(rad)
+    if thrust:
+        vx += c_thrust * cos_h
+        vy += c_thrust * sin_h
+    vx *= drag
+    vy *= drag
+    speed2 = vx * vx + vy * vy
+    if speed2 > cap * cap:
+        scale = cap / math.sqrt(speed2)
+        vx *= scale
+        vy *= scale
+    return heading, vx, vy, cos_h, sin_h
+
+
+@jitable
+def in_rear_arc(facing: float, x: float, y: float, rear_arc: float) -> bool:
+    """Whether the bearing of (x, y) lies in the open arc centred opposite the facing."""
+    rear = facing + 180.0
+    bearing = math.degrees(math.atan2(y, x))
+    return abs(angle_diff(bearing, rear)) <= rear_arc / 2.0
+
+
+@jitable
+def fortress_turn(facing: float, bearing: float, max_turn: float) -> tuple[float, float]:
+    """(turn, aim error before it): the fortress turns toward the bearing by at most max_turn."""
+    error = angle_diff(bearing, facing)
+    low = error if error < max_turn else max_turn  # min(max_turn, error)
+    return (low if low > -max_turn else -max_turn), error  # max(-max_turn, low)
 
 
 class Game:
@@ -211,23 +264,17 @@ class Game:
     def _steer(self, ship: Ship, action: int) -> None:
         c = self.config
         turn, thrust, fire = split_action(action)
-        if turn == 1:
-            ship.heading = (ship.heading + c.ship_turn) % 360.0
-        elif turn == 2:
-            ship.heading = (ship.heading - c.ship_turn) % 360.0
-        rad = math.radians(ship.heading)
-        cos_h, sin_h = math.cos(rad), math.sin(rad)
-        vx, vy = ship.vx, ship.vy
-        if thrust:
-            vx += c.ship_thrust * cos_h
-            vy += c.ship_thrust * sin_h
-        vx *= c.ship_drag
-        vy *= c.ship_drag
-        speed2 = vx * vx + vy * vy
-        if speed2 > c.ship_max_speed * c.ship_max_speed:
-            scale = c.ship_max_speed / math.sqrt(speed2)
-            vx *= scale
-            vy *= scale
+        ship.heading, vx, vy, cos_h, sin_h = steer(
+            ship.heading,
+            ship.vx,
+            ship.vy,
+            turn,
+            thrust,
+            c.ship_turn,
+            c.ship_thrust,
+            c.ship_drag,
+            c.ship_max_speed,
+        )
         ship.vx, ship.vy = vx, vy
         ship.body.velocity = (vx, vy)
         if ship.cooldown > 0:
@@ -272,7 +319,7 @@ class Game:
             if d2 > reach * reach:
                 kept.append(m)
                 continue
-            through_opening = self.vulnerable > 0 and self._in_rear_arc(x, y)
+            through_opening = self.vulnerable > 0 and in_rear_arc(self.facing, x, y, self.config.rear_arc)
             if d2 <= c.kill_distance * c.kill_distance and through_opening:
                 if killer < 0:
                     killer = m[4]
@@ -286,11 +333,6 @@ class Game:
             self.events.append(Event(self.frame, "shield_hit", owner.role))
         self.missiles = kept
         return killer
-
-    def _in_rear_arc(self, x: float, y: float) -> bool:
-        rear = self.facing + 180.0
-        bearing = math.degrees(math.atan2(y, x))
-        return abs(_angle_diff(bearing, rear)) <= self.config.rear_arc / 2.0
 
     def _resolve_shells(self) -> None:
         c = self.config
@@ -340,8 +382,7 @@ class Game:
         target = self.ships[self.lock]
         tx, ty = target.body.position
         bearing = math.degrees(math.atan2(ty, tx))
-        error = _angle_diff(bearing, self.facing)
-        turn = max(-c.fortress_turn, min(c.fortress_turn, error))
+        turn, error = fortress_turn(self.facing, bearing, c.fortress_turn)
         if turn:
             self._set_facing(self.facing + turn)
             error -= turn

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from services.sim.jit import njit
 from shared.game import Policy
 
 
@@ -24,26 +25,51 @@ def batch_probs(policy: Policy, observations: np.ndarray) -> np.ndarray:
 def sample(probs: np.ndarray, uniforms: np.ndarray) -> np.ndarray:
     """One action per row of (rows, 12) distributions: the first action whose cumulative
     probability exceeds the row's uniform draw (the last one should rounding leave none)."""
-    below = np.cumsum(probs, axis=1) <= uniforms[:, None]
-    return np.minimum(below.sum(axis=1), probs.shape[1] - 1)
-
-
-_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
-
-
-def _mix(z: np.ndarray) -> np.ndarray:
-    """SplitMix64's finaliser: a bijection of 64-bit words that scatters every input bit."""
-    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-    return z ^ (z >> np.uint64(31))
+    out = np.empty(len(probs), np.int64)
+    _sample(np.ascontiguousarray(probs, np.float64), np.asarray(uniforms, np.float64), out)
+    return out
 
 
 def lane_uniforms(seeds: np.ndarray, stream: int, frame: int | np.ndarray) -> np.ndarray:
     """One uniform in [0, 1) per game seed for (stream, frame): a counter-based generator, so a
     batched game's draws depend on its own seed only, never on which lanes share its batch or
     which worker plays it."""
-    counter = np.asarray(frame).astype(np.uint64) + np.uint64(stream << 32)
-    with np.errstate(over="ignore"):
-        key = _mix(np.asarray(seeds).astype(np.uint64) * _GOLDEN + _GOLDEN)
-        z = _mix(key ^ counter * _GOLDEN)
-    return (z >> np.uint64(11)).astype(np.float64) * 2.0**-53
+    keys = np.asarray(seeds).astype(np.uint64)
+    counters = np.asarray(frame).astype(np.uint64) + np.uint64(stream << 32)
+    if counters.shape != keys.shape:
+        counters = np.full(keys.shape, counters, np.uint64)
+    out = np.empty(keys.shape, np.float64)
+    _uniforms(keys, counters, out)
+    return out
+
+
+@njit
+def _sample(probs, uniforms, out):
+    for i in range(probs.shape[0]):
+        total, out[i] = 0.0, probs.shape[1] - 1
+        for j in range(probs.shape[1]):
+            total += probs[i, j]
+            if uniforms[i] < total:
+                out[i] = j
+                break
+
+
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_M1, _M2 = np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)
+_S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(11)
+
+
+@njit
+def _mix(z):
+    """SplitMix64's finaliser: a bijection of 64-bit words that scatters every input bit."""
+    z = (z ^ (z >> _S30)) * _M1
+    z = (z ^ (z >> _S27)) * _M2
+    return z ^ (z >> _S31)
+
+
+@njit
+def _uniforms(keys, counters, out):
+    for i in range(keys.shape[0]):
+        key = _mix(keys[i] * _GOLDEN + _GOLDEN)
+        z = _mix(key ^ (counters[i] * _GOLDEN))
+        out[i] = np.float64(z >> _S11) * 2.0**-53

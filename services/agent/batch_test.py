@@ -36,7 +36,7 @@ def test_batched_probs_are_the_row_by_row_probs(key: str, role: str) -> None:
     """Rules give the very same bits; a network's matrix product over a batch rounds a little
     differently from one row's (BLAS picks other kernels), so learned heads agree to 1e-12."""
     policy = policy_for(key, role)
-    obs = observations(policy.frame, role)
+    obs = observations(policy.view, role)
     expected = np.stack([policy.probs(row) for row in obs])
     if isinstance(policy, LearnedPolicy):
         np.testing.assert_allclose(batch_probs(policy, obs), expected, rtol=1e-12, atol=0)

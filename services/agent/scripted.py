@@ -6,7 +6,7 @@
   circle rather than through the region, faces the fortress and fires into the open rear when the
   missile will arrive inside the vulnerability window.
 - `idle`: never acts (a lone-ship baseline for the other seat).
-All read the world-frame observation (services/sim/observation.py).
+All read the world-view observation (services/sim/observation.py).
 
 The rules are plain functions of the observation and numbers (`jitable`): the scalar policies run
 them as Python, and `choose_batch` runs the very same source compiled over a batch of rows.
@@ -242,7 +242,7 @@ def _mirror_rows(observations, numbers, out):
 def good_shot(obs: np.ndarray, config: GameConfig, aim_tolerance: float, rear_tolerance: float) -> bool:
     """Whether a missile fired now flies into the open rear before the vulnerability window shuts:
     the ship faces the fortress within `aim_tolerance` and sits within `rear_tolerance` of the
-    rear (degrees). Works in either observation frame."""
+    rear (degrees). Works in either observation view."""
     c = config
     return good_shot_at(
         obs, c.kill_distance, c.missile_speed, float(c.vulnerable_frames), aim_tolerance, rear_tolerance

@@ -96,7 +96,7 @@ class RecipeVecEnv(VecEnv):
         partners = [library.load(k, self.config) for k in recipe.partners]
         weights, reward = dict(recipe.weights), REWARDS[recipe.reward]
         self.env = RoleVectorEnv(
-            n_envs, recipe.role, partners, self.config, recipe.frame, lambda b, s, p: reward(b, s, p, weights)
+            n_envs, recipe.role, partners, self.config, recipe.view, lambda b, s, p: reward(b, s, p, weights)
         )
         self.features = np.array(FEATURES[recipe.features])
         bound = self.env.single_observation_space.high[0]

@@ -1,6 +1,6 @@
 """Observations of every lane of a batched game at once: `observe()` (observation.py) in bulk.
 
-Bit-identical to the scalar `observe` for the same state: the world-frame values are computed in
+Bit-identical to the scalar `observe` for the same state: the world-view values are computed in
 float64 with the same operations and order (nearest shells and missiles by a stable selection, as
 `sorted` orders them), rotated into the role view the same way, then rounded to float32.
 """
@@ -23,15 +23,15 @@ def observe(batch: BatchGame, role: str, view: str = "world") -> np.ndarray:
     """The (lanes, 64) float32 observations of `role` in every lane, in the given view."""
     if role not in ROLES:
         raise ValueError(f"unknown role {role!r}; expected one of {ROLES}")
-    if view not in ob.FRAMES:
-        raise ValueError(f"unknown observation view {view!r}; expected one of {ob.FRAMES}")
+    if view not in ob.VIEWS:
+        raise ValueError(f"unknown observation view {view!r}; expected one of {ob.VIEWS}")
     values = np.empty((batch.n, OBS_SIZE), np.float64)
     c = batch.config
     _world_values(
         batch.state, ROLES.index(role), c.vulnerable_frames, c.fortress_fire_interval, c.frames, values
     )
     if view == "role":
-        _to_role_frame(values)
+        _to_role_view(values)
     return values.astype(np.float32)
 
 
@@ -107,8 +107,8 @@ def _projectiles(group, count, cx, cy, picks, out):
 
 
 @njit
-def _to_role_frame(values):
-    """observation.to_role_frame on every row, in place."""
+def _to_role_view(values):
+    """observation.to_role_view on every row, in place."""
     for i in range(values.shape[0]):
         rot = math.pi / 2 - math.atan2(values[i, ob.SELF + ob.Y], values[i, ob.SELF + ob.X])
         cr, sr = math.cos(rot), math.sin(rot)

@@ -27,7 +27,7 @@ def play_batch(
     while not batch.done[0]:
         frame = batch.state.frame
         actions = [
-            sample(batch_probs(policy, observe(batch, role, policy.frame)), lane_uniforms(keys, seat, frame))
+            sample(batch_probs(policy, observe(batch, role, policy.view)), lane_uniforms(keys, seat, frame))
             for seat, (role, policy) in enumerate(zip(ROLES, (bait, shooter), strict=True))
         ]
         batch.step(*actions)

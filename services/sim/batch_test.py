@@ -156,7 +156,7 @@ def test_observations_are_the_scalar_observations_in_both_views() -> None:
     streams = library_streams(seeds)
     batch, games = BatchGame(2, seeds=seeds), [Game(seed=seed) for seed in seeds]
     for frame in range(streams.shape[1]):
-        for role, view in itertools.product(ROLES, ob.FRAMES):
+        for role, view in itertools.product(ROLES, ob.VIEWS):
             expected = np.stack([ob.observe(game, role, view) for game in games])
             np.testing.assert_array_equal(observe(batch, role, view), expected)
         batch.step(streams[:, frame, 0], streams[:, frame, 1])

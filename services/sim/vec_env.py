@@ -95,9 +95,9 @@ class RoleVectorEnv(VectorEnv):
         for index, partner in enumerate(self.partners):
             lanes = np.flatnonzero(self.partner_of == index)
             if lanes.size:
-                if partner.frame not in views:
-                    views[partner.frame] = observe(batch, ROLES[seat], partner.frame)
-                actions[lanes] = sample(batch_probs(partner, views[partner.frame][lanes]), uniforms[lanes])
+                if partner.view not in views:
+                    views[partner.view] = observe(batch, ROLES[seat], partner.view)
+                actions[lanes] = sample(batch_probs(partner, views[partner.view][lanes]), uniforms[lanes])
         return actions
 
     def _seeds(self, n: int) -> np.ndarray:

@@ -21,6 +21,7 @@ from services.sim.calibration import calibrate
 from services.sim.config import GameConfig
 from services.sim.play import play, summarize
 from shared.bus import BusConfig, stop_on_signals
+from shared.errors import Failure
 
 app = typer.Typer(no_args_is_help=True, add_completion=False, help="Team Space Fortress.")
 console = Console()
@@ -473,7 +474,10 @@ def match_command(
 @app.command("replay")
 @bus_options
 def replay_command(
-    recording: Path = typer.Argument(..., help="A recording (.tsflog)."),
+    recording: Path = typer.Argument(..., exists=True, dir_okay=False, help="A recording (.tsflog)."),
+    allow_torn: bool = typer.Option(
+        False, "--allow-torn", help="Accept a missing end (no summary, a torn last record), nothing else."
+    ),
     video: Path | None = typer.Option(None, help="Write the re-simulated match as an .mp4 or .gif."),
     scale: float = typer.Option(1.0, min=0.1, help="Video pixels per world pixel."),
     every: int = typer.Option(1, min=1, help="Video: draw every N-th frame (the video keeps real speed)."),
@@ -488,16 +492,16 @@ def replay_command(
     from services.recorder.recording import load, replay
     from services.recorder.replay import republish, write_video
 
-    loaded = load(recording)
     try:
-        mismatches = replay(loaded)
+        loaded = load(recording)
     except ValueError as error:
-        console.print(f"[red]{error}[/]")
-        raise typer.Exit(1) from None
-    tail = "" if loaded.clean else " [yellow](the log ends in a torn or corrupt record)[/]"
+        raise Failure(str(error)) from None
+    if problems := loaded.problems(allow_torn):
+        raise Failure(f"{recording}: incomplete: {'; '.join(problems)}")
+    mismatches = replay(loaded)
+    tail = "" if not loaded.problems() else " [yellow](its end is missing: --allow-torn)[/]"
     if mismatches:
-        console.print(f"[red]{recording}: {len(mismatches)} states differ, first at frame {mismatches[0]}[/]")
-        raise typer.Exit(1)
+        raise Failure(f"{recording}: {len(mismatches)} states differ, first at frame {mismatches[0]}")
     console.print(f"{recording}: all {len(loaded.states)} states reproduce their hashes{tail}")
     if video is not None:
         count = write_video(loaded, video, scale, every)
@@ -752,5 +756,12 @@ def study(
     console.print(f"{len(done.participants)} participants, {finished} finished")
 
 
+def main() -> None:
+    """The `tsf` command (services/entry.py: one line, not a traceback, when it ends badly)."""
+    from services.entry import run
+
+    raise SystemExit(run(app))
+
+
 if __name__ == "__main__":
-    app()
+    main()

@@ -21,7 +21,7 @@ from services.sim.calibration import calibrate
 from services.sim.config import GameConfig
 from services.sim.play import play, summarize
 from shared.bus import BusConfig, stop_on_signals
-from shared.errors import Failure
+from shared.errors import Failure, UsageError
 
 app = typer.Typer(no_args_is_help=True, add_completion=False, help="Team Space Fortress.")
 console = Console()
@@ -94,7 +94,9 @@ def game(
     config = GameConfig(frames=frames)
     results = []
     for s in range(seed, seed + games):
-        result = play(policy_for(bait, "bait"), policy_for(shooter, "shooter"), s, config)
+        result = play(
+            policy_for(bait, "bait", "--bait"), policy_for(shooter, "shooter", "--shooter"), s, config
+        )
         results.append(result)
         deaths = {role: sum(c["deaths"].values()) for role, c in result.counters.items()}
         console.print(
@@ -126,9 +128,12 @@ def train(
 ) -> None:
     """Train library policies by their registry recipes (needs the `train` extra)."""
     from services.agent import library
-    from services.agent.train import train as train_policy
 
-    todo = keys or [k for k, r in library.registry().items() if r.algorithm]
+    todo = library.learned(keys or [])
+    try:
+        from services.agent.train import train as train_policy
+    except ModuleNotFoundError as error:
+        raise Failure(f"{error}: training needs the `train` extra, pip install -e '.[train]'") from None
     for key in todo:
         console.print(f"[bold]training {key}[/]: {library.registry()[key].description}")
         entry = train_policy(key, steps, seed, log_dir / key, score_games=score_games)
@@ -174,10 +179,13 @@ def diversity(
     from services.adapter.cem import cem_matrix
     from services.agent import library
 
+    partners = {  # both checked before the first matrix
+        "bait": policy_for(bait_partner, "shooter", "--bait-partner"),
+        "shooter": policy_for(shooter_partner, "bait", "--shooter-partner"),
+    }
     for role, partner in (("bait", bait_partner), ("shooter", shooter_partner)):
         keys = library.keys(role)
-        partner_role = "shooter" if role == "bait" else "bait"
-        m = cem_matrix([library.load(k) for k in keys], policy_for(partner, partner_role), list(range(games)))
+        m = cem_matrix([library.load(k) for k in keys], partners[role], list(range(games)))
         table = Table(title=f"{role}s with {partner}: mean log-probability of row's actions under column")
         for column in ("", *keys):
             table.add_column(column)
@@ -281,7 +289,7 @@ def _print_table(table) -> None:  # noqa: ANN001 - a services.table.table.Table
 
 @app.command("table")
 def table_command(
-    path: Path = typer.Argument(Path("services/agent/library/table.json")),
+    path: Path = typer.Argument(Path("services/agent/library/table.json"), exists=True, dir_okay=False),
     plot: Path | None = typer.Option(None, help="Draw the heatmap into this PNG."),
 ) -> None:
     """Show a measured table (refused if the library or rules changed since)."""
@@ -391,10 +399,7 @@ def adapter(
     from services.adapter.core import AdapterConfig
     from services.adapter.service import run_adapter
 
-    try:
-        config = AdapterConfig(role, window, strategy, initial, warmup, dwell, hazard, noise, seed)
-    except ValueError as error:
-        raise typer.BadParameter(str(error)) from None
+    config = AdapterConfig(role, window, strategy, initial, warmup, dwell, hazard, noise, seed)
     run_adapter(bus, match, config, stop_on_signals())
 
 
@@ -423,8 +428,11 @@ def match_command(
     lockstep: bool = typer.Option(
         False, help="Lockstep (as fast as the agents answer) instead of real time."
     ),
-    match: str = typer.Option("", help="Match id (default: from the clock)."),
+    match: str = typer.Option("", help="Match id (default: the time and a random suffix)."),
     out: Path = typer.Option(Path("recordings"), help="Directory of the recordings."),
+    overwrite: bool = typer.Option(
+        False, "--overwrite", help="Reuse the id of an existing recording; the old one is renamed aside."
+    ),
     adaptive: str = typer.Option("", help="Make this seat (bait or shooter) the adaptive agent."),
     window: int = typer.Option(400, min=1, help="--adaptive: the window T in frames."),
     strategy: str = typer.Option("cem", help=f"--adaptive: one of {', '.join(STRATEGIES)}."),
@@ -438,8 +446,6 @@ def match_command(
         match or new_match_id(), seed, round(duration * 30), "lockstep" if lockstep else "realtime",
         bait, shooter, out, adaptive=adaptive, window=window, strategy=strategy,
     )  # fmt: skip
-    if adaptive and adaptive not in ("bait", "shooter"):
-        raise typer.BadParameter(f"--adaptive takes bait or shooter, not {adaptive!r}")
     seats = plan.policies()
     view = {"partner": "-"}
 
@@ -456,7 +462,7 @@ def match_command(
                 f"points {state.points}  bait {seats['bait']}  shooter {seats['shooter']}{estimate}"
             )
 
-        summary, path = run_match(plan, scoreboard, adapted)
+        summary, path = run_match(plan, scoreboard, adapted, overwrite, stop_on_signals())
     export = export_parquet(load(path), path.with_suffix(".parquet"))
     console.print(
         f"[bold]{plan.match}[/]: {summary.kills} kills in {summary.frame} frames "
@@ -542,7 +548,7 @@ def alive(
 
 
 Host = Annotated[str, typer.Option(help="Address the web page is served on (0.0.0.0: every interface).")]
-Port = Annotated[int, typer.Option(help="Port of the web page (0: any free port).")]
+Port = Annotated[int, typer.Option(min=0, max=65535, help="Port of the web page (0: any free port).")]
 
 
 @app.command()
@@ -590,10 +596,11 @@ def play_command(
     wait: float = typer.Option(600.0, help="Seconds to wait for the players to press start."),
     host: Host = "127.0.0.1",
     port: Port = 8000,
-    match: str = typer.Option("", help="Match id (default: from the clock)."),
+    match: str = typer.Option("", help="Match id (default: the time and a random suffix)."),
     out: Path = typer.Option(Path("recordings"), help="Directory of the recordings."),
 ) -> None:
     """Play a match from a browser, with an agent or another person; prints the link(s) to open."""
+    from services.agent.library import check_seat
     from services.human.play import play_with_people
     from services.launch import HUMAN, MatchPlan, new_match_id
 
@@ -605,7 +612,7 @@ def play_command(
         seats.update(adaptive=other, window=window, strategy=strategy)
     else:
         if partner != HUMAN:
-            policy_for(partner, other)  # an unknown key fails here, before anyone opens the page
+            check_seat(partner, other, "--partner")  # before anyone opens the page
         seats[other] = partner
     plan = MatchPlan(
         match or new_match_id(), seed, round(duration * 30), "realtime", directory=out, wait_players=wait,
@@ -616,7 +623,7 @@ def play_command(
         for seat, url in urls.items():
             console.print(f"[bold]{seat}[/]: open {url}")
 
-    summary, path = play_with_people(plan, host, port, links)
+    summary, path = play_with_people(plan, host, port, links, stop=stop_on_signals())
     console.print(
         f"[bold]{plan.match}[/]: {summary.kills} kills in {summary.frame} frames "
         f"= {summary.kills_per_minute:.2f} kills/min, points {summary.points}; recording: {path}"
@@ -651,7 +658,10 @@ def eval_command(
     from services.agent import library
 
     workers = workers or os.cpu_count() or 1
-    window_list = [int(w) for w in windows.split(",") if w.strip()]
+    try:
+        window_list = [int(w) for w in windows.split(",") if w.strip()]
+    except ValueError:
+        raise UsageError("--windows", windows, "not whole numbers separated by commas") from None
     partners = partner or [p for group in population(other(role)).values() for p in group]
     agents = library.keys(role) + evaluate.variants(window_list, strategies.split(","), strategy_window)
     columns = (BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
@@ -731,7 +741,9 @@ def report_command(
 
 @app.command()
 def study(
-    config: Path = typer.Argument(..., help="The study's TOML file (see services/study/configs/)."),
+    config: Path = typer.Argument(
+        ..., exists=True, dir_okay=False, help="The study's TOML file (see services/study/configs/)."
+    ),
     out: Path = typer.Option(Path("studies"), help="Studies go to OUT/<name>: progress and recordings."),
     host: Host = "127.0.0.1",
     port: Port = 8000,

@@ -8,6 +8,7 @@ listens on a port of its own, so zenoh's gossip links them all directly. No rout
 from __future__ import annotations
 
 import os
+import secrets
 import subprocess
 import sys
 import threading
@@ -19,11 +20,15 @@ from pathlib import Path
 import zenoh
 
 from services.adapter.core import AdapterConfig, Payoff
+from services.agent.library import check_seat
+from services.recorder.log import make_way
 from services.recorder.recording import load
 from services.recorder.service import recording_path
+from services.sim.config import ROLES
 from services.table.table import DEFAULT_TABLE, Table
 from shared import keys
 from shared.bus import BusConfig, free_endpoint, session
+from shared.errors import Failure, UsageError
 from shared.messages import AdapterStatus, MessageError, State, Summary, decode
 
 HUMAN = "human"  # a seat's policy key for a person: no agent is started, a gateway plays it
@@ -45,6 +50,16 @@ class MatchPlan:
     window: int = 400
     strategy: str = "cem"
     initial: str = "best-average"
+
+    def __post_init__(self) -> None:
+        """Refuse (UsageError) a match whose seats cannot all be filled, before anything starts."""
+        keys.check_match(self.match)
+        if self.adaptive and self.adaptive not in ROLES:
+            raise UsageError("--adaptive", self.adaptive, "not a seat", ROLES)
+        adapter = self.adapter  # AdapterConfig checks the adaptive seat's options
+        for role in ROLES:
+            if getattr(self, role) != HUMAN and (adapter is None or role != adapter.role):
+                check_seat(getattr(self, role), role, f"--{role}")
 
     @property
     def adapter(self) -> AdapterConfig | None:
@@ -72,6 +87,7 @@ class Processes:
 
     def __init__(self) -> None:
         self.children: dict[str, subprocess.Popen] = {}
+        self.ended: set[str] = set()  # the children still running at exit, which this ended
 
     def start(self, name: str, command: list[str], nice: int = 0) -> subprocess.Popen:
         """Start a child; `nice` > 0 lowers its CPU priority (for work off the latency path)."""
@@ -89,9 +105,14 @@ class Processes:
     def __enter__(self) -> Processes:
         return self
 
+    def failed(self) -> dict[str, int]:
+        """The exit status of each child that ended by itself, badly."""
+        return {n: c.returncode for n, c in self.children.items() if n not in self.ended and c.returncode}
+
     def __exit__(self, *exc: object) -> None:
-        for child in self.children.values():
+        for name, child in self.children.items():
             if child.poll() is None:
+                self.ended.add(name)
                 child.terminate()
         for child in self.children.values():
             try:
@@ -105,9 +126,17 @@ def run_match(
     plan: MatchPlan,
     on_state: Callable[[State], None] = lambda state: None,
     on_adapter: Callable[[AdapterStatus], None] = lambda status: None,
+    overwrite: bool = False,
+    stop: threading.Event | None = None,
 ) -> tuple[Summary, Path]:
     """Run the match to its end; `on_state` sees up to 10 states a second and `on_adapter` the
-    adapter's reports (for a live scoreboard)."""
+    adapter's reports (for a live scoreboard). A recording of the same id is never appended to:
+    refused, or with `overwrite` renamed aside (log.make_way). `stop` (stop_on_signals: SIGINT,
+    SIGTERM, SIGHUP) ends the match and every process it started. A match that was stopped, ended
+    without a summary, or one of whose services failed is a Failure."""
+    stop = stop or threading.Event()
+    path = recording_path(plan.directory, plan.match)
+    make_way(path, overwrite)
     endpoint = free_endpoint()
     sim_bus = BusConfig(listen=(endpoint,), connect=plan.peers, low_latency=plan.low_latency)
     peer_bus = BusConfig(connect=(endpoint,), low_latency=plan.low_latency)
@@ -175,19 +204,23 @@ def run_match(
                 z.declare_subscriber(keys.summary(plan.match), on_summary),
                 z.declare_subscriber(keys.adapter(plan.match), on_adapter_sample),
             ]
-            while not done.wait(0.2):
+            while not done.wait(0.2) and not stop.is_set():
                 if processes.children["sim"].poll() is not None:
                     break
             for subscriber in subscribers:
                 subscriber.undeclare()
-        processes.wait("sim", 10)
-        processes.wait("recorder", 10)
-    path = recording_path(plan.directory, plan.match)
+        if not stop.is_set():
+            processes.wait("sim", 10)
+            processes.wait("recorder", 10)
+    if stop.is_set():
+        raise Failure(f"match {plan.match} was stopped before its end; its processes ended")
+    if failed := processes.failed():
+        statuses = ", ".join(f"{name} exited with status {code}" for name, code in failed.items())
+        raise Failure(f"match {plan.match}: {statuses}")
     if not summary and path.exists():  # the live view can miss it; the recording cannot
         summary = [s for s in [load(path).summary] if s is not None]
     if not summary:
-        code = processes.children["sim"].returncode
-        raise RuntimeError(f"match {plan.match} ended without a summary (sim exit code {code})")
+        raise Failure(f"match {plan.match} ended without a summary")
     return summary[0], path
 
 
@@ -200,4 +233,6 @@ def adapter_args(config: AdapterConfig) -> list[str]:
 
 
 def new_match_id() -> str:
-    return time.strftime("m%Y%m%d-%H%M%S")
+    """The clock for reading, and a random suffix for uniqueness: matches started in the same second
+    never share an id, and so never a recording."""
+    return time.strftime("m%Y%m%d-%H%M%S-") + secrets.token_hex(3)

@@ -19,6 +19,7 @@ from __future__ import annotations
 import re
 
 from services.sim.config import ROLES
+from shared.errors import UsageError
 
 PREFIX = "tsf"
 SERVICES = ("sim", "agent", "recorder", "adapter", "human")
@@ -28,13 +29,13 @@ _MATCH_ID = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 def check_match(match: str) -> str:
     """A match id is one key chunk: letters, digits, '-' and '_' only (no wildcards, no '/')."""
     if not isinstance(match, str) or not _MATCH_ID.match(match):
-        raise ValueError(f"invalid match id {match!r}: use 1-64 letters, digits, '-' or '_'")
+        raise UsageError("--match", match, "invalid match id: use 1-64 letters, digits, '-' or '_'")
     return match
 
 
 def _role(role: str) -> str:
     if role not in ROLES:
-        raise ValueError(f"unknown role {role!r}; expected one of {ROLES}")
+        raise UsageError("--role", role, "unknown role", ROLES)
     return role
 
 
@@ -69,7 +70,7 @@ def adapter(match: str) -> str:
 def alive(match: str, service: str, role: str | None = None) -> str:
     """Liveliness token key of one running service (agents and humans name their role)."""
     if service not in SERVICES:
-        raise ValueError(f"unknown service {service!r}; expected one of {SERVICES}")
+        raise UsageError("--service", service, "unknown service", SERVICES)
     key = f"{PREFIX}/{check_match(match)}/alive/{service}"
     return f"{key}/{_role(role)}" if role is not None else key
 

@@ -108,7 +108,7 @@ def test_bad_input_is_counted_and_the_agent_keeps_playing(seat, wait_until):
         (keys.summary(MATCH), Summary(MATCH, 3, "sim", kills=-1).encode(), "range"),
         (policy_key, msgpack.packb("idle"), "shape"),
         (policy_key, PolicySwitch(MATCH, 3, "x", "shooter", "idle").encode(), "mismatch"),
-        (policy_key, PolicySwitch(MATCH, 3, "x", "bait", "no-such-policy").encode(), "ValueError"),
+        (policy_key, PolicySwitch(MATCH, 3, "x", "bait", "no-such-policy").encode(), "policy"),
     ]
     for frame in range(6):
         for key, data, reason in bad if frame % 2 else []:

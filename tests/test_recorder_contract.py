@@ -11,11 +11,13 @@ import zenoh
 
 from services.recorder.log import read_log
 from services.recorder.recording import load
-from services.recorder.service import run_recorder
+from services.recorder.service import recording_path, run_recorder
 from services.sim.config import ROLES, GameConfig
 from services.sim.engine import Game
 from services.sim.match import start_message, state_message, summary_message
 from shared import keys
+from shared.bus import BusConfig
+from shared.errors import UsageError
 from shared.messages import Action, GameEvent, PolicySwitch
 
 MATCH, SEED = "rec", 3
@@ -115,13 +117,15 @@ def test_everything_valid_exactly_once_a_gap_for_the_hole_and_no_garbage(recorde
     assert recording.start is not None and recording.summary is not None and len(recording.events) == 1
 
 
-def test_a_restarted_recorder_cuts_a_torn_tail_and_records_the_gap(recorder):
+def test_a_restarted_recorder_cuts_a_torn_tail_and_records_the_gap(recorder, wait_until, tmp_path):
     match, start = recorder
     first = start()
     match.start()
     match.frames(3)
-    match.summary()
-    path = first.result(timeout=5)
+    path = recording_path(tmp_path, MATCH)
+    assert wait_until(lambda: path.exists() and len(read_log(path)[0]) == len(match.sent))
+    first.stop.set()  # the recorder stops (killed, say) during the match: no summary in its log
+    assert first.result(timeout=5) == path
     with path.open("ab") as log:
         log.write(b"\x40\0\0\0\1\2\3\4 torn")  # a record cut short by a crash
     assert read_log(path)[1][-1].torn
@@ -135,3 +139,16 @@ def test_a_restarted_recorder_cuts_a_torn_tail_and_records_the_gap(recorder):
     assert recording.clean
     assert [s.frame for s in recording.states] == [0, 1, 2, 3, 6, 7, 8]
     assert recording.gaps == [(4, 5)]
+
+
+def test_the_log_of_a_finished_match_is_never_appended_to(recorder, tmp_path):
+    match, start = recorder
+    first = start()
+    match.start()
+    match.frames(2)
+    match.summary()
+    path = first.result(timeout=5)
+    before = path.read_bytes()
+    with pytest.raises(UsageError, match=f"--match {MATCH}: .* holds a finished match of this id"):
+        run_recorder(BusConfig(), MATCH, tmp_path)
+    assert path.read_bytes() == before

@@ -35,6 +35,7 @@ from services.agent.policy import Policy
 from services.sim.config import N_ACTIONS, ROLES
 from services.sim.observation import as_observation
 from services.table.table import Table
+from shared.errors import UsageError
 
 STRATEGIES = ("cem", "cem-dwell", "cem-ood", "bayes", "bayes-dwell-ood")
 INITIAL = ("best-average", "random")
@@ -43,6 +44,8 @@ CALIBRATION = Path(__file__).parent / "calibration.json"
 
 def other(role: str) -> str:
     """The other seat."""
+    if role not in ROLES:
+        raise UsageError("--role", role, "not a seat", ROLES)
     return ROLES[1 - ROLES.index(role)]
 
 
@@ -61,16 +64,20 @@ class AdapterConfig:
     seed: int = 0  # draws the random initial policy
 
     def __post_init__(self) -> None:
-        if self.role not in ROLES:
-            raise ValueError(f"unknown role {self.role!r}; expected one of {ROLES}")
-        if self.strategy not in STRATEGIES:
-            raise ValueError(f"unknown strategy {self.strategy!r}; expected one of {STRATEGIES}")
-        if self.initial not in INITIAL:
-            raise ValueError(f"unknown initial policy rule {self.initial!r}; expected one of {INITIAL}")
-        if self.window < 1 or self.warmup < 0 or self.dwell < 0:
-            raise ValueError("window must be >= 1, warmup and dwell >= 0")
-        if not (0.0 <= self.hazard < 1.0 and 0.0 <= self.noise < 1.0):
-            raise ValueError("hazard and noise are probabilities in [0, 1)")
+        choices = (("--role", self.role, ROLES), ("--strategy", self.strategy, STRATEGIES))
+        for option, value, valid in (*choices, ("--initial", self.initial, INITIAL)):
+            if value not in valid:
+                raise UsageError(option, value, "unknown", valid)
+        for option, value, low in (
+            ("--window", self.window, 1),
+            ("--warmup", self.warmup, 0),
+            ("--dwell", self.dwell, 0),
+        ):
+            if value < low:
+                raise UsageError(option, value, f"must be at least {low}")
+        for option, value in (("--hazard", self.hazard), ("--noise", self.noise)):
+            if not 0.0 <= value < 1.0:
+                raise UsageError(option, value, "a probability in [0, 1)")
 
     @property
     def partner_role(self) -> str:

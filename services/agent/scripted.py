@@ -195,6 +195,11 @@ def good_shot(obs: np.ndarray, config: GameConfig, aim_tolerance: float, rear_to
 SCRIPTED = {"circle": CircleBait, "mirror": MirrorShooter}
 
 
+def scripted_keys(role: str) -> list[str]:
+    """The scripted keys that can play `role`'s seat: its own rule, and idle and random (any seat)."""
+    return [*(k for k, policy in SCRIPTED.items() if policy.role == role), "idle", "random"]
+
+
 def scripted_policy(key: str, role: str) -> RulePolicy | UniformPolicy:
     """A scripted policy by key for a seat: circle, mirror, idle or random (any role)."""
     if key == "idle":

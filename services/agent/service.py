@@ -43,8 +43,11 @@ def run_agent(
                 if message.role != role:
                     raise MessageError("mismatch", f"switch for {message.role} on {role}'s key")
                 player.switch(message.policy)
-            except ValueError as error:  # MessageError, or an unknown policy key
+            except MessageError as error:
                 drops.drop(str(sample.key_expr), error)
+                return
+            except ValueError as error:  # a key this seat cannot play
+                drops.drop(str(sample.key_expr), MessageError("policy", str(error)))
                 return
             log.info("%s switches to %s from the next frame (%s)", sender, message.policy, message.reason)
 

@@ -25,6 +25,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from services.sim.config import ROLES, GameConfig, join_action
+from shared.errors import UsageError
 from shared.messages import State, Summary
 
 KEYS = ("left", "right", "thrust", "fire")
@@ -151,7 +152,7 @@ class SeatBook:
     def __init__(self, tokens: dict[str, str]) -> None:
         unknown = set(tokens) - set(ROLES)
         if unknown:
-            raise ValueError(f"unknown roles {sorted(unknown)}; expected {ROLES}")
+            raise UsageError("--token", ", ".join(sorted(unknown)), "unknown roles", ROLES)
         self.tokens = dict(tokens)
         self.holders: dict[str, object] = {}
 

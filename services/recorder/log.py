@@ -22,6 +22,8 @@ from pathlib import Path
 
 import msgpack
 
+from shared.errors import UsageError
+
 MAGIC = b"TSFLOG1\n"
 HEADER = struct.Struct("<II")
 MAX_RECORD = 1 << 20
@@ -162,6 +164,29 @@ def _payload(record: Record) -> bytes:
     if record.gap is not None:
         return msgpack.packb({"t": record.t, "gap": list(record.gap)}, use_bin_type=True)
     return msgpack.packb({"key": record.key, "t": record.t, "data": record.data}, use_bin_type=True)
+
+
+def make_way(path: Path, overwrite: bool) -> Path | None:
+    """Free `path` for a new recording: an existing one is never appended to. Refused unless
+    `overwrite`; then it, and its Parquet export beside it, are renamed `<name>.replaced-<n>` (the
+    first free n). Returns where the old recording went, or None when there was none."""
+    if not path.exists():
+        return None
+    if not overwrite:
+        raise UsageError(
+            "--match", path.stem, f"{path} exists; choose another id, or --overwrite to keep it aside"
+        )
+    n = 1
+    while any(p.with_name(f"{p.name}.replaced-{n}").exists() for p in _with_export(path)):
+        n += 1
+    for old in _with_export(path):
+        if old.exists():
+            old.rename(old.with_name(f"{old.name}.replaced-{n}"))
+    return path.with_name(f"{path.name}.replaced-{n}")
+
+
+def _with_export(path: Path) -> tuple[Path, Path]:
+    return path, path.with_suffix(".parquet")
 
 
 class GapTracker:

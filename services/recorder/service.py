@@ -14,10 +14,11 @@ from pathlib import Path
 
 import zenoh
 
-from services.recorder.log import GapTracker, LogWriter
+from services.recorder.log import GapTracker, LogWriter, read_log
 from services.sim.config import ROLES
 from shared import keys
 from shared.bus import BusConfig, Drops, session
+from shared.errors import UsageError
 from shared.messages import Message, MessageError, State, Summary, decode_any
 
 log = logging.getLogger("tsf.recorder")
@@ -36,7 +37,8 @@ def run_recorder(
     wait_seats: float = 10.0,
 ) -> Path:
     """Record `match` until its summary is written or `stop` is set; returns the log's path.
-    Restarted on the same directory, it appends to the same log after cutting any torn tail.
+    Restarted on the same directory during the match, it appends to the same log after cutting any
+    torn tail; the log of a finished match (one with a summary) is never appended to (UsageError).
 
     Its liveliness token (which the sim waits for) is declared once both seats' players are seen,
     or after `wait_seats` seconds: a peer learns of the others over gossip after the sim has seen
@@ -44,6 +46,10 @@ def run_recorder(
     this recorder."""
     stop = stop or threading.Event()
     path = recording_path(directory, match)
+    if path.exists() and any(r.key == keys.summary(match) for r in read_log(path)[0]):
+        raise UsageError(
+            "--match", match, f"{path} holds a finished match of this id; give the new one another id"
+        )
     inbox: queue.SimpleQueue = queue.SimpleQueue()
     drops = Drops("recorder")
 

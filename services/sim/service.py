@@ -22,6 +22,7 @@ from services.sim.engine import Game
 from services.sim.match import Seats, event_messages, start_message, state_message, summary_message
 from shared import keys
 from shared.bus import BusConfig, Drops, session
+from shared.errors import UsageError
 from shared.messages import MessageError, Summary, decode_seat_action
 
 log = logging.getLogger("tsf.sim")
@@ -47,7 +48,7 @@ def run_sim(
     before the first frame (and `wait_adapter` for an adapter, in adaptive matches); a seat still
     empty then plays no-op until its player arrives."""
     if mode not in MODES:
-        raise ValueError(f"unknown sim mode {mode!r}; expected one of {MODES}")
+        raise UsageError("--sim-mode", mode, "unknown", MODES)
     stop = stop or threading.Event()
     game = Game(config, seed)
     seats, drops = Seats(), Drops("sim")

@@ -737,6 +737,8 @@ def report_command(
         colour = "yellow" if problem.used else "red"
         console.print(f"[{colour}]{problem.name}: {problem.reason}[/]")
     console.print(f"report: {report.html}  ({len(report.figures)} figures, numbers in {out / 'data'})")
+    if not report.matches:
+        raise Failure(f"none of the {len(recordings)} recordings is usable; {report.html} names why")
 
 
 @app.command()

@@ -165,6 +165,7 @@ MISTAKES = [
     ("report", 2, "tsf report: Missing argument 'recordings'."),
     ("report {done} --partner-role pilot", 2, "Invalid value for --partner-role: bait or shooter"),
     ("report {done} --reference-games 0", 2, "Invalid value for '--reference-games'"),
+    ("report {garbage} {torn} --out {tmp}/report", 1, "none of the 2 recordings is usable; {tmp}/report"),
     (
         "study {tmp}/none.toml",
         2,

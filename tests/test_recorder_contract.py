@@ -17,7 +17,7 @@ from services.sim.engine import Game
 from services.sim.match import start_message, state_message, summary_message
 from shared import keys
 from shared.bus import BusConfig
-from shared.errors import UsageError
+from shared.errors import Failure, UsageError
 from shared.messages import Action, GameEvent, PolicySwitch
 
 MATCH, SEED = "rec", 3
@@ -139,6 +139,19 @@ def test_a_restarted_recorder_cuts_a_torn_tail_and_records_the_gap(recorder, wai
     assert recording.clean
     assert [s.frame for s in recording.states] == [0, 1, 2, 3, 6, 7, 8]
     assert recording.gaps == [(4, 5)]
+
+
+def test_a_second_match_under_the_same_id_is_not_recorded(recorder, tmp_path):
+    match, start = recorder
+    first = start()
+    match.start()
+    match.frames(3)
+    match.start()  # another sim starts a match under this id
+    match.frames(6)
+    with pytest.raises(Failure, match=f"a second match started under the id {MATCH}; it was not recorded"):
+        first.result(timeout=5)
+    recording = load(recording_path(tmp_path, MATCH))
+    assert recording.starts == 1 and [s.frame for s in recording.states] == [0, 1, 2, 3]
 
 
 def test_the_log_of_a_finished_match_is_never_appended_to(recorder, tmp_path):

@@ -15,5 +15,13 @@ app = typer.Typer(no_args_is_help=True, add_completion=False, help="Team Space F
 for group in (agent_cli, table_cli, services_cli, matches_cli, adapter_cli, report_cli):
     app.registered_commands += group.commands.registered_commands
 
+
+def main() -> None:
+    """The `tsf` command (services/entry.py: one line, not a traceback, when it ends badly)."""
+    from services.entry import run
+
+    raise SystemExit(run(app))
+
+
 if __name__ == "__main__":
-    app()
+    main()

@@ -8,6 +8,7 @@ listens on a port of its own, so zenoh's gossip links them all directly. No rout
 from __future__ import annotations
 
 import os
+import secrets
 import subprocess
 import sys
 import threading
@@ -17,10 +18,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from services.adapter.core import AdapterConfig
+from services.agent.library import check_seat
+from services.recorder.log import make_way
 from services.recorder.recording import load
 from services.recorder.service import recording_path
 from shared import keys
 from shared.bus import BusConfig, free_endpoint, session, subscribe
+from shared.errors import Failure
+from shared.game import ROLES
 from shared.messages import AdapterStatus, State, Summary
 
 HUMAN = "human"  # a seat's policy key for a person: no agent is started, a gateway plays it
@@ -40,6 +45,14 @@ class MatchPlan:
     wait_players: float = 10.0  # seconds the sim waits for both seats (people take longer)
     adapter: AdapterConfig | None = None  # the adaptive agent, in the seat it names (that key is ignored)
 
+    def __post_init__(self) -> None:
+        """Refuse (UsageError) a match whose seats cannot all be filled, before anything starts
+        (the AdapterConfig has checked the adaptive seat's options)."""
+        keys.check_match(self.match)
+        for role in ROLES:
+            if getattr(self, role) != HUMAN and (self.adapter is None or role != self.adapter.role):
+                check_seat(getattr(self, role), role, f"--{role}")
+
     def policies(self) -> dict[str, str]:
         """Each seat's starting policy key; an adaptive seat starts with the adapter's initial policy."""
         keys_ = {"bait": self.bait, "shooter": self.shooter}
@@ -58,6 +71,7 @@ class Processes:
 
     def __init__(self) -> None:
         self.children: dict[str, subprocess.Popen] = {}
+        self.ended: set[str] = set()  # the children still running at exit, which this ended
 
     def start(self, name: str, command: list[str], nice: int = 0) -> subprocess.Popen:
         """Start a child; `nice` > 0 lowers its CPU priority (for work off the latency path)."""
@@ -75,9 +89,14 @@ class Processes:
     def __enter__(self) -> Processes:
         return self
 
+    def failed(self) -> dict[str, int]:
+        """The exit status of each child that ended by itself, badly."""
+        return {n: c.returncode for n, c in self.children.items() if n not in self.ended and c.returncode}
+
     def __exit__(self, *exc: object) -> None:
-        for child in self.children.values():
+        for name, child in self.children.items():
             if child.poll() is None:
+                self.ended.add(name)
                 child.terminate()
         for child in self.children.values():
             try:
@@ -91,9 +110,17 @@ def run_match(
     plan: MatchPlan,
     on_state: Callable[[State], None] = lambda state: None,
     on_adapter: Callable[[AdapterStatus], None] = lambda status: None,
+    overwrite: bool = False,
+    stop: threading.Event | None = None,
 ) -> tuple[Summary, Path]:
     """Run the match to its end; `on_state` sees up to 10 states a second and `on_adapter` the
-    adapter's reports (for a live scoreboard)."""
+    adapter's reports (for a live scoreboard). A recording of the same id is never appended to:
+    refused, or with `overwrite` renamed aside (log.make_way). `stop` (stop_on_signals: SIGINT,
+    SIGTERM, SIGHUP) ends the match and every process it started. A match that was stopped, ended
+    without a summary, or one of whose services failed is a Failure."""
+    stop = stop or threading.Event()
+    path = recording_path(plan.directory, plan.match)
+    make_way(path, overwrite)
     endpoint = free_endpoint()
     sim_bus = BusConfig(listen=(endpoint,), connect=plan.peers, low_latency=plan.low_latency)
     peer_bus = BusConfig(connect=(endpoint,), low_latency=plan.low_latency)
@@ -146,19 +173,25 @@ def run_match(
             subscribe(z, keys.summary(plan.match), Summary, on_summary),
             subscribe(z, keys.adapter(plan.match), AdapterStatus, on_adapter),
         ):
-            while not done.wait(0.2):
+            while not done.wait(0.2) and not stop.is_set():
                 if processes.children["sim"].poll() is not None:
                     break
-        processes.wait("sim", 10)
-        processes.wait("recorder", 10)
-    path = recording_path(plan.directory, plan.match)
+        if not stop.is_set():
+            processes.wait("sim", 10)
+            processes.wait("recorder", 10)
+    if stop.is_set():
+        raise Failure(f"match {plan.match} was stopped before its end; its processes ended")
+    if failed := processes.failed():
+        statuses = ", ".join(f"{name} exited with status {code}" for name, code in failed.items())
+        raise Failure(f"match {plan.match}: {statuses}")
     if not summary and path.exists():  # the live view can miss it; the recording cannot
         summary = [s for s in [load(path).summary] if s is not None]
     if not summary:
-        code = processes.children["sim"].returncode
-        raise RuntimeError(f"match {plan.match} ended without a summary (sim exit code {code})")
+        raise Failure(f"match {plan.match} ended without a summary")
     return summary[0], path
 
 
 def new_match_id() -> str:
-    return time.strftime("m%Y%m%d-%H%M%S")
+    """The clock for reading, and a random suffix for uniqueness: matches started in the same second
+    never share an id, and so never a recording."""
+    return time.strftime("m%Y%m%d-%H%M%S-") + secrets.token_hex(3)

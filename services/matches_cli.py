@@ -8,9 +8,9 @@ from pathlib import Path
 import typer
 from rich.live import Live
 
-from services.agent.library import policy_for
 from services.options import AdapterFactory, Host, Port, adapter_options, bus_options, console
 from shared.bus import BusConfig, stop_on_signals
+from shared.errors import Failure, UsageError
 from shared.game import FPS, ROLES, other
 
 commands = typer.Typer()
@@ -26,8 +26,11 @@ def match_command(
     lockstep: bool = typer.Option(
         False, help="Lockstep (as fast as the agents answer) instead of real time."
     ),
-    match: str = typer.Option("", help="Match id (default: from the clock)."),
+    match: str = typer.Option("", help="Match id (default: the time and a random suffix)."),
     out: Path = typer.Option(Path("recordings"), help="Directory of the recordings."),
+    overwrite: bool = typer.Option(
+        False, "--overwrite", help="Reuse the id of an existing recording; the old one is renamed aside."
+    ),
     adaptive: str = typer.Option("", help="Make this seat (bait or shooter) the adaptive agent."),
     *,
     adapter: AdapterFactory,
@@ -38,7 +41,7 @@ def match_command(
     from services.recorder.recording import export_parquet, load
 
     if adaptive and adaptive not in ROLES:
-        raise typer.BadParameter(f"--adaptive takes bait or shooter, not {adaptive!r}")
+        raise UsageError("--adaptive", adaptive, "not a seat", ROLES)
     plan = MatchPlan(
         match or new_match_id(), seed, round(duration * FPS), "lockstep" if lockstep else "realtime",
         bait, shooter, out, adapter=adapter(role=adaptive, seed=seed) if adaptive else None,
@@ -59,7 +62,7 @@ def match_command(
                 f"points {state.points}  bait {seats['bait']}  shooter {seats['shooter']}{estimate}"
             )
 
-        summary, path = run_match(plan, scoreboard, adapted)
+        summary, path = run_match(plan, scoreboard, adapted, overwrite, stop_on_signals())
     export = export_parquet(load(path), path.with_suffix(".parquet"))
     console.print(
         f"[bold]{plan.match}[/]: {summary.kills} kills in {summary.frame} frames "
@@ -88,12 +91,13 @@ def play_command(
     wait: float = typer.Option(600.0, help="Seconds to wait for the players to press start."),
     host: Host = "127.0.0.1",
     port: Port = 8000,
-    match: str = typer.Option("", help="Match id (default: from the clock)."),
+    match: str = typer.Option("", help="Match id (default: the time and a random suffix)."),
     out: Path = typer.Option(Path("recordings"), help="Directory of the recordings."),
     *,
     adapter: AdapterFactory,
 ) -> None:
     """Play a match from a browser, with an agent or another person; prints the link(s) to open."""
+    from services.agent.library import check_seat
     from services.human.play import play_with_people
     from services.launch import HUMAN, MatchPlan, new_match_id
 
@@ -105,7 +109,7 @@ def play_command(
         seats["adapter"] = adapter(role=partner_role, seed=seed)
     else:
         if partner != HUMAN:
-            policy_for(partner, partner_role)  # an unknown key fails here, before anyone opens the page
+            check_seat(partner, partner_role, "--partner")  # before anyone opens the page
         seats[partner_role] = partner
     plan = MatchPlan(
         match or new_match_id(), seed, round(duration * FPS), "realtime", directory=out, wait_players=wait,
@@ -116,7 +120,7 @@ def play_command(
         for seat, url in urls.items():
             console.print(f"[bold]{seat}[/]: open {url}")
 
-    summary, path = play_with_people(plan, host, port, links)
+    summary, path = play_with_people(plan, host, port, links, stop=stop_on_signals())
     console.print(
         f"[bold]{plan.match}[/]: {summary.kills} kills in {summary.frame} frames "
         f"= {summary.kills_per_minute:.2f} kills/min, points {summary.points}; recording: {path}"
@@ -125,7 +129,9 @@ def play_command(
 
 @commands.command()
 def study(
-    config: Path = typer.Argument(..., help="The study's TOML file (see services/study/configs/)."),
+    config: Path = typer.Argument(
+        ..., exists=True, dir_okay=False, help="The study's TOML file (see services/study/configs/)."
+    ),
     out: Path = typer.Option(Path("studies"), help="Studies go to OUT/<name>: progress and recordings."),
     host: Host = "127.0.0.1",
     port: Port = 8000,
@@ -153,7 +159,10 @@ def study(
 @commands.command("replay")
 @bus_options
 def replay_command(
-    recording: Path = typer.Argument(..., help="A recording (.tsflog)."),
+    recording: Path = typer.Argument(..., exists=True, dir_okay=False, help="A recording (.tsflog)."),
+    allow_torn: bool = typer.Option(
+        False, "--allow-torn", help="Accept a missing end (no summary, a torn last record), nothing else."
+    ),
     video: Path | None = typer.Option(None, help="Write the re-simulated match as an .mp4 or .gif."),
     scale: float = typer.Option(1.0, min=0.1, help="Video pixels per world pixel."),
     every: int = typer.Option(1, min=1, help="Video: draw every N-th frame (the video keeps real speed)."),
@@ -168,16 +177,16 @@ def replay_command(
     from services.recorder.recording import load, replay
     from services.recorder.replay import republish, write_video
 
-    loaded = load(recording)
     try:
-        mismatches = replay(loaded)
+        loaded = load(recording)
     except ValueError as error:
-        console.print(f"[red]{error}[/]")
-        raise typer.Exit(1) from None
-    tail = "" if loaded.clean else " [yellow](the log ends in a torn or corrupt record)[/]"
+        raise Failure(str(error)) from None
+    if problems := loaded.problems(allow_torn):
+        raise Failure(f"{recording}: incomplete: {'; '.join(problems)}")
+    mismatches = replay(loaded)
+    tail = "" if not loaded.problems() else " [yellow](its end is missing: --allow-torn)[/]"
     if mismatches:
-        console.print(f"[red]{recording}: {len(mismatches)} states differ, first at frame {mismatches[0]}[/]")
-        raise typer.Exit(1)
+        raise Failure(f"{recording}: {len(mismatches)} states differ, first at frame {mismatches[0]}")
     console.print(f"{recording}: all {len(loaded.states)} states reproduce their hashes{tail}")
     if video is not None:
         count = write_video(loaded, video, scale, every)

@@ -18,6 +18,7 @@ import zenoh
 
 from shared import keys
 from shared.bus import BusConfig
+from shared.errors import UsageError
 
 USERS = (
     "sim",
@@ -67,7 +68,7 @@ def router_config(listen: tuple[str, ...], credentials: Path | None = None) -> z
     config = BusConfig("router", listen).to_zenoh()
     if credentials is not None:
         if not credentials.is_file():
-            raise ValueError(f"credentials file {credentials} does not exist")
+            raise UsageError("--credentials", credentials, "no such file")
         auth = {"user": "router", "password": "", "dictionary_file": str(credentials.resolve())}
         config.insert_json5("transport/auth/usrpwd", json.dumps(auth))
         config.insert_json5("access_control", json.dumps(access_control()))

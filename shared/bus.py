@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import logging
+import re
 import signal
 import socket
 import threading
@@ -20,11 +21,13 @@ from dataclasses import dataclass
 import zenoh
 
 from shared import keys
+from shared.errors import UsageError
 from shared.messages import M, Summary, decode
 
 log = logging.getLogger("tsf.bus")
 
 MODES = ("peer", "client", "router")
+ENDPOINT = re.compile(r"^[a-z][a-z0-9-]*/[^?#]")  # <protocol>/<address>[?<metadata>][#<config>]
 
 
 @dataclass(frozen=True)
@@ -43,7 +46,11 @@ class BusConfig:
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
-            raise ValueError(f"unknown zenoh mode {self.mode!r}; expected one of {MODES}")
+            raise UsageError("--mode", self.mode, "unknown zenoh mode", MODES)
+        for option, endpoints in (("--listen", self.listen), ("--connect", self.connect)):
+            for endpoint in endpoints:
+                if not ENDPOINT.match(endpoint):
+                    raise UsageError(option, endpoint, "not a zenoh endpoint such as tcp/127.0.0.1:7447")
 
     def to_zenoh(self) -> zenoh.Config:
         config = zenoh.Config()
@@ -157,8 +164,10 @@ def stop_on_summary(z: zenoh.Session, match: str, stop: threading.Event, drops: 
 
 
 def stop_on_signals() -> threading.Event:
-    """An event set by SIGINT or SIGTERM: services poll it and leave through their `finally`."""
+    """An event set by SIGINT, SIGTERM or SIGHUP (Ctrl-C, `timeout` or a scheduler, a closed
+    terminal or a supervisor): services poll it and leave through their `finally`, launchers end
+    their children."""
     stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         signal.signal(sig, lambda *_: stop.set())
     return stop

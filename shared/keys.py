@@ -19,7 +19,8 @@ from __future__ import annotations
 import re
 from typing import NamedTuple
 
-from shared.game import check_role
+from shared.errors import UsageError
+from shared.game import ROLES, check_role
 
 PREFIX = "tsf"
 SERVICES = ("sim", "agent", "recorder", "adapter", "human")
@@ -29,8 +30,15 @@ _MATCH_ID = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
 def check_match(match: str) -> str:
     """A match id is one key chunk: letters, digits, '-' and '_' only (no wildcards, no '/')."""
     if not isinstance(match, str) or not _MATCH_ID.match(match):
-        raise ValueError(f"invalid match id {match!r}: use 1-64 letters, digits, '-' or '_'")
+        raise UsageError("--match", match, "invalid match id: use 1-64 letters, digits, '-' or '_'")
     return match
+
+
+def _role(role: str) -> str:
+    """A seat named by a user (--role): a UsageError, not a bug, when it is not one."""
+    if role not in ROLES:
+        raise UsageError("--role", role, "unknown role", ROLES)
+    return role
 
 
 def state(match: str) -> str:
@@ -38,11 +46,11 @@ def state(match: str) -> str:
 
 
 def action(match: str, role: str) -> str:
-    return f"{PREFIX}/{check_match(match)}/action/{check_role(role)}"
+    return f"{PREFIX}/{check_match(match)}/action/{_role(role)}"
 
 
 def policy(match: str, role: str) -> str:
-    return f"{PREFIX}/{check_match(match)}/policy/{check_role(role)}"
+    return f"{PREFIX}/{check_match(match)}/policy/{_role(role)}"
 
 
 def start(match: str) -> str:
@@ -64,9 +72,9 @@ def adapter(match: str) -> str:
 def alive(match: str, service: str, role: str | None = None) -> str:
     """Liveliness token key of one running service (agents and humans name their role)."""
     if service not in SERVICES:
-        raise ValueError(f"unknown service {service!r}; expected one of {SERVICES}")
+        raise UsageError("--service", service, "unknown service", SERVICES)
     key = f"{PREFIX}/{check_match(match)}/alive/{service}"
-    return f"{key}/{check_role(role)}" if role is not None else key
+    return f"{key}/{_role(role)}" if role is not None else key
 
 
 def actions(match: str) -> str:

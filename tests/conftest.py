@@ -122,13 +122,16 @@ def tap() -> Iterator[Callable[[zenoh.Session, str], Tap]]:
 
 @pytest.fixture
 def background() -> Iterator[Callable[..., Future]]:
-    """Runs a service function in a thread with `stop=` an event of its own; all are set (and the
-    threads joined) at teardown, so a failing test never leaves a service running."""
+    """Runs a service function in a thread with `stop=` an event of its own (the future's `stop`, for a
+    test that stops it early); all are set (and the threads joined) at teardown, so a failing test
+    never leaves a service running."""
     stops: list[threading.Event] = []
 
     def start(fn: Callable[..., object], *args: object, **kwargs: object) -> Future:
         stops.append(threading.Event())
-        return pool.submit(fn, *args, stop=stops[-1], **kwargs)
+        future = pool.submit(fn, *args, stop=stops[-1], **kwargs)
+        future.stop = stops[-1]  # type: ignore[attr-defined]
+        return future
 
     with ThreadPoolExecutor(max_workers=16) as pool:
         yield start

@@ -117,7 +117,7 @@ def test_bad_input_is_counted_and_the_agent_keeps_playing(seat, wait_until):
         (
             policy_key,
             PolicySwitch(match=MATCH, frame=3, sender="x", role="bait", policy="no-such-policy").encode(),
-            "ValueError",
+            "policy",
         ),
     ]
     for frame in range(6):

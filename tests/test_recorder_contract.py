@@ -11,10 +11,12 @@ import zenoh
 
 from services.recorder.log import read_log
 from services.recorder.recording import load
-from services.recorder.service import run_recorder
+from services.recorder.service import recording_path, run_recorder
 from services.sim.engine import Game
 from services.sim.match import start_message, state_message, summary_message
 from shared import keys
+from shared.bus import BusConfig
+from shared.errors import Failure, UsageError
 from shared.game import ROLES, GameConfig
 from shared.messages import Action, GameEvent, PolicySwitch
 
@@ -128,8 +130,8 @@ def test_everything_valid_exactly_once_a_gap_for_the_hole_and_no_garbage(recorde
     match.summary()
     path = future.result(timeout=5)  # it stops by itself after the summary
 
-    records, clean = read_log(path)
-    assert clean
+    records, damage = read_log(path)
+    assert damage == []
     at = match.state_at[7]  # the gap record comes right before state 7, the first after the hole
     assert [r.gap or (r.key, r.data) for r in records] == [*match.sent[:at], (5, 6), *match.sent[at:]]
     recording = load(path)
@@ -138,16 +140,18 @@ def test_everything_valid_exactly_once_a_gap_for_the_hole_and_no_garbage(recorde
     assert recording.start is not None and recording.summary is not None and len(recording.events) == 1
 
 
-def test_a_restarted_recorder_cuts_a_torn_tail_and_records_the_gap(recorder):
+def test_a_restarted_recorder_cuts_a_torn_tail_and_records_the_gap(recorder, wait_until, tmp_path):
     match, start = recorder
     first = start()
     match.start()
     match.frames(3)
-    match.summary()
-    path = first.result(timeout=5)
+    path = recording_path(tmp_path, MATCH)
+    assert wait_until(lambda: path.exists() and len(read_log(path)[0]) == len(match.sent))
+    first.stop.set()  # the recorder stops (killed, say) during the match: no summary in its log
+    assert first.result(timeout=5) == path
     with path.open("ab") as log:
         log.write(b"\x40\0\0\0\1\2\3\4 torn")  # a record cut short by a crash
-    assert not read_log(path)[1]
+    assert read_log(path)[1][-1].torn
 
     match.frames(5)  # published while no recorder ran
     second = start()
@@ -158,3 +162,29 @@ def test_a_restarted_recorder_cuts_a_torn_tail_and_records_the_gap(recorder):
     assert recording.clean
     assert [s.frame for s in recording.states] == [0, 1, 2, 3, 6, 7, 8]
     assert recording.gaps == [(4, 5)]
+
+
+def test_a_second_match_under_the_same_id_is_not_recorded(recorder, tmp_path):
+    match, start = recorder
+    first = start()
+    match.start()
+    match.frames(3)
+    match.start()  # another sim starts a match under this id
+    match.frames(6)
+    with pytest.raises(Failure, match=f"a second match started under the id {MATCH}; it was not recorded"):
+        first.result(timeout=5)
+    recording = load(recording_path(tmp_path, MATCH))
+    assert recording.starts == 1 and [s.frame for s in recording.states] == [0, 1, 2, 3]
+
+
+def test_the_log_of_a_finished_match_is_never_appended_to(recorder, tmp_path):
+    match, start = recorder
+    first = start()
+    match.start()
+    match.frames(2)
+    match.summary()
+    path = first.result(timeout=5)
+    before = path.read_bytes()
+    with pytest.raises(UsageError, match=f"--match {MATCH}: .* holds a finished match of this id"):
+        run_recorder(BusConfig(), MATCH, tmp_path)
+    assert path.read_bytes() == before

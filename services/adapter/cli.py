@@ -11,6 +11,7 @@ from rich.table import Table
 from services.adapter.core import STRATEGIES, AdapterConfig
 from services.agent.library import policy_for
 from services.options import console
+from shared.errors import UsageError
 from shared.game import FPS, other
 
 commands = typer.Typer()
@@ -27,10 +28,13 @@ def diversity(
     from services.adapter.cem import cem_matrix
     from services.agent import library
 
+    partners = {  # both checked before the first matrix
+        "bait": policy_for(bait_partner, "shooter", "--bait-partner"),
+        "shooter": policy_for(shooter_partner, "bait", "--shooter-partner"),
+    }
     for role, partner in (("bait", bait_partner), ("shooter", shooter_partner)):
         keys = library.keys(role)
-        partner_role = other(role)
-        m = cem_matrix([library.load(k) for k in keys], policy_for(partner, partner_role), list(range(games)))
+        m = cem_matrix([library.load(k) for k in keys], partners[role], list(range(games)))
         table = Table(title=f"{role}s with {partner}: mean log-probability of row's actions under column")
         for column in ("", *keys):
             table.add_column(column)
@@ -74,7 +78,10 @@ def eval_command(
     from services.agent import library
 
     workers = workers or os.cpu_count() or 1
-    window_list = [int(w) for w in windows.split(",") if w.strip()]
+    try:
+        window_list = [int(w) for w in windows.split(",") if w.strip()]
+    except ValueError:
+        raise UsageError("--windows", windows, "not whole numbers separated by commas") from None
     partners = partner or [p for group in population(other(role)).values() for p in group]
     agents = library.keys(role) + team.variants(window_list, strategies.split(","), strategy_window)
     columns = (BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())

@@ -34,7 +34,8 @@ import numpy as np
 
 from services.adapter.cem import log_probs
 from services.table.table import DEFAULT_TABLE, Table
-from shared.game import N_ACTIONS, Policy, check_role, other
+from shared.errors import UsageError
+from shared.game import N_ACTIONS, ROLES, Policy, other
 
 STRATEGIES = ("cem", "cem-dwell", "cem-ood", "bayes", "bayes-dwell-ood")
 INITIAL = ("best-average", "random")
@@ -64,15 +65,20 @@ class AdapterConfig:
     seed: int = _option(0, "Draws the random initial policy.")
 
     def __post_init__(self) -> None:
-        check_role(self.role)
-        if self.strategy not in STRATEGIES:
-            raise ValueError(f"unknown strategy {self.strategy!r}; expected one of {STRATEGIES}")
-        if self.initial not in INITIAL:
-            raise ValueError(f"unknown initial policy rule {self.initial!r}; expected one of {INITIAL}")
-        if self.window < 1 or self.warmup < 0 or self.dwell < 0:
-            raise ValueError("window must be >= 1, warmup and dwell >= 0")
-        if not (0.0 <= self.hazard < 1.0 and 0.0 <= self.noise < 1.0):
-            raise ValueError("hazard and noise are probabilities in [0, 1)")
+        choices = (("--role", self.role, ROLES), ("--strategy", self.strategy, STRATEGIES))
+        for option, value, valid in (*choices, ("--initial", self.initial, INITIAL)):
+            if value not in valid:
+                raise UsageError(option, value, "unknown", valid)
+        for option, value, low in (
+            ("--window", self.window, 1),
+            ("--warmup", self.warmup, 0),
+            ("--dwell", self.dwell, 0),
+        ):
+            if value < low:
+                raise UsageError(option, value, f"must be at least {low}")
+        for option, value in (("--hazard", self.hazard), ("--noise", self.noise)):
+            if not 0.0 <= value < 1.0:
+                raise UsageError(option, value, "a probability in [0, 1)")
 
     @property
     def partner_role(self) -> str:

@@ -14,6 +14,7 @@ from services.agent import library
 from services.agent.library import policy_for
 from services.sim.engine import Game
 from services.sim.observation import world_values
+from shared.errors import UsageError
 
 # A hand-made table: partner types X, Y, Z (rows) against our policies a, b, c (columns).
 PAYOFF = Payoff(
@@ -130,10 +131,12 @@ def test_random_initial_policy_is_drawn_by_seed() -> None:
 
 
 def test_config_is_validated() -> None:
-    with pytest.raises(ValueError, match="strategy"):
+    with pytest.raises(UsageError, match="--strategy oracle: unknown; valid: cem, "):
         AdapterConfig(strategy="oracle")
-    with pytest.raises(ValueError, match="role"):
+    with pytest.raises(UsageError, match="--role pilot: unknown; valid: bait, shooter"):
         AdapterConfig(role="pilot")
+    with pytest.raises(UsageError, match=r"--noise 1.0: a probability in \[0, 1\)"):
+        AdapterConfig(noise=1.0)
     assert AdapterConfig(window=800).warmup_frames == 150
     assert AdapterConfig(window=400, strategy="cem-dwell").dwell_frames == 40
     assert AdapterConfig(window=400).dwell_frames == 0

@@ -131,7 +131,7 @@ def make_partner(name: str, role: str) -> Partner:
         return Switching(make_partner(first, role), make_partner(second, role))
     if ":" in name:
         return _external(name, role)
-    return policy_for(name, role)
+    return policy_for(name, role, "--partner")
 
 
 def _split_arguments(text: str) -> tuple[str, str]:

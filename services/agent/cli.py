@@ -11,6 +11,7 @@ from services.agent.calibration import calibrate
 from services.agent.library import policy_for
 from services.options import console
 from services.sim.play import play, summarize
+from shared.errors import Failure
 from shared.game import FPS, GameConfig
 
 commands = typer.Typer()
@@ -28,7 +29,9 @@ def game(
     config = GameConfig(frames=frames)
     results = []
     for s in range(seed, seed + games):
-        result = play(policy_for(bait, "bait"), policy_for(shooter, "shooter"), s, config)
+        result = play(
+            policy_for(bait, "bait", "--bait"), policy_for(shooter, "shooter", "--shooter"), s, config
+        )
         results.append(result)
         deaths = {role: sum(c["deaths"].values()) for role, c in result.counters.items()}
         console.print(
@@ -60,9 +63,12 @@ def train(
 ) -> None:
     """Train library policies by their registry recipes (needs the `train` extra)."""
     from services.agent import library
-    from services.agent.train import train as train_policy
 
-    todo = keys or [k for k, r in library.registry().items() if r.algorithm]
+    todo = library.learned(keys or [])
+    try:
+        from services.agent.train import train as train_policy
+    except ModuleNotFoundError as error:
+        raise Failure(f"{error}: training needs the `train` extra, pip install -e '.[train]'") from None
     for key in todo:
         console.print(f"[bold]training {key}[/]: {library.registry()[key].description}")
         entry = train_policy(key, steps, seed, log_dir / key, score_games=score_games)

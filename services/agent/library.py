@@ -25,9 +25,10 @@ from pathlib import Path
 import numpy as np
 
 from services.agent.policy import RulePolicy, factored_probs, factored_probs_batch, rule_head_probs
-from services.agent.scripted import MirrorShooter, good_shot, good_shot_batch, scripted_policy
+from services.agent.scripted import MirrorShooter, good_shot, good_shot_batch, scripted_keys, scripted_policy
 from services.sim import observation as ob
 from services.sim.sampling import batch_probs, sample
+from shared.errors import UsageError
 from shared.game import N_FIRE, N_THRUST, N_TURN, ROLES, GameConfig, Policy, join_action
 
 LIBRARY = Path(__file__).parent / "library"
@@ -300,11 +301,33 @@ def batch_act(policy: Policy, observations: np.ndarray, uniforms: np.ndarray) ->
     return sample(batch_probs(policy, observations), uniforms)
 
 
-def policy_for(key: str, role: str) -> Policy:
-    """Any policy a seat can play, by key: a library policy (B1-B9, S1-S7) or a scripted one."""
-    if key in registry():
-        policy = load(key)
-        if policy.role != role:
-            raise ValueError(f"library policy {key} plays {policy.role}, not {role}")
-        return policy
-    return scripted_policy(key, role)
+def seat_keys(role: str) -> list[str]:
+    """Every key that can play `role`'s seat: the library's policies of that role, then the scripted ones."""
+    return [*keys(role), *scripted_keys(role)]
+
+
+def learned(chosen: list[str]) -> list[str]:
+    """The learned policies to train: `chosen` (UsageError for a key that is not one), or all."""
+    trainable = [k for k, r in registry().items() if r.algorithm]
+    for key in chosen:
+        if key not in trainable:
+            raise UsageError("KEYS", key, "not a learned policy of the library", trainable)
+    return chosen or trainable
+
+
+def check_seat(key: str, role: str, option: str = "--policy") -> None:
+    """Refuse (UsageError) a seat that is not one, or a key that cannot play it: the line names the
+    option, the value and every key that can."""
+    if role not in ROLES:
+        raise UsageError("--role", role, "not a seat", ROLES)
+    if key not in seat_keys(role):
+        other = [r for r in ROLES if key in seat_keys(r)]
+        problem = f"plays the {other[0]} seat, not the {role}" if other else f"no policy of the {role} seat"
+        raise UsageError(option, key, problem, seat_keys(role))
+
+
+def policy_for(key: str, role: str, option: str = "--policy") -> Policy:
+    """Any policy a seat can play, by key: a library policy (B1-B9, S1-S7) or a scripted one; a key
+    that cannot play the seat is a UsageError about `option` (check_seat)."""
+    check_seat(key, role, option)
+    return load(key) if key in registry() else scripted_policy(key, role)

@@ -12,6 +12,7 @@ import pytest
 from services.agent import library
 from services.sim.engine import Game
 from services.sim.observation import observe
+from shared.errors import UsageError
 from shared.game import N_ACTIONS, ROLES, GameConfig, Policy
 
 KEYS = library.keys()
@@ -74,10 +75,33 @@ def test_same_seed_same_actions():
 def test_policy_for_resolves_library_and_scripted_keys():
     assert library.policy_for("S5", "shooter").key == "S5"
     assert library.policy_for("circle", "bait").key == "circle"
-    with pytest.raises(ValueError, match="plays shooter"):
-        library.policy_for("S5", "bait")
-    with pytest.raises(ValueError, match="unknown scripted policy"):
-        library.policy_for("B99", "bait")
+
+
+BAITS = "B1, B2, B3, B4, B5, B6, B7, B8, B9, circle, idle, random"
+
+
+@pytest.mark.parametrize(
+    ("key", "role", "option", "line"),
+    [
+        ("B99", "bait", "--bait", f"--bait B99: no policy of the bait seat; valid: {BAITS}"),
+        ("S5", "bait", "--policy", f"--policy S5: plays the shooter seat, not the bait; valid: {BAITS}"),
+        ("mirror", "bait", "--bait", f"--bait mirror: plays the shooter seat, not the bait; valid: {BAITS}"),
+        (
+            "circle",
+            "shooter",
+            "--shooter",
+            "--shooter circle: plays the bait seat, not the shooter; valid: S1,",
+        ),
+        ("circle", "pilot", "--policy", "--role pilot: not a seat; valid: bait, shooter"),
+    ],
+)
+def test_a_key_that_cannot_play_the_seat_is_named_with_every_key_that_can(
+    key: str, role: str, option: str, line: str
+) -> None:
+    with pytest.raises(UsageError) as refused:
+        library.policy_for(key, role, option)
+    assert str(refused.value).startswith(line)
+    assert library.seat_keys("shooter")[-3:] == ["mirror", "idle", "random"]
 
 
 def copy_library(tmp_path: Path) -> Path:

@@ -90,7 +90,7 @@ def test_switch_takes_effect_at_next_act() -> None:
 
 def test_unknown_key_keeps_current_policy() -> None:
     player = Player("shooter", "mirror", seed=1)
-    with pytest.raises(ValueError, match="unknown scripted policy"):
+    with pytest.raises(ValueError, match="--policy nope: no policy of the shooter seat"):
         player.switch("nope")
     assert player.key == "mirror" and player.pending is None
     assert player.act(next(states()), "a").policy == "mirror"

@@ -297,6 +297,11 @@ def _good_shot_rows(observations, numbers, out):
 SCRIPTED = {"circle": CircleBait, "mirror": MirrorShooter}
 
 
+def scripted_keys(role: str) -> list[str]:
+    """The scripted keys that can play `role`'s seat: its own rule, and idle and random (any seat)."""
+    return [*(k for k, policy in SCRIPTED.items() if policy.role == role), "idle", "random"]
+
+
 def scripted_policy(key: str, role: str) -> RulePolicy | UniformPolicy:
     """A scripted policy by key for a seat: circle, mirror, idle or random (any role)."""
     if key == "idle":

@@ -35,7 +35,10 @@ def run_agent(
         def on_switch(message: PolicySwitch) -> None:
             if message.role != role:
                 raise MessageError("mismatch", f"switch for {message.role} on {role}'s key")
-            player.switch(message.policy)  # an unknown policy key raises ValueError: dropped
+            try:
+                player.switch(message.policy)
+            except ValueError as error:  # a key this seat cannot play
+                raise MessageError("policy", str(error)) from error
             log.info("%s switches to %s from the next frame (%s)", sender, message.policy, message.reason)
 
         with (

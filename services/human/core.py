@@ -24,6 +24,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from shared.errors import UsageError
 from shared.game import ROLES, GameConfig, join_action, split_action
 from shared.messages import State, Summary
 
@@ -151,7 +152,7 @@ class SeatBook:
     def __init__(self, tokens: dict[str, str]) -> None:
         unknown = set(tokens) - set(ROLES)
         if unknown:
-            raise ValueError(f"unknown roles {sorted(unknown)}; expected {ROLES}")
+            raise UsageError("--token", ", ".join(sorted(unknown)), "unknown roles", ROLES)
         self.tokens = dict(tokens)
         self.holders: dict[str, object] = {}
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import secrets
+import threading
 from collections.abc import Callable
 from pathlib import Path
 
@@ -26,9 +27,11 @@ def play_with_people(
     port: int = 8000,
     on_links: Callable[[dict[str, str]], None] = lambda links: None,
     on_state: Callable[[State], None] = lambda state: None,
+    stop: threading.Event | None = None,
 ) -> tuple[Summary, Path]:
     """Run `plan`, whose seats with the policy `human` are played from browsers: each such seat gets
-    a fresh token, and `on_links` the links to open, before the sim waits for the players."""
+    a fresh token, and `on_links` the links to open, before the sim waits for the players. `stop`
+    ends the match and its processes (run_match)."""
     people = [role for role in ROLES if getattr(plan, role) == HUMAN]
     if not people:
         raise ValueError("no seat of this match is played by a person")
@@ -37,4 +40,4 @@ def play_with_people(
     bus = BusConfig(listen=(endpoint,), low_latency=plan.low_latency)
     with Gateway(bus, seat_handler(plan.match, SeatBook(tokens)), host, port) as gateway:
         on_links(seat_links(gateway.url, tokens))
-        return run_match(dataclasses.replace(plan, peers=(endpoint,)), on_state)
+        return run_match(dataclasses.replace(plan, peers=(endpoint,)), on_state, stop=stop)

@@ -8,6 +8,7 @@ The payload is a msgpack map: {"key": bus key, "t": receive time (ns since the e
 "data": the message bytes exactly as received} or, for frames the recorder did not see,
 {"gap": [first missing frame, last missing frame]}. A crash can only tear the last record; opening
 the log for appending detects a torn or corrupt tail by its length and checksum and cuts it off.
+Readers skip a damaged record and resume at the next intact one, and say which bytes they skipped.
 """
 
 from __future__ import annotations
@@ -16,11 +17,12 @@ import os
 import struct
 import time
 import zlib
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import msgpack
+
+from shared.errors import UsageError
 
 MAGIC = b"TSFLOG1\n"
 HEADER = struct.Struct("<II")
@@ -35,49 +37,79 @@ class Record:
     gap: tuple[int, int] | None = None
 
 
-def _scan(handle) -> Iterator[tuple[int, Record]]:  # noqa: ANN001 - a binary file
-    """Yield (end offset, record) for every intact record from the current position; stop at the
-    first torn or corrupt one."""
-    while True:
-        header = handle.read(HEADER.size)
-        if len(header) < HEADER.size:
-            return
-        length, crc = HEADER.unpack(header)
-        if length > MAX_RECORD:
-            return
-        payload = handle.read(length)
-        if len(payload) < length or zlib.crc32(payload) != crc:
-            return
-        try:
-            item = msgpack.unpackb(payload, raw=False)
-            record = (
-                Record("", item["t"], b"", tuple(item["gap"]))
-                if "gap" in item
-                else Record(item["key"], item["t"], item["data"])
-            )
-        except (ValueError, KeyError, TypeError):
-            return
-        yield handle.tell(), record
+@dataclass(frozen=True)
+class Damage:
+    """Bytes [start, end) of a log that hold no intact record. `torn`: they are the end of the file
+    and the record there runs past it (a write cut short); otherwise the bytes are corrupt, and the
+    reader resumed at the next intact record (or the file ended)."""
+
+    start: int
+    end: int
+    torn: bool = False
+
+    def __str__(self) -> str:
+        what = "torn tail" if self.torn else "damaged"
+        return f"{what} at bytes {self.start}-{self.end - 1}"
 
 
-def read_log(path: str | Path) -> tuple[list[Record], bool]:
-    """All intact records of a log, and whether it ended cleanly (False: a torn or corrupt tail)."""
-    records, good_end, size = _read(Path(path))
-    return records, good_end == size
+def _record_at(data: bytes, offset: int) -> tuple[int, Record] | None:
+    """The intact record that starts at `offset` and the offset after it, or None."""
+    if offset + HEADER.size > len(data):
+        return None
+    length, crc = HEADER.unpack_from(data, offset)
+    end = offset + HEADER.size + length
+    if length > MAX_RECORD or end > len(data):
+        return None
+    payload = data[offset + HEADER.size : end]
+    if zlib.crc32(payload) != crc:
+        return None
+    try:
+        item = msgpack.unpackb(payload, raw=False)
+    except (ValueError, TypeError, msgpack.UnpackException):
+        return None
+    match item:
+        case {"t": int(t), "gap": [int(first), int(last)]}:
+            return end, Record("", t, b"", (first, last))
+        case {"key": str(key), "t": int(t), "data": bytes(message)}:
+            return end, Record(key, t, message)
+    return None
 
 
-def _read(path: Path) -> tuple[list[Record], int, int]:
-    with path.open("rb") as handle:
-        if handle.read(len(MAGIC)) != MAGIC:
-            raise ValueError(f"{path} is not a TSF recording (bad magic)")
-        good_end, records = len(MAGIC), []
-        for good_end, record in _scan(handle):  # noqa: B007 - the last intact end is kept
+def _runs_past_end(data: bytes, offset: int) -> bool:
+    """Whether the record that starts at `offset` is unfinished: its header or payload is cut off."""
+    if offset + HEADER.size > len(data):
+        return True
+    length, _ = HEADER.unpack_from(data, offset)
+    return offset + HEADER.size + length > len(data)
+
+
+def read_log(path: str | Path) -> tuple[list[Record], list[Damage]]:
+    """Every intact record of a log, and the damaged stretches between them (none: a clean log).
+
+    After a damaged record the reader tries each following byte until an intact record starts there
+    (length, CRC and record map all check out), so one flipped bit costs one record, not the rest."""
+    path = Path(path)
+    data = path.read_bytes()
+    if not data.startswith(MAGIC):
+        raise ValueError(f"{path} is not a TSF recording (bad magic)")
+    records: list[Record] = []
+    damage: list[Damage] = []
+    offset = len(MAGIC)
+    while offset < len(data):
+        found = _record_at(data, offset)
+        if found is not None:
+            offset, record = found
             records.append(record)
-    return records, good_end, path.stat().st_size
+            continue
+        resume = next((o for o in range(offset + 1, len(data)) if _record_at(data, o)), len(data))
+        damage.append(Damage(offset, resume, resume == len(data) and _runs_past_end(data, offset)))
+        offset = resume
+    return records, damage
 
 
 class LogWriter:
-    """Appends records; reopening an existing log cuts a torn tail first. Every record is written
+    """Appends records; reopening an existing log cuts a torn or corrupt tail first (damage before
+    an intact record is left for readers to skip). Every record is written
     through to the OS at once (a killed process loses nothing it wrote); fsync runs at most every
     `sync_every` seconds and at close (what a power cut can cost)."""
 
@@ -88,10 +120,11 @@ class LogWriter:
         self.cut_bytes = 0
         self.last_records: list[Record] = []
         if self.path.exists() and self.path.stat().st_size >= len(MAGIC):
-            self.last_records, good, size = _read(self.path)
-            self.cut_bytes = size - good
-            with self.path.open("r+b") as handle:
-                handle.truncate(good)
+            self.last_records, damage = read_log(self.path)
+            if damage and damage[-1].end == self.path.stat().st_size:
+                self.cut_bytes = damage[-1].end - damage[-1].start
+                with self.path.open("r+b") as handle:
+                    handle.truncate(damage[-1].start)
             self._file = self.path.open("ab", buffering=0)
         else:
             self._file = self.path.open("wb", buffering=0)
@@ -131,6 +164,29 @@ def _payload(record: Record) -> bytes:
     if record.gap is not None:
         return msgpack.packb({"t": record.t, "gap": list(record.gap)}, use_bin_type=True)
     return msgpack.packb({"key": record.key, "t": record.t, "data": record.data}, use_bin_type=True)
+
+
+def make_way(path: Path, overwrite: bool) -> Path | None:
+    """Free `path` for a new recording: an existing one is never appended to. Refused unless
+    `overwrite`; then it, and its Parquet export beside it, are renamed `<name>.replaced-<n>` (the
+    first free n). Returns where the old recording went, or None when there was none."""
+    if not path.exists():
+        return None
+    if not overwrite:
+        raise UsageError(
+            "--match", path.stem, f"{path} exists; choose another id, or --overwrite to keep it aside"
+        )
+    n = 1
+    while any(p.with_name(f"{p.name}.replaced-{n}").exists() for p in _with_export(path)):
+        n += 1
+    for old in _with_export(path):
+        if old.exists():
+            old.rename(old.with_name(f"{old.name}.replaced-{n}"))
+    return path.with_name(f"{path.name}.replaced-{n}")
+
+
+def _with_export(path: Path) -> tuple[Path, Path]:
+    return path, path.with_suffix(".parquet")
 
 
 class GapTracker:

@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from services.recorder.log import read_log
+from services.recorder.log import Damage, read_log
 from services.sim.engine import Game
 from shared.game import GameConfig
 from shared.messages import (
@@ -30,10 +30,10 @@ TABLES = ("states", "actions", "switches", "events", "gaps", "match", "adapter")
 
 @dataclass
 class Recording:
-    """The decoded content of one match's log."""
+    """The decoded content of one match's log, and every way it falls short of a complete one."""
 
     path: Path
-    clean: bool  # False: the log ended in a torn or corrupt record
+    damage: list[Damage] = field(default_factory=list)  # stretches of the log the reader skipped
     start: Start | None = None
     summary: Summary | None = None
     states: list[State] = field(default_factory=list)
@@ -43,15 +43,66 @@ class Recording:
     adapter: list[AdapterStatus] = field(default_factory=list)
     gaps: list[tuple[int, int]] = field(default_factory=list)
     undecodable: int = 0
+    duplicates: list[int] = field(default_factory=list)  # frames whose state came again (first kept)
+    starts: int = 0  # start records: more than one means two matches in one log
+    summaries: int = 0
+
+    @property
+    def clean(self) -> bool:
+        return not self.damage
+
+    @property
+    def torn(self) -> bool:
+        return bool(self.damage) and self.damage[-1].torn
 
     @property
     def missing_frames(self) -> int:
         return sum(last - first + 1 for first, last in self.gaps)
 
+    def lost(self) -> list[tuple[int, int]]:
+        """Ranges of frames up to the last one known (the summary's, else the last state's) whose
+        state is in the log neither as a state nor inside a gap record: lost to damage."""
+        last = self.summary.frame if self.summary else max((s.frame for s in self.states), default=-1)
+        known = {s.frame for s in self.states} | {f for a, b in self.gaps for f in range(a, b + 1)}
+        return _ranges(f for f in range(last + 1) if f not in known)
+
+    def problems(self, allow_torn: bool = False) -> list[str]:
+        """What is missing or wrong, one phrase each; empty for a complete recording with a summary.
+        `allow_torn`: a missing end (no summary, maybe a last record cut short) is no problem."""
+        damaged = [d for d in self.damage if not d.torn or not allow_torn]
+        last = max((s.frame for s in self.states), default=None)
+        return [
+            *(str(d) for d in damaged),
+            *([f"frames {_text(self.lost())} lost"] if self.lost() else []),
+            *([f"frames {_text(self.gaps)} never reached the recorder"] if self.gaps else []),
+            *(["no start record"] if self.start is None else []),
+            *([f"no summary (last state: frame {last})"] if self.summary is None and not allow_torn else []),
+            *([f"{self.starts} start records (more than one match)"] if self.starts > 1 else []),
+            *([f"{self.summaries} summaries (more than one match)"] if self.summaries > 1 else []),
+            *([f"frames {_text(_ranges(self.duplicates))} recorded twice"] if self.duplicates else []),
+            *([f"{self.undecodable} undecodable records"] if self.undecodable else []),
+        ]
+
+
+def _ranges(frames: Iterable[int]) -> list[tuple[int, int]]:
+    """Sorted frame numbers as ranges of consecutive ones."""
+    out: list[tuple[int, int]] = []
+    for frame in sorted(set(frames)):
+        if out and out[-1][1] == frame - 1:
+            out[-1] = (out[-1][0], frame)
+        else:
+            out.append((frame, frame))
+    return out
+
+
+def _text(ranges: list[tuple[int, int]]) -> str:
+    return ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in ranges)
+
 
 def load(path: str | Path) -> Recording:
-    records, clean = read_log(path)
-    recording = Recording(Path(path), clean)
+    records, damage = read_log(path)
+    recording = Recording(Path(path), damage)
+    seen: set[int] = set()
     for record in records:
         if record.gap is not None:
             recording.gaps.append(record.gap)
@@ -62,6 +113,10 @@ def load(path: str | Path) -> Recording:
             recording.undecodable += 1
             continue
         if isinstance(message, State):
+            if message.frame in seen:
+                recording.duplicates.append(message.frame)
+                continue
+            seen.add(message.frame)
             recording.states.append(message)
         elif isinstance(message, Action):
             recording.actions.append((record.t, message))
@@ -72,9 +127,11 @@ def load(path: str | Path) -> Recording:
         elif isinstance(message, AdapterStatus):
             recording.adapter.append(message)
         elif isinstance(message, Start):
-            recording.start = message
+            recording.starts += 1
+            recording.start = recording.start or message
         elif isinstance(message, Summary):
-            recording.summary = message
+            recording.summaries += 1
+            recording.summary = recording.summary or message
     return recording
 
 

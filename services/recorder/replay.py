@@ -22,6 +22,7 @@ from services.recorder.recording import Recording, simulate
 from services.sim.render import render
 from shared import keys
 from shared.bus import BusConfig, session
+from shared.errors import UsageError
 from shared.game import GameConfig
 from shared.messages import AdapterStatus, GameEvent, Message, MessageError, Start, State, Summary, decode_any
 
@@ -50,7 +51,7 @@ def write_video(recording: Recording, path: Path, scale: float = 1.0, every: int
     """Write the match as a GIF (Pillow) or an MP4 (H.264, the ffmpeg inside imageio-ffmpeg) at the
     game's speed; returns the number of frames written."""
     if path.suffix not in VIDEO_FORMATS:
-        raise ValueError(f"{path}: the video must be one of {VIDEO_FORMATS}")
+        raise UsageError("--video", path, "not a video file name", (f"*{s}" for s in VIDEO_FORMATS))
     if recording.start is None:
         raise ValueError(f"{recording.path}: no start record, so the match cannot be replayed")
     fps = GameConfig.from_dict(recording.start.config).fps / every

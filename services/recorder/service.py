@@ -14,11 +14,12 @@ from pathlib import Path
 
 import zenoh
 
-from services.recorder.log import GapTracker, LogWriter
+from services.recorder.log import GapTracker, LogWriter, read_log
 from shared import keys
 from shared.bus import BusConfig, Drops, session
+from shared.errors import Failure, UsageError
 from shared.game import ROLES
-from shared.messages import Message, MessageError, State, Summary, decode_any
+from shared.messages import Message, MessageError, Start, State, Summary, decode_any
 
 log = logging.getLogger("tsf.recorder")
 _DONE = object()
@@ -36,7 +37,9 @@ def run_recorder(
     wait_seats: float = 10.0,
 ) -> Path:
     """Record `match` until its summary is written or `stop` is set; returns the log's path.
-    Restarted on the same directory, it appends to the same log after cutting any torn tail.
+    Restarted on the same directory during the match, it appends to the same log after cutting any
+    torn tail; the log of a finished match (one with a summary) is never appended to (UsageError),
+    and a second start of the id ends the recording before it is written (Failure): one log, one match.
 
     Its liveliness token (which the sim waits for) is declared once both seats' players are seen,
     or after `wait_seats` seconds: a peer learns of the others over gossip after the sim has seen
@@ -44,13 +47,19 @@ def run_recorder(
     this recorder."""
     stop = stop or threading.Event()
     path = recording_path(directory, match)
+    if path.exists() and any(r.key == keys.summary(match) for r in read_log(path)[0]):
+        raise UsageError(
+            "--match", match, f"{path} holds a finished match of this id; give the new one another id"
+        )
     inbox: queue.SimpleQueue = queue.SimpleQueue()
     drops = Drops("recorder")
 
     def on_sample(sample: zenoh.Sample) -> None:
         inbox.put((str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
 
-    def drain(writer: LogWriter, gaps: GapTracker) -> None:
+    second: list[Start] = []  # a start after the log's first: another match under this id
+
+    def drain(writer: LogWriter, gaps: GapTracker, started: bool) -> None:
         while True:
             item = inbox.get()
             if item is _DONE:
@@ -62,6 +71,11 @@ def run_recorder(
             except MessageError as error:
                 drops.drop(key, error)
                 continue
+            if isinstance(message, Start) and started:
+                second.append(message)
+                stop.set()
+                return
+            started = started or isinstance(message, Start)
             if isinstance(message, State) and (gap := gaps.see(message.frame)):
                 writer.write_gap(*gap)
             writer.write(key, data, t)
@@ -72,7 +86,8 @@ def run_recorder(
         last = max((_frame(r.data) for r in writer.last_records if r.key == keys.state(match)), default=-1)
         if writer.cut_bytes:
             log.warning("cut a torn tail of %d bytes from %s", writer.cut_bytes, path)
-        drainer = threading.Thread(target=drain, args=(writer, GapTracker(last)), daemon=True)
+        started = any(r.key == keys.start(match) for r in writer.last_records)
+        drainer = threading.Thread(target=drain, args=(writer, GapTracker(last), started), daemon=True)
         drainer.start()
         with session(bus) as z, z.declare_subscriber(keys.everything(match), on_sample):
             _wait_for_seats(z, match, wait_seats, stop)
@@ -81,6 +96,8 @@ def run_recorder(
                 time.sleep(0.5)  # actions still in flight after the summary (they come over other links)
         inbox.put(_DONE)
         drainer.join()
+    if second:
+        raise Failure(f"{path}: a second match started under the id {match}; it was not recorded")
     return path
 
 

@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from services.options import console
+from shared.errors import Failure
 from shared.game import ROLES
 
 commands = typer.Typer()
@@ -40,3 +41,5 @@ def report_command(
         colour = "yellow" if problem.used else "red"
         console.print(f"[{colour}]{problem.name}: {problem.reason}[/]")
     console.print(f"report: {report.html}  ({len(report.figures)} figures, numbers in {out / 'data'})")
+    if not report.matches:
+        raise Failure(f"none of the {len(recordings)} recordings is usable; {report.html} names why")

@@ -2,8 +2,9 @@
 
 A recording is left out of the analyses, and named in the report with the reason, when it cannot be
 read, has no start or no summary (a truncated log, or a match that never ended), or when the engine
-does not reproduce its states. A torn tail after the summary, or lost frames that stop the replay
-check, are named too but the recording is still used: its result is known.
+does not reproduce its states. Damage after the start and before or after the summary (a torn
+tail, damaged records skipped, frames lost or never recorded, duplicates) is named too, but the
+recording is still used: its result is known; its states are not checked against the engine then.
 
 The study runner (services/study) leaves a JSON sidecar beside each recording, `<match>.study.json`
 (a plain `<match>.json` is read too): its `participant`, `role` (the participant's seat),
@@ -83,16 +84,11 @@ def load_matches(paths: list[Path], parquet: Path) -> tuple[list[Match], list[Pr
             last = recording.states[-1].frame if recording.states else "none"
             problem(f"no summary: the log is truncated or the match never ended (last state {last})")
             continue
-        try:
-            mismatches = replay(recording)
-        except ValueError as error:
-            problem(f"not replayed: {error}", used=True)
-        else:
-            if mismatches:
-                problem(f"{len(mismatches)} states differ from the engine's, first at frame {mismatches[0]}")
-                continue
-        if not recording.clean:
-            problem("the log ends in a torn or corrupt record after the summary", used=True)
+        if recording.problems():
+            problem("; ".join(recording.problems()), used=True)
+        elif mismatches := replay(recording):
+            problem(f"{len(mismatches)} states differ from the engine's, first at frame {mismatches[0]}")
+            continue
         meta = _sidecar(path)
         if meta.get("status", "done") != "done":
             problem(f"the study marked this attempt {meta['status']}")

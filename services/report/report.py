@@ -28,6 +28,7 @@ class Report:
     figures: dict[str, Path] = field(default_factory=dict)
     data: dict[str, pd.DataFrame] = field(default_factory=dict)
     problems: list[Problem] = field(default_factory=list)
+    matches: int = 0  # recordings in the analyses (none: the report names only problems)
 
 
 def build_report(
@@ -65,7 +66,7 @@ def build_report(
         problems.append(Problem(trial, "", "--trial: no analysed match of that name has a partner", True))
     curves = analysis.curves(trial_match, seat) if seat else pd.DataFrame()
 
-    report = Report(out / "report.html", problems=problems)
+    report = Report(out / "report.html", problems=problems, matches=len(matches))
     report.data = {
         "table": pd.DataFrame(
             [

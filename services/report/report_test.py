@@ -118,7 +118,7 @@ def test_bad_recordings_are_named_and_the_rest_builds(built: tuple[Report, dict[
     assert "marked this attempt dropped" in problems.loc["dropped", "reason"]
     page = report.html.read_text()
     assert all(f"{name} (left out)" in page for name in ("truncated", "garbage", "dropped"))
-    assert set(csv(out, "partners")["match"]) == set(paths)
+    assert set(csv(out, "partners")["match"]) == set(paths) and report.matches == len(paths)
 
 
 def test_a_torn_tail_after_the_summary_is_noted_and_used(
@@ -313,7 +313,7 @@ def test_a_report_with_nothing_usable_still_builds(tmp_path: Path) -> None:
     report = build_report([bad], tmp_path / "out")
     assert [(p.name, p.used) for p in report.problems] == [("bad", False)]
     assert "no start record" in report.problems[0].reason
-    assert report.html.exists() and "bad (left out)" in report.html.read_text()
+    assert report.html.exists() and "bad (left out)" in report.html.read_text() and report.matches == 0
     assert csv(tmp_path / "out", "partners").empty and csv(tmp_path / "out", "variants").empty
 
 

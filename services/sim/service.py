@@ -21,6 +21,7 @@ from services.sim.engine import Game
 from services.sim.match import Seats, event_messages, start_message, state_message, summary_message
 from shared import keys
 from shared.bus import BusConfig, Drops, session, subscribe
+from shared.errors import UsageError
 from shared.game import ROLES, GameConfig
 from shared.messages import Action, Summary, seat_actions
 
@@ -47,7 +48,7 @@ def run_sim(
     before the first frame (and `wait_adapter` for an adapter, in adaptive matches); a seat still
     empty then plays no-op until its player arrives."""
     if mode not in MODES:
-        raise ValueError(f"unknown sim mode {mode!r}; expected one of {MODES}")
+        raise UsageError("--sim-mode", mode, "unknown", MODES)
     stop = stop or threading.Event()
     game = Game(config, seed)
     seats, drops = Seats(), Drops("sim")

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from services.adapter.core import AdapterConfig
+from shared.errors import UsageError
 from shared.game import FPS, ROLES, other
 
 NAME = re.compile(r"[A-Za-z0-9_]{1,24}")
@@ -94,12 +95,16 @@ class StudyConfig:
 
     @classmethod
     def load(cls, path: str | Path) -> StudyConfig:
-        """Read a study's TOML file (services/study/configs/ has the original two experiments)."""
-        data = tomllib.loads(Path(path).read_text())
-        variants = tuple(Variant(**v) for v in data.pop("variants", []))
-        if "roles" in data:
-            data["roles"] = tuple(data["roles"])
-        return cls(variants=variants, **data)
+        """Read a study's TOML file (services/study/configs/ has the original two experiments); a
+        file that is not a study's is a UsageError that says why."""
+        try:
+            data = tomllib.loads(Path(path).read_text())
+            variants = tuple(Variant(**v) for v in data.pop("variants", []))
+            if "roles" in data:
+                data["roles"] = tuple(data["roles"])
+            return cls(variants=variants, **data)
+        except (ValueError, TypeError) as error:  # TOML syntax, unknown or missing fields, bad values
+            raise UsageError("CONFIG", path, f"not a study: {error}") from None
 
     def hash(self) -> str:
         text = json.dumps(dataclasses.asdict(self), sort_keys=True)

@@ -92,8 +92,11 @@ class Socket:
             task.cancel()
 
 
-def study_handler(study: Study, endpoint: str, low_latency: bool = True) -> Handler:
-    """Serve participants: consent or resume, then their trials one by one."""
+def study_handler(
+    study: Study, endpoint: str, low_latency: bool = True, stop: threading.Event | None = None
+) -> Handler:
+    """Serve participants: consent or resume, then their trials one by one. `stop` ends a running
+    trial's match and its processes (run_match)."""
     config = study.config
     recordings = study.directory / "recordings"
     playing: set[str] = set()
@@ -123,7 +126,7 @@ def study_handler(study: Study, endpoint: str, low_latency: bool = True) -> Hand
         bridge = Bridge(z, trial.match, trial.role, socket.controls, socket.outbox, obs)
         bridge.live()
         study.record(trial, "running")
-        running = asyncio.ensure_future(asyncio.to_thread(run_match, plan))
+        running = asyncio.ensure_future(asyncio.to_thread(run_match, plan, stop=stop))
         gone = asyncio.ensure_future(socket.gone.wait())
         await asyncio.wait({running, gone}, return_when=asyncio.FIRST_COMPLETED)
         gone.cancel()
@@ -210,7 +213,7 @@ def run_study(
     study = Study(config, directory)
     endpoint = free_endpoint()
     bus = BusConfig(listen=(endpoint,), low_latency=low_latency)
-    with Gateway(bus, study_handler(study, endpoint, low_latency), host, port) as gateway:
+    with Gateway(bus, study_handler(study, endpoint, low_latency, stop), host, port) as gateway:
         on_ready(gateway)
         stop.wait()
     return study

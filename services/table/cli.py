@@ -104,7 +104,7 @@ def _print_table(table) -> None:  # noqa: ANN001 - a services.table.table.Table
 
 @commands.command("table")
 def table_command(
-    path: Path = typer.Argument(Path("services/agent/library/table.json")),
+    path: Path = typer.Argument(Path("services/agent/library/table.json"), exists=True, dir_okay=False),
     plot: Path | None = typer.Option(None, help="Draw the heatmap into this PNG."),
 ) -> None:
     """Show a measured table (refused if the library or rules changed since)."""

@@ -1,0 +1,52 @@
+"""The `tsf` entry point: how a command ends is said in one line, never as a traceback.
+
+A user's mistake (click's usage errors, shared.errors.UsageError from a core) exits 2, a failure
+(shared.errors.Failure, or any other exception) exits 1. `--debug` anywhere on the command line,
+or TSF_DEBUG=1, lets the traceback through instead.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Sequence
+
+import typer
+
+from shared.errors import Failure, UsageError
+
+DEBUG_HINT = "(--debug or TSF_DEBUG=1 shows the traceback)"
+
+
+def run(app: typer.Typer, args: Sequence[str] | None = None) -> int:
+    """Run the app on `args` (default: the process's) and return its exit status."""
+    args = list(sys.argv[1:] if args is None else args)
+    debug = "--debug" in args or os.environ.get("TSF_DEBUG", "") not in ("", "0")
+    args = [a for a in args if a != "--debug"]
+    where = f"tsf {args[0]}" if args and not args[0].startswith("-") else "tsf"  # the command, for the line
+    try:
+        status = typer.main.get_command(app).main(args or ["--help"], prog_name="tsf", standalone_mode=False)
+    except typer.TyperException as error:  # click's exceptions, as typer ships them: usage errors exit 2
+        context = getattr(error, "ctx", None)
+        where = context.command_path if context else "tsf"
+        _say(f"{where}: {' '.join(error.format_message().split())}")
+        return error.exit_code
+    except typer.Abort:
+        _say(f"{where}: aborted")
+        return 1
+    except UsageError as error:
+        if debug:
+            raise
+        _say(f"{where}: {error}")
+        return 2
+    except Exception as error:  # the one place where every failure becomes a line
+        if debug:
+            raise
+        plain = isinstance(error, Failure | OSError)
+        _say(f"{where}: {error}" if plain else f"{where}: {type(error).__name__}: {error} {DEBUG_HINT}")
+        return 1
+    return status if isinstance(status, int) else 0
+
+
+def _say(line: str) -> None:
+    print(line, file=sys.stderr)

@@ -1,0 +1,114 @@
+"""`tsf match` as people run it, each in a real process with its own services: default ids that never
+collide, a recording that is never appended to, and signals that end every process it started."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+from services.recorder.log import read_log
+from services.recorder.recording import load, replay
+
+SHORT = ("--lockstep", "--duration", "0.3")  # 9 frames
+
+
+def children(pid: int) -> dict[int, str]:
+    """The live child processes of `pid` and their command lines, from /proc."""
+    found = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+            command = (stat.parent / "cmdline").read_bytes().replace(b"\0", b" ").decode()
+        except OSError:
+            continue  # it ended while we looked
+        if int(fields[1]) == pid and fields[0] != "Z":
+            found[int(stat.parent.name)] = command
+    return found
+
+
+def alive(pid: int) -> bool:
+    try:
+        return (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.fixture
+def tsf_match(tmp_path: Path) -> Iterator[Callable[..., subprocess.Popen]]:
+    """Start `tsf match --out tmp_path ARGS...` in a session of its own, output to files; whatever
+    is left of its process group is killed at teardown, so a failing test leaves nothing behind."""
+    started: list[subprocess.Popen] = []
+
+    def start(*args: str) -> subprocess.Popen:
+        n = len(started)
+        command = [sys.executable, "-m", "services.cli", "match", "--out", str(tmp_path), *args]
+        with (tmp_path / f"out{n}").open("w") as out, (tmp_path / f"err{n}").open("w") as err:
+            started.append(subprocess.Popen(command, stdout=out, stderr=err, start_new_session=True))
+        started[-1].err = tmp_path / f"err{n}"  # type: ignore[attr-defined]
+        return started[-1]
+
+    yield start
+    for process in started:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(process.pid, signal.SIGKILL)
+        process.wait()
+
+
+def last_line(process: subprocess.Popen) -> str:
+    text = process.err.read_text()  # type: ignore[attr-defined]
+    assert "Traceback" not in text
+    return text.strip().splitlines()[-1]
+
+
+def test_matches_started_together_get_their_own_recordings_and_an_id_is_never_reused(tsf_match, tmp_path):
+    first, second = tsf_match(*SHORT), tsf_match(*SHORT)  # the same second, the default id
+    assert first.wait(120) == 0 and second.wait(120) == 0
+    paths = sorted(tmp_path.glob("*.tsflog"))
+    assert len(paths) == 2
+    for path in paths:
+        recording = load(path)
+        assert recording.problems() == [] and replay(recording) == []
+
+    taken, before = paths[0].stem, paths[0].read_bytes()
+    refused = tsf_match(*SHORT, "--match", taken)
+    assert refused.wait(60) == 2
+    refusal = f"{paths[0]} exists; choose another id, or --overwrite to keep it aside"
+    assert last_line(refused) == f"tsf match: --match {taken}: {refusal}"
+    assert paths[0].read_bytes() == before and not children(refused.pid)
+
+    again = tsf_match(*SHORT, "--match", taken, "--overwrite")
+    assert again.wait(120) == 0
+    assert (tmp_path / f"{taken}.tsflog.replaced-1").read_bytes() == before
+    assert (tmp_path / f"{taken}.parquet.replaced-1" / "states.parquet").exists()
+    recording = load(paths[0])
+    assert recording.problems() == [] and recording.starts == 1 and replay(recording) == []
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT], ids=lambda s: s.name)
+def test_a_signal_ends_the_match_and_every_process_it_started(tsf_match, tmp_path, wait_until, sig):
+    match = tsf_match("--duration", "60", "--match", "signalled")
+    log = tmp_path / "signalled.tsflog"
+    assert wait_until(lambda: log.exists() and len(read_log(log)[0]) > 20, timeout=60)  # under way
+    started = children(match.pid)
+    assert sorted(command.split()[3] for command in started.values()) == ["agent", "agent", "recorder", "sim"]
+    os.kill(match.pid, sig)
+    assert match.wait(20) == 1
+    assert last_line(match) == "tsf match: match signalled was stopped before its end; its processes ended"
+    assert [pid for pid in started if alive(pid)] == []
+
+
+def test_a_service_that_fails_fails_the_match(tsf_match, tmp_path, wait_until):
+    match = tsf_match("--duration", "3", "--match", "failing")
+    log = tmp_path / "failing.tsflog"
+    assert wait_until(lambda: log.exists() and len(read_log(log)[0]) > 20, timeout=60)
+    [recorder] = [pid for pid, command in children(match.pid).items() if command.split()[3] == "recorder"]
+    os.kill(recorder, signal.SIGKILL)
+    assert match.wait(30) == 1
+    assert last_line(match) == "tsf match: match failing: recorder exited with status -9"

@@ -1,0 +1,249 @@
+"""A user's mistakes across the commands, run in-process as `tsf` runs them (services/entry.py): each
+ends in one line that names the option, the value and what is accepted, exit status 2 (usage) or 1
+(failure), and never a traceback."""
+
+from __future__ import annotations
+
+import shlex
+import shutil
+import signal
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from services.agent import library
+from services.cli import app
+from services.entry import run
+from services.recorder.recording_test import M, record_match
+from shared.errors import UsageError
+
+BAITS = "B1, B2, B3, B4, B5, B6, B7, B8, B9, circle, idle, random"
+SHOOTERS = "S1, S2, S3, S4, S5, S6, S7, mirror, idle, random"
+STRATEGIES = "cem, cem-dwell, cem-ood, bayes, bayes-dwell-ood"
+
+# (command line, exit status, what the one line says); {tmp} is a directory that holds the finished
+# recording {done} (match id M), its torn copy {torn}, one with a wrong state hash {tampered}, and
+# {garbage}, a file that is no recording.
+MISTAKES = [
+    ("nosuch", 2, "tsf: No such command 'nosuch'."),
+    ("game --nosuch", 2, "tsf game: No such option: --nosuch"),
+    ("game --games 0", 2, "Invalid value for '--games': Input should be greater than or equal to 1"),
+    ("game --frames 0", 2, "Invalid value for '--frames'"),
+    ("game --seed x", 2, "Invalid value for '--seed': Input should be a valid integer"),
+    ("game --bait B99", 2, f"tsf game: --bait B99: no policy of the bait seat; valid: {BAITS}"),
+    ("game --bait S4", 2, f"tsf game: --bait S4: plays the shooter seat, not the bait; valid: {BAITS}"),
+    (
+        "game --shooter circle",
+        2,
+        f"--shooter circle: plays the bait seat, not the shooter; valid: {SHOOTERS}",
+    ),
+    ("game --shooter B1", 2, f"--shooter B1: plays the bait seat, not the shooter; valid: {SHOOTERS}"),
+    ("calibrate --games 1", 2, "Invalid value for '--games': Input should be greater than or equal to 2"),
+    ("train NOPE", 2, "tsf train: KEYS NOPE: not a learned policy of the library; valid: B"),
+    ("train --steps 0", 2, "Invalid value for '--steps'"),
+    ("diversity --games 0", 2, "Invalid value for '--games'"),
+    (
+        "diversity --bait-partner B1",
+        2,
+        f"--bait-partner B1: plays the bait seat, not the shooter; valid: {SHOOTERS}",
+    ),
+    (
+        "diversity --shooter-partner ZZ",
+        2,
+        f"--shooter-partner ZZ: no policy of the bait seat; valid: {BAITS}",
+    ),
+    ("sweep --baits B99", 2, "tsf sweep: Invalid value: not baits of the library: ['B99']"),
+    ("sweep --shooters B1", 2, "not shooters of the library: ['B1']"),
+    ("sweep --games 0", 2, "Invalid value for '--games'"),
+    ("sweep --chunk 0", 2, "Invalid value for '--chunk'"),
+    ("sweep --mode banana", 2, "tsf sweep: --mode banana: unknown zenoh mode; valid: peer, client, router"),
+    ("worker --mode banana", 2, "tsf worker: --mode banana: unknown zenoh mode"),
+    ("worker --connect nowhere", 2, "--connect nowhere: not a zenoh endpoint such as tcp/127.0.0.1:7447"),
+    (
+        "table {tmp}/none.json",
+        2,
+        "tsf table: Invalid value for 'path': file '{tmp}/none.json' does not exist.",
+    ),
+    ("sim --match a/b", 2, "tsf sim: --match a/b: invalid match id: use 1-64 letters, digits, '-' or '_'"),
+    ("sim --match x --sim-mode fast", 2, "tsf sim: --sim-mode fast: unknown; valid: realtime, lockstep"),
+    ("sim --match x --frames 0", 2, "Invalid value for '--frames'"),
+    ("sim --match x --listen garbage", 2, "tsf sim: --listen garbage: not a zenoh endpoint"),
+    ("sim --match x --mode hub", 2, "tsf sim: --mode hub: unknown zenoh mode"),
+    (
+        "agent --match x --role pilot --policy circle",
+        2,
+        "tsf agent: --role pilot: not a seat; valid: bait, shooter",
+    ),
+    (
+        "agent --match x --role bait --policy S4",
+        2,
+        f"--policy S4: plays the shooter seat, not the bait; valid: {BAITS}",
+    ),
+    (
+        "agent --match x --role shooter --policy zz",
+        2,
+        f"--policy zz: no policy of the shooter seat; valid: {SHOOTERS}",
+    ),
+    ("agent --match x --policy circle", 2, "tsf agent: Missing option '--role'."),
+    ("agent --match 'bad id' --role bait --policy circle", 2, "--match bad id: invalid match id"),
+    ("recorder --match x/y", 2, "tsf recorder: --match x/y: invalid match id"),
+    ("recorder --match " + M + " --out {tmp}", 2, f"--match {M}: {{done}} holds a finished match of this id"),
+    ("adapter --match x --role pilot", 2, "tsf adapter: --role pilot: unknown; valid: bait, shooter"),
+    (
+        "adapter --match x --strategy oracle",
+        2,
+        f"tsf adapter: --strategy oracle: unknown; valid: {STRATEGIES}",
+    ),
+    ("adapter --match x --initial best", 2, "--initial best: unknown; valid: best-average, random"),
+    ("adapter --match x --window 0", 2, "Invalid value for '--window'"),
+    ("adapter --match x --hazard 1.5", 2, "Invalid value for '--hazard'"),
+    ("adapter --match x --noise -1", 2, "Invalid value for '--noise'"),
+    ("router --credentials {tmp}/none.txt", 2, "tsf router: --credentials {tmp}/none.txt: no such file"),
+    ("alive --match x --service banana", 2, "--service banana: unknown service; valid: sim, agent, recorder"),
+    ("alive --match x --service agent --role pilot", 2, "tsf alive: --role pilot: unknown role; valid: bait"),
+    ("match --bait B99", 2, f"tsf match: --bait B99: no policy of the bait seat; valid: {BAITS}"),
+    ("match --bait S4", 2, f"tsf match: --bait S4: plays the shooter seat, not the bait; valid: {BAITS}"),
+    (
+        "match --shooter B1",
+        2,
+        f"tsf match: --shooter B1: plays the bait seat, not the shooter; valid: {SHOOTERS}",
+    ),
+    ("match --shooter circle", 2, "tsf match: --shooter circle: plays the bait seat, not the shooter"),
+    ("match --adaptive pilot", 2, "tsf match: --adaptive pilot: not a seat; valid: bait, shooter"),
+    ("match --adaptive shooter --strategy oracle", 2, f"--strategy oracle: unknown; valid: {STRATEGIES}"),
+    (
+        "match --adaptive bait --bait zz --shooter zz",
+        2,
+        "tsf match: --shooter zz: no policy of the shooter seat",
+    ),
+    ("match --duration 0", 2, "Invalid value for '--duration'"),
+    ("match --window 0", 2, "Invalid value for '--window'"),
+    ("match --seed abc", 2, "Invalid value for '--seed'"),
+    ("match --match a/b", 2, "tsf match: --match a/b: invalid match id"),
+    (
+        "match --match " + M + " --out {tmp}",
+        2,
+        f"--match {M}: {{done}} exists; choose another id, or --overwrite",
+    ),
+    (
+        "replay {tmp}/none.tsflog",
+        2,
+        "tsf replay: Invalid value for 'recording': file '{tmp}/none.tsflog' does not",
+    ),
+    ("replay {tmp}", 2, "tsf replay: Invalid value for 'recording': file '{tmp}' is a directory."),
+    ("replay", 2, "tsf replay: Missing argument 'recording'."),
+    ("replay {garbage}", 1, "tsf replay: {garbage} is not a TSF recording (bad magic)"),
+    ("replay {torn}", 1, "tsf replay: {torn}: incomplete: torn tail at bytes"),
+    ("replay {tampered}", 1, "tsf replay: {tampered}: 1 states differ, first at frame 17"),
+    (
+        "replay {done} --video {tmp}/m.avi",
+        2,
+        "tsf replay: --video {tmp}/m.avi: not a video file name; valid: *.gif",
+    ),
+    ("replay {done} --speed 0", 2, "Invalid value for '--speed'"),
+    ("replay {done} --scale 0", 2, "Invalid value for '--scale'"),
+    ("human --match x --token bait", 2, "tsf human: Invalid value: give each seat as ROLE=TOKEN"),
+    ("human --match x --token pilot=t", 2, "tsf human: --token pilot: unknown roles; valid: bait, shooter"),
+    ("human --match x --port 70000", 2, "Invalid value for '--port'"),
+    ("play --role pilot", 2, "tsf play: Invalid value: role is bait or shooter"),
+    ("play --partner B99", 2, f"tsf play: --partner B99: no policy of the shooter seat; valid: {SHOOTERS}"),
+    (
+        "play --role shooter --partner S4",
+        2,
+        f"tsf play: --partner S4: plays the shooter seat, not the bait; valid: {BAITS}",
+    ),
+    ("play --strategy oracle", 2, f"tsf play: --strategy oracle: unknown; valid: {STRATEGIES}"),
+    ("play --window 0", 2, "Invalid value for '--window'"),
+    ("play --match a/b --partner S4", 2, "tsf play: --match a/b: invalid match id"),
+    ("eval --role pilot", 2, "tsf eval: --role pilot: not a seat; valid: bait, shooter"),
+    ("eval --windows 1,x", 2, "tsf eval: --windows 1,x: not whole numbers separated by commas"),
+    ("eval --strategy-window 0", 2, "Invalid value for '--strategy-window'"),
+    ("calibrate-adapter --workers -1", 2, "Invalid value for '--workers'"),
+    ("report", 2, "tsf report: Missing argument 'recordings'."),
+    ("report {done} --partner-role pilot", 2, "Invalid value for --partner-role: bait or shooter"),
+    ("report {done} --reference-games 0", 2, "Invalid value for '--reference-games'"),
+    ("report {garbage} {torn} --out {tmp}/report", 1, "none of the 2 recordings is usable; {tmp}/report"),
+    (
+        "study {tmp}/none.toml",
+        2,
+        "tsf study: Invalid value for 'config': file '{tmp}/none.toml' does not exist.",
+    ),
+    ("study {garbage}", 2, "tsf study: CONFIG {garbage}: not a study: Expected '=' after a key"),
+    ("study {tmp}/empty.toml", 2, "tsf study: CONFIG {tmp}/empty.toml: not a study: "),
+]
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
+    tmp = tmp_path_factory.mktemp("mistakes")
+    done = tmp / f"{M}.tsflog"
+    record_match(done)
+    record_match(tmp / "tampered.tsflog", tamper=17)
+    torn = tmp / "torn.tsflog"
+    torn.write_bytes(done.read_bytes()[: done.stat().st_size // 2])
+    (tmp / "garbage").write_text("this is no recording\n")
+    (tmp / "empty.toml").write_text("")
+    names = {"done": done, "torn": torn, "tampered": tmp / "tampered.tsflog", "garbage": tmp / "garbage"}
+    return {"tmp": str(tmp), **{name: str(path) for name, path in names.items()}}
+
+
+@pytest.fixture(autouse=True)
+def signals_kept() -> Iterator[None]:
+    """Commands install their signal handlers in this process: put pytest's back."""
+    kept = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
+    yield
+    for sig, handler in kept.items():
+        signal.signal(sig, handler)
+
+
+def tsf(args: list[str], capsys: pytest.CaptureFixture) -> tuple[int, list[str]]:
+    """Run `tsf ARGS` in-process; its exit status and the lines it wrote to stderr."""
+    status = run(app, args)
+    return status, capsys.readouterr().err.splitlines()
+
+
+@pytest.mark.parametrize(("line", "status", "said"), MISTAKES, ids=[m[0][:60] for m in MISTAKES])
+def test_a_mistake_is_one_line_and_an_exit_status(
+    line: str, status: int, said: str, files: dict[str, str], capsys: pytest.CaptureFixture
+) -> None:
+    args = [a.format(**files) for a in shlex.split(line)]
+    got, lines = tsf(args, capsys)
+    assert (got, len(lines)) == (status, 1), lines
+    assert said.format(**files) in lines[0] and "Traceback" not in lines[0]
+    assert lines[0].startswith("tsf")
+
+
+def test_enough_mistakes_are_tried() -> None:
+    assert len(MISTAKES) >= 60 and len({m[0] for m in MISTAKES}) == len(MISTAKES)
+
+
+def test_train_without_the_train_extra_says_which_extra(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> None:
+    monkeypatch.setitem(sys.modules, "torch", None)  # as if torch were not installed
+    monkeypatch.delitem(sys.modules, "services.agent.train", raising=False)
+    status, lines = tsf(["train", library.learned([])[0]], capsys)
+    assert status == 1 and len(lines) == 1
+    assert lines[0].startswith("tsf train: import of torch halted") and "the `train` extra" in lines[0]
+
+
+def test_debug_shows_the_traceback(files: dict[str, str], capsys: pytest.CaptureFixture) -> None:
+    with pytest.raises(UsageError, match="--bait B99"):
+        run(app, ["game", "--bait", "B99", "--debug"])
+    assert tsf(["game", "--bait", "B99"], capsys)[0] == 2
+
+
+def test_no_command_shows_the_help(capsys: pytest.CaptureFixture) -> None:
+    assert run(app, []) == 0
+    assert "Team Space Fortress" in capsys.readouterr().out
+
+
+def test_the_installed_command_is_the_entry(tmp_path: Path) -> None:
+    """`tsf` on PATH (pyproject's script) goes through services.entry too."""
+    tsf_path = shutil.which("tsf", path=str(Path(sys.executable).parent))
+    assert tsf_path is not None
+    done = subprocess.run([tsf_path, "game", "--bait", "B99"], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and done.stderr.startswith("tsf game: --bait B99") and not done.stdout

@@ -2,7 +2,7 @@
 
 (a) one policy, one observation (probs); (b) all policies of a role, one observation; (c) all
 policies of a role, a batch of 64 observations (per observation). Observations come from a
-seeded game of the scripted pair; each policy reads them in its own frame.
+seeded game of the scripted pair; each policy reads them in its own view.
 
     .venv/bin/python bench/policies.py [--repeat N]
 """
@@ -56,8 +56,8 @@ def main() -> None:
 
 def report(role: str, states: list[list[float]], repeat: int) -> None:
     policies = [library.load(k) for k in library.keys(role)]
-    obs = {p.key: as_observation(states[0], p.frame) for p in policies}
-    batches = {p.key: np.stack([as_observation(s, p.frame) for s in states]) for p in policies}
+    obs = {p.key: as_observation(states[0], p.view) for p in policies}
+    batches = {p.key: np.stack([as_observation(s, p.view) for s in states]) for p in policies}
     print(f"{role}s ({len(policies)} policies)")
     for p in policies:
         t = per_call(lambda p=p: p.probs(obs[p.key]), repeat)

@@ -79,7 +79,7 @@ class Policy(Protocol):
 
     key: str
     role: str
-    frame: str  # the observation frame it reads: "world" or "role"
+    view: str  # the observation view it reads: "world" or "role"
 
     def reset(self, seed: int | None = None) -> None: ...
 

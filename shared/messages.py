@@ -119,7 +119,7 @@ class Message:
 class State(Message):
     """One frame of the game, published by the sim after stepping.
 
-    `obs` holds each role's world-frame observation values (float64, docs/observation.md), from
+    `obs` holds each role's world-view observation values (float64, docs/observation.md), from
     which agents build their policy's input; `snapshot` holds what a viewer or the recorder needs
     beyond them: ships [x, y, vx, vy, heading, alive], fortress [facing, alive, vulnerable, lock,
     since_shell], every missile [x, y, vx, vy, owner] and shell [x, y, vx, vy]."""

@@ -77,7 +77,7 @@ def test_malformed_partner_actions_are_dropped_and_never_averaged(bus, tap, back
     for frame in range(40):
         state = state_message(game, match, "sim", (0, 0))
         z.put(keys.state(match), state.encode(), **BLOCK)
-        action = partner.act(observe(game, "bait", partner.frame))
+        action = partner.act(observe(game, "bait", partner.view))
         bad = [
             b"\xc1 not msgpack",
             Action(

@@ -75,7 +75,7 @@ def test_one_action_per_state_as_the_policy_plays_it(seat, wait_until, role, pol
     reference = policy_for(policy, role)
     reference.reset(policy_seed(SEED, role))
     for _ in range(FRAMES):
-        expected = reference.act(observe(sim.game, role, reference.frame))
+        expected = reference.act(observe(sim.game, role, reference.view))
         action = sim.step(wait_until)
         assert (action.match, action.role, action.policy, action.action) == (MATCH, role, policy, expected)
     assert sim.end(wait_until, agent) == Counter()

@@ -59,7 +59,7 @@ def clean_run() -> tuple[list[str], tuple]:
     hashes = [game.state_hash()]
     while not game.done:
         game.step(
-            bait.act(observe(game, "bait", bait.frame)), shooter.act(observe(game, "shooter", shooter.frame))
+            bait.act(observe(game, "bait", bait.view)), shooter.act(observe(game, "shooter", shooter.view))
         )
         hashes.append(game.state_hash())
     return hashes, (game.kills, game.points, game.counters())

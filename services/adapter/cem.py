@@ -1,8 +1,8 @@
 """The cross-entropy metric (CEM): how likely a library policy finds another player's actions.
 
 The similarity of a player to a policy is the mean log-probability the policy gives the player's
-actions in the states the player saw. States are kept as world-frame values (what the sim
-publishes), so that each policy reads them in its own observation frame.
+actions in the states the player saw. States are kept as world-view values (what the sim
+publishes), so that each policy reads them in its own observation view.
 """
 
 from __future__ import annotations
@@ -21,19 +21,19 @@ from shared.game import ROLES, GameConfig, Policy, bait_first
 def log_probs(
     policies: Sequence[Policy], states: Sequence[Sequence[float]], actions: Sequence[int]
 ) -> np.ndarray:
-    """The similarity score, (n, K): log pi_k(a_t | s_t) of a player's n (world-frame state values,
-    action) pairs under each of K policies. Every policy reads the states in its own frame, and its
+    """The similarity score, (n, K): log pi_k(a_t | s_t) of a player's n (world-view state values,
+    action) pairs under each of K policies. Every policy reads the states in its own view, and its
     probabilities come from one batched evaluation (library.batch_probs) over all n states."""
-    frames = {p.frame for p in policies}
-    observed = {f: np.stack([as_observation(s, f) for s in states]) for f in sorted(frames)}
+    views = {p.view for p in policies}
+    observed = {v: np.stack([as_observation(s, v) for s in states]) for v in sorted(views)}
     rows = np.arange(len(actions))
-    return np.log(np.stack([batch_probs(p, observed[p.frame])[rows, actions] for p in policies], axis=1))
+    return np.log(np.stack([batch_probs(p, observed[p.view])[rows, actions] for p in policies], axis=1))
 
 
 def rollout(
     policy: Policy, partner: Policy, seed: int, config: GameConfig | None = None
 ) -> tuple[list[list[float]], list[int]]:
-    """The (world-frame state, action) stream of `policy`'s seat over one game with `partner`."""
+    """The (world-view state, action) stream of `policy`'s seat over one game with `partner`."""
     role = policy.role
     states: list[list[float]] = []
     actions: list[int] = []

@@ -178,7 +178,7 @@ class Window:
 
 
 class Scorer:
-    """log pi_k(a | s) under every library policy k of one role, from world-frame state values."""
+    """log pi_k(a | s) under every library policy k of one role, from world-view state values."""
 
     def __init__(self, policies: list[Policy]) -> None:
         self.policies = policies

@@ -55,7 +55,7 @@ class Outcome:
     kills_per_minute: float
     switches: int = 0
     timeline: list[tuple[int, str, str]] = field(default_factory=list)  # (frame, estimate, policy)
-    values: list[list[float]] = field(default_factory=list)  # the partner's world-frame states
+    values: list[list[float]] = field(default_factory=list)  # the partner's world-view states
     actions: list[int] = field(default_factory=list)  # and actions, when recorded
 
 
@@ -79,8 +79,8 @@ def play_partner(
     ours.reset(policy_seed(seed, role))
     outcome = Outcome(0.0)
     while not game.done:
-        partner_action = partner.act(observe(game, partner_role, partner.frame))
-        our_action = ours.act(observe(game, role, ours.frame))
+        partner_action = partner.act(observe(game, partner_role, partner.view))
+        our_action = ours.act(observe(game, role, ours.view))
         if adapter is not None or record:
             values = world_values(game, partner_role)
         if record:

@@ -8,7 +8,7 @@ any worker process:
     delayed(B5)        acts on the state of DELAY frames ago (a reaction time of 0.2 s)
     sticky(B5)         repeats its previous action with probability STICKY (keys held too long)
     switch(B5,B7)      plays B5 until SWITCH_AT, then B7 (a partner who changes style mid-game)
-    package.module:attr  your own partner: an object with the policy protocol's key, role, frame,
+    package.module:attr  your own partner: an object with the policy protocol's key, role, view,
                          reset(seed) and act(obs), or a callable that returns a new one
 
 Wrappers nest: `noisy(switch(B5,B7))`.
@@ -40,7 +40,7 @@ class Partner(Protocol):
 
     key: str
     role: str
-    frame: str
+    view: str
 
     def reset(self, seed: int | None = None) -> None: ...
 
@@ -52,7 +52,7 @@ class Wrapper:
 
     def __init__(self, inner: Partner, key: str) -> None:
         self.inner, self.key = inner, key
-        self.role, self.frame = inner.role, inner.frame
+        self.role, self.view = inner.role, inner.view
         self.rng = random.Random(0)
 
     def reset(self, seed: int | None = None) -> None:
@@ -102,8 +102,8 @@ class Sticky(Wrapper):
 
 class Switching(Wrapper):
     def __init__(self, first: Partner, second: Partner, at: int = SWITCH_AT) -> None:
-        if first.role != second.role or first.frame != second.frame:
-            raise ValueError(f"switch({first.key},{second.key}): both must share role and observation frame")
+        if first.role != second.role or first.view != second.view:
+            raise ValueError(f"switch({first.key},{second.key}): both must share role and observation view")
         super().__init__(first, f"switch({first.key},{second.key})")
         self.second, self.at, self.t = second, at, 0
 
@@ -149,7 +149,7 @@ def _external(path: str, role: str) -> Partner:
     found = getattr(importlib.import_module(module), attr)
     partner = found() if isinstance(found, type) or not isinstance(found, Partner) else found
     if not isinstance(partner, Partner):
-        raise TypeError(f"{path} is not a partner (key, role, frame, reset, act)")
+        raise TypeError(f"{path} is not a partner (key, role, view, reset, act)")
     if partner.role != role:
         raise ValueError(f"{path} plays {partner.role}, not {role}")
     return partner

@@ -22,7 +22,7 @@ from shared.game import N_ACTIONS
 class Counting:
     """A partner whose action is the first observation value: shows which observation it acted on."""
 
-    key, role, frame = "counting", "bait", "world"
+    key, role, view = "counting", "bait", "world"
 
     def reset(self, seed: int | None = None) -> None:
         pass

@@ -59,7 +59,7 @@ class Recipe:
     algorithm: str | None = None  # A2C, PPO, TRPO, DQN; None for a rule-based policy
     learned: tuple[str, ...] = ()  # heads the network chooses
     features: str = ""
-    frame: str = "role"
+    view: str = "role"
     reward: str = ""
     weights: dict[str, float] = field(default_factory=dict)  # reward term weights
     speed_cap: float = 0.0  # px/frame, the thrust rule's cap
@@ -79,6 +79,8 @@ def registry(root: Path = LIBRARY) -> dict[str, Recipe]:
     recipes = {}
     for key, entry in raw.items():
         entry = {k: tuple(v) if isinstance(v, list) else v for k, v in entry.items()}
+        if "frame" in entry:  # the registry's name for the view; renaming it would unbind the table
+            entry["view"] = entry.pop("frame")
         recipe = Recipe(key=key, **entry)
         if recipe.role not in ROLES:
             raise ValueError(f"registry entry {key}: unknown role {recipe.role!r}")
@@ -123,7 +125,7 @@ def rule_heads(recipe: Recipe, obs: np.ndarray, config: GameConfig) -> dict[str,
     A bait thrusts while under the recipe's speed cap and never fires. A shooter thrusts as the
     mirror shooter with the recipe's speed cap would (toward the point opposite the bait, holding
     once there) and fires when the shot is good (scripted.good_shot). Shooter rules read the
-    world frame."""
+    world view."""
     out = {}
     if recipe.role == "bait":
         if "thrust" not in recipe.learned:
@@ -184,7 +186,7 @@ class LearnedPolicy:
 
     def __init__(self, recipe: Recipe, network: Network, config: GameConfig | None = None) -> None:
         self.recipe, self.network = recipe, network
-        self.key, self.role, self.frame = recipe.key, recipe.role, recipe.frame
+        self.key, self.role, self.view = recipe.key, recipe.role, recipe.view
         self.config = config or GameConfig()
         self.features = np.array(FEATURES[recipe.features])
         self.rng = random.Random(0)
@@ -253,7 +255,7 @@ class MirrorVariant(MirrorShooter):
 
     def __init__(self, recipe: Recipe) -> None:
         super().__init__(**recipe.rule)
-        self.key, self.role, self.frame = recipe.key, recipe.role, "world"
+        self.key, self.role, self.view = recipe.key, recipe.role, "world"
 
 
 def load(key: str, config: GameConfig | None = None, root: Path = LIBRARY) -> Policy:

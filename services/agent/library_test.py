@@ -17,13 +17,13 @@ from shared.game import N_ACTIONS, ROLES, GameConfig, Policy
 KEYS = library.keys()
 
 
-def observations(role: str, frame: str, n: int = 40) -> list[np.ndarray]:
+def observations(role: str, view: str, n: int = 40) -> list[np.ndarray]:
     """Observations from a few frames of random play (ships moving, shells flying)."""
     game, rng, out = Game(GameConfig(), seed=3), np.random.default_rng(0), []
     for _ in range(n * 10):
         game.step(int(rng.integers(N_ACTIONS)), int(rng.integers(N_ACTIONS)))
         if game.frame % 10 == 0:
-            out.append(observe(game, role, frame))
+            out.append(observe(game, role, view))
     return out
 
 
@@ -41,9 +41,9 @@ def test_policy_conforms_and_never_gives_zero(key):
     policy = library.load(key)
     recipe = library.registry()[key]
     assert isinstance(policy, Policy)
-    assert (policy.key, policy.role) == (key, recipe.role) and policy.frame in ("world", "role")
+    assert (policy.key, policy.role) == (key, recipe.role) and policy.view in ("world", "role")
     policy.reset(7)
-    for obs in observations(policy.role, policy.frame):
+    for obs in observations(policy.role, policy.view):
         p = policy.probs(obs)
         assert p.shape == (N_ACTIONS,)
         assert p.sum() == pytest.approx(1.0, abs=1e-9)
@@ -54,7 +54,7 @@ def test_policy_conforms_and_never_gives_zero(key):
 @pytest.mark.parametrize("key", ["B1", "B5", "S1", "S4"])
 def test_act_samples_the_distribution_probs_reports(key):
     policy = library.load(key)
-    obs = observations(policy.role, policy.frame)[5]
+    obs = observations(policy.role, policy.view)[5]
     p = policy.probs(obs)
     policy.reset(1)
     n = 4000

@@ -43,7 +43,7 @@ class Player:
                 self.policy, self.pending = self._next, None
                 self.policy.reset(switch_seed(self.seed, self.role, state.frame))
             policy = self.policy
-        action = policy.act(as_observation(state.obs[self.role], policy.frame))
+        action = policy.act(as_observation(state.obs[self.role], policy.view))
         return Action(
             match=state.match,
             frame=state.frame,

@@ -41,7 +41,7 @@ def play(player: Player, switches: dict[int, str] | None = None) -> list[Action]
 class Recorder:
     """A fake policy that remembers the seeds it was reset with and plays a fixed action."""
 
-    frame = "world"
+    view = "world"
 
     def __init__(self, key: str, role: str) -> None:
         self.key, self.role, self.seeds = key, role, []

@@ -26,7 +26,7 @@ class RulePolicy:
     EPSILON = 0.01
     key = "rule"
     role = "bait"
-    frame = "world"
+    view = "world"
 
     def __init__(self, epsilon: float = EPSILON) -> None:
         if not 0.0 < epsilon < 1.0:
@@ -64,7 +64,7 @@ class RulePolicy:
 class UniformPolicy:
     """Every action equally likely: the random baseline."""
 
-    frame = "world"
+    view = "world"
 
     def __init__(self, role: str, key: str = "random") -> None:
         self.role, self.key = role, key

@@ -6,7 +6,7 @@
   circle rather than through the region, faces the fortress and fires into the open rear when the
   missile will arrive inside the vulnerability window.
 - `idle`: never acts (a lone-ship baseline for the other seat).
-All read the world-frame observation (services/sim/observation.py).
+All read the world-view observation (services/sim/observation.py).
 """
 
 from __future__ import annotations
@@ -172,7 +172,7 @@ class MirrorShooter(RulePolicy):
 def good_shot(obs: np.ndarray, config: GameConfig, aim_tolerance: float, rear_tolerance: float) -> bool:
     """Whether a missile fired now flies into the open rear before the vulnerability window shuts:
     the ship faces the fortress within `aim_tolerance` and sits within `rear_tolerance` of the
-    rear (degrees). Works in either observation frame."""
+    rear (degrees). Works in either observation view."""
     x, y, _, _ = _ship(obs, ob.SELF)
     cos_h, sin_h = float(obs[ob.SELF + ob.COS]), float(obs[ob.SELF + ob.SIN])
     to_fortress = math.atan2(-y, -x)

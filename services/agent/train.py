@@ -89,7 +89,7 @@ REWARDS: dict[str, Callable[[Game, str, list[Event], dict[str, float]], float]] 
 class PartnerPool:
     """Plays one of several partner policies per game, drawn from the game's partner seed."""
 
-    frame = "world"
+    view = "world"
 
     def __init__(self, partners: list[Policy]) -> None:
         self.partners = partners
@@ -99,7 +99,7 @@ class PartnerPool:
     def reset(self, seed: int | None = None) -> None:
         self.current = random.Random(seed).choice(self.partners)
         self.current.reset(seed)
-        self.frame = self.current.frame
+        self.view = self.current.view
 
     def act(self, obs: np.ndarray) -> int:
         return self.current.act(obs)
@@ -119,7 +119,7 @@ class RecipeEnv(gymnasium.Env):
         weights = dict(recipe.weights)
         reward = REWARDS[recipe.reward]
         self.env = RoleEnv(
-            recipe.role, partners, self.config, recipe.frame, lambda g, r, e: reward(g, r, e, weights)
+            recipe.role, partners, self.config, recipe.view, lambda g, r, e: reward(g, r, e, weights)
         )
         self.features = np.array(FEATURES[recipe.features])
         bound = self.env.observation_space.high[0]

@@ -26,7 +26,7 @@ def test_smoke_training_exports_a_loadable_policy(tmp_path, key):
     assert entry["steps"] == 300 and entry["score"]["games"] == 1
     assert (tmp_path / "logs" / "progress.csv").exists()
     policy = library.load(key, root=root)
-    p = policy.probs(observations(policy.role, policy.frame)[0])
+    p = policy.probs(observations(policy.role, policy.view)[0])
     assert p.min() > 0 and p.sum() == pytest.approx(1.0)
 
 
@@ -39,7 +39,7 @@ def test_numpy_network_matches_torch(tmp_path, key):
     arrays = export(model, recipe)
     arrays.pop("meta")
     network = library.Network(arrays, "relu" if recipe.algorithm == "DQN" else "tanh")
-    features = np.stack(observations(recipe.role, recipe.frame))[:, library.FEATURES[recipe.features]]
+    features = np.stack(observations(recipe.role, recipe.view))[:, library.FEATURES[recipe.features]]
     with th.no_grad():
         x = th.as_tensor(features)
         if recipe.algorithm == "DQN":

@@ -108,7 +108,7 @@ def most_played(match: Match, role: str) -> str:
 
 
 def partner_stream(match: Match, role: str) -> pd.DataFrame:
-    """The partner's (frame, world-frame observation, action) pairs, one per answered frame."""
+    """The partner's (frame, world-view observation, action) pairs, one per answered frame."""
     actions = match.tables["actions"].query("role == @role").drop_duplicates("frame", keep="last")
     states = match.tables["states"][["frame", f"{role}_obs"]].rename(columns={f"{role}_obs": "obs"})
     return actions[["frame", "action"]].merge(states, on="frame").sort_values("frame", ignore_index=True)

@@ -103,7 +103,7 @@ def csv(out: Path, name: str) -> pd.DataFrame:
 
 
 def stream(recording: Recording, role: str) -> tuple[list[list[float]], list[int]]:
-    """The partner's (world-frame state, action) pairs straight from the decoded recording."""
+    """The partner's (world-view state, action) pairs straight from the decoded recording."""
     obs = {s.frame: s.obs[role] for s in recording.states}
     pairs = {a.frame: a.action for _, a in recording.actions if a.role == role and a.frame in obs}
     frames = sorted(pairs)

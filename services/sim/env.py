@@ -18,7 +18,7 @@ from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
 from services.sim.engine import Event, Game
-from services.sim.observation import FRAMES, POSITION_SCALE, VELOCITY_SCALE, observe
+from services.sim.observation import POSITION_SCALE, VELOCITY_SCALE, VIEWS, observe
 from services.sim.play import policy_seed
 from services.sim.render import render
 from shared.game import FPS, N_ACTIONS, OBS_SIZE, ROLES, GameConfig, Policy, bait_first, check_role
@@ -49,9 +49,9 @@ def _info(game: Game, events: list[Event]) -> dict[str, Any]:
     return {"events": [event._asdict() for event in events], "state_hash": game.state_hash()}
 
 
-def _check_modes(frame: str, render_mode: str | None) -> None:
-    if frame not in FRAMES:
-        raise ValueError(f"unknown observation frame {frame!r}; expected one of {FRAMES}")
+def _check_modes(view: str, render_mode: str | None) -> None:
+    if view not in VIEWS:
+        raise ValueError(f"unknown observation view {view!r}; expected one of {VIEWS}")
     if render_mode is not None and render_mode not in RENDER_MODES:
         raise ValueError(f"unknown render mode {render_mode!r}; expected one of {RENDER_MODES}")
 
@@ -62,11 +62,11 @@ class TSFParallelEnv(ParallelEnv):
     metadata = {"name": "tsf_v0", "render_modes": list(RENDER_MODES), "render_fps": FPS}
 
     def __init__(
-        self, config: GameConfig | None = None, frame: str = "world", render_mode: str | None = None
+        self, config: GameConfig | None = None, view: str = "world", render_mode: str | None = None
     ) -> None:
-        _check_modes(frame, render_mode)
+        _check_modes(view, render_mode)
         self.config = config or GameConfig()
-        self.frame = frame
+        self.view = view
         self.render_mode = render_mode
         self.possible_agents = list(ROLES)
         self.agents: list[str] = []
@@ -108,11 +108,11 @@ class TSFParallelEnv(ParallelEnv):
         return render(self.game) if self.render_mode == "rgb_array" else None
 
     def _observations(self) -> dict[str, np.ndarray]:
-        return {role: observe(self.game, role, self.frame) for role in ROLES}
+        return {role: observe(self.game, role, self.view) for role in ROLES}
 
 
 class RoleEnv(gymnasium.Env):
-    """One role's seat; the partner policy plays the other seat, reading its own observation frame,
+    """One role's seat; the partner policy plays the other seat, reading its own observation view,
     and is reset at each reset with the seed play() would give it."""
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": FPS}
@@ -122,17 +122,17 @@ class RoleEnv(gymnasium.Env):
         role: str,
         partner: Policy,
         config: GameConfig | None = None,
-        frame: str = "world",
+        view: str = "world",
         reward: Reward | None = None,
         render_mode: str | None = None,
     ) -> None:
         check_role(role)
         if partner.role == role:
             raise ValueError(f"the partner policy {partner.key!r} plays {role}, the seat being trained")
-        _check_modes(frame, render_mode)
+        _check_modes(view, render_mode)
         self.role, self.partner = role, partner
         self.config = config or GameConfig()
-        self.frame = frame
+        self.view = view
         self.reward = reward
         self.render_mode = render_mode
         self.observation_space = observation_space(self.config)
@@ -143,19 +143,19 @@ class RoleEnv(gymnasium.Env):
         super().reset(seed=seed)
         self.game = Game(self.config, _game_seed(self.np_random, seed))
         self.partner.reset(policy_seed(self.game.seed, self.partner.role))
-        return observe(self.game, self.role, self.frame), _info(self.game, [])
+        return observe(self.game, self.role, self.view), _info(self.game, [])
 
     def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict]:
         game = self.game
         before = game.points
-        partner_action = self.partner.act(observe(game, self.partner.role, self.partner.frame))
+        partner_action = self.partner.act(observe(game, self.partner.role, self.partner.view))
         actions = bait_first(self.role, action, partner_action)
         events = game.step(*actions)
         if self.reward is None:
             reward = float(game.points - before)
         else:
             reward = float(self.reward(game, self.role, events))
-        return observe(game, self.role, self.frame), reward, False, game.done, _info(game, events)
+        return observe(game, self.role, self.view), reward, False, game.done, _info(game, events)
 
     def render(self) -> np.ndarray | None:
         return render(self.game) if self.render_mode == "rgb_array" else None

@@ -8,17 +8,17 @@ from services.agent.scripted import CircleBait, Idle, MirrorShooter
 from services.sim import observation
 from services.sim.engine import Game
 from services.sim.env import RoleEnv, TSFParallelEnv
-from services.sim.observation import FRAMES, observe
+from services.sim.observation import VIEWS, observe
 from services.sim.play import play
 from shared.game import OBS_SIZE, GameConfig
 
 SHORT = GameConfig(frames=200)
 
 
-@pytest.mark.parametrize("frame", FRAMES)
-def test_parallel_env_passes_the_pettingzoo_api_test(frame):
-    parallel_api_test(TSFParallelEnv(SHORT, frame=frame), num_cycles=SHORT.frames + 10)
-    parallel_seed_test(lambda: TSFParallelEnv(SHORT, frame=frame), num_cycles=50)
+@pytest.mark.parametrize("view", VIEWS)
+def test_parallel_env_passes_the_pettingzoo_api_test(view):
+    parallel_api_test(TSFParallelEnv(SHORT, view=view), num_cycles=SHORT.frames + 10)
+    parallel_seed_test(lambda: TSFParallelEnv(SHORT, view=view), num_cycles=50)
 
 
 @pytest.mark.filterwarnings("ignore:.*Not able to test alternative render modes")
@@ -30,7 +30,7 @@ def test_role_env_passes_the_gymnasium_checker(role, partner):
 def test_same_seed_and_actions_give_the_same_observations():
     runs = []
     for _ in range(2):
-        env = TSFParallelEnv(SHORT, frame="role")
+        env = TSFParallelEnv(SHORT, view="role")
         rng = np.random.default_rng(1)
         obs, _ = env.reset(seed=5)
         trace = [obs["bait"], obs["shooter"]]
@@ -78,9 +78,9 @@ def test_role_env_trains_one_seat_against_a_partner_and_replays_play():
     assert env.game.kills == play(CircleBait(), MirrorShooter(), seed=0).kills > 0
 
 
-def test_role_env_reads_the_partner_in_its_own_frame_and_uses_a_custom_reward():
+def test_role_env_reads_the_partner_in_its_own_view_and_uses_a_custom_reward():
     partner = UniformPolicy("bait")
-    partner.frame = "role"
+    partner.view = "role"
     seen = []
     partner.act = lambda obs: seen.append(obs) or 0
     env = RoleEnv("shooter", partner, reward=lambda game, role, events: len(events) + 0.5)
@@ -93,8 +93,8 @@ def test_role_env_reads_the_partner_in_its_own_frame_and_uses_a_custom_reward():
 
 
 def test_observations_stay_inside_the_space_through_border_deaths():
-    for frame in FRAMES:
-        env = RoleEnv("bait", Idle("shooter"), frame=frame)
+    for view in VIEWS:
+        env = RoleEnv("bait", Idle("shooter"), view=view)
         obs, _ = env.reset(seed=0)
         borders = 0
         for step in range(600):
@@ -115,8 +115,8 @@ def test_invalid_actions_and_wrong_seats_raise():
         role_env.step(1.5)
     with pytest.raises(ValueError, match="plays bait"):
         RoleEnv("bait", CircleBait())
-    with pytest.raises(ValueError, match="observation frame"):
-        TSFParallelEnv(frame="fortress")
+    with pytest.raises(ValueError, match="observation view"):
+        TSFParallelEnv(view="fortress")
 
 
 def test_render_gives_an_image_only_in_rgb_array_mode():

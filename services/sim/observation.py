@@ -11,7 +11,7 @@ Layout (OBS_SIZE = 64 float32, documented in docs/observation.md; the offsets be
     [63]     time left, as a fraction of the game
 
 Positions are in units of POSITION_SCALE px, velocities of VELOCITY_SCALE px/frame, so values stay
-within a few units for learning. Two frames: "world" (fortress-centred, y up) and "role" (the same
+within a few units for learning. Two views: "world" (fortress-centred, y up) and "role" (the same
 picture rotated so that +y passes through the observing ship, as the original bait policies saw
 it). The fortress is the origin in both.
 """
@@ -43,28 +43,28 @@ TIME = MISSILES + N_MISSILES * PROJECTILE_SIZE
 X, Y, VX, VY, COS, SIN, ALIVE, IN_REGION = range(SHIP_SIZE)
 F_COS, F_SIN, F_ALIVE, F_VULNERABLE, F_LOCK_SELF, F_LOCK_PARTNER, F_SINCE_SHELL = range(7)
 
-FRAMES = ("world", "role")
+VIEWS = ("world", "role")  # the observation's coordinates (a "frame" is a time step)
 
 
-def observe(game: Game, role: str, frame: str = "world") -> np.ndarray:
-    """The observation vector of `role` (bait or shooter) in the given frame."""
-    return as_observation(world_values(game, role), frame)
+def observe(game: Game, role: str, view: str = "world") -> np.ndarray:
+    """The observation vector of `role` (bait or shooter) in the given view."""
+    return as_observation(world_values(game, role), view)
 
 
-def as_observation(values: list[float], frame: str = "world") -> np.ndarray:
+def as_observation(values: list[float], view: str = "world") -> np.ndarray:
     """World-frame values (as the sim publishes them) -> the float32 vector a policy reads.
 
-    The role frame is computed from the float64 world values here, in-process and on the bus alike,
+    The role view is computed from the float64 world values here, in-process and on the bus alike,
     so that a policy sees bit-identical input either way."""
-    if frame == "role":
-        values = to_role_frame(values)
-    elif frame != "world":
-        raise ValueError(f"unknown observation frame {frame!r}; expected one of {FRAMES}")
+    if view == "role":
+        values = to_role_view(values)
+    elif view != "world":
+        raise ValueError(f"unknown observation view {view!r}; expected one of {VIEWS}")
     return np.array(values, dtype=np.float32)
 
 
 def world_values(game: Game, role: str) -> list[float]:
-    """The observation of `role` in the world frame, as float64 values in the documented layout."""
+    """The observation of `role` in the world view, as float64 values in the documented layout."""
     me, them = ROLES.index(check_role(role)), ROLES.index(other(role))
     ship, partner = game.ships[me], game.ships[them]
     sx, sy = ship.body.position
@@ -112,8 +112,8 @@ _PAIRS = [
 ]
 
 
-def to_role_frame(values: list[float]) -> list[float]:
-    """Rotate world-frame values about the fortress so that +y passes through the observing ship."""
+def to_role_view(values: list[float]) -> list[float]:
+    """Rotate world-view values about the fortress so that +y passes through the observing ship."""
     rot = math.pi / 2 - math.atan2(values[SELF + Y], values[SELF + X])
     cr, sr = math.cos(rot), math.sin(rot)
     out = list(values)

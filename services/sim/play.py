@@ -45,8 +45,8 @@ def play(
     shooter.reset(policy_seed(seed, "shooter"))
     while not game.done:
         actions = (
-            bait.act(observe(game, "bait", bait.frame)),
-            shooter.act(observe(game, "shooter", shooter.frame)),
+            bait.act(observe(game, "bait", bait.view)),
+            shooter.act(observe(game, "shooter", shooter.view)),
         )
         if trace is not None:
             trace(game, *actions)

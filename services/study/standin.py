@@ -67,7 +67,7 @@ async def stand_in(
                 report.states += 1
                 if leave_after and report.states >= leave_after:
                     return report
-                keys = action_keys(policy.act(as_observation(message["obs"], policy.frame)))
+                keys = action_keys(policy.act(as_observation(message["obs"], policy.view)))
                 if keys != held:  # a person's keyboard reports changes, not frames
                     held = keys
                     await ws.send(json.dumps({"type": "keys", **keys}))

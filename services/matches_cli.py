@@ -42,9 +42,10 @@ def match_command(
 
     if adaptive and adaptive not in ROLES:
         raise UsageError("--adaptive", adaptive, "not a seat", ROLES)
+    config = adapter(role=adaptive or ROLES[1], seed=seed)  # its options are checked with or without
     plan = MatchPlan(
         match or new_match_id(), seed, round(duration * FPS), "lockstep" if lockstep else "realtime",
-        bait, shooter, out, adapter=adapter(role=adaptive, seed=seed) if adaptive else None,
+        bait, shooter, out, adapter=config if adaptive else None,
     )  # fmt: skip
     seats = plan.policies()
     view = {"partner": "-"}

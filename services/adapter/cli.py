@@ -12,7 +12,7 @@ from services.adapter.core import STRATEGIES, AdapterConfig
 from services.agent.library import policy_for
 from services.options import console
 from shared.errors import UsageError
-from shared.game import FPS, other
+from shared.game import FPS, ROLES, other
 
 commands = typer.Typer()
 
@@ -77,6 +77,8 @@ def eval_command(
     from services.adapter.partners import SWITCH_AT, population
     from services.agent import library
 
+    if role not in ROLES:
+        raise UsageError("--role", role, "not a seat", ROLES)
     workers = workers or os.cpu_count() or 1
     try:
         window_list = [int(w) for w in windows.split(",") if w.strip()]

@@ -20,7 +20,7 @@ import numpy as np
 
 from services.agent.policy import RulePolicy, UniformPolicy, turn_toward
 from services.sim import observation as ob
-from services.sim.jit import jitable, njit
+from services.sim.jit import compiled, jitable
 from shared.game import GameConfig
 
 _DEFAULTS = GameConfig()
@@ -142,7 +142,7 @@ def evade(obs: np.ndarray, x: float, y: float) -> tuple[float, float]:
     return 3.0 * mx / miss, 3.0 * my / miss
 
 
-@njit
+@compiled
 def _circle_rows(observations, radius, speed, outside, out):
     for i in range(observations.shape[0]):
         out[i] = circle_choice(observations[i], radius, speed, outside)
@@ -233,7 +233,7 @@ def mirror_choice(
     return turn, 0, int(shot)
 
 
-@njit
+@compiled
 def _mirror_rows(observations, numbers, out):
     for i in range(observations.shape[0]):
         out[i] = mirror_choice(observations[i], *numbers)
@@ -288,7 +288,7 @@ def good_shot_at(
     )
 
 
-@njit
+@compiled
 def _good_shot_rows(observations, numbers, out):
     for i in range(observations.shape[0]):
         out[i] = good_shot_at(observations[i], *numbers)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from services.sim.jit import njit
+from services.sim.jit import compiled, jitable
 from shared.game import Policy
 
 
@@ -43,7 +43,7 @@ def lane_uniforms(seeds: np.ndarray, stream: int, frame: int | np.ndarray) -> np
     return out
 
 
-@njit
+@compiled
 def _sample(probs, uniforms, out):
     for i in range(probs.shape[0]):
         total, out[i] = 0.0, probs.shape[1] - 1
@@ -59,7 +59,7 @@ _M1, _M2 = np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)
 _S30, _S27, _S31, _S11 = np.uint64(30), np.uint64(27), np.uint64(31), np.uint64(11)
 
 
-@njit
+@jitable
 def _mix(z):
     """SplitMix64's finaliser: a bijection of 64-bit words that scatters every input bit."""
     z = (z ^ (z >> _S30)) * _M1
@@ -67,7 +67,7 @@ def _mix(z):
     return z ^ (z >> _S31)
 
 
-@njit
+@compiled
 def _uniforms(keys, counters, out):
     for i in range(keys.shape[0]):
         key = _mix(keys[i] * _GOLDEN + _GOLDEN)

@@ -15,7 +15,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from services.agent import library
-from services.sim.batch_play import play_batch
 from shared.game import GameConfig
 
 TABLE_VERSION = 1
@@ -53,6 +52,8 @@ def jobs(baits: list[str], shooters: list[str], games: int, chunk: int = CHUNK) 
 def run_job(job: Job, config: GameConfig | None = None) -> list[float]:
     """Kills per minute of each of the job's games, played as lanes of one batch (policies loaded
     fresh, so nothing carries over; each game depends on its seed only, see batch_play)."""
+    from services.sim.batch_play import play_batch  # bulk play only: the table's readers never load numba
+
     bait, shooter = library.load(job.bait, config), library.load(job.shooter, config)
     return [result.kills_per_minute for result in play_batch(bait, shooter, list(job.seeds), config)]
 

@@ -23,7 +23,7 @@ def log_probs(
 ) -> np.ndarray:
     """The similarity score, (n, K): log pi_k(a_t | s_t) of a player's n (world-view state values,
     action) pairs under each of K policies. Every policy reads the states in its own view, and its
-    probabilities come from one batched evaluation (library.batch_probs) over all n states."""
+    probabilities come from one batched evaluation (sampling.batch_probs) over all n states."""
     views = {p.view for p in policies}
     observed = {v: np.stack([as_observation(s, v) for s in states]) for v in sorted(views)}
     rows = np.arange(len(actions))

@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from services.agent.library import LearnedPolicy, batch_act, keys, policy_for
+from services.agent.library import LearnedPolicy, keys, policy_for
 from services.sim.engine import Game
 from services.sim.observation import observe
 from services.sim.play import play
-from services.sim.sampling import batch_probs, lane_uniforms, sample
+from services.sim.sampling import batch_act, batch_probs, lane_uniforms, sample
 from shared.game import N_ACTIONS, ROLES
 
 

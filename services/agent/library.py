@@ -27,7 +27,6 @@ import numpy as np
 from services.agent.policy import RulePolicy, factored_probs, factored_probs_batch, rule_head_probs
 from services.agent.scripted import MirrorShooter, good_shot, good_shot_batch, scripted_keys, scripted_policy
 from services.sim import observation as ob
-from services.sim.sampling import batch_probs, sample
 from shared.errors import UsageError
 from shared.game import N_FIRE, N_THRUST, N_TURN, ROLES, GameConfig, Policy, join_action
 
@@ -293,12 +292,6 @@ def load(key: str, config: GameConfig | None = None, root: Path = LIBRARY) -> Po
         raise ValueError(f"{path} does not match its manifest hash; retrain {key} or restore the file")
     network, _ = Network.load(path)
     return LearnedPolicy(recipe, network, config)
-
-
-def batch_act(policy: Policy, observations: np.ndarray, uniforms: np.ndarray) -> np.ndarray:
-    """One action per observation, drawn from the policy's distribution with the given uniforms
-    (sampling.lane_uniforms; not the policy's per-game stream: a batch samples all lanes at once)."""
-    return sample(batch_probs(policy, observations), uniforms)
 
 
 def seat_keys(role: str) -> list[str]:

@@ -14,7 +14,7 @@ import numpy as np
 from services.sim.batch import BatchGame
 from services.sim.batch_observation import observe
 from services.sim.play import GameResult
-from services.sim.sampling import batch_probs, lane_uniforms, sample
+from services.sim.sampling import batch_act, lane_uniforms
 from shared.game import ROLES, GameConfig, Policy
 
 
@@ -27,7 +27,7 @@ def play_batch(
     while not batch.done[0]:
         frame = batch.state.frame
         actions = [
-            sample(batch_probs(policy, observe(batch, role, policy.view)), lane_uniforms(keys, seat, frame))
+            batch_act(policy, observe(batch, role, policy.view), lane_uniforms(keys, seat, frame))
             for seat, (role, policy) in enumerate(zip(ROLES, (bait, shooter), strict=True))
         ]
         batch.step(*actions)

@@ -22,6 +22,12 @@ def batch_probs(policy: Policy, observations: np.ndarray) -> np.ndarray:
     return np.stack([policy.probs(obs) for obs in observations])
 
 
+def batch_act(policy: Policy, observations: np.ndarray, uniforms: np.ndarray) -> np.ndarray:
+    """One action per observation, drawn from the policy's distribution with the given uniforms
+    (not the policy's own per-game stream: a batch samples all its lanes at once)."""
+    return sample(batch_probs(policy, observations), uniforms)
+
+
 def sample(probs: np.ndarray, uniforms: np.ndarray) -> np.ndarray:
     """One action per row of (rows, 12) distributions: the first action whose cumulative
     probability exceeds the row's uniform draw (the last one should rounding leave none)."""

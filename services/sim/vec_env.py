@@ -19,7 +19,7 @@ from gymnasium.vector.utils import batch_space
 from services.sim.batch import BatchGame
 from services.sim.batch_observation import observe
 from services.sim.env import observation_space
-from services.sim.sampling import batch_probs, lane_uniforms, sample
+from services.sim.sampling import batch_act, lane_uniforms
 from shared.game import N_ACTIONS, ROLES, GameConfig, Policy
 
 # A batched reward: (batch, the learner's seat, points before the frame) -> (lanes,) rewards.
@@ -97,7 +97,7 @@ class RoleVectorEnv(VectorEnv):
             if lanes.size:
                 if partner.view not in views:
                     views[partner.view] = observe(batch, ROLES[seat], partner.view)
-                actions[lanes] = sample(batch_probs(partner, views[partner.view][lanes]), uniforms[lanes])
+                actions[lanes] = batch_act(partner, views[partner.view][lanes], uniforms[lanes])
         return actions
 
     def _seeds(self, n: int) -> np.ndarray:

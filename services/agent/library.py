@@ -232,12 +232,10 @@ class LearnedPolicy:
 
     def rule_head_probs(self, obs: np.ndarray) -> dict[str, np.ndarray]:
         """The rule heads' distributions: the rule's choice with 1 - EPSILON, the rest spread."""
-        eps, heads = RulePolicy.EPSILON, {}
-        for name, choice in rule_heads(self.recipe, obs, self.config).items():
-            n = HEAD_SIZES[name]
-            heads[name] = np.full(n, eps / (n - 1))
-            heads[name][choice] = 1.0 - eps
-        return heads
+        return {
+            name: rule_head_probs(np.array([choice]), HEAD_SIZES[name], RulePolicy.EPSILON)[0]
+            for name, choice in rule_heads(self.recipe, obs, self.config).items()
+        }
 
     def head_probs(self, obs: np.ndarray) -> dict[str, np.ndarray]:
         learned = dict(zip(self.recipe.learned, self.learned_heads(obs), strict=True))

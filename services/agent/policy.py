@@ -66,12 +66,8 @@ class RulePolicy:
         return join_action(turn, thrust, fire)
 
     def probs(self, obs: np.ndarray) -> np.ndarray:
-        heads = []
-        for choice, n in zip(self.choose(obs), (N_TURN, N_THRUST, N_FIRE), strict=True):
-            head = np.full(n, self.epsilon / (n - 1))
-            head[choice] = 1.0 - self.epsilon
-            heads.append(head)
-        return factored_probs(*heads)
+        choices = zip(self.choose(obs), (N_TURN, N_THRUST, N_FIRE), strict=True)
+        return factored_probs(*(rule_head_probs(np.array([c]), n, self.epsilon)[0] for c, n in choices))
 
     def choose_batch(self, observations: np.ndarray) -> np.ndarray:
         """choose() of every row, (rows, 3); the project's rules run their compiled form."""

@@ -39,7 +39,6 @@ class Rules(NamedTuple):
     """The numbers of a GameConfig that the compiled loop reads, plus the derived constants the
     scalar engine computes in Python (so that both use the very same bits)."""
 
-    frames: int
     arena_x: float
     arena_y: float
     shield_radius: float
@@ -80,7 +79,7 @@ class Rules(NamedTuple):
     def of(cls, c: GameConfig) -> Rules:
         spawns = np.array([c.bait_spawn, c.shooter_spawn], dtype=np.float64)
         return cls(
-            c.frames, c.arena_x, c.arena_y, c.shield_radius, c.region_radius, c.fortress_turn,
+            c.arena_x, c.arena_y, c.shield_radius, c.region_radius, c.fortress_turn,
             c.fortress_aim_tolerance, c.fortress_fire_interval, c.vulnerable_frames, c.rear_arc,
             c.kill_distance, c.ship_radius, c.ship_turn, c.ship_thrust, c.ship_drag, c.ship_max_speed,
             c.missile_speed, c.missile_radius, c.missiles_in_flight, c.missile_cooldown, c.shell_speed,

@@ -11,7 +11,7 @@ from services.agent.calibration import calibrate
 from services.agent.library import policy_for
 from services.options import console
 from services.sim.play import play, summarize
-from shared.errors import Failure
+from shared.errors import Failure, UsageError
 from shared.game import FPS, GameConfig
 
 commands = typer.Typer()
@@ -55,29 +55,51 @@ def calibrate_command(games: int = typer.Option(20, min=2, help="Seeded one-minu
 
 @commands.command()
 def train(
-    keys: list[str] = typer.Argument(None, help="Library keys to train (default: every learned policy)."),
+    keys: list[str] = typer.Argument(None, help="Library keys to train."),
+    all_: bool = typer.Option(False, "--all", help="Train every learned policy of the library."),
+    out: Path = typer.Option(
+        Path("tsf-library"),
+        "--library",
+        help="Library to train into; a new one starts as a copy of the shipped library. "
+        "Retraining the shipped library needs its path: --library services/agent/library.",
+    ),
     steps: int | None = typer.Option(None, min=1, help="Environment steps (default: the recipe's)."),
-    seed: int | None = typer.Option(None, help="Training seed (default: the recipe's)."),
-    log_dir: Path = typer.Option(Path("runs"), help="CSV training logs go to LOG_DIR/KEY."),
-    score_games: int = typer.Option(10, min=0, help="Games scored with the first partner after training."),
+    seed: int | None = typer.Option(None, min=0, help="Training seed (default: the recipe's)."),
+    runs: Path = typer.Option(Path("runs"), help="Learning curves and checkpoints go to RUNS/KEY."),
+    figures: Path | None = typer.Option(None, help="Also draw each learning curve to FIGURES/train_KEY.png."),
+    warm_start: bool = typer.Option(
+        False, help="Imitate the recipe's scripted demonstrator before RL (not the shipped recipes)."
+    ),
+    jobs: int = typer.Option(1, min=1, max=64, help="Policies trained at once (processes)."),
+    score_games: int = typer.Option(
+        20, min=0, max=1000, help="Games scored with the first partner after training."
+    ),
 ) -> None:
-    """Train library policies by their registry recipes (needs the `train` extra)."""
+    """Train library policies by their registry recipes (needs the `train` extra). A run stopped
+    part way resumes from its last checkpoint in RUNS/KEY."""
+    import time
+
     from services.agent import library
 
+    if bool(keys) == all_:
+        raise UsageError("KEYS", " ".join(keys or []) or "(none)", "give library keys or --all, not both")
     todo = library.learned(keys or [])
     try:
-        from services.agent.train import train as train_policy
+        from services.agent.train import train_library
     except ModuleNotFoundError as error:
         raise Failure(f"{error}: training needs the `train` extra, pip install -e '.[train]'") from None
-    for key in todo:
-        console.print(f"[bold]training {key}[/]: {library.registry()[key].description}")
-        entry = train_policy(key, steps, seed, log_dir / key, score_games=score_games)
+    started = time.monotonic()
+    console.print(f"training {', '.join(todo)} into {out}, {jobs} at a time")
+    options = {"steps": steps, "seed": seed, "run_dir": runs, "figures": figures}
+    options |= {"warm_start": warm_start, "score_games": score_games, "progress": jobs == 1}
+    entries = train_library(todo, out, jobs, **options)
+    for key, entry in entries.items():
         score = entry.get("score")
-        console.print(f"  {entry['file']} sha256 {entry['sha256'][:12]} in {entry['seconds']} s")
-        if score:
-            console.print(
-                f"  {score['kills_per_minute']:.2f} ± {score['stderr']:.2f} kills/min with {score['partner']}"
-            )
+        console.print(
+            f"{key}: {entry['steps']:,} steps in {entry['seconds']} s, sha256 {entry['sha256'][:12]}"
+            + (f", {_score_text(score)}" if score else "")
+        )
+    console.print(f"trained {len(entries)} policies in {time.monotonic() - started:.0f} s (wall)")
 
 
 def _score_text(score: dict) -> str:

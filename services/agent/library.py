@@ -18,7 +18,7 @@ import json
 import math
 import random
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from functools import cache
 from pathlib import Path
 
@@ -107,6 +107,11 @@ def manifest_hash(root: Path = LIBRARY) -> str:
     h = hashlib.sha256((root / "registry.toml").read_bytes())
     h.update(json.dumps(manifest(root), sort_keys=True).encode())
     return h.hexdigest()[:16]
+
+
+def recipe_hash(recipe: Recipe) -> str:
+    """Hash of a recipe's fields: a training checkpoint resumes only under the recipe it began with."""
+    return hashlib.sha256(json.dumps(asdict(recipe), sort_keys=True).encode()).hexdigest()[:16]
 
 
 def file_hash(path: Path) -> str:

@@ -10,13 +10,17 @@ seed, score and the command that made it.
 
 from __future__ import annotations
 
+import csv
 import fcntl
 import json
 import math
+import multiprocessing
 import shlex
+import shutil
 import sys
 import time
 from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
 from importlib.metadata import version
 from pathlib import Path
 
@@ -25,7 +29,7 @@ import torch as th
 from gymnasium import spaces
 from sb3_contrib import TRPO
 from stable_baselines3 import A2C, DQN, PPO
-from stable_baselines3.common.logger import configure
+from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv
 
 from services.agent import library
@@ -33,16 +37,30 @@ from services.agent.library import FEATURES, HEAD_SIZES, HEADS, LIBRARY, Recipe
 from services.agent.scripted import CircleBait, MirrorShooter
 from services.sim.batch import BatchGame
 from services.sim.batch_observation import observe
-from services.sim.play import play, summarize
+from services.sim.batch_play import play_batch
+from services.sim.play import summarize
 from services.sim.vec_env import RoleVectorEnv
-from shared.game import GameConfig, bait_first, join_action
+from shared.errors import UsageError
+from shared.game import ROLES, GameConfig, Policy, bait_first, join_action
 
 # --- rewards: one value per lane of a batched game, for the learner's seat -----------------------
 
 
-def region_reward(batch: BatchGame, seat: int, before: np.ndarray, weights: dict[str, float]) -> np.ndarray:
+def drawing_fire_reward(
+    batch: BatchGame, seat: int, before: np.ndarray, weights: dict[str, float]
+) -> np.ndarray:
+    """1 per frame the fortress, locked on this bait, fires with its open back to the shooter, plus
+    `kill` per team kill. The study paid 1 per frame in the region. From scratch that taught baits
+    to stay in after a kill (which keeps the fortress from respawning) and to circle faster than
+    the fortress turns or the shooter follows: region time without kills."""
     s = batch.state
-    return (s.alive[:, seat] & s.in_region[:, seat]).astype(np.float64)
+    shooter = 1 - seat
+    rear = np.radians(s.facing + 180.0)
+    bearing = np.arctan2(s.y[:, shooter], s.x[:, shooter])
+    behind = np.abs((bearing - rear + np.pi) % (2 * np.pi) - np.pi) <= np.radians(batch.config.rear_arc / 2)
+    both = s.alive[:, seat] & s.alive[:, shooter]
+    opening = both & s.fortress_alive & (s.lock == seat) & (s.vulnerable > 0) & behind
+    return opening + weights.get("kill", 0.0) * batch.event_counts("kill")
 
 
 def border_bearing_death_reward(
@@ -56,7 +74,8 @@ def border_bearing_death_reward(
     bearing = -(x * np.cos(h) + y * np.sin(h)) / r  # cos of the angle to the fortress
     inside = weights["border"] * r / batch.config.region_radius + weights["bearing"] * bearing
     deaths = batch.event_counts("death", seat)
-    return -weights["death"] * deaths + np.where(s.alive[:, seat] & s.in_region[:, seat], inside, 0.0)
+    kills = weights.get("kill", 0.0) * batch.event_counts("kill")
+    return kills - weights["death"] * deaths + np.where(s.alive[:, seat] & s.in_region[:, seat], inside, 0.0)
 
 
 def shooter_position_reward(
@@ -74,7 +93,7 @@ def shooter_position_reward(
 
 
 REWARDS: dict[str, Callable[[BatchGame, int, np.ndarray, dict[str, float]], np.ndarray]] = {
-    "region": region_reward,
+    "drawing-fire": drawing_fire_reward,
     "border-bearing-death": border_bearing_death_reward,
     "shooter-position": shooter_position_reward,
 }
@@ -90,13 +109,21 @@ class RecipeVecEnv(VecEnv):
 
     render_mode = None
 
-    def __init__(self, recipe: Recipe, n_envs: int, config: GameConfig | None = None) -> None:
+    def __init__(
+        self, recipe: Recipe, n_envs: int, config: GameConfig | None = None, root: Path = LIBRARY
+    ) -> None:
         self.recipe = recipe
         self.config = config or GameConfig()
-        partners = [library.load(k, self.config) for k in recipe.partners]
+        partners = [library.load(k, self.config, root) for k in recipe.partners]
         weights, reward = dict(recipe.weights), REWARDS[recipe.reward]
         self.env = RoleVectorEnv(
-            n_envs, recipe.role, partners, self.config, recipe.view, lambda b, s, p: reward(b, s, p, weights)
+            n_envs,
+            recipe.role,
+            partners,
+            self.config,
+            recipe.view,
+            lambda b, s, p: reward(b, s, p, weights),
+            end_on_death=True,
         )
         self.features = np.array(FEATURES[recipe.features])
         bound = self.env.single_observation_space.high[0]
@@ -108,6 +135,7 @@ class RecipeVecEnv(VecEnv):
         )
         self.obs = np.zeros((n_envs, self.env.single_observation_space.shape[0]), np.float32)
         self.actions = np.zeros(n_envs, np.int64)
+        self.returns, self.lengths = np.zeros(n_envs), np.zeros(n_envs, np.int64)
 
     def reset(self) -> np.ndarray:
         self.obs, _ = self.env.reset(seed=self._seeds[0])
@@ -121,14 +149,18 @@ class RecipeVecEnv(VecEnv):
         heads = dict(zip(self.recipe.learned, self.actions.T, strict=True))
         heads |= library.rule_heads_batch(self.recipe, self.obs, self.config)
         action = join_action(*(heads[h] for h in HEADS))
-        self.obs, rewards, _, truncated, infos = self.env.step(action)
+        self.obs, rewards, terminated, truncated, infos = self.env.step(action)
+        self.returns += rewards
+        self.lengths += 1
         out: list[dict] = [{} for _ in range(self.num_envs)]
-        for lane in np.flatnonzero(truncated):
+        for lane in np.flatnonzero(terminated | truncated):
             out[lane] = {
                 "terminal_observation": infos["final_obs"][lane, self.features],
-                "TimeLimit.truncated": True,
+                "TimeLimit.truncated": bool(truncated[lane]),
+                "episode": {"r": float(self.returns[lane]), "l": int(self.lengths[lane]), "t": 0.0},
             }
-        return self.obs[:, self.features], rewards.astype(np.float32), truncated, out
+            self.returns[lane], self.lengths[lane] = 0.0, 0
+        return self.obs[:, self.features], rewards.astype(np.float32), terminated | truncated, out
 
     def close(self) -> None:
         pass
@@ -174,33 +206,48 @@ class DoubleDQN(DQN):
 
 ALGORITHMS = {"A2C": A2C, "PPO": PPO, "TRPO": TRPO, "DQN": DoubleDQN}
 NET = [64, 64]
-# Per-algorithm settings, chosen once for every recipe (recorded in each manifest entry).
+# Per-algorithm settings (n_envs: lanes of the batched engine), chosen by `search` for every
+# recipe of the algorithm (docs/library.md has the search) and recorded in each manifest entry.
 HYPERPARAMETERS: dict[str, dict] = {
-    "A2C": {"n_steps": 16, "learning_rate": 5e-5, "gamma": 0.99},
-    "PPO": {"n_steps": 256, "batch_size": 512, "n_epochs": 5, "learning_rate": 3e-5},
-    "TRPO": {"n_steps": 256, "batch_size": 512, "learning_rate": 1e-3, "gamma": 0.99},
+    "A2C": {"n_envs": 256, "n_steps": 8, "learning_rate": 2.5e-4, "ent_coef": 0.01, "gamma": 0.99},
+    "PPO": {
+        "n_envs": 256,
+        "n_steps": 32,
+        "batch_size": 2048,
+        "n_epochs": 4,
+        "learning_rate": 3e-4,
+        "ent_coef": 0.01,
+        "gamma": 0.99,
+    },
+    "TRPO": {"n_envs": 256, "n_steps": 32, "batch_size": 2048, "learning_rate": 1e-3, "gamma": 0.99},
     "DQN": {
-        "learning_starts": 2000,
-        "buffer_size": 100_000,
-        "train_freq": 4,
-        "target_update_interval": 2000,
-        "exploration_initial_eps": 0.05,
-        "exploration_final_eps": 0.02,
-        "learning_rate": 1e-5,
-        "batch_size": 64,
+        "n_envs": 64,
+        "learning_starts": 20_000,
+        "buffer_size": 300_000,
+        "train_freq": 1,
+        "gradient_steps": 4,
+        "target_update_interval": 5_000,
+        "exploration_fraction": 0.2,
+        "exploration_final_eps": 0.05,
+        "learning_rate": 1e-4,
+        "batch_size": 256,
+        "gamma": 0.99,
     },
 }
-N_ENVS = {"A2C": 16, "PPO": 16, "TRPO": 16, "DQN": 4}
 
 
-def make_model(recipe: Recipe, seed: int, log_dir: Path | None, config: GameConfig | None = None):  # noqa: ANN201
-    """The recipe's algorithm on its env, with the algorithm's settings above."""
-    env = RecipeVecEnv(recipe, N_ENVS[recipe.algorithm], config)
-    kwargs = {"policy_kwargs": {"net_arch": NET}, **HYPERPARAMETERS[recipe.algorithm]}
-    model = ALGORITHMS[recipe.algorithm]("MlpPolicy", env, seed=seed, device="cpu", verbose=0, **kwargs)
-    if log_dir is not None:
-        model.set_logger(configure(str(log_dir), ["csv", "log"]))
-    return model
+def make_model(
+    recipe: Recipe,
+    seed: int,
+    hyperparameters: dict | None = None,
+    config: GameConfig | None = None,
+    root: Path = LIBRARY,
+):  # noqa: ANN201 - an SB3 model
+    """The recipe's algorithm on its env, with the algorithm's settings (or `hyperparameters`)."""
+    settings = dict(HYPERPARAMETERS[recipe.algorithm] if hyperparameters is None else hyperparameters)
+    env = RecipeVecEnv(recipe, settings.pop("n_envs"), config, root)
+    kwargs = {"policy_kwargs": {"net_arch": NET}, **settings}
+    return ALGORITHMS[recipe.algorithm]("MlpPolicy", env, seed=seed, device="cpu", verbose=0, **kwargs)
 
 
 DEMONSTRATORS = {"bait": CircleBait, "shooter": MirrorShooter}
@@ -232,7 +279,7 @@ def demonstrations(recipe: Recipe, games: int, gamma: float, learner=None, first
     return np.concatenate(features), np.concatenate(labels), returns.reshape(-1)
 
 
-def warm_start(model, recipe: Recipe, rounds: int = 3, games: int = 4, epochs: int = 40) -> float:  # noqa: ANN001
+def warm_start_fit(model, recipe: Recipe, rounds: int = 3, games: int = 4, epochs: int = 40) -> float:  # noqa: ANN001
     """Imitation before reinforcement learning: DAgger rounds fit the policy to the demonstrator's
     choices (and the value to the returns), so that training starts from a bait that holds the
     region rather than from a random walk; from scratch, 400k steps did not get there on two
@@ -289,57 +336,212 @@ def export(model, recipe: Recipe) -> dict[str, np.ndarray]:  # noqa: ANN001 - an
     return arrays
 
 
-def score(key: str, partner: str, games: int, config: GameConfig | None = None, root: Path = LIBRARY) -> dict:
-    """Kills/min of a library policy with a partner (from the shipped library) over seeded games."""
-    policy = library.load(key, config, root)
-    other = library.load(partner, config)
-    pair = bait_first(policy.role, policy, other)
-    s = summarize([play(*pair, seed, config) for seed in range(games)])
-    return {"partner": partner, "games": s.games, "kills_per_minute": s.mean, "stderr": s.stderr}
+# --- a training run: curve, checkpoints, manifest ------------------------------------------------
+
+EVAL_SEEDS = range(10_000, 10_016)  # the curve's games: seeds that no table or test plays
+CURVE = ("steps", "seconds", "kills_per_minute", "stderr", "mean_return")
+
+
+def policy_of(model, recipe: Recipe, config: GameConfig | None = None) -> library.LearnedPolicy:  # noqa: ANN001
+    """The model as the library plays it: the exported arrays, in numpy."""
+    arrays = export(model, recipe)
+    meta = json.loads(bytes(arrays.pop("meta")).decode())
+    return library.LearnedPolicy(recipe, library.Network(arrays, meta["activation"]), config)
+
+
+def team_score(policy: Policy, partner: Policy, seeds: range, config: GameConfig | None = None) -> dict:
+    """Kills/min of `policy` with `partner` over seeded games (lanes of one batch)."""
+    s = summarize(play_batch(*bait_first(policy.role, policy, partner), list(seeds), config))
+    return {"partner": partner.key, "games": s.games, "kills_per_minute": s.mean, "stderr": s.stderr}
+
+
+class Run(BaseCallback):
+    """Every `every` steps: the learning curve's next point (kills/min with the recipe's first
+    partner on EVAL_SEEDS, mean training return) and a checkpoint that a later call resumes."""
+
+    def __init__(self, run_dir: Path, recipe: Recipe, partner: Policy, every: int, state: dict) -> None:
+        super().__init__()
+        self.run_dir, self.recipe, self.partner = run_dir, recipe, partner
+        self.every, self.state = every, state
+        self.clock = time.monotonic()
+
+    def _on_training_start(self) -> None:
+        self.next_at = (self.num_timesteps // self.every + 1) * self.every
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps >= self.next_at:
+            self.point()
+            self.next_at += self.every
+        return True
+
+    def seconds(self) -> float:
+        return self.state["seconds"] + time.monotonic() - self.clock
+
+    def point(self) -> dict:
+        """Score the policy, add the curve's row, keep the best policy so far, save a checkpoint."""
+        score = team_score(policy_of(self.model, self.recipe), self.partner, EVAL_SEEDS)
+        if score["kills_per_minute"] >= self.state.get("best", {}).get("kills_per_minute", -1.0):
+            np.savez(self.run_dir / "best.npz", **export(self.model, self.recipe))
+            self.state["best"] = {"steps": self.num_timesteps, "kills_per_minute": score["kills_per_minute"]}
+        returns = [e["r"] for e in self.model.ep_info_buffer]
+        row = {
+            "steps": self.num_timesteps,
+            "seconds": round(self.seconds(), 1),
+            "kills_per_minute": round(score["kills_per_minute"], 3),
+            "stderr": round(score["stderr"], 3),
+            "mean_return": round(float(np.mean(returns)), 3) if returns else "",
+        }
+        curve = self.run_dir / "curve.csv"
+        with open(curve, "a", newline="") as f:
+            writer = csv.DictWriter(f, CURVE)
+            if f.tell() == 0:
+                writer.writeheader()
+            writer.writerow(row)
+        self.model.save(self.run_dir / "checkpoint.zip")
+        if isinstance(self.model, DQN):
+            self.model.save_replay_buffer(self.run_dir / "replay.pkl")
+        self.state |= {"steps": self.num_timesteps, "seconds": row["seconds"]}
+        (self.run_dir / "checkpoint.json").write_text(json.dumps(self.state, indent=2) + "\n")
+        return row
+
+
+def plot_curve(curve: Path, out: Path, key: str) -> None:
+    """The learning curve as a PNG: kills/min with the training partner (± s.e.) and mean return."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    with open(curve) as f:
+        rows = list(csv.DictReader(f))
+    steps = np.array([float(r["steps"]) for r in rows]) / 1e6
+    kpm = np.array([float(r["kills_per_minute"]) for r in rows])
+    se = np.array([float(r["stderr"]) for r in rows])
+    fig, ax = plt.subplots(figsize=(5, 3.2))
+    ax.plot(steps, kpm, color="C0", label="kills/min")
+    ax.fill_between(steps, kpm - se, kpm + se, color="C0", alpha=0.25)
+    ax.set(xlabel="environment steps (millions)", ylabel="kills/min with training partner", title=key)
+    ax.set_ylim(bottom=0)
+    returns = [(x, float(r["mean_return"])) for x, r in zip(steps, rows, strict=True) if r["mean_return"]]
+    if returns:
+        twin = ax.twinx()
+        twin.plot(*zip(*returns, strict=True), color="C1", alpha=0.7, label="mean return")
+        twin.set_ylabel("mean training return", color="C1")
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=100)
+    plt.close(fig)
 
 
 def train(
     key: str,
+    out: Path,
     steps: int | None = None,
     seed: int | None = None,
-    log_dir: Path | None = None,
-    out: Path = LIBRARY,
+    run_dir: Path = Path("runs"),
+    hyperparameters: dict | None = None,
+    warm_start: bool = False,
+    every: int = 250_000,
     progress: bool = True,
-    score_games: int = 10,
+    score_games: int = 20,
+    figures: Path | None = None,
 ) -> dict:
-    """Train one library policy by its recipe, write its weights and manifest entry, return it."""
+    """Train one library policy by its recipe into the library at `out`: its weights, manifest
+    entry and learning curve (`run_dir`/KEY/curve.csv, .png, and `figures`/train_KEY.png). A run
+    stopped part way resumes from its last checkpoint when called again with the same settings."""
     recipe = library.registry(out)[key]
     if recipe.algorithm is None:
         raise ValueError(f"{key} is rule-based ({recipe.family}); there is nothing to train")
     steps = recipe.steps if steps is None else steps
     seed = recipe.seed if seed is None else seed
+    settings = {
+        "seed": seed,
+        "hyperparameters": hyperparameters or HYPERPARAMETERS[recipe.algorithm],
+        "warm_start": warm_start,
+        "recipe": library.recipe_hash(recipe),
+    }
+    run_dir = run_dir / key
+    run_dir.mkdir(parents=True, exist_ok=True)
     th.manual_seed(seed)
     th.set_num_threads(1)  # small networks: more threads only contend with the env and other trainings
-    started = time.monotonic()
-    model = make_model(recipe, seed, log_dir)
-    agreement = warm_start(model, recipe) if recipe.demonstrator else None
-    model.learn(total_timesteps=steps, progress_bar=progress)
+    model, state, agreement = _resume(run_dir, recipe, settings, out)
+    if model is None:
+        for stale in ("curve.csv", "checkpoint.zip", "replay.pkl"):
+            (run_dir / stale).unlink(missing_ok=True)
+        model = make_model(recipe, seed, settings["hyperparameters"], root=out)
+        agreement = warm_start_fit(model, recipe) if warm_start else None
+        state = settings | {"steps": 0, "seconds": 0.0, "agreement": agreement}
+    partner = library.load(recipe.partners[0], root=out)
+    run = Run(run_dir, recipe, partner, every, state)
+    if state["steps"] < steps:
+        model.learn(steps - state["steps"], callback=run, progress_bar=progress, reset_num_timesteps=False)
+        run.point()
+    plot_curve(run_dir / "curve.csv", run_dir / "curve.png", key)
+    if figures is not None:
+        plot_curve(run_dir / "curve.csv", figures / f"train_{key}.png", key)
     path = out / "weights" / f"{key}.npz"
     path.parent.mkdir(parents=True, exist_ok=True)
-    np.savez(path, **export(model, recipe))
+    shutil.copyfile(run_dir / "best.npz", path)
     entry = {
         "file": str(path.relative_to(out)),
         "sha256": library.file_hash(path),
         "algorithm": recipe.algorithm,
-        "steps": steps,
+        "steps": int(model.num_timesteps),
         "seed": seed,
         "command": shlex.join(["tsf", "train", key, "--steps", str(steps), "--seed", str(seed)]),
         "argv": sys.argv,
-        "seconds": round(time.monotonic() - started, 1),
-        "hyperparameters": HYPERPARAMETERS[recipe.algorithm],
-        "warm_start": {"demonstrator": recipe.demonstrator, "agreement": agreement} if agreement else None,
+        "seconds": state["seconds"],
+        "selected": state["best"],
+        "hyperparameters": settings["hyperparameters"],
+        "warm_start": {"demonstrator": recipe.demonstrator, "agreement": agreement} if warm_start else None,
         "versions": {p: version(p) for p in ("stable-baselines3", "sb3-contrib", "torch", "numpy")},
     }
-    if score_games:
-        _record(out, key, entry)  # score() loads the policy through the manifest
-        entry["score"] = score(key, recipe.partners[0], score_games, root=out)
+    if score_games:  # on seeds the selection did not see
+        chosen = library.LearnedPolicy(recipe, library.Network.load(path)[0])
+        entry["score"] = team_score(chosen, partner, range(score_games))
     _record(out, key, entry)
     return entry
+
+
+def prepare(out: Path) -> None:
+    """A library directory to train into: one that does not exist yet starts as a copy of the
+    shipped library (registry, manifest, weights), so that untouched policies stay playable."""
+    if (out / "registry.toml").exists():
+        return
+    if out.exists() and any(out.iterdir()):
+        raise UsageError("--library", out, "is neither a library (no registry.toml) nor empty")
+    shutil.copytree(LIBRARY, out, dirs_exist_ok=True, ignore=shutil.ignore_patterns(".*"))
+
+
+def train_library(keys: list[str], out: Path, jobs: int = 1, **options: object) -> dict[str, dict]:
+    """Train `keys` into the library at `out`, `jobs` at a time: the baits first, then the shooters,
+    which train with baits of this library. Returns each key's manifest entry."""
+    prepare(out)
+    recipes = library.registry(out)
+    entries: dict[str, dict] = {}
+    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+        for role in ROLES:
+            group = [k for k in keys if recipes[k].role == role]
+            futures = {k: pool.submit(train, k, out, **options) for k in group}
+            entries |= {k: f.result() for k, f in futures.items()}
+    return entries
+
+
+def _resume(run_dir: Path, recipe: Recipe, settings: dict, out: Path) -> tuple:
+    """(model, state, agreement) from the run's checkpoint, or Nones when there is none to resume:
+    no checkpoint, or one made with other settings (then the run starts over)."""
+    checkpoint = run_dir / "checkpoint.json"
+    if not checkpoint.exists():
+        return None, None, None
+    state = json.loads(checkpoint.read_text())
+    if {k: state.get(k) for k in settings} != json.loads(json.dumps(settings)):
+        return None, None, None
+    hyperparameters = dict(settings["hyperparameters"])
+    env = RecipeVecEnv(recipe, hyperparameters.pop("n_envs"), root=out)
+    model = ALGORITHMS[recipe.algorithm].load(run_dir / "checkpoint.zip", env=env, device="cpu")
+    if isinstance(model, DQN):
+        model.load_replay_buffer(run_dir / "replay.pkl")
+    return model, state, state.get("agreement")
 
 
 def _record(out: Path, key: str, entry: dict) -> None:

@@ -3,7 +3,7 @@ exported numpy network computes what the torch network does."""
 
 from __future__ import annotations
 
-import shutil
+import json
 
 import numpy as np
 import pytest
@@ -14,20 +14,44 @@ import torch as th  # noqa: E402
 
 from services.agent import library  # noqa: E402
 from services.agent.library_test import observations  # noqa: E402
-from services.agent.train import make_model, train  # noqa: E402
+from services.agent.train import HYPERPARAMETERS, make_model, prepare, train  # noqa: E402
+from shared.errors import UsageError  # noqa: E402
 
 
 @pytest.mark.parametrize("key", ["B1", "B5", "B6", "S1"])  # A2C, PPO, TRPO, double DQN
 def test_smoke_training_exports_a_loadable_policy(tmp_path, key):
     root = tmp_path / "library"
-    root.mkdir()
-    shutil.copy(library.LIBRARY / "registry.toml", root)
-    entry = train(key, steps=300, seed=0, log_dir=tmp_path / "logs", out=root, progress=False, score_games=1)
-    assert entry["steps"] == 300 and entry["score"]["games"] == 1
-    assert (tmp_path / "logs" / "progress.csv").exists()
+    prepare(root)
+    entry = train(key, root, steps=300, seed=0, run_dir=tmp_path / "runs", progress=False, score_games=1)
+    assert entry["steps"] >= 300 and entry["score"]["games"] == 1 and entry["warm_start"] is None
+    assert (tmp_path / "runs" / key / "curve.png").exists()
     policy = library.load(key, root=root)
     p = policy.probs(observations(policy.role, policy.view)[0])
     assert p.min() > 0 and p.sum() == pytest.approx(1.0)
+
+
+def test_a_stopped_run_resumes_from_its_checkpoint(tmp_path):
+    root, runs = tmp_path / "library", tmp_path / "runs"
+    prepare(root)
+    small = {**HYPERPARAMETERS["PPO"], "n_envs": 4, "n_steps": 16, "batch_size": 64}
+    options = {"run_dir": runs, "hyperparameters": small, "every": 64, "progress": False, "score_games": 0}
+    train("B5", root, steps=128, **options)
+    curve = (runs / "B5" / "curve.csv").read_text().splitlines()
+    entry = train("B5", root, steps=256, **options)
+    resumed = (runs / "B5" / "curve.csv").read_text().splitlines()
+    assert resumed[: len(curve)] == curve and len(resumed) > len(curve)  # the curve goes on
+    assert entry["steps"] == 256 and entry["seconds"] >= json.loads(curve[-1].split(",")[1])
+    train("B5", root, steps=128, **{**options, "hyperparameters": {**small, "learning_rate": 1e-3}})
+    assert len((runs / "B5" / "curve.csv").read_text().splitlines()) == len(curve)  # other settings: anew
+
+
+def test_a_new_library_starts_as_a_copy_and_a_stray_directory_is_refused(tmp_path):
+    prepare(tmp_path / "new")
+    assert library.registry(tmp_path / "new").keys() == library.registry().keys()
+    (tmp_path / "stray").mkdir()
+    (tmp_path / "stray" / "notes.txt").write_text("mine")
+    with pytest.raises(UsageError, match="--library"):
+        prepare(tmp_path / "stray")
 
 
 @pytest.mark.parametrize("key", ["B4", "S2"])
@@ -35,7 +59,7 @@ def test_numpy_network_matches_torch(tmp_path, key):
     from services.agent.train import export
 
     recipe = library.registry()[key]
-    model = make_model(recipe, seed=0, log_dir=None)
+    model = make_model(recipe, seed=0)
     arrays = export(model, recipe)
     arrays.pop("meta")
     network = library.Network(arrays, "relu" if recipe.algorithm == "DQN" else "tanh")

@@ -3,8 +3,12 @@
 The learner plays `role` in every lane; the partner seat is played by one policy, or by a pool
 (each game draws its partner from its own seed). Partners answer in batch (`probs_batch`) and
 their actions are drawn with `lane_uniforms`, so a lane's game depends on its seed only. Games end
-by truncation after `config.frames` and restart at once with a fresh seed (Gymnasium's same-step
-autoreset: the finished game's last observation is in `infos["final_obs"]`).
+by truncation after `config.frames`. With `end_on_death`, a game also ends when a ship dies: a
+dead ship stays dead until its round ends, so the rest of such a game is often time in which the
+learner has no control or no partner. The learner's death terminates its game, the partner's
+truncates it (the learner is not to blame). Either way the lane restarts at once with a fresh
+seed (Gymnasium's same-step autoreset: the finished game's last observation is in
+`infos["final_obs"]`).
 """
 
 from __future__ import annotations
@@ -45,6 +49,7 @@ class RoleVectorEnv(VectorEnv):
         config: GameConfig | None = None,
         view: str = "world",
         reward: BatchReward = team_points,
+        end_on_death: bool = False,
     ) -> None:
         if role not in ROLES:
             raise ValueError(f"unknown role {role!r}; expected one of {ROLES}")
@@ -54,7 +59,7 @@ class RoleVectorEnv(VectorEnv):
                 raise ValueError(f"the partner policy {partner.key!r} plays {role}, the seat being trained")
         self.num_envs, self.role, self.seat = num_envs, role, ROLES.index(role)
         self.config = config or GameConfig()
-        self.view, self.reward = view, reward
+        self.view, self.reward, self.end_on_death = view, reward, end_on_death
         self.single_observation_space = observation_space(self.config)
         self.single_action_space = spaces.Discrete(N_ACTIONS)
         self.observation_space = batch_space(self.single_observation_space, num_envs)
@@ -76,15 +81,20 @@ class RoleVectorEnv(VectorEnv):
         batch.step(*((mine, theirs) if self.seat == 0 else (theirs, mine)))
         rewards = self.reward(batch, self.seat, before)
         truncated = batch.done.copy()
+        terminated = np.zeros(self.num_envs, np.bool_)
+        if self.end_on_death:
+            terminated = batch.event_counts("death", self.seat) > 0
+            truncated = (truncated | (batch.event_counts("death", 1 - self.seat) > 0)) & ~terminated
         obs = observe(batch, self.role, self.view)
         infos: dict = {}
-        if truncated.any():
-            lanes = np.flatnonzero(truncated)
-            infos = {"final_obs": obs.copy(), "_final_obs": truncated}
+        ended = truncated | terminated
+        if ended.any():
+            lanes = np.flatnonzero(ended)
+            infos = {"final_obs": obs.copy(), "_final_obs": ended}
             batch.reset(lanes, self._seeds(len(lanes)))
             self._draw_partners(lanes)
             obs = observe(batch, self.role, self.view)
-        return obs, rewards, np.zeros(self.num_envs, np.bool_), truncated, infos
+        return obs, rewards, terminated, truncated, infos
 
     def partner_actions(self) -> np.ndarray:
         """Every lane's partner action for the current frame."""

@@ -363,7 +363,7 @@ class Run(BaseCallback):
         super().__init__()
         self.run_dir, self.recipe, self.partner = run_dir, recipe, partner
         self.every, self.state = every, state
-        self.clock = time.monotonic()
+        self.clock, self.before = time.monotonic(), state["seconds"]  # seconds of earlier sessions
 
     def _on_training_start(self) -> None:
         self.next_at = (self.num_timesteps // self.every + 1) * self.every
@@ -375,7 +375,7 @@ class Run(BaseCallback):
         return True
 
     def seconds(self) -> float:
-        return self.state["seconds"] + time.monotonic() - self.clock
+        return self.before + time.monotonic() - self.clock
 
     def point(self) -> dict:
         """Score the policy, add the curve's row, keep the best policy so far, save a checkpoint."""

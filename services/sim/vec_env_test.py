@@ -56,3 +56,20 @@ def test_same_seed_same_games_and_a_pool_plays_every_partner() -> None:
 def test_the_partner_must_play_the_other_seat() -> None:
     with pytest.raises(ValueError, match="plays bait, the seat being trained"):
         RoleVectorEnv(2, "bait", policy_for("circle", "bait"))
+
+
+def test_with_end_on_death_the_learners_death_terminates_and_the_partners_truncates() -> None:
+    env = RoleVectorEnv(32, "bait", policy_for("random", "shooter"), GameConfig(), end_on_death=True)
+    env.reset(seed=3)
+    ended = {"terminated": 0, "truncated": 0}
+    for frame in range(900):
+        seeds = env.batch.seeds.copy()
+        _, _, terminated, truncated, infos = env.step(np.full(32, 4 if frame % 50 else 1))  # thrust, turn
+        assert not (terminated & truncated).any()
+        for lane in np.flatnonzero(terminated | truncated):
+            final = infos["final_obs"][lane]
+            dead = ob.PARTNER if truncated[lane] and frame + 1 < GameConfig().frames else ob.SELF
+            assert final[dead + ob.ALIVE] == 0.0 and env.batch.seeds[lane] != seeds[lane]
+        ended["terminated"] += int(terminated.sum())
+        ended["truncated"] += int(truncated.sum())
+    assert ended["terminated"] > 0 and ended["truncated"] > 0

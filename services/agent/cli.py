@@ -9,23 +9,28 @@ from rich.table import Table
 
 from services.agent.calibration import calibrate
 from services.agent.library import policy_for
-from services.options import console
+from services.options import GAMES, console, number, output
 from services.sim.play import play, summarize
-from shared.errors import Failure
-from shared.game import FPS, GameConfig
+from shared.errors import Failure, UsageError
+from shared.game import FPS, FRAMES, SEEDS, GameConfig, Range
 
 commands = typer.Typer()
+STEPS = Range(1, 10**9)  # environment steps of one training
 
 
 @commands.command()
 def game(
     bait: str = typer.Option("circle", help="Bait seat's policy key."),
     shooter: str = typer.Option("mirror", help="Shooter seat's policy key."),
-    seed: int = typer.Option(0, help="Seed of the first game; game i uses seed + i."),
-    games: int = typer.Option(1, min=1, help="Number of games."),
-    frames: int = typer.Option(GameConfig.frames, min=1, help=f"Frames per game ({FPS} per second)."),
+    seed: int = number(0, SEEDS, "Seed of the first game; game i uses seed + i."),
+    games: int = number(1, GAMES, "Number of games."),
+    frames: int = number(GameConfig.frames, FRAMES, f"Frames per game ({FPS} per second)."),
 ) -> None:
     """Play headless games in-process between two policies and print the score."""
+    if seed + games - 1 not in SEEDS:
+        raise UsageError(
+            "--seed", seed, f"the last game's seed {seed + games - 1} is outside the range {SEEDS}"
+        )
     config = GameConfig(frames=frames)
     results = []
     for s in range(seed, seed + games):
@@ -43,7 +48,9 @@ def game(
 
 
 @commands.command("calibrate")
-def calibrate_command(games: int = typer.Option(20, min=2, help="Seeded one-minute games per pair.")) -> None:
+def calibrate_command(
+    games: int = number(20, Range(2, GAMES.high), "Seeded one-minute games per pair."),
+) -> None:
     """Score the calibration pairs of the rules page (mean and standard error of kills/min)."""
     table = Table(title=f"Calibration: kills per minute over {games} seeded one-minute games")
     for column in ("pair", "bait seat", "shooter seat", "kills/min", "s.e."):
@@ -56,12 +63,21 @@ def calibrate_command(games: int = typer.Option(20, min=2, help="Seeded one-minu
 @commands.command()
 def train(
     keys: list[str] = typer.Argument(None, help="Library keys to train (default: every learned policy)."),
-    steps: int | None = typer.Option(None, min=1, help="Environment steps (default: the recipe's)."),
-    seed: int | None = typer.Option(None, help="Training seed (default: the recipe's)."),
-    log_dir: Path = typer.Option(Path("runs"), help="CSV training logs go to LOG_DIR/KEY."),
-    score_games: int = typer.Option(10, min=0, help="Games scored with the first partner after training."),
+    steps: int | None = number(None, STEPS, "Environment steps (default: the recipe's)."),
+    seed: int | None = number(None, SEEDS, "Training seed (default: the recipe's)."),
+    out: Path = output(
+        Path("tsf-library"),
+        "The library the weights and manifest go to; a new directory starts as a copy of the "
+        "shipped library. The shipped library itself is written only when named here.",
+        directory=True,
+    ),
+    log_dir: Path = output(Path("runs"), "CSV training logs go to LOG_DIR/KEY.", directory=True),
+    score_games: int = number(
+        10, Range(0, GAMES.high), "Games scored with the first partner after training."
+    ),
 ) -> None:
-    """Train library policies by their registry recipes (needs the `train` extra)."""
+    """Train library policies by their registry recipes into a library directory (needs the
+    `train` extra)."""
     from services.agent import library
 
     todo = library.learned(keys or [])
@@ -69,15 +85,14 @@ def train(
         from services.agent.train import train as train_policy
     except ModuleNotFoundError as error:
         raise Failure(f"{error}: training needs the `train` extra, pip install -e '.[train]'") from None
+    library.copy(out)
     for key in todo:
         console.print(f"[bold]training {key}[/]: {library.registry()[key].description}")
-        entry = train_policy(key, steps, seed, log_dir / key, score_games=score_games)
+        entry = train_policy(key, steps, seed, log_dir / key, out, score_games=score_games)
         score = entry.get("score")
-        console.print(f"  {entry['file']} sha256 {entry['sha256'][:12]} in {entry['seconds']} s")
+        console.print(f"  {out / entry['file']} sha256 {entry['sha256'][:12]} in {entry['seconds']} s")
         if score:
-            console.print(
-                f"  {score['kills_per_minute']:.2f} ± {score['stderr']:.2f} kills/min with {score['partner']}"
-            )
+            console.print(f"  {_score_text(score)}")
 
 
 def _score_text(score: dict) -> str:

@@ -11,6 +11,7 @@ from rich.table import Table
 
 from services.options import GAMES, WORKERS, bus_options, console, number, output
 from shared.bus import BusConfig, stop_on_signals
+from shared.errors import Failure
 from shared.messages import JOB_SEEDS
 
 commands = typer.Typer()
@@ -47,7 +48,7 @@ def sweep(
     """Coordinate a self-play sweep: measure the table with local and remote workers; resumable."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
 
-    from services.table.sweep import local_workers, run_sweep
+    from services.table.sweep import journal_path, local_workers, run_sweep
     from shared.bus import free_endpoint
 
     bait_keys, shooter_keys = _keys(baits, "bait"), _keys(shooters, "shooter")
@@ -63,8 +64,7 @@ def sweep(
             lambda done, total: bar.update(task, completed=done, total=total), stop,
         )  # fmt: skip
     if table is None:
-        console.print("stopped; run the same command again to resume from the journal")
-        raise typer.Exit(1)
+        raise Failure(f"stopped; run the same command again to resume from {journal_path(out)}")
     _print_table(table)
     console.print(f"table written to {out}")
     if plot is not None:

@@ -30,7 +30,7 @@ SECONDS = Range(0.0, 24 * 3600.0)  # a wait: at most a day
 PORTS = Range(0, 65535)
 
 
-def number(default: object, limits: Range, help: str, *names: str) -> Any:
+def number(default: object, limits: Range, help: str) -> Any:
     """A numeric option that refuses a value outside `limits` before the command starts: one line
     naming the option, the value and the range, exit status 2 (click's usage error). Whole numbers
     when the limits are ints; NaN and infinities are outside every range. `default` is `...` inside
@@ -51,14 +51,14 @@ def number(default: object, limits: Range, help: str, *names: str) -> Any:
             raise typer.BadParameter(f"{text} is not a whole number")
         return kind(value)
 
-    return typer.Option(default, *names, parser=parse, help=f"{help} [{limits}]")
+    return typer.Option(default, parser=parse, help=f"{help} [{limits}]")
 
 
 Seed = Annotated[int, number(..., SEEDS, "The game's seed.")]
 Duration = Annotated[float, number(..., DURATION, f"Game length in seconds ({FPS} frames each).")]
 
 
-def output(default: Path | None, help: str, *names: str, directory: bool = False) -> Any:
+def output(default: Path | None, help: str, directory: bool = False) -> Any:
     """An option naming where a command writes (a file, or with `directory` a directory made if
     missing), refused before the command starts when nothing could be written there. Defaults are
     relative to the current directory: a shipped artifact is written only when named."""
@@ -75,7 +75,7 @@ def output(default: Path | None, help: str, *names: str, directory: bool = False
             raise typer.BadParameter(f"{path}: {existing} is not writable")
         return path
 
-    return typer.Option(default, *names, callback=check, help=help)
+    return typer.Option(default, callback=check, help=help)
 
 
 # Options every bus service shares. The environment can set them (space-separated endpoints), so that

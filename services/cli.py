@@ -18,8 +18,9 @@ for group in (agent_cli, table_cli, services_cli, matches_cli, adapter_cli, repo
 
 def main() -> None:
     """The `tsf` command (services/entry.py: one line, not a traceback, when it ends badly)."""
-    from services.entry import run
+    from services.entry import run, start
 
+    start()
     raise SystemExit(run(app))
 
 

@@ -8,14 +8,34 @@ or TSF_DEBUG=1, lets the traceback through instead.
 from __future__ import annotations
 
 import os
+import signal
 import sys
 from collections.abc import Sequence
 
 import typer
 
+from services.processes import adopt
 from shared.errors import Failure, UsageError
 
 DEBUG_HINT = "(--debug or TSF_DEBUG=1 shows the traceback)"
+
+
+_interrupted: list[str] = []  # the signal that interrupted the command, if one did
+
+
+def start() -> None:
+    """What a `tsf` process does first. SIGINT, SIGTERM and SIGHUP interrupt a command alike, so
+    that it ends through its `finally` blocks (a pool is terminated, files are closed) with one
+    line and exit status 1; a command that stops gracefully installs its own (stop_on_signals). A
+    process a launcher started dies with it (services/processes.py)."""
+
+    def interrupt(sig: int, frame: object) -> None:
+        _interrupted.append(signal.Signals(sig).name)
+        raise KeyboardInterrupt
+
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, interrupt)
+    adopt()
 
 
 def run(app: typer.Typer, args: Sequence[str] | None = None) -> int:
@@ -42,10 +62,19 @@ def run(app: typer.Typer, args: Sequence[str] | None = None) -> int:
     except Exception as error:  # the one place where every failure becomes a line
         if debug:
             raise
+        if _interrupted:  # what failed was cut short by the signal
+            return _stopped(where)
         plain = isinstance(error, Failure | OSError)
         _say(f"{where}: {error}" if plain else f"{where}: {type(error).__name__}: {error} {DEBUG_HINT}")
         return 1
+    if _interrupted:  # typer turns the KeyboardInterrupt into exit status 130, without a word
+        return _stopped(where)
     return status if isinstance(status, int) else 0
+
+
+def _stopped(where: str) -> int:
+    _say(f"{where}: stopped by {_interrupted[0]}")
+    return 1
 
 
 def _say(line: str) -> None:

@@ -7,9 +7,7 @@ listens on a port of its own, so zenoh's gossip links them all directly. No rout
 
 from __future__ import annotations
 
-import os
 import secrets
-import subprocess
 import sys
 import threading
 import time
@@ -19,6 +17,7 @@ from pathlib import Path
 
 from services.adapter.core import AdapterConfig
 from services.agent.library import check_seat
+from services.processes import Processes
 from services.recorder.log import make_way
 from services.recorder.recording import load
 from services.recorder.service import recording_path
@@ -64,46 +63,6 @@ class MatchPlan:
 def service_command(name: str, bus: BusConfig, *args: str) -> list[str]:
     """The command line that starts one service of the `tsf` CLI in a new Python process."""
     return [sys.executable, "-m", "services.cli", name, *bus.to_args(), *args]
-
-
-class Processes:
-    """The child processes of a match; all are ended (SIGTERM, then SIGKILL) on exit."""
-
-    def __init__(self) -> None:
-        self.children: dict[str, subprocess.Popen] = {}
-        self.ended: set[str] = set()  # the children still running at exit, which this ended
-
-    def start(self, name: str, command: list[str], nice: int = 0) -> subprocess.Popen:
-        """Start a child; `nice` > 0 lowers its CPU priority (for work off the latency path)."""
-        self.children[name] = subprocess.Popen(
-            command, stdin=subprocess.DEVNULL, preexec_fn=(lambda: os.nice(nice)) if nice else None
-        )
-        return self.children[name]
-
-    def wait(self, name: str, timeout: float) -> int | None:
-        try:
-            return self.children[name].wait(timeout)
-        except subprocess.TimeoutExpired:
-            return None
-
-    def __enter__(self) -> Processes:
-        return self
-
-    def failed(self) -> dict[str, int]:
-        """The exit status of each child that ended by itself, badly."""
-        return {n: c.returncode for n, c in self.children.items() if n not in self.ended and c.returncode}
-
-    def __exit__(self, *exc: object) -> None:
-        for name, child in self.children.items():
-            if child.poll() is None:
-                self.ended.add(name)
-                child.terminate()
-        for child in self.children.values():
-            try:
-                child.wait(5)
-            except subprocess.TimeoutExpired:
-                child.kill()
-                child.wait()
 
 
 def run_match(

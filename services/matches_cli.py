@@ -8,10 +8,22 @@ from pathlib import Path
 import typer
 from rich.live import Live
 
-from services.options import AdapterFactory, Host, Port, adapter_options, bus_options, console
+from services.options import (
+    SECONDS,
+    AdapterFactory,
+    Duration,
+    Host,
+    Port,
+    Seed,
+    adapter_options,
+    bus_options,
+    console,
+    number,
+    output,
+)
 from shared.bus import BusConfig, stop_on_signals
 from shared.errors import Failure, UsageError
-from shared.game import FPS, ROLES, other
+from shared.game import FPS, FRAMES, ROLES, Range, other
 
 commands = typer.Typer()
 
@@ -19,15 +31,15 @@ commands = typer.Typer()
 @commands.command("match")
 @adapter_options("role", "seed")
 def match_command(
-    seed: int = typer.Option(0, help="The game's seed."),
-    duration: float = typer.Option(60.0, min=0.1, help=f"Game length in seconds ({FPS} frames each)."),
+    seed: Seed = 0,
+    duration: Duration = 60.0,
     bait: str = typer.Option("circle", help="Bait agent's policy key."),
     shooter: str = typer.Option("mirror", help="Shooter agent's policy key."),
     lockstep: bool = typer.Option(
         False, help="Lockstep (as fast as the agents answer) instead of real time."
     ),
     match: str = typer.Option("", help="Match id (default: the time and a random suffix)."),
-    out: Path = typer.Option(Path("recordings"), help="Directory of the recordings."),
+    out: Path = output(Path("recordings"), "Directory of the recordings.", directory=True),
     overwrite: bool = typer.Option(
         False, "--overwrite", help="Reuse the id of an existing recording; the old one is renamed aside."
     ),
@@ -87,13 +99,13 @@ def play_command(
         help="Who plays the other seat: `adaptive` (the adaptive agent), a policy key (see `tsf "
         "library`), or `human` for a person.",
     ),
-    seed: int = typer.Option(0, help="The game's seed."),
-    duration: float = typer.Option(60.0, min=0.1, help=f"Game length in seconds ({FPS} frames each)."),
-    wait: float = typer.Option(600.0, help="Seconds to wait for the players to press start."),
+    seed: Seed = 0,
+    duration: Duration = 60.0,
+    wait: float = number(600.0, SECONDS, "Seconds to wait for the players to press start."),
     host: Host = "127.0.0.1",
     port: Port = 8000,
     match: str = typer.Option("", help="Match id (default: the time and a random suffix)."),
-    out: Path = typer.Option(Path("recordings"), help="Directory of the recordings."),
+    out: Path = output(Path("recordings"), "Directory of the recordings.", directory=True),
     *,
     adapter: AdapterFactory,
 ) -> None:
@@ -133,7 +145,7 @@ def study(
     config: Path = typer.Argument(
         ..., exists=True, dir_okay=False, help="The study's TOML file (see services/study/configs/)."
     ),
-    out: Path = typer.Option(Path("studies"), help="Studies go to OUT/<name>: progress and recordings."),
+    out: Path = output(Path("studies"), "Studies go to OUT/<name>: progress and recordings.", directory=True),
     host: Host = "127.0.0.1",
     port: Port = 8000,
 ) -> None:
@@ -164,13 +176,13 @@ def replay_command(
     allow_torn: bool = typer.Option(
         False, "--allow-torn", help="Accept a missing end (no summary, a torn last record), nothing else."
     ),
-    video: Path | None = typer.Option(None, help="Write the re-simulated match as an .mp4 or .gif."),
-    scale: float = typer.Option(1.0, min=0.1, help="Video pixels per world pixel."),
-    every: int = typer.Option(1, min=1, help="Video: draw every N-th frame (the video keeps real speed)."),
+    video: Path | None = output(None, "Write the re-simulated match as an .mp4 or .gif."),
+    scale: float = number(1.0, Range(0.1, 10.0), "Video pixels per world pixel."),
+    every: int = number(1, FRAMES, "Video: draw every N-th frame (the video keeps real speed)."),
     live: bool = typer.Option(False, "--live", help="Put the match back on the bus at the game's pace."),
-    speed: float = typer.Option(1.0, min=0.01, help="--live: playback speed (1 = real time)."),
+    speed: float = number(1.0, Range(0.01, 100.0), "--live: playback speed (1 = real time)."),
     as_match: str = typer.Option("", "--as", help="--live: publish under this match id (default: its own)."),
-    delay: float = typer.Option(1.0, min=0.0, help="--live: seconds to wait for watchers before starting."),
+    delay: float = number(1.0, SECONDS, "--live: seconds to wait for watchers before starting."),
     *,
     bus: BusConfig,
 ) -> None:

@@ -1,5 +1,6 @@
-"""What the `tsf` command groups share: the console, the bus options every service takes, the
-adaptive agent's options (built from AdapterConfig) and the web page's host and port."""
+"""What the `tsf` command groups share: the console, numeric options checked against their limits,
+the bus options every service takes, the adaptive agent's options (built from AdapterConfig) and the
+web page's host and port."""
 
 from __future__ import annotations
 
@@ -7,16 +8,74 @@ import dataclasses
 import functools
 import inspect
 import logging
+import os
 from collections.abc import Callable
-from typing import Annotated
+from pathlib import Path
+from typing import Annotated, Any
 
 import typer
 from rich.console import Console
 
 from services.adapter.core import AdapterConfig
 from shared.bus import BusConfig
+from shared.game import DURATION, FPS, SEEDS, Range
 
 console = Console()
+
+# The limits of values that only the command line sets; those of the game and the wire live in
+# shared/ (game.SEEDS, FRAMES, DURATION, messages.JOB_SEEDS) and the adapter's in AdapterConfig.
+GAMES = Range(1, 10_000)  # games per pair, policy or partner
+WORKERS = Range(0, 256)  # processes started on this machine (0: the command's default)
+SECONDS = Range(0.0, 24 * 3600.0)  # a wait: at most a day
+PORTS = Range(0, 65535)
+
+
+def number(default: object, limits: Range, help: str) -> Any:
+    """A numeric option that refuses a value outside `limits` before the command starts: one line
+    naming the option, the value and the range, exit status 2 (click's usage error). Whole numbers
+    when the limits are ints; NaN and infinities are outside every range. `default` is `...` inside
+    Annotated."""
+    kind = type(limits.low)
+
+    def parse(text: str) -> int | float:
+        try:
+            value = int(text) if kind is int else float(text)
+        except ValueError:
+            try:
+                value = float(text)  # 1e9, inf, nan, 2.5: a number, if not one of this range
+            except ValueError:
+                raise typer.BadParameter(f"{text} is not a number") from None
+        if value not in limits:
+            raise typer.BadParameter(f"{text} is outside the range {limits}")
+        if kind is int and value != int(value):
+            raise typer.BadParameter(f"{text} is not a whole number")
+        return kind(value)
+
+    return typer.Option(default, parser=parse, help=f"{help} [{limits}]")
+
+
+Seed = Annotated[int, number(..., SEEDS, "The game's seed.")]
+Duration = Annotated[float, number(..., DURATION, f"Game length in seconds ({FPS} frames each).")]
+
+
+def output(default: Path | None, help: str, directory: bool = False, names: tuple[str, ...] = ()) -> Any:
+    """An option naming where a command writes (a file, or with `directory` a directory made if
+    missing), refused before the command starts when nothing could be written there. Defaults are
+    relative to the current directory: a shipped artifact is written only when named."""
+
+    def check(path: Path | None) -> Path | None:
+        if path is None:
+            return None
+        if path.exists() and path.is_dir() != directory:
+            raise typer.BadParameter(f"{path} is {'not ' if directory else ''}a directory")
+        existing = next(p for p in (path, *path.absolute().parents) if p.exists())
+        if existing != path and not existing.is_dir():
+            raise typer.BadParameter(f"{path}: {existing} is not a directory")
+        if not os.access(existing, os.W_OK):
+            raise typer.BadParameter(f"{path}: {existing} is not writable")
+        return path
+
+    return typer.Option(default, *names, callback=check, help=help)
 
 
 # Options every bus service shares. The environment can set them (space-separated endpoints), so that
@@ -131,4 +190,4 @@ def adapter_options(*fixed: str) -> Callable[[Callable[..., None]], Callable[...
 Host = Annotated[str, typer.Option(help="Address the web page is served on (0.0.0.0: every interface).")]
 
 
-Port = Annotated[int, typer.Option(min=0, max=65535, help="Port of the web page (0: any free port).")]
+Port = Annotated[int, number(..., PORTS, "Port of the web page (0: any free port).")]

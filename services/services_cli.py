@@ -10,9 +10,22 @@ from typing import Annotated
 import typer
 
 from services.adapter.core import AdapterConfig
-from services.options import AdapterFactory, Connect, Host, Match, Port, adapter_options, bus_options, console
+from services.options import (
+    SECONDS,
+    AdapterFactory,
+    Connect,
+    Host,
+    Match,
+    Port,
+    Seed,
+    adapter_options,
+    bus_options,
+    console,
+    number,
+    output,
+)
 from shared.bus import BusConfig, stop_on_signals
-from shared.game import FPS, GameConfig
+from shared.game import FPS, FRAMES, SEEDS, GameConfig
 
 commands = typer.Typer()
 
@@ -21,14 +34,14 @@ commands = typer.Typer()
 @bus_options
 def sim(
     match: Match,
-    seed: int = typer.Option(0),
-    frames: int = typer.Option(GameConfig.frames, min=1),
+    seed: Seed = 0,
+    frames: int = number(GameConfig.frames, FRAMES, f"Game length in frames ({FPS} a second)."),
     mode: str = typer.Option("realtime", "--sim-mode", help=f"realtime ({FPS} Hz) or lockstep."),
     bait: str = typer.Option("", help="Bait's policy key, for the record."),
     shooter: str = typer.Option("", help="Shooter's policy key, for the record."),
-    wait_players: float = typer.Option(10.0, help="Seconds to wait for both seats before starting."),
-    wait_recorder: float = typer.Option(0.0, help="Seconds to wait for a recorder before starting."),
-    wait_adapter: float = typer.Option(0.0, help="Seconds to wait for an adapter before starting."),
+    wait_players: float = number(10.0, SECONDS, "Seconds to wait for both seats before starting."),
+    wait_recorder: float = number(0.0, SECONDS, "Seconds to wait for a recorder before starting."),
+    wait_adapter: float = number(0.0, SECONDS, "Seconds to wait for an adapter before starting."),
     *,
     bus: BusConfig,
 ) -> None:
@@ -54,7 +67,7 @@ def agent(
         help="Policy key to play (a library or scripted key), or an adaptive agent's name "
         "(adaptive-T<window>-<strategy>) to start with its initial policy.",
     ),
-    seed: int = typer.Option(0, help="The match's seed (the policy's seed derives from it)."),
+    seed: int = number(0, SEEDS, "The match's seed (the policy's seed derives from it)."),
     *,
     bus: BusConfig,
 ) -> None:
@@ -69,7 +82,7 @@ def agent(
 @bus_options
 def recorder(
     match: Match,
-    out: Path = typer.Option(Path("recordings"), help="Directory of the recordings."),
+    out: Path = output(Path("recordings"), "Directory of the recordings.", directory=True),
     *,
     bus: BusConfig,
 ) -> None:
@@ -142,7 +155,7 @@ def alive(
     service: str = typer.Option(..., help="sim, agent, recorder, adapter or human."),
     role: str = typer.Option("", help="The seat, for an agent or a human."),
     connect: Connect = None,
-    timeout: float = typer.Option(2.0, help="Seconds to wait for the bus."),
+    timeout: float = number(2.0, SECONDS, "Seconds to wait for the bus."),
 ) -> None:
     """Exit 0 if the service's liveliness token is on the bus, else 1 (a container healthcheck).
 

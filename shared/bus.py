@@ -143,8 +143,10 @@ def subscribe(
     """Subscribe `handler` to the valid messages on `key`. Decoding and validation happen here, once:
     `kind` is the message type, or a decoder that also reads the key (decode_seat_action). Input that
     fails, or that the handler refuses by raising ValueError (MessageError for a contract reason), is
-    counted in `drops` by reason and dropped. Use the subscriber as a context manager to undeclare it
-    (publishers that callbacks use are left to the session's close: undeclaring one mid-put fails)."""
+    counted in `drops` by reason and dropped. A handler's put that finds the session closed (a
+    sample still in flight while the service ends) is let go. Use the subscriber as a context
+    manager to undeclare it (publishers that callbacks use are left to the session's close:
+    undeclaring one mid-put fails)."""
 
     def on_sample(sample: zenoh.Sample) -> None:
         where = str(sample.key_expr)
@@ -154,6 +156,9 @@ def subscribe(
         except ValueError as error:
             if drops is not None:
                 drops.drop(where, error)
+        except zenoh.ZError:  # a late sample whose answer meets the session closed: the service is ending
+            if not z.is_closed():
+                raise
 
     return z.declare_subscriber(key, on_sample)
 

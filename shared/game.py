@@ -40,6 +40,30 @@ EVENT_KINDS = (
 )
 OBS_SIZE = 64  # float values per observation; the layout is services/sim/observation.py
 
+
+@dataclass(frozen=True)
+class Range:
+    """The values a number may take, both ends included. The wire contract and the command line
+    check a value against the same Range, so a value a command accepts is one every service accepts.
+    Ends of type float make a range of numbers, ends of type int one of whole numbers."""
+
+    low: int | float
+    high: int | float
+
+    def __contains__(self, value: object) -> bool:
+        """NaN is in no range (it compares false), nor is a bool."""
+        return (
+            isinstance(value, int | float) and not isinstance(value, bool) and self.low <= value <= self.high
+        )
+
+    def __str__(self) -> str:
+        return f"{self.low} to {self.high}"
+
+
+SEEDS = Range(0, 2**32 - 1)  # a game's seed; random.Random(-s) would play the game of seed s
+FRAMES = Range(1, 60 * 60 * FPS)  # a game's length: at most an hour
+DURATION = Range(0.1, FRAMES.high / FPS)  # the same in seconds, where people give it (--duration)
+
 T = TypeVar("T")
 
 
@@ -133,8 +157,8 @@ class GameConfig:
     points_shield_hit: int = -20  # (assumption)
 
     def __post_init__(self) -> None:
-        if self.frames <= 0 or self.fps <= 0:
-            raise ValueError(f"frames and fps must be positive, got {self.frames}, {self.fps}")
+        if self.frames not in FRAMES or self.fps <= 0:
+            raise ValueError(f"frames must be {FRAMES} and fps positive, got {self.frames}, {self.fps}")
         if not self.fortress_radius < self.shield_radius < self.region_radius:
             raise ValueError("need fortress_radius < shield_radius < region_radius")
 

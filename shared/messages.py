@@ -18,11 +18,12 @@ from typing import Any, ClassVar, TypeVar
 import msgpack
 
 from shared import keys
-from shared.game import DEATH_CAUSES, EVENT_KINDS, N_ACTIONS, OBS_SIZE, ROLES, GameConfig
+from shared.game import DEATH_CAUSES, EVENT_KINDS, N_ACTIONS, OBS_SIZE, ROLES, SEEDS, GameConfig, Range
 
 SCHEMA_VERSION = 1
 MAX_BYTES = 64 * 1024
 MAX_FRAME = 10**9
+JOB_SEEDS = Range(1, 1000)  # games of one sweep job (tsf sweep --chunk)
 
 
 class MessageError(ValueError):
@@ -197,6 +198,7 @@ class GameEvent(Message):
 
 
 _COUNT = _int(0, MAX_FRAME)
+_SEED = _int(SEEDS.low, SEEDS.high)
 
 
 def _counters(v: Any) -> bool:
@@ -224,7 +226,7 @@ class Start(Message):
 
     TYPE: ClassVar[str] = "start"
     CHECKS: ClassVar[dict[str, Check]] = {
-        "seed": _int(-(2**63), 2**63),
+        "seed": _SEED,
         "mode": _one_of(("realtime", "lockstep")),
         "config": _config,
         "policies": _map(ROLES, _KEY_OR_NONE),
@@ -305,7 +307,7 @@ class SweepJob(Message):
         "job": _text(r"[A-Za-z0-9_-]{1,64}"),
         "bait": _POLICY_KEY,
         "shooter": _POLICY_KEY,
-        "seeds": lambda v: isinstance(v, list) and 0 < len(v) <= 1000 and all(_int(0, 2**31)(x) for x in v),
+        "seeds": lambda v: isinstance(v, list) and len(v) in JOB_SEEDS and all(_SEED(x) for x in v),
         "library": _HASH,
         "config": _HASH,
     }
@@ -326,7 +328,7 @@ class SweepResult(Message):
     CHECKS: ClassVar[dict[str, Check]] = {
         "job": _text(r"[A-Za-z0-9_-]{1,64}"),
         "kills_per_minute": lambda v: (
-            isinstance(v, list) and len(v) <= 1000 and all(_number(0.0)(x) for x in v)
+            isinstance(v, list) and len(v) <= JOB_SEEDS.high and all(_number(0.0)(x) for x in v)
         ),
         "error": _text(r"[ -~]{0,300}"),
         "seconds": _number(0.0),

@@ -210,6 +210,11 @@ BAD: list[tuple[str, Callable[[], bytes], type[Message] | None, str]] = [
     ("version true", lambda: pack(record("action", v=True)), Action, "version"),
     ("version float", lambda: pack(record("action", v=1.0)), Action, "version"),
     ("config NaN", lambda: pack(record("start", config=config_with(ship_thrust=math.nan))), Start, "range"),
+    ("negative seed", lambda: pack(record("start", seed=-1)), Start, "range"),
+    ("seed past 2^32", lambda: pack(record("start", seed=2**32)), Start, "range"),
+    ("a day-long game", lambda: pack(record("start", config=config_with(frames=2_592_000))), Start, "range"),
+    ("job seed -1", lambda: pack(record("sweep_job", seeds=[-1])), SweepJob, "range"),
+    ("job of 1001 games", lambda: pack(record("sweep_job", seeds=list(range(1001)))), SweepJob, "range"),
     (
         "config spawn",
         lambda: pack(record("start", config=config_with(bait_spawn=["a", None, []]))),

@@ -41,14 +41,14 @@ def alive(pid: int) -> bool:
 
 
 @pytest.fixture
-def tsf_match(tmp_path: Path) -> Iterator[Callable[..., subprocess.Popen]]:
-    """Start `tsf match --out tmp_path ARGS...` in a session of its own, output to files; whatever
-    is left of its process group is killed at teardown, so a failing test leaves nothing behind."""
+def tsf(tmp_path: Path) -> Iterator[Callable[..., subprocess.Popen]]:
+    """Start `tsf ARGS...` in a session of its own, output to files; whatever is left of its process
+    group is killed at teardown, so a failing test leaves nothing behind."""
     started: list[subprocess.Popen] = []
 
     def start(*args: str) -> subprocess.Popen:
         n = len(started)
-        command = [sys.executable, "-m", "services.cli", "match", "--out", str(tmp_path), *args]
+        command = [sys.executable, "-m", "services.cli", *args]
         with (tmp_path / f"out{n}").open("w") as out, (tmp_path / f"err{n}").open("w") as err:
             started.append(subprocess.Popen(command, stdout=out, stderr=err, start_new_session=True))
         started[-1].err = tmp_path / f"err{n}"  # type: ignore[attr-defined]
@@ -61,9 +61,23 @@ def tsf_match(tmp_path: Path) -> Iterator[Callable[..., subprocess.Popen]]:
         process.wait()
 
 
+@pytest.fixture
+def tsf_match(tsf, tmp_path: Path) -> Callable[..., subprocess.Popen]:
+    """`tsf match --out tmp_path ARGS...`, as `tsf` starts it."""
+    return lambda *args: tsf("match", "--out", str(tmp_path), *args)
+
+
+def recorded(log: Path) -> int:
+    """The records of a recording so far: none until its header is written."""
+    try:
+        return len(read_log(log)[0])
+    except (OSError, ValueError):
+        return 0
+
+
 def last_line(process: subprocess.Popen) -> str:
     text = process.err.read_text()  # type: ignore[attr-defined]
-    assert "Traceback" not in text
+    assert "Traceback" not in text, text
     return text.strip().splitlines()[-1]
 
 
@@ -91,23 +105,57 @@ def test_matches_started_together_get_their_own_recordings_and_an_id_is_never_re
     assert recording.problems() == [] and recording.starts == 1 and replay(recording) == []
 
 
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT], ids=lambda s: s.name)
+SIGNALS = [signal.SIGTERM, signal.SIGHUP, signal.SIGINT, signal.SIGKILL]
+
+
+def ended(process: subprocess.Popen, sig: signal.Signals, line: str) -> bool:
+    """Whether the launcher ended as it should on `sig`: killed, or exit status 1 and one line."""
+    if sig == signal.SIGKILL:
+        return process.wait(20) == -signal.SIGKILL
+    return process.wait(30) == 1 and last_line(process) == line
+
+
+@pytest.mark.parametrize("sig", SIGNALS, ids=lambda s: s.name)
 def test_a_signal_ends_the_match_and_every_process_it_started(tsf_match, tmp_path, wait_until, sig):
+    """SIGKILL leaves the match no time to end its processes: each asked the kernel for SIGTERM
+    when its launcher dies (services/processes.py)."""
     match = tsf_match("--duration", "60", "--match", "signalled")
     log = tmp_path / "signalled.tsflog"
-    assert wait_until(lambda: log.exists() and len(read_log(log)[0]) > 20, timeout=60)  # under way
+    assert wait_until(lambda: recorded(log) > 20, timeout=60)  # under way
     started = children(match.pid)
     assert sorted(command.split()[3] for command in started.values()) == ["agent", "agent", "recorder", "sim"]
     os.kill(match.pid, sig)
-    assert match.wait(20) == 1
-    assert last_line(match) == "tsf match: match signalled was stopped before its end; its processes ended"
-    assert [pid for pid in started if alive(pid)] == []
+    assert ended(match, sig, "tsf match: match signalled was stopped before its end; its processes ended")
+    assert wait_until(lambda: not any(alive(pid) for pid in started), timeout=20)
+
+
+# Launchers of worker processes, as they are started for a long run: a sweep's workers are `tsf
+# worker` processes, eval's a pool's.
+LAUNCHERS = {
+    "sweep": ("sweep", "--workers", "2", "--games", "10000", "--out", "{tmp}/table.json"),
+    "eval": ("eval", "--workers", "2", "--out", "{tmp}/eval"),
+}
+STOPPED = {
+    "sweep": "tsf sweep: stopped; run the same command again to resume from {tmp}/table.json.journal",
+    "eval": "tsf eval: stopped by {sig}",
+}
+
+
+@pytest.mark.parametrize("sig", SIGNALS, ids=lambda s: s.name)
+@pytest.mark.parametrize("launcher", LAUNCHERS)
+def test_a_signal_ends_a_launcher_and_its_workers(tsf, tmp_path, wait_until, launcher, sig):
+    process = tsf(*(arg.format(tmp=tmp_path) for arg in LAUNCHERS[launcher]))
+    assert wait_until(lambda: len(children(process.pid)) == 2, timeout=60)
+    started = children(process.pid)
+    os.kill(process.pid, sig)
+    assert ended(process, sig, STOPPED[launcher].format(tmp=tmp_path, sig=sig.name))
+    assert wait_until(lambda: not any(alive(pid) for pid in started), timeout=30)
 
 
 def test_a_service_that_fails_fails_the_match(tsf_match, tmp_path, wait_until):
     match = tsf_match("--duration", "3", "--match", "failing")
     log = tmp_path / "failing.tsflog"
-    assert wait_until(lambda: log.exists() and len(read_log(log)[0]) > 20, timeout=60)
+    assert wait_until(lambda: recorded(log) > 20, timeout=60)
     [recorder] = [pid for pid, command in children(match.pid).items() if command.split()[3] == "recorder"]
     os.kill(recorder, signal.SIGKILL)
     assert match.wait(30) == 1

@@ -10,9 +10,11 @@ import signal
 import subprocess
 import sys
 from collections.abc import Iterator
+from importlib import resources
 from pathlib import Path
 
 import pytest
+import typer
 
 from services.agent import library
 from services.cli import app
@@ -23,6 +25,7 @@ from shared.errors import UsageError
 BAITS = "B1, B2, B3, B4, B5, B6, B7, B8, B9, circle, idle, random"
 SHOOTERS = "S1, S2, S3, S4, S5, S6, S7, mirror, idle, random"
 STRATEGIES = "cem, cem-dwell, cem-ood, bayes, bayes-dwell-ood"
+SEED_RANGE = "0 to 4294967295"
 
 # (command line, exit status, what the one line says); {tmp} is a directory that holds the finished
 # recording {done} (match id M), its torn copy {torn}, one with a wrong state hash {tampered}, and
@@ -30,9 +33,9 @@ STRATEGIES = "cem, cem-dwell, cem-ood, bayes, bayes-dwell-ood"
 MISTAKES = [
     ("nosuch", 2, "tsf: No such command 'nosuch'."),
     ("game --nosuch", 2, "tsf game: No such option: --nosuch"),
-    ("game --games 0", 2, "Invalid value for '--games': Input should be greater than or equal to 1"),
-    ("game --frames 0", 2, "Invalid value for '--frames'"),
-    ("game --seed x", 2, "Invalid value for '--seed': Input should be a valid integer"),
+    ("game --games 0", 2, "tsf game: Invalid value for '--games': 0 is outside the range 1 to 10000"),
+    ("game --frames 0", 2, "Invalid value for '--frames': 0 is outside the range 1 to 108000"),
+    ("game --seed x", 2, "tsf game: Invalid value for '--seed': x is not a number"),
     ("game --bait B99", 2, f"tsf game: --bait B99: no policy of the bait seat; valid: {BAITS}"),
     ("game --bait S4", 2, f"tsf game: --bait S4: plays the shooter seat, not the bait; valid: {BAITS}"),
     (
@@ -41,7 +44,7 @@ MISTAKES = [
         f"--shooter circle: plays the bait seat, not the shooter; valid: {SHOOTERS}",
     ),
     ("game --shooter B1", 2, f"--shooter B1: plays the bait seat, not the shooter; valid: {SHOOTERS}"),
-    ("calibrate --games 1", 2, "Invalid value for '--games': Input should be greater than or equal to 2"),
+    ("calibrate --games 1", 2, "Invalid value for '--games': 1 is outside the range 2 to 10000"),
     ("train NOPE", 2, "tsf train: KEYS NOPE: not a learned policy of the library; valid: B"),
     ("train --steps 0", 2, "Invalid value for '--steps'"),
     ("diversity --games 0", 2, "Invalid value for '--games'"),
@@ -98,7 +101,7 @@ MISTAKES = [
         f"tsf adapter: --strategy oracle: unknown; valid: {STRATEGIES}",
     ),
     ("adapter --match x --initial best", 2, "--initial best: unknown; valid: best-average, random"),
-    ("adapter --match x --window 0", 2, "tsf adapter: --window 0: must be at least 1"),
+    ("adapter --match x --window 0", 2, "tsf adapter: --window 0: outside the range 1 to 108000"),
     ("adapter --match x --hazard 1.5", 2, "tsf adapter: --hazard 1.5: a probability in [0, 1)"),
     ("adapter --match x --noise -1", 2, "tsf adapter: --noise -1.0: a probability in [0, 1)"),
     ("router --credentials {tmp}/none.txt", 2, "tsf router: --credentials {tmp}/none.txt: no such file"),
@@ -120,7 +123,7 @@ MISTAKES = [
         "tsf match: --shooter zz: no policy of the shooter seat",
     ),
     ("match --duration 0", 2, "Invalid value for '--duration'"),
-    ("match --window 0", 2, "tsf match: --window 0: must be at least 1"),
+    ("match --window 0", 2, "tsf match: --window 0: outside the range 1 to 108000"),
     ("match --seed abc", 2, "Invalid value for '--seed'"),
     ("match --match a/b", 2, "tsf match: --match a/b: invalid match id"),
     (
@@ -156,7 +159,7 @@ MISTAKES = [
         f"tsf play: --partner S4: plays the shooter seat, not the bait; valid: {BAITS}",
     ),
     ("play --strategy oracle", 2, f"tsf play: --strategy oracle: unknown; valid: {STRATEGIES}"),
-    ("play --window 0", 2, "tsf play: --window 0: must be at least 1"),
+    ("play --window 0", 2, "tsf play: --window 0: outside the range 1 to 108000"),
     ("play --match a/b --partner S4", 2, "tsf play: --match a/b: invalid match id"),
     ("eval --role pilot", 2, "tsf eval: --role pilot: not a seat; valid: bait, shooter"),
     ("eval --windows 1,x", 2, "tsf eval: --windows 1,x: not whole numbers separated by commas"),
@@ -173,6 +176,123 @@ MISTAKES = [
     ),
     ("study {garbage}", 2, "tsf study: CONFIG {garbage}: not a study: Expected '=' after a key"),
     ("study {tmp}/empty.toml", 2, "tsf study: CONFIG {tmp}/empty.toml: not a study: "),
+    # Values outside their limits (shared/game.py, shared/messages.py, services/options.py,
+    # AdapterConfig): refused before anything starts, naming the accepted range.
+    ("game --seed -1", 2, f"tsf game: Invalid value for '--seed': -1 is outside the range {SEED_RANGE}"),
+    ("game --frames 1000000000", 2, "'--frames': 1000000000 is outside the range 1 to 108000"),
+    ("game --games 1e9", 2, "tsf game: Invalid value for '--games': 1e9 is outside the range 1 to 10000"),
+    ("game --games 2.5", 2, "tsf game: Invalid value for '--games': 2.5 is not a whole number"),
+    (
+        "game --seed 4294967295 --games 2",
+        2,
+        f"tsf game: --seed 4294967295: the last game's seed 4294967296 is outside the range {SEED_RANGE}",
+    ),
+    ("calibrate --games 100000", 2, "'--games': 100000 is outside the range 2 to 10000"),
+    (
+        "match --duration 1e9",
+        2,
+        "tsf match: Invalid value for '--duration': 1e9 is outside the range 0.1 to 3600.0",
+    ),
+    ("match --duration nan", 2, "'--duration': nan is outside the range 0.1 to 3600.0"),
+    ("match --seed -1", 2, f"tsf match: Invalid value for '--seed': -1 is outside the range {SEED_RANGE}"),
+    ("match --window 1000000", 2, "tsf match: --window 1000000: outside the range 1 to 108000"),
+    ("match --adaptive bait --warmup -1", 2, "tsf match: --warmup -1: outside the range 0 to 108000"),
+    ("play --duration inf", 2, "tsf play: Invalid value for '--duration': inf is outside the range"),
+    ("play --wait -5", 2, "tsf play: Invalid value for '--wait': -5 is outside the range 0.0 to 86400.0"),
+    ("play --seed -2", 2, "tsf play: Invalid value for '--seed': -2 is outside the range"),
+    ("sim --match x --frames 1000000000", 2, "'--frames': 1000000000 is outside the range 1 to 108000"),
+    (
+        "sim --match x --seed -1",
+        2,
+        f"tsf sim: Invalid value for '--seed': -1 is outside the range {SEED_RANGE}",
+    ),
+    ("sim --match x --wait-players -1", 2, "'--wait-players': -1 is outside the range 0.0 to 86400.0"),
+    ("sim --match x --wait-recorder 1e9", 2, "'--wait-recorder': 1e9 is outside the range 0.0 to 86400.0"),
+    ("sim --match x --wait-adapter nan", 2, "'--wait-adapter': nan is outside the range"),
+    ("agent --match x --role bait --policy circle --seed -1", 2, "tsf agent: Invalid value for '--seed': -1"),
+    ("adapter --match x --seed -1", 2, f"tsf adapter: --seed -1: outside the range {SEED_RANGE}"),
+    (
+        "adapter --match x --dwell 999999999",
+        2,
+        "tsf adapter: --dwell 999999999: outside the range 0 to 108000",
+    ),
+    ("train --seed -1", 2, f"tsf train: Invalid value for '--seed': -1 is outside the range {SEED_RANGE}"),
+    (
+        "train --steps 1e12",
+        2,
+        "tsf train: Invalid value for '--steps': 1e12 is outside the range 1 to 1000000000",
+    ),
+    ("train --score-games -1", 2, "'--score-games': -1 is outside the range 0 to 10000"),
+    (
+        "sweep --games 1000000",
+        2,
+        "tsf sweep: Invalid value for '--games': 1000000 is outside the range 1 to 10000",
+    ),
+    ("sweep --chunk 5000", 2, "tsf sweep: Invalid value for '--chunk': 5000 is outside the range 1 to 1000"),
+    ("sweep --workers 100000", 2, "'--workers': 100000 is outside the range 0 to 256"),
+    (
+        "diversity --games -3",
+        2,
+        "tsf diversity: Invalid value for '--games': -3 is outside the range 1 to 10000",
+    ),
+    ("eval --seeds 0", 2, "tsf eval: Invalid value for '--seeds': 0 is outside the range 1 to 10000"),
+    ("eval --windows 0,400", 2, "tsf eval: --windows 0,400: each window must be in the range 1 to 108000"),
+    ("eval --identify-seeds 1e6", 2, "'--identify-seeds': 1e6 is outside the range 1 to 10000"),
+    ("eval --workers 9999", 2, "tsf eval: Invalid value for '--workers': 9999 is outside the range 0 to 256"),
+    ("eval --strategy-window 1000000", 2, "'--strategy-window': 1000000 is outside the range 1 to 108000"),
+    ("calibrate-adapter --workers 1e9", 2, "'--workers': 1e9 is outside the range 0 to 256"),
+    ("report {done} --reference-games 1e9", 2, "'--reference-games': 1e9 is outside the range 1 to 10000"),
+    (
+        "replay {done} --speed inf",
+        2,
+        "tsf replay: Invalid value for '--speed': inf is outside the range 0.01 to 100.0",
+    ),
+    (
+        "replay {done} --every 0",
+        2,
+        "tsf replay: Invalid value for '--every': 0 is outside the range 1 to 108000",
+    ),
+    (
+        "replay {done} --delay -1",
+        2,
+        "tsf replay: Invalid value for '--delay': -1 is outside the range 0.0 to",
+    ),
+    (
+        "alive --match x --service sim --timeout nan",
+        2,
+        "tsf alive: Invalid value for '--timeout': nan is outside",
+    ),
+    (
+        "human --match x --port -1",
+        2,
+        "tsf human: Invalid value for '--port': -1 is outside the range 0 to 65535",
+    ),
+    (
+        "study {tmp}/long.toml",
+        2,
+        "tsf study: CONFIG {tmp}/long.toml: not a study: trial_seconds 1000000000.0: outside the range 0.1",
+    ),
+    # Outputs: where nothing can be written is refused before the work starts.
+    ("eval --out {garbage}", 2, "tsf eval: Invalid value for '--out': {garbage} is not a directory"),
+    (
+        "calibrate-adapter --out {tmp}",
+        2,
+        "tsf calibrate-adapter: Invalid value for '--out': {tmp} is a directory",
+    ),
+    (
+        "sweep --out {garbage}/t.json",
+        2,
+        "tsf sweep: Invalid value for '--out': {garbage}/t.json: {garbage} is not a",
+    ),
+    ("train --out {garbage}", 2, "tsf train: Invalid value for '--out': {garbage} is not a directory"),
+    (
+        "report {done} --out {garbage}",
+        2,
+        "tsf report: Invalid value for '--out': {garbage} is not a directory",
+    ),
+    ("match --out {garbage}", 2, "tsf match: Invalid value for '--out': {garbage} is not a directory"),
+    ("table --plot {tmp}", 2, "tsf table: Invalid value for '--plot': {tmp} is a directory"),
+    ("replay {done} --video {garbage}/m.gif", 2, "'--video': {garbage}/m.gif: {garbage} is not a directory"),
 ]
 
 
@@ -186,6 +306,8 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
     torn.write_bytes(done.read_bytes()[: done.stat().st_size // 2])
     (tmp / "garbage").write_text("this is no recording\n")
     (tmp / "empty.toml").write_text("")
+    study = (resources.files("services.study") / "configs" / "static.toml").read_text()
+    (tmp / "long.toml").write_text(study.replace("trial_seconds = 60", "trial_seconds = 1e9"))
     names = {"done": done, "torn": torn, "tampered": tmp / "tampered.tsflog", "garbage": tmp / "garbage"}
     return {"tmp": str(tmp), **{name: str(path) for name, path in names.items()}}
 
@@ -218,6 +340,29 @@ def test_a_mistake_is_one_line_and_an_exit_status(
 
 def test_enough_mistakes_are_tried() -> None:
     assert len(MISTAKES) >= 60 and len({m[0] for m in MISTAKES}) == len(MISTAKES)
+
+
+def test_no_default_writes_into_the_checkout_or_the_package() -> None:
+    """Every path a command defaults to is relative to the current directory and names none of the
+    project's own directories: a shipped artifact (the table, the library, docs/eval) is written
+    only when its path is given."""
+    shipped = ("services", "shared", "docs")  # the packages and the pages with measured results
+    defaults = {
+        (name, param.name): param.default
+        for name, command in typer.main.get_command(app).commands.items()
+        for param in command.params
+        if isinstance(param.default, Path)
+    }
+    assert defaults  # the walk sees them
+    assert {k: p for k, p in defaults.items() if p.is_absolute() or p.parts[0] in shipped} == {}
+
+
+def test_the_shipped_table_is_read_from_any_directory(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    assert run(app, ["table"]) == 0
+    assert "mean of the table" in capsys.readouterr().out and list(tmp_path.iterdir()) == []
 
 
 def test_train_without_the_train_extra_says_which_extra(

@@ -8,9 +8,9 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from services.adapter.core import STRATEGIES, AdapterConfig
+from services.adapter.core import STRATEGIES, WINDOWS, AdapterConfig
 from services.agent.library import policy_for
-from services.options import console
+from services.options import GAMES, WORKERS, console, number, output
 from shared.errors import UsageError
 from shared.game import FPS, ROLES, other
 
@@ -19,10 +19,12 @@ commands = typer.Typer()
 
 @commands.command()
 def diversity(
-    games: int = typer.Option(5, min=1, help="Seeded games of each policy."),
+    games: int = number(5, GAMES, "Seeded games of each policy."),
     bait_partner: str = typer.Option("S4", help="The shooter every bait plays with."),
     shooter_partner: str = typer.Option("B1", help="The bait every shooter plays with."),
-    out: Path | None = typer.Option(None, help="Write the two matrices as CSV files into this directory."),
+    out: Path | None = output(
+        None, "Write the two matrices as CSV files into this directory.", directory=True
+    ),
 ) -> None:
     """The library's CEM matrices: mean log-probability of policy i's actions under policy j."""
     from services.adapter.cem import cem_matrix
@@ -52,20 +54,24 @@ def diversity(
 @commands.command("eval")
 def eval_command(
     role: str = typer.Option("shooter", help="The adaptive agent's seat; the partners play the other."),
-    seeds: int = typer.Option(5, min=1, help="Seeded one-minute games per partner and agent."),
+    seeds: int = number(5, GAMES, "Seeded one-minute games per partner and agent."),
     windows: str = typer.Option("150,400,800", help="Windows T of the study's CEM agent (comma-separated)."),
     strategies: str = typer.Option(",".join(STRATEGIES), help="Strategies compared at --strategy-window."),
-    strategy_window: int = typer.Option(
-        AdapterConfig.window, min=1, help="The window of the strategies other than cem."
+    strategy_window: int = number(
+        AdapterConfig.window, WINDOWS, "The window of the strategies other than cem."
     ),
     partner: list[str] | None = typer.Option(
         None, help="A partner by name, repeatable (default: the population; see docs/adapter.md)."
     ),
-    identify_seeds: int = typer.Option(3, min=1, help="Games per library partner for identification."),
+    identify_seeds: int = number(3, GAMES, "Games per library partner for identification."),
     identify: bool = typer.Option(True, help="Measure identification accuracy."),
     performance: bool = typer.Option(True, help="Measure team performance."),
-    workers: int = typer.Option(0, min=0, help="Processes (default: one per core)."),
-    out: Path = typer.Option(Path("docs/eval"), help="Directory for the numbers, figures and summary."),
+    workers: int = number(0, WORKERS, "Processes (default: one per core)."),
+    out: Path = output(
+        Path("tsf-eval"),
+        "Directory for the numbers, figures and summary (the shipped results: --out docs/eval).",
+        directory=True,
+    ),
 ) -> None:
     """Evaluate the adaptive agent in-process: identification, team performance, the test against
     the best static policy, and the figures."""
@@ -84,6 +90,8 @@ def eval_command(
         window_list = [int(w) for w in windows.split(",") if w.strip()]
     except ValueError:
         raise UsageError("--windows", windows, "not whole numbers separated by commas") from None
+    if not window_list or any(w not in WINDOWS for w in window_list):
+        raise UsageError("--windows", windows, f"each window must be in the range {WINDOWS}")
     partners = partner or [p for group in population(other(role)).values() for p in group]
     agents = library.keys(role) + team.variants(window_list, strategies.split(","), strategy_window)
     columns = (BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
@@ -118,9 +126,14 @@ def eval_command(
 
 @commands.command("calibrate-adapter")
 def calibrate_adapter(
-    workers: int = typer.Option(0, min=0, help="Processes (default: one per core)."),
+    workers: int = number(0, WORKERS, "Processes (default: one per core)."),
+    out: Path = output(
+        Path("tsf-calibration.json"),
+        "Where the thresholds go (the adapter reads services/adapter/calibration.json; name it here to "
+        "replace it).",
+    ),
 ) -> None:
-    """Measure the adapter's out-of-library thresholds into services/adapter/calibration.json."""
+    """Measure the adapter's out-of-library thresholds."""
     import os
 
     from services.adapter.thresholds import calibrate, write_calibration
@@ -128,4 +141,4 @@ def calibrate_adapter(
     result = calibrate(workers=workers or os.cpu_count() or 1)
     for role, thresholds in result["thresholds"].items():
         console.print(f"{role}: " + ", ".join(f"T={t}: {v:.2f}" for t, v in thresholds.items()))
-    console.print(f"written to {write_calibration(result)}")
+    console.print(f"written to {write_calibration(result, out)}")

@@ -35,10 +35,11 @@ import numpy as np
 from services.adapter.cem import log_probs
 from services.table.table import DEFAULT_TABLE, Table
 from shared.errors import UsageError
-from shared.game import N_ACTIONS, ROLES, Policy, other
+from shared.game import FRAMES, N_ACTIONS, ROLES, SEEDS, Policy, Range, other
 
 STRATEGIES = ("cem", "cem-dwell", "cem-ood", "bayes", "bayes-dwell-ood")
 INITIAL = ("best-average", "random")
+WINDOWS = Range(1, FRAMES.high)  # T: a window longer than a game never fills
 CALIBRATION = Path(__file__).parent / "calibration.json"
 ADAPTIVE = "adaptive-"  # how every adaptive agent's name begins
 _NAME = re.compile(rf"^{ADAPTIVE}T(\d+)-([a-z-]+)$")
@@ -69,13 +70,14 @@ class AdapterConfig:
         for option, value, valid in (*choices, ("--initial", self.initial, INITIAL)):
             if value not in valid:
                 raise UsageError(option, value, "unknown", valid)
-        for option, value, low in (
-            ("--window", self.window, 1),
-            ("--warmup", self.warmup, 0),
-            ("--dwell", self.dwell, 0),
+        for option, value, limits in (
+            ("--window", self.window, WINDOWS),
+            ("--warmup", self.warmup, Range(0, FRAMES.high)),
+            ("--dwell", self.dwell, Range(0, FRAMES.high)),
+            ("--seed", self.seed, SEEDS),
         ):
-            if value < low:
-                raise UsageError(option, value, f"must be at least {low}")
+            if value not in limits:
+                raise UsageError(option, value, f"outside the range {limits}")
         for option, value in (("--hazard", self.hazard), ("--noise", self.noise)):
             if not 0.0 <= value < 1.0:
                 raise UsageError(option, value, "a probability in [0, 1)")

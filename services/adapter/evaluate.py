@@ -11,6 +11,7 @@ out-of-library thresholds) and results.py (the numbers and summary written out).
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cache
@@ -24,6 +25,7 @@ from services.adapter.core import (
 )
 from services.adapter.partners import Partner
 from services.agent import library
+from services.processes import pool_worker
 from services.sim.engine import Game
 from services.sim.observation import observe, world_values
 from services.sim.play import policy_seed, switch_seed
@@ -108,7 +110,7 @@ def run_parallel(
             if progress:
                 progress(len(results), len(tasks))
         return results
-    with get_context("fork").Pool(workers) as pool:
+    with get_context("fork").Pool(workers, initializer=pool_worker, initargs=(os.getpid(),)) as pool:
         for result in pool.imap(_star, [(fn, task) for task in tasks], chunksize=1):
             results.append(result)
             if progress:

@@ -10,9 +10,6 @@ from pathlib import Path
 import numpy as np
 
 from services.adapter.cem import log_probs
-from services.adapter.core import (
-    CALIBRATION,
-)
 from services.adapter.evaluate import play_partner, run_parallel
 from services.adapter.identification import windowed
 from services.adapter.partners import make_partner
@@ -72,6 +69,6 @@ def _role(key: str) -> str:
     return library.registry()[key].role
 
 
-def write_calibration(result: dict, path: Path = CALIBRATION) -> Path:
+def write_calibration(result: dict, path: Path) -> Path:
     path.write_text(json.dumps(result, indent=1) + "\n")
     return path

@@ -9,23 +9,28 @@ from rich.table import Table
 
 from services.agent.calibration import calibrate
 from services.agent.library import policy_for
-from services.options import console
+from services.options import GAMES, console, number, output
 from services.sim.play import play, summarize
 from shared.errors import Failure, UsageError
-from shared.game import FPS, GameConfig
+from shared.game import FPS, FRAMES, SEEDS, GameConfig, Range
 
 commands = typer.Typer()
+STEPS = Range(1, 10**9)  # environment steps of one training
 
 
 @commands.command()
 def game(
     bait: str = typer.Option("circle", help="Bait seat's policy key."),
     shooter: str = typer.Option("mirror", help="Shooter seat's policy key."),
-    seed: int = typer.Option(0, help="Seed of the first game; game i uses seed + i."),
-    games: int = typer.Option(1, min=1, help="Number of games."),
-    frames: int = typer.Option(GameConfig.frames, min=1, help=f"Frames per game ({FPS} per second)."),
+    seed: int = number(0, SEEDS, "Seed of the first game; game i uses seed + i."),
+    games: int = number(1, GAMES, "Number of games."),
+    frames: int = number(GameConfig.frames, FRAMES, f"Frames per game ({FPS} per second)."),
 ) -> None:
     """Play headless games in-process between two policies and print the score."""
+    if seed + games - 1 not in SEEDS:
+        raise UsageError(
+            "--seed", seed, f"the last game's seed {seed + games - 1} is outside the range {SEEDS}"
+        )
     config = GameConfig(frames=frames)
     results = []
     for s in range(seed, seed + games):
@@ -43,7 +48,9 @@ def game(
 
 
 @commands.command("calibrate")
-def calibrate_command(games: int = typer.Option(20, min=2, help="Seeded one-minute games per pair.")) -> None:
+def calibrate_command(
+    games: int = number(20, Range(2, GAMES.high), "Seeded one-minute games per pair."),
+) -> None:
     """Score the calibration pairs of the rules page (mean and standard error of kills/min)."""
     table = Table(title=f"Calibration: kills per minute over {games} seeded one-minute games")
     for column in ("pair", "bait seat", "shooter seat", "kills/min", "s.e."):
@@ -57,26 +64,27 @@ def calibrate_command(games: int = typer.Option(20, min=2, help="Seeded one-minu
 def train(
     keys: list[str] = typer.Argument(None, help="Library keys to train."),
     all_: bool = typer.Option(False, "--all", help="Train every learned policy of the library."),
-    out: Path = typer.Option(
+    out: Path = output(
         Path("tsf-library"),
-        "--library",
-        help="Library to train into; a new one starts as a copy of the shipped library. "
-        "Retraining the shipped library needs its path: --library services/agent/library.",
+        "The library the weights and manifest go to; a new directory starts as a copy of the "
+        "shipped library. The shipped library itself is written only when named here.",
+        directory=True,
+        names=("--library", "--out"),
     ),
-    steps: int | None = typer.Option(None, min=1, help="Environment steps (default: the recipe's)."),
-    seed: int | None = typer.Option(None, min=0, help="Training seed (default: the recipe's)."),
-    runs: Path = typer.Option(Path("runs"), help="Learning curves and checkpoints go to RUNS/KEY."),
-    figures: Path | None = typer.Option(None, help="Also draw each learning curve to FIGURES/train_KEY.png."),
+    steps: int | None = number(None, STEPS, "Environment steps (default: the recipe's)."),
+    seed: int | None = number(None, SEEDS, "Training seed (default: the recipe's)."),
+    runs: Path = output(Path("runs"), "Learning curves and checkpoints go to RUNS/KEY.", directory=True),
+    figures: Path | None = output(None, "Also draw each learning curve to FIGURES/train_KEY.png.", True),
     warm_start: bool = typer.Option(
         False, help="Imitate the recipe's scripted demonstrator before RL (not the shipped recipes)."
     ),
-    jobs: int = typer.Option(1, min=1, max=64, help="Policies trained at once (processes)."),
-    score_games: int = typer.Option(
-        20, min=0, max=1000, help="Games scored with the first partner after training."
+    jobs: int = number(1, Range(1, 64), "Policies trained at once (processes)."),
+    score_games: int = number(
+        20, Range(0, GAMES.high), "Games scored with the first partner after training."
     ),
 ) -> None:
-    """Train library policies by their registry recipes (needs the `train` extra). A run stopped
-    part way resumes from its last checkpoint in RUNS/KEY."""
+    """Train library policies by their registry recipes into a library directory (needs the
+    `train` extra). A run stopped part way resumes from its last checkpoint in RUNS/KEY."""
     import time
 
     from services.agent import library
@@ -96,8 +104,8 @@ def train(
     for key, entry in entries.items():
         score = entry.get("score")
         console.print(
-            f"{key}: {entry['steps']:,} steps in {entry['seconds']} s, sha256 {entry['sha256'][:12]}"
-            + (f", {_score_text(score)}" if score else "")
+            f"{key}: {entry['steps']:,} steps in {entry['seconds']} s, {out / entry['file']} "
+            f"sha256 {entry['sha256'][:12]}" + (f", {_score_text(score)}" if score else "")
         )
     console.print(f"trained {len(entries)} policies in {time.monotonic() - started:.0f} s (wall)")
 

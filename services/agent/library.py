@@ -17,6 +17,7 @@ import hashlib
 import json
 import math
 import random
+import shutil
 import tomllib
 from dataclasses import asdict, dataclass, field
 from functools import cache
@@ -112,6 +113,15 @@ def manifest_hash(root: Path = LIBRARY) -> str:
 def recipe_hash(recipe: Recipe) -> str:
     """Hash of a recipe's fields: a training checkpoint resumes only under the recipe it began with."""
     return hashlib.sha256(json.dumps(asdict(recipe), sort_keys=True).encode()).hexdigest()[:16]
+
+
+def copy(to: Path) -> Path:
+    """A library at `to` that starts as the shipped one (registry, manifest, weights; not the table,
+    which a retrained policy would make stale): where `tsf train` writes unless it is told to write
+    the shipped library. A directory that already holds a registry is left as it is."""
+    if not (to / "registry.toml").exists():
+        shutil.copytree(LIBRARY, to, ignore=shutil.ignore_patterns("table.json*", ".*"), dirs_exist_ok=True)
+    return to
 
 
 def file_hash(path: Path) -> str:
@@ -290,7 +300,9 @@ def load(key: str, config: GameConfig | None = None, root: Path = LIBRARY) -> Po
     entry = manifest(root).get(key)
     path = root / entry["file"] if entry else None
     if path is None or not path.exists():
-        raise FileNotFoundError(f"library policy {key} is not trained yet: run `tsf train {key}`")
+        raise FileNotFoundError(
+            f"library policy {key} is not trained yet: run `tsf train {key} --out {root}`"
+        )
     if file_hash(path) != entry["sha256"]:
         raise ValueError(f"{path} does not match its manifest hash; retrain {key} or restore the file")
     network, _ = Network.load(path)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -105,9 +104,18 @@ def test_a_key_that_cannot_play_the_seat_is_named_with_every_key_that_can(
 
 
 def copy_library(tmp_path: Path) -> Path:
-    root = tmp_path / "library"
-    shutil.copytree(library.LIBRARY, root)
-    return root
+    return library.copy(tmp_path / "library")
+
+
+def test_a_copy_is_the_shipped_library_but_its_table_and_is_never_overwritten(tmp_path):
+    root = copy_library(tmp_path)
+    assert library.manifest_hash(root) == library.manifest_hash()
+    keys = library.keys()
+    assert [library.load(k, root=root).key for k in keys] == keys
+    assert not (root / "table.json").exists()  # a retrained policy would make it stale
+    (root / "manifest.json").write_text("{}")
+    library.copy(root)  # an existing library is left as it is: `tsf train` adds to it
+    assert library.manifest(root) == {}
 
 
 def test_tampered_weights_are_refused(tmp_path):
@@ -123,7 +131,7 @@ def test_tampered_weights_are_refused(tmp_path):
 def test_untrained_policy_says_how_to_train_it(tmp_path):
     root = copy_library(tmp_path)
     (root / "manifest.json").write_text(json.dumps({}))
-    with pytest.raises(FileNotFoundError, match="tsf train B3"):
+    with pytest.raises(FileNotFoundError, match=f"run `tsf train B3 --out {root}`"):
         library.load("B3", root=root)
 
 

@@ -504,13 +504,11 @@ def train(
 
 
 def prepare(out: Path) -> None:
-    """A library directory to train into: one that does not exist yet starts as a copy of the
-    shipped library (registry, manifest, weights), so that untouched policies stay playable."""
-    if (out / "registry.toml").exists():
-        return
-    if out.exists() and any(out.iterdir()):
+    """A library directory to train into: an empty one starts as a copy of the shipped library
+    (`library.copy`), so that untouched policies stay playable."""
+    if not (out / "registry.toml").exists() and out.exists() and any(out.iterdir()):
         raise UsageError("--library", out, "is neither a library (no registry.toml) nor empty")
-    shutil.copytree(LIBRARY, out, dirs_exist_ok=True, ignore=shutil.ignore_patterns(".*"))
+    library.copy(out)
 
 
 def train_library(keys: list[str], out: Path, jobs: int = 1, **options: object) -> dict[str, dict]:

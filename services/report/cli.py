@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from services.options import console
+from services.options import GAMES, console, number, output
 from shared.errors import Failure
 from shared.game import ROLES
 
@@ -16,13 +16,15 @@ commands = typer.Typer()
 @commands.command("report")
 def report_command(
     recordings: list[Path] = typer.Argument(..., help="Recordings (.tsflog); bad ones are named, left out."),
-    out: Path = typer.Option(Path("report"), help="Directory for report.html, figures/, data/ and parquet/."),
+    out: Path = output(
+        Path("report"), "Directory for report.html, figures/, data/ and parquet/.", directory=True
+    ),
     table: Path | None = typer.Option(None, help="The self-play table (default: the library's)."),
     partner_role: str = typer.Option(
         "", help="Only this seat is the partner in agent-agent matches (default: each seat in turn)."
     ),
     trial: str = typer.Option("", help="Match whose log-prob curves are drawn (default: the first)."),
-    reference_games: int = typer.Option(2, min=1, help="Games per library policy for the reference points."),
+    reference_games: int = number(2, GAMES, "Games per library policy for the reference points."),
 ) -> None:
     """The study's figures and numbers from recordings: one self-contained HTML report."""
     from services.report.report import build_report

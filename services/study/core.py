@@ -22,7 +22,7 @@ from pathlib import Path
 
 from services.adapter.core import AdapterConfig
 from shared.errors import UsageError
-from shared.game import FPS, ROLES, other
+from shared.game import DURATION, FPS, ROLES, SEEDS, other
 
 NAME = re.compile(r"[A-Za-z0-9_]{1,24}")
 DEFAULT_CONSENT = (
@@ -79,8 +79,12 @@ class StudyConfig:
             raise ValueError("a study needs at least one variant")
         if len({v.name for v in self.variants}) != len(self.variants):
             raise ValueError("variant names must differ")
-        if self.trials < 1 or self.trial_seconds <= 0:
-            raise ValueError("need at least one trial of positive length")
+        if self.trials < 1:
+            raise ValueError("need at least one trial")
+        if self.trial_seconds not in DURATION:
+            raise ValueError(f"trial_seconds {self.trial_seconds}: outside the range {DURATION}")
+        if self.seed not in SEEDS:
+            raise ValueError(f"seed {self.seed}: outside the range {SEEDS}")
         if not self.roles or not set(self.roles) <= set(ROLES):
             raise ValueError(f"roles must be among {ROLES}")
         for variant in self.variants:

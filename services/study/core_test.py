@@ -40,6 +40,10 @@ def test_the_shipped_studies_load_and_name_library_policies(name: str) -> None:
         ({"variants": (Variant("a", "B1", "S1"), Variant("a", "B2", "S2"))}, "names must differ"),
         ({"variants": (Variant("a", bait="B1"),)}, "no shooter for a bait participant"),
         ({"trials": 0}, "at least one trial"),
+        ({"trial_seconds": 0}, r"trial_seconds 0: outside the range 0.1 to 3600.0"),
+        ({"trial_seconds": 1e9}, r"trial_seconds 1000000000.0: outside the range"),
+        ({"trial_seconds": float("nan")}, r"trial_seconds nan: outside the range"),
+        ({"seed": -1}, r"seed -1: outside the range 0 to 4294967295"),
         ({"roles": ("pilot",)}, "roles must be"),
     ],
 )

@@ -9,8 +9,10 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from services.options import bus_options, console
+from services.options import GAMES, WORKERS, bus_options, console, number, output
 from shared.bus import BusConfig, stop_on_signals
+from shared.errors import Failure
+from shared.messages import JOB_SEEDS
 
 commands = typer.Typer()
 
@@ -28,13 +30,17 @@ def _keys(text: str, role: str) -> list[str]:
 @commands.command()
 @bus_options
 def sweep(
-    games: int = typer.Option(20, min=1, help="Seeded one-minute games per pair (seeds 0..games-1)."),
+    games: int = number(20, GAMES, "Seeded one-minute games per pair (seeds 0..games-1)."),
     baits: str = typer.Option("", help="Comma-separated baits (default: all)."),
     shooters: str = typer.Option("", help="Comma-separated shooters (default: all)."),
-    workers: int = typer.Option(2, min=0, help="Worker processes to start here (0: only remote workers)."),
-    chunk: int = typer.Option(20, min=1, help="Games per job, played as the lanes of one batch."),
-    out: Path = typer.Option(Path("services/agent/library/table.json"), help="Where the table goes."),
-    plot: Path | None = typer.Option(None, help="Also draw the heatmap into this PNG."),
+    workers: int = number(2, WORKERS, "Worker processes to start here (0: only remote workers)."),
+    chunk: int = number(20, JOB_SEEDS, "Games per job, played as the lanes of one batch."),
+    out: Path = output(
+        Path("tsf-table.json"),
+        "Where the table goes (and its journal, OUT.journal). The shipped table is written only "
+        "when named here.",
+    ),
+    plot: Path | None = output(None, "Also draw the heatmap into this PNG."),
     sweep_id: str = typer.Option("table", "--sweep", help="Sweep id: the key namespace tsf/sweep/<id>/..."),
     *,
     bus: BusConfig,
@@ -42,7 +48,7 @@ def sweep(
     """Coordinate a self-play sweep: measure the table with local and remote workers; resumable."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
 
-    from services.table.sweep import local_workers, run_sweep
+    from services.table.sweep import journal_path, local_workers, run_sweep
     from shared.bus import free_endpoint
 
     bait_keys, shooter_keys = _keys(baits, "bait"), _keys(shooters, "shooter")
@@ -58,8 +64,7 @@ def sweep(
             lambda done, total: bar.update(task, completed=done, total=total), stop,
         )  # fmt: skip
     if table is None:
-        console.print("stopped; run the same command again to resume from the journal")
-        raise typer.Exit(1)
+        raise Failure(f"stopped; run the same command again to resume from {journal_path(out)}")
     _print_table(table)
     console.print(f"table written to {out}")
     if plot is not None:
@@ -104,15 +109,17 @@ def _print_table(table) -> None:  # noqa: ANN001 - a services.table.table.Table
 
 @commands.command("table")
 def table_command(
-    path: Path = typer.Argument(Path("services/agent/library/table.json"), exists=True, dir_okay=False),
-    plot: Path | None = typer.Option(None, help="Draw the heatmap into this PNG."),
+    path: Path | None = typer.Argument(
+        None, exists=True, dir_okay=False, help="A table file (default: the library's shipped table)."
+    ),
+    plot: Path | None = output(None, "Draw the heatmap into this PNG."),
 ) -> None:
     """Show a measured table (refused if the library or rules changed since)."""
-    from services.table.table import StaleTable
+    from services.table.table import DEFAULT_TABLE, StaleTable
     from services.table.table import Table as SelfPlayTable
 
     try:
-        table = SelfPlayTable.load(path)
+        table = SelfPlayTable.load(path or DEFAULT_TABLE)
     except StaleTable as error:
         console.print(f"[red]{error}[/]")
         raise typer.Exit(1) from None

@@ -23,6 +23,7 @@ from pathlib import Path
 import zenoh
 
 from services.agent import library
+from services.processes import Processes
 from services.table.table import CHUNK, Job, Table, assemble, jobs, run_job
 from shared import keys
 from shared.bus import BusConfig, Drops, session, subscribe
@@ -217,14 +218,8 @@ def local_workers(sweep: str, endpoint: str, n: int) -> Iterator[list[subprocess
     ended on exit."""
     bus = BusConfig("peer", ("tcp/127.0.0.1:0",), (endpoint,))
     command = [sys.executable, "-m", "services.cli", "worker", *bus.to_args(), "--sweep", sweep]
-    workers = [subprocess.Popen([*command, "--id", f"{sweep}-local{i}"]) for i in range(n)]
-    try:
-        yield workers
-    finally:
-        for worker in workers:
-            worker.terminate()
-        for worker in workers:
-            worker.wait()
+    with Processes() as processes:
+        yield [processes.start(f"worker{i}", [*command, "--id", f"{sweep}-local{i}"]) for i in range(n)]
 
 
 def run_worker(bus: BusConfig, sweep: str, worker: str, stop: threading.Event | None = None) -> int:

@@ -116,7 +116,8 @@ class Table:
             if (table.library, table.config) != now:
                 raise StaleTable(
                     f"{path} was measured with library {table.library} and rules {table.config}, but "
-                    f"the library is now {now[0]} and the rules {now[1]}: run `tsf sweep` to remeasure"
+                    f"the library is now {now[0]} and the rules {now[1]}: remeasure it with "
+                    f"`tsf sweep --out {path}`"
                 )
         return table
 

@@ -1,0 +1,93 @@
+"""Child processes that never outlive the launcher that started them.
+
+A launcher (`tsf match`, `play`, `study`, `sweep`, `eval`, `calibrate-adapter`) ends its children
+itself when it is stopped (SIGINT, SIGTERM or SIGHUP): `Processes` on exit, a pool on terminate.
+A launcher that cannot clean up (SIGKILL, the out-of-memory killer, a crashed interpreter) is
+covered by the kernel: each child asks Linux for SIGTERM when its parent dies (prctl
+PR_SET_PDEATHSIG) as its first act, and ends at once if the parent is already gone. The signal
+comes when the thread that started the child ends, so launchers start children from a thread that
+outlives them (run_match waits for its children).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import signal
+import subprocess
+import sys
+
+PARENT = "TSF_PARENT"  # environment: the pid of the launcher a `tsf` child must not outlive
+_PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
+
+
+def die_with_parent(parent: int) -> None:
+    """Have this process sent SIGTERM when `parent` dies (Linux; elsewhere only the check below),
+    and end it now if `parent` is already gone (the child was re-parented before it could ask)."""
+    if sys.platform.startswith("linux"):
+        libc = ctypes.CDLL(None, use_errno=True)
+        if libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0) != 0:
+            raise OSError(ctypes.get_errno(), "prctl(PR_SET_PDEATHSIG)")
+    if os.getppid() != parent:
+        os._exit(1)
+
+
+def adopt() -> None:
+    """In a `tsf` process: if a launcher started it (PARENT is set), die with that launcher. The
+    variable is removed, so that this process's own children are not taken for the launcher's."""
+    parent = os.environ.pop(PARENT, "")
+    if parent:
+        die_with_parent(int(parent))
+
+
+def pool_worker(parent: int) -> None:
+    """A pool's initializer (multiprocessing, fork): Ctrl-C is the parent's to handle (it ends the
+    pool), SIGTERM and SIGHUP end the worker as they would any program, and it dies with `parent`."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, signal.SIG_DFL)
+    die_with_parent(parent)
+
+
+class Processes:
+    """Child `tsf` processes; all are ended (SIGTERM, then SIGKILL) on exit, and each dies with
+    this process if it is killed first (adopt)."""
+
+    def __init__(self) -> None:
+        self.children: dict[str, subprocess.Popen] = {}
+        self.ended: set[str] = set()  # the children still running at exit, which this ended
+
+    def start(self, name: str, command: list[str], nice: int = 0) -> subprocess.Popen:
+        """Start a child; `nice` > 0 lowers its CPU priority (for work off the latency path)."""
+        self.children[name] = subprocess.Popen(
+            command,
+            stdin=subprocess.DEVNULL,
+            env={**os.environ, PARENT: str(os.getpid())},
+            preexec_fn=(lambda: os.nice(nice)) if nice else None,
+        )
+        return self.children[name]
+
+    def wait(self, name: str, timeout: float) -> int | None:
+        try:
+            return self.children[name].wait(timeout)
+        except subprocess.TimeoutExpired:
+            return None
+
+    def failed(self) -> dict[str, int]:
+        """The exit status of each child that ended by itself, badly."""
+        return {n: c.returncode for n, c in self.children.items() if n not in self.ended and c.returncode}
+
+    def __enter__(self) -> Processes:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for name, child in self.children.items():
+            if child.poll() is None:
+                self.ended.add(name)
+                child.terminate()
+        for child in self.children.values():
+            try:
+                child.wait(5)
+            except subprocess.TimeoutExpired:
+                child.kill()
+                child.wait()

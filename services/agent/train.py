@@ -46,36 +46,44 @@ from shared.game import ROLES, GameConfig, Policy, bait_first, join_action
 # --- rewards: one value per lane of a batched game, for the learner's seat -----------------------
 
 
-def drawing_fire_reward(
-    batch: BatchGame, seat: int, before: np.ndarray, weights: dict[str, float]
-) -> np.ndarray:
-    """1 per frame the fortress, locked on this bait, fires with its open back to the shooter, plus
-    `kill` per team kill. The study paid 1 per frame in the region. From scratch that taught baits
-    to stay in after a kill (which keeps the fortress from respawning) and to circle faster than
-    the fortress turns or the shooter follows: region time without kills."""
-    s = batch.state
-    shooter = 1 - seat
+def opening(batch: BatchGame, seat: int) -> np.ndarray:
+    """Whether the fortress, up and locked on this bait, is firing with its open back to the
+    shooter: the frames in which the bait's work can become a kill."""
+    s, shooter = batch.state, 1 - seat
     rear = np.radians(s.facing + 180.0)
     bearing = np.arctan2(s.y[:, shooter], s.x[:, shooter])
     behind = np.abs((bearing - rear + np.pi) % (2 * np.pi) - np.pi) <= np.radians(batch.config.rear_arc / 2)
     both = s.alive[:, seat] & s.alive[:, shooter]
-    opening = both & s.fortress_alive & (s.lock == seat) & (s.vulnerable > 0) & behind
-    return opening + weights.get("kill", 0.0) * batch.event_counts("kill")
+    return both & s.fortress_alive & (s.lock == seat) & (s.vulnerable > 0) & behind
+
+
+def drawing_fire_reward(
+    batch: BatchGame, seat: int, before: np.ndarray, weights: dict[str, float]
+) -> np.ndarray:
+    """1 per frame of `opening`, plus `kill` per team kill. The study paid 1 per frame in the
+    region. From scratch that taught baits to stay in after a kill (which keeps the fortress from
+    respawning) and to circle faster than the fortress turns or the shooter follows: region time
+    without kills."""
+    return opening(batch, seat) + weights.get("kill", 0.0) * batch.event_counts("kill")
 
 
 def border_bearing_death_reward(
     batch: BatchGame, seat: int, before: np.ndarray, weights: dict[str, float]
 ) -> np.ndarray:
+    """The shaped family: border * distance / region radius + bearing * cos(heading to the
+    fortress) per frame of `opening`, - death per death of this ship, + kill per team kill. The
+    study paid the shaped terms on every frame in the region; from scratch its baits then sat at the
+    border facing the fortress and drew no useful fire."""
     s = batch.state
     x, y = s.x[:, seat], s.y[:, seat]
     r = np.hypot(x, y)
     r = np.where(r == 0.0, 1.0, r)
     h = np.radians(s.heading[:, seat])
     bearing = -(x * np.cos(h) + y * np.sin(h)) / r  # cos of the angle to the fortress
-    inside = weights["border"] * r / batch.config.region_radius + weights["bearing"] * bearing
+    shaped = weights["border"] * r / batch.config.region_radius + weights["bearing"] * bearing
     deaths = batch.event_counts("death", seat)
     kills = weights.get("kill", 0.0) * batch.event_counts("kill")
-    return kills - weights["death"] * deaths + np.where(s.alive[:, seat] & s.in_region[:, seat], inside, 0.0)
+    return kills - weights["death"] * deaths + np.where(opening(batch, seat), shaped, 0.0)
 
 
 def shooter_position_reward(
@@ -209,23 +217,23 @@ NET = [64, 64]
 # Per-algorithm settings (n_envs: lanes of the batched engine), chosen by `search` for every
 # recipe of the algorithm (docs/library.md has the search) and recorded in each manifest entry.
 HYPERPARAMETERS: dict[str, dict] = {
-    "A2C": {"n_envs": 256, "n_steps": 8, "learning_rate": 2.5e-4, "ent_coef": 0.01, "gamma": 0.99},
+    "A2C": {"n_envs": 64, "n_steps": 8, "learning_rate": 7e-4, "ent_coef": 0.01, "gamma": 0.99},
     "PPO": {
-        "n_envs": 256,
-        "n_steps": 32,
+        "n_envs": 64,
+        "n_steps": 128,
         "batch_size": 2048,
         "n_epochs": 4,
         "learning_rate": 3e-4,
         "ent_coef": 0.01,
         "gamma": 0.99,
     },
-    "TRPO": {"n_envs": 256, "n_steps": 32, "batch_size": 2048, "learning_rate": 1e-3, "gamma": 0.99},
+    "TRPO": {"n_envs": 64, "n_steps": 128, "batch_size": 2048, "learning_rate": 1e-3, "gamma": 0.99},
     "DQN": {
         "n_envs": 64,
         "learning_starts": 20_000,
         "buffer_size": 300_000,
         "train_freq": 1,
-        "gradient_steps": 4,
+        "gradient_steps": 1,
         "target_update_interval": 5_000,
         "exploration_fraction": 0.2,
         "exploration_final_eps": 0.05,

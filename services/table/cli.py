@@ -10,6 +10,7 @@ import typer
 from rich.table import Table
 
 from services.options import bus_options, console
+from services.table.table import LANES
 from shared.bus import BusConfig, stop_on_signals
 
 commands = typer.Typer()
@@ -32,7 +33,8 @@ def sweep(
     baits: str = typer.Option("", help="Comma-separated baits (default: all)."),
     shooters: str = typer.Option("", help="Comma-separated shooters (default: all)."),
     workers: int = typer.Option(2, min=0, help="Worker processes to start here (0: only remote workers)."),
-    chunk: int = typer.Option(20, min=1, help="Games per job, played as the lanes of one batch."),
+    chunk: int = typer.Option(20, min=1, help="Games per job."),
+    lanes: int = typer.Option(LANES, min=1, help="Games a worker plays at once, as the lanes of one batch."),
     out: Path = typer.Option(Path("services/agent/library/table.json"), help="Where the table goes."),
     plot: Path | None = typer.Option(None, help="Also draw the heatmap into this PNG."),
     sweep_id: str = typer.Option("table", "--sweep", help="Sweep id: the key namespace tsf/sweep/<id>/..."),
@@ -55,7 +57,7 @@ def sweep(
         task = bar.add_task("jobs", total=None)
         table = run_sweep(
             bus, sweep_id, out, bait_keys, shooter_keys, games, chunk,
-            lambda done, total: bar.update(task, completed=done, total=total), stop,
+            lambda done, total: bar.update(task, completed=done, total=total), stop, lanes=lanes,
         )  # fmt: skip
     if table is None:
         console.print("stopped; run the same command again to resume from the journal")

@@ -115,6 +115,21 @@ def test_a_slow_job_is_sent_again_and_a_failing_worker_gets_nothing_more():
     assert "b" not in c.idle and all(w != "b" for w, _ in c.assignments(12.0, 10))
 
 
+def test_idle_workers_share_the_waiting_jobs_in_batches():
+    c = Coordinator(jobs(["B4"], ["S4"], games=7, chunk=1), {}, per_worker=3)
+    c.worker_up("a")
+    c.worker_up("b")
+    sent = c.assignments(0.0, 60)
+    assert [w for w, _ in sent] == ["a"] * 3 + ["b"] * 3  # 3 each, not 4 and 3: the cap holds
+    c.worker_down("a")
+    c.worker_up("c")
+    resent = c.assignments(1.0, 60)
+    assert [j for w, j in resent if w == "c"] == [j for w, j in sent if w == "a"]  # a's batch, whole
+    for worker, job in sent[3:]:
+        c.result(worker, job.id, [1.0])
+    assert "b" in c.idle and [j.id for _, j in c.assignments(2.0, 60)] == ["B4-S4-6-1"]
+
+
 def test_journal_resumes_and_skips_a_torn_line(tmp_path):
     path = tmp_path / "t.journal"
     path.write_text('{"job": "B4-S4-0-1", "kills_per_minute": [2.0]}\n{"job": "B4-S4-1-1", "kil')

@@ -18,6 +18,7 @@ results.py (the numbers and summary written out).
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -135,8 +136,8 @@ def batches(items: list, workers: int, lanes: int = LANES) -> list[list]:
     """Consecutive slices of `items` to play as batches: at most `lanes` each, and at least two per
     worker (when there are several), so that the workers finish close together."""
     count = min(len(items), max(math.ceil(len(items) / lanes), 2 * workers if workers > 1 else 1))
-    size = math.ceil(len(items) / max(count, 1))
-    return [items[i : i + size] for i in range(0, len(items), size)]
+    bounds = [len(items) * i // count for i in range(count + 1)] if count else [0]
+    return [items[a:b] for a, b in itertools.pairwise(bounds)]
 
 
 def play_partner(

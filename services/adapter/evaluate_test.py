@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pytest
 from scipy import stats
 
 from services.adapter.core import AdapterConfig
@@ -119,3 +120,17 @@ def test_batches_cover_every_game_once_in_order() -> None:
         parts = batches(items, workers, lanes)
         assert [i for part in parts for i in part] == items
         assert max(map(len, parts)) <= lanes and (workers == 1 or len(parts) >= 2 * workers)
+
+
+@pytest.mark.slow
+def test_batched_games_agree_with_scalar_games_in_distribution() -> None:
+    """Batched draws are other streams than the scalar policies' own: kills/min of adaptive games
+    with a noisy partner agree within three standard errors of the difference over 40 seeds, and
+    so do the numbers of switches."""
+    agent, seeds = AdapterConfig("shooter", 150), range(40)
+    batched = play_games([("noisy(B6)", agent, seed) for seed in seeds], "shooter")
+    scalar = [play_partner(make_partner("noisy(B6)", "bait"), agent, seed, "shooter") for seed in seeds]
+    for measure in ("kills_per_minute", "switches"):
+        a, b = (np.array([getattr(o, measure) for o in side]) for side in (batched, scalar))
+        stderr = np.hypot(a.std(ddof=1), b.std(ddof=1)) / np.sqrt(len(seeds))
+        assert abs(a.mean() - b.mean()) < 3 * stderr, (measure, a.mean(), b.mean(), stderr)

@@ -133,9 +133,10 @@ def play_games(
 
 
 def batches(items: list, workers: int, lanes: int = LANES) -> list[list]:
-    """Consecutive slices of `items` to play as batches: at most `lanes` each, and at least two per
-    worker (when there are several), so that the workers finish close together."""
-    count = min(len(items), max(math.ceil(len(items) / lanes), 2 * workers if workers > 1 else 1))
+    """Consecutive slices of `items`, of even sizes, to play as batches: at most `lanes` each, and
+    at least one per worker. (The fewer the batches, the fewer the calls per game: a frame costs
+    about the same whether a policy answers for ten lanes or a hundred.)"""
+    count = min(len(items), max(math.ceil(len(items) / lanes), workers))
     bounds = [len(items) * i // count for i in range(count + 1)] if count else [0]
     return [items[a:b] for a, b in itertools.pairwise(bounds)]
 

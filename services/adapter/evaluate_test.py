@@ -119,7 +119,8 @@ def test_batches_cover_every_game_once_in_order() -> None:
     for workers, lanes in ((1, 1024), (2, 1024), (2, 10), (8, 50)):
         parts = batches(items, workers, lanes)
         assert [i for part in parts for i in part] == items
-        assert max(map(len, parts)) <= lanes and (workers == 1 or len(parts) >= 2 * workers)
+        assert max(map(len, parts)) - min(map(len, parts)) <= 1
+        assert max(map(len, parts)) <= lanes and len(parts) >= workers
 
 
 @pytest.mark.slow

@@ -1,11 +1,14 @@
 """Partners in bulk: a partner (partners.py) in many lanes of a batched game at once.
 
-`lanes(partner)` is a partner's batched form. A project policy (library, scripted, random) draws
-its actions from its distributions for all lanes at once, as batch_play does; each wrapper of
-partners.py does what it does there, in arrays: noisy, delayed, sticky and switch, nested as the
-partner is. A partner of any other kind (a plug-in `module:attr`, a kind this module does not
-know) is played as it is: one copy per lane, reset and asked lane by lane as in a scalar game, so
-it is exact, only slower.
+`lanes(partners)` is the batched form of partners of one shape (`shape`: the same wrappers with
+the same settings, nested the same way, whatever policies they wrap): each wrapper of partners.py
+does what it does there, in arrays (noisy, delayed, sticky, switch), and the project policies
+inside (library, scripted, random) draw from their distributions, each policy asked once a frame
+for all the lanes it plays in, as batch_play does. So `noisy(switch(B1,B5))` and
+`noisy(switch(B7,B2))` share one batched form, and a frame costs one call per policy, not per
+partner. A partner of any other kind (a plug-in `module:attr`, a kind this module does not know)
+is played as it is: one copy per lane, reset and asked lane by lane as in a scalar game, so it is
+exact, only slower.
 
 The draws of a policy and of each wrapper come from their own stream of `lane_uniforms`, keyed by
 the game's seed: a game's partner depends on its seed, never on which lanes share the batch. They
@@ -25,8 +28,9 @@ import numpy as np
 from services.adapter.partners import Delayed, Noisy, Partner, Sticky, Switching, make_partner
 from services.agent.library import LearnedPolicy
 from services.agent.policy import RulePolicy, UniformPolicy
+from services.sim.batch_play import act_lanes
 from services.sim.play import policy_seed
-from services.sim.sampling import batch_act, lane_uniforms
+from services.sim.sampling import lane_uniforms
 from shared.game import N_ACTIONS, ROLES
 
 
@@ -41,16 +45,20 @@ class Lanes(Protocol):
 
 
 class PolicyLanes:
-    """A project policy: its distributions for every lane, sampled with the lanes' draws."""
+    """Project policies of one view, one per lane: each policy's distributions for its lanes,
+    sampled with the lanes' draws."""
 
-    def __init__(self, policy: Partner, stream: int) -> None:
-        self.policy, self.view, self.stream = policy, policy.view, stream
+    def __init__(self, policies: list[Partner], stream: int) -> None:
+        self.policies = list({id(p): p for p in policies}.values())
+        self.choice = np.array([[id(q) for q in self.policies].index(id(p)) for p in policies])
+        self.view, self.stream = policies[0].view, stream
 
     def reset(self, keys: np.ndarray) -> None:
         self.keys = keys
 
     def act(self, obs: np.ndarray, frame: int) -> np.ndarray:
-        return batch_act(self.policy, obs, lane_uniforms(self.keys, self.stream, frame))
+        uniforms = lane_uniforms(self.keys, self.stream, frame)
+        return act_lanes(self.policies, self.choice, lambda view: obs, uniforms)
 
 
 class NoisyLanes:
@@ -127,14 +135,14 @@ class SwitchLanes:
 
 
 class EachLane:
-    """Any other partner, as it is: a copy per lane, reset with the scalar game's seed (`offset`
-    added, as a switch's second partner gets) and asked lane by lane."""
+    """Any other partners, as they are: a copy per lane, reset with the scalar game's seed
+    (`offset` added, as a switch's second partner gets) and asked lane by lane."""
 
-    def __init__(self, partner: Partner, offset: int = 0) -> None:
-        self.partner, self.offset, self.view = partner, offset, partner.view
+    def __init__(self, partners: list[Partner], offset: int = 0) -> None:
+        self.partners, self.offset, self.view = partners, offset, partners[0].view
 
     def reset(self, keys: np.ndarray) -> None:
-        self.copies = [copy.deepcopy(self.partner) for _ in keys]
+        self.copies = [copy.deepcopy(p) for p in self.partners]
         for partner, key in zip(self.copies, keys.tolist(), strict=True):
             partner.reset(policy_seed(key, partner.role) + self.offset)
 
@@ -144,41 +152,52 @@ class EachLane:
 
 # A policy whose act() draws from its probs() is played from its distributions.
 _SAMPLED = (LearnedPolicy.act, RulePolicy.act, UniformPolicy.act)
+_SETTING = {Noisy: "noise", Delayed: "delay", Sticky: "sticky", Switching: "at"}
 
 
-def lanes(partner: Partner, stream: int, streams: Iterator[int], offset: int = 0) -> Lanes:
-    """The batched form of `partner`: its policy draws from `stream`, every other draw of its
-    wrappers from the next of `streams` (unique within one partner)."""
+def shape(partner: Partner) -> tuple:
+    """What a partner's batched form depends on: its wrappers, their settings and nesting, and the
+    view of the policies inside, not which policies they are."""
     kind = type(partner)
+    if kind in _SETTING:
+        inner = (shape(partner.inner), *([shape(partner.second)] if kind is Switching else []))
+        return (kind.__name__, getattr(partner, _SETTING[kind]), *inner)
+    return ("policy" if getattr(kind, "act", None) in _SAMPLED else "other", partner.view)
+
+
+def lanes(partners: list[Partner], stream: int, streams: Iterator[int], offset: int = 0) -> Lanes:
+    """The batched form of `partners` (one per lane, all of one `shape`): their policies draw from
+    `stream`, every other draw of the wrappers from the next of `streams` (unique in one form)."""
+    kind, first = type(partners[0]), partners[0]
+    inner = [p.inner for p in partners] if kind in _SETTING else []
     if kind is Noisy:
-        return NoisyLanes(lanes(partner.inner, stream, streams, offset), partner.noise, streams)
+        return NoisyLanes(lanes(inner, stream, streams, offset), first.noise, streams)
     if kind is Delayed:
-        return DelayedLanes(lanes(partner.inner, stream, streams, offset), partner.delay)
+        return DelayedLanes(lanes(inner, stream, streams, offset), first.delay)
     if kind is Sticky:
-        return StickyLanes(lanes(partner.inner, stream, streams, offset), partner.sticky, streams)
+        return StickyLanes(lanes(inner, stream, streams, offset), first.sticky, streams)
     if kind is Switching:
-        first = lanes(partner.inner, stream, streams, offset)
-        return SwitchLanes(first, lanes(partner.second, next(streams), streams, offset + 1), partner.at)
-    if getattr(kind, "act", None) in _SAMPLED:
-        return PolicyLanes(partner, stream)
-    return EachLane(partner, offset)
+        second = lanes([p.second for p in partners], next(streams), streams, offset + 1)
+        return SwitchLanes(lanes(inner, stream, streams, offset), second, first.at)
+    if shape(first)[0] == "policy":
+        return PolicyLanes(partners, stream)
+    return EachLane(partners, offset)
 
 
 class Partners:
-    """Every lane's partner, by name: the lanes of one name are played by one batched form."""
+    """Every lane's partner, by name: the lanes of partners of one shape are played by one
+    batched form."""
 
     def __init__(self, names: list[str], role: str, keys: np.ndarray) -> None:
+        made = {name: make_partner(name, role) for name in dict.fromkeys(names)}
+        shapes = [shape(made[name]) for name in names]
         self.groups: list[tuple[np.ndarray, Lanes]] = []
-        for name in dict.fromkeys(names):
-            rows = np.flatnonzero(np.array(names) == name)
+        for kind in dict.fromkeys(shapes):
+            rows = np.array([lane for lane, s in enumerate(shapes) if s == kind])
             # streams 0 and 1 are the seats' (batch_play); a partner's wrappers draw from 2 on
-            partner = lanes(make_partner(name, role), ROLES.index(role), itertools.count(2))
+            partner = lanes([made[names[lane]] for lane in rows], ROLES.index(role), itertools.count(2))
             partner.reset(np.asarray(keys)[rows])
             self.groups.append((rows, partner))
-
-    @property
-    def views(self) -> set[str]:
-        return {partner.view for _, partner in self.groups}
 
     def act(self, observed: Callable[[str], np.ndarray], frame: int) -> np.ndarray:
         """Every lane's action; `observed(view)`: every lane's observation of the partner's seat."""

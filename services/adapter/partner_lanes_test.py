@@ -14,7 +14,7 @@ from shared.game import N_ACTIONS
 
 
 def batched(partner, keys: list[int]):
-    out = lanes(partner, 0, itertools.count(2))
+    out = lanes([partner] * len(keys), 0, itertools.count(2))
     out.reset(np.array(keys))
     return out
 
@@ -28,6 +28,8 @@ def test_forms_follow_the_partner_and_plug_ins_are_played_as_they_are() -> None:
     partner = batched(make_partner("noisy(switch(B1,delayed(B5)))", "bait"), [0])
     assert type(partner).__name__ == "NoisyLanes" and type(partner.inner).__name__ == "SwitchLanes"
     assert isinstance(partner.inner.first, PolicyLanes) and partner.inner.second.delay == 6
+    names = ["noisy(switch(B1,B5))", "noisy(switch(B7,B2))", "noisy(B1)", "switch(B1,B5)", "noisy(B2)"]
+    assert [len(rows) for rows, _ in Partners(names, "bait", np.arange(5)).groups] == [2, 2, 1]
     plug_in = batched(make_partner("services.adapter.partners_test:Constant", "bait"), [0, 1])
     assert isinstance(plug_in, EachLane) and len(plug_in.copies) == 2
     assert plug_in.copies[0] is not plug_in.copies[1]

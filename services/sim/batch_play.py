@@ -13,7 +13,8 @@ with the number of distinct policies, not of pairs.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from functools import cache, partial
 
 import numpy as np
 
@@ -40,18 +41,26 @@ class Seat:
     def act(self, batch: BatchGame) -> np.ndarray:
         """Every lane's action this frame: each policy in use asked once, for its lanes."""
         uniforms = lane_uniforms(self.keys, self.stream, batch.state.frame)
-        views: dict[str, np.ndarray] = {}
-        used = np.unique(self.choice)
-        if len(used) == 1:  # one policy for every lane: no gathering
-            policy = self.policies[used[0]]
-            return batch_act(policy, observe(batch, self.role, policy.view), uniforms)
-        out = np.empty(batch.n, np.int64)
-        for k in used:
-            policy, lanes = self.policies[k], np.flatnonzero(self.choice == k)
-            if policy.view not in views:
-                views[policy.view] = observe(batch, self.role, policy.view)
-            out[lanes] = batch_act(policy, views[policy.view][lanes], uniforms[lanes])
-        return out
+        return act_lanes(self.policies, self.choice, cache(partial(observe, batch, self.role)), uniforms)
+
+
+def act_lanes(
+    policies: Sequence[Policy],
+    choice: np.ndarray,
+    observed: Callable[[str], np.ndarray],
+    uniforms: np.ndarray,
+) -> np.ndarray:
+    """One action per lane: lane i's drawn from `policies[choice[i]]` with `uniforms[i]`, each
+    policy asked once for all its lanes; `observed(view)`: every lane's observation in that view."""
+    used = np.unique(choice)
+    if len(used) == 1:  # one policy for every lane: no gathering
+        policy = policies[used[0]]
+        return batch_act(policy, observed(policy.view), uniforms)
+    out = np.empty(len(choice), np.int64)
+    for k in used:
+        policy, lanes = policies[k], np.flatnonzero(choice == k)
+        out[lanes] = batch_act(policy, observed(policy.view)[lanes], uniforms[lanes])
+    return out
 
 
 def play_batch(

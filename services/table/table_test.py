@@ -12,7 +12,7 @@ from services.agent import library
 from services.sim.batch_play import play_batch
 from services.sim.play import play, summarize
 from services.table.sweep import Coordinator, read_journal
-from services.table.table import StaleTable, Table, assemble, jobs, run_job
+from services.table.table import StaleTable, Table, assemble, jobs, run_job, run_jobs
 from shared.game import GameConfig
 
 BAITS, SHOOTERS = ["B4", "B5"], ["S4", "S6"]
@@ -47,6 +47,13 @@ def test_batched_games_agree_with_scalar_games_in_distribution():
 def small_table() -> Table:
     results = {job.id: run_job(job, GameConfig(frames=300)) for job in jobs(BAITS, SHOOTERS, 3, 2)}
     return assemble(BAITS, SHOOTERS, 3, results, 2)
+
+
+def test_jobs_played_together_are_the_jobs_played_alone(small_table):
+    todo = jobs(BAITS, SHOOTERS, 3, 2)
+    played = run_jobs(todo, GameConfig(frames=300))
+    together = assemble(BAITS, SHOOTERS, 3, {j.id: v for j, v in zip(todo, played, strict=True)}, 2)
+    assert together.results == small_table.results
 
 
 def test_table_statistics(small_table):

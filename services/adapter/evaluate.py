@@ -33,7 +33,6 @@ from services.adapter.core import (
     Payoff,
     Scorer,
 )
-from services.adapter.partner_lanes import Partners
 from services.adapter.partners import Partner
 from services.agent import library
 from services.sim.engine import Game
@@ -84,7 +83,8 @@ def play_games(
     """Games of (partner name, our agent, seed), our seat `role`, as the lanes of one batch. With
     `record`, each outcome keeps the partner's scores under the library (the Scorer) and both
     seats' actions, frame by frame."""
-    from services.sim.batch import BatchGame  # bulk play only: live services never load numba
+    from services.adapter.partner_lanes import Partners  # bulk play only: numba loads with it
+    from services.sim.batch import BatchGame
     from services.sim.batch_observation import observe as observe_lanes
     from services.sim.batch_play import Seat
 

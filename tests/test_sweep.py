@@ -61,12 +61,9 @@ def test_stopped_sweep_resumes_from_its_journal(bus, spawn, wait_until, tmp_path
         if done >= 3:
             stop.set()
 
-    assert (
-        run_sweep(
-            bus.config(listen=True), sweep, out, BAITS, SHOOTERS, GAMES, CHUNK, stop_after_three, stop, lanes=1
-        )
-        is None
-    )
+    config = bus.config(listen=True)
+    stopped = run_sweep(config, sweep, out, BAITS, SHOOTERS, GAMES, CHUNK, stop_after_three, stop, lanes=1)
+    assert stopped is None
     collected = journal_path(out).read_text().count("\n")
     assert 3 <= collected < len(jobs(BAITS, SHOOTERS, GAMES, CHUNK)) and not out.exists()
     spawn("worker", bus.config(), *worker_args(sweep, "w2"))

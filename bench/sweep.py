@@ -1,8 +1,9 @@
 """Self-play sweep speed: frames per second of one worker, and the wall time of the full 9x7
-table at N = 20 games (2.27 M frames) with 1 and 2 local workers over zenoh.
-Goals: full table <= 5 minutes with 2 workers; 2 workers >= 1.8x one.
+table at N = 20 games (2.27 M frames) with 1 and 2 local workers over zenoh (process start
+included; each worker plays up to --lanes games as one batch).
+Goals: full table <= 20 s with 2 workers; 2 workers >= 1.8x one.
 
-    .venv/bin/python bench/sweep.py [--games N] [--workers 1,2] [--out DIR]
+    .venv/bin/python bench/sweep.py [--games N] [--workers 1,2] [--lanes 640] [--out DIR]
 """
 
 from __future__ import annotations
@@ -14,27 +15,26 @@ from pathlib import Path
 
 from services.agent import library
 from services.table.sweep import local_workers, run_sweep
-from services.table.table import Job, run_job
+from services.table.table import LANES, jobs, run_jobs
 from shared.bus import BusConfig, free_endpoint
 
 
 def worker_fps(games: int = 4) -> float:
-    """Frames per second of the in-process core on one pair mix (a learned bait, a rule shooter
-    and the reverse), as one worker plays them."""
-    start, frames = time.perf_counter(), 0
-    for bait, shooter in (("B5", "S4"), ("B1", "S2")):
-        run_job(Job(bait, shooter, tuple(range(games))))
-        frames += games * 1800
-    return frames / (time.perf_counter() - start)
+    """Frames per second of the in-process core on two rows of the table (learned baits with rule
+    and learned shooters) played as one batch, as a worker plays its jobs."""
+    todo = jobs(["B1", "B5"], library.keys("shooter"), games)
+    start = time.perf_counter()
+    run_jobs(todo)
+    return len(todo) * games * 1800 / (time.perf_counter() - start)
 
 
-def full_table(workers: int, games: int, out: Path) -> float:
+def full_table(workers: int, games: int, out: Path, lanes: int) -> float:
     endpoint = free_endpoint()
     sweep = f"bench{workers}"
     bus = BusConfig("peer", (endpoint,), ())
     start = time.perf_counter()
     with local_workers(sweep, endpoint, workers):
-        table = run_sweep(bus, sweep, out, library.keys("bait"), library.keys("shooter"), games)
+        table = run_sweep(bus, sweep, out, library.keys("bait"), library.keys("shooter"), games, lanes=lanes)
     assert table is not None
     return time.perf_counter() - start
 
@@ -43,6 +43,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--games", type=int, default=20)
     parser.add_argument("--workers", default="1,2")
+    parser.add_argument("--lanes", type=int, default=LANES, help="games a worker plays as one batch")
     parser.add_argument("--out", type=Path, default=None, help="Keep the tables here (default: a temp dir).")
     args = parser.parse_args()
     print(f"one worker, in-process: {worker_fps():,.0f} frames/s")
@@ -52,7 +53,7 @@ def main() -> None:
         out = args.out or Path(tmp)
         out.mkdir(parents=True, exist_ok=True)
         for n in (int(w) for w in args.workers.split(",")):
-            walls[n] = full_table(n, args.games, out / f"table-{n}workers.json")
+            walls[n] = full_table(n, args.games, out / f"table-{n}workers.json", args.lanes)
             print(f"full table, {n} worker(s): {walls[n]:.1f} s ({frames / walls[n]:,.0f} frames/s in all)")
     if 1 in walls and 2 in walls:
         print(f"speed-up of 2 workers over 1: {walls[1] / walls[2]:.2f}x")

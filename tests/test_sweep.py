@@ -38,14 +38,14 @@ def test_sweep_survives_a_killed_worker(bus, spawn, background, wait_until, tmp_
     progress: list[int] = []
     result = background(
         run_sweep, bus.config(listen=True), sweep, out, BAITS, SHOOTERS, GAMES, CHUNK,
-        lambda done, total: progress.append(done),
+        lambda done, total: progress.append(done), lanes=2,
     )  # fmt: skip
     victim = spawn("worker", bus.config(), *worker_args(sweep, "victim"))
     assert wait_until(
         lambda: journal_path(out).exists() and journal_path(out).read_text().count("\n") >= 1, 60
     )
     survivor = spawn("worker", bus.config(), *worker_args(sweep, "survivor"))
-    victim.send_signal(signal.SIGKILL)  # mid-job: it always has one while jobs remain
+    victim.send_signal(signal.SIGKILL)  # mid-batch: it always has two jobs while jobs remain
     table = result.result(timeout=240)
     assert table is not None and table.results == reference.results
     assert Table.load(out).results == reference.results
@@ -61,10 +61,9 @@ def test_stopped_sweep_resumes_from_its_journal(bus, spawn, wait_until, tmp_path
         if done >= 3:
             stop.set()
 
-    assert (
-        run_sweep(bus.config(listen=True), sweep, out, BAITS, SHOOTERS, GAMES, CHUNK, stop_after_three, stop)
-        is None
-    )
+    config = bus.config(listen=True)
+    stopped = run_sweep(config, sweep, out, BAITS, SHOOTERS, GAMES, CHUNK, stop_after_three, stop, lanes=1)
+    assert stopped is None
     collected = journal_path(out).read_text().count("\n")
     assert 3 <= collected < len(jobs(BAITS, SHOOTERS, GAMES, CHUNK)) and not out.exists()
     spawn("worker", bus.config(), *worker_args(sweep, "w2"))

@@ -7,7 +7,7 @@ publishes), so that each policy reads them in its own observation view.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
@@ -26,6 +26,14 @@ def log_probs(
     probabilities come from one batched evaluation (sampling.batch_probs) over all n states."""
     views = {p.view for p in policies}
     observed = {v: np.stack([as_observation(s, v) for s in states]) for v in sorted(views)}
+    return observed_log_probs(policies, observed, actions)
+
+
+def observed_log_probs(
+    policies: Sequence[Policy], observed: Mapping[str, np.ndarray], actions: Sequence[int] | np.ndarray
+) -> np.ndarray:
+    """`log_probs` of n states already observed in each policy's view (`observed[view]`: (n, 64),
+    as the batched engine observes them, bit-identical to as_observation of the world values)."""
     rows = np.arange(len(actions))
     return np.log(np.stack([batch_probs(p, observed[p.view])[rows, actions] for p in policies], axis=1))
 

@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from services.adapter.cem import log_probs
+from services.adapter.cem import log_probs, observed_log_probs
 from services.table.table import DEFAULT_TABLE, Table
 from shared.errors import UsageError
 from shared.game import FRAMES, N_ACTIONS, ROLES, SEEDS, Policy, Range, other
@@ -120,9 +120,15 @@ class AdapterConfig:
 
     def build(self, payoff: Payoff | None = None) -> Adapter:
         """The adapter core this config describes (`payoff`: the shipped table seen from our seat)."""
-        payoff = payoff or Payoff.load(self.role)
-        threshold = ood_threshold(self.partner_role, self.window) if "ood" in self.strategy else None
-        return Adapter(self, payoff, threshold)
+        return Adapter(self, payoff or Payoff.load(self.role), self.threshold())
+
+    def build_lanes(self, lanes: int, payoff: Payoff | None = None) -> AdapterLanes:
+        """The same adapter in `lanes` games at once (bulk evaluation)."""
+        return AdapterLanes(self, payoff or Payoff.load(self.role), lanes, self.threshold())
+
+    def threshold(self) -> float | None:
+        """The out-of-library threshold, for the strategies that have one."""
+        return ood_threshold(self.partner_role, self.window) if "ood" in self.strategy else None
 
 
 @dataclass(frozen=True)
@@ -199,6 +205,15 @@ class Scorer:
     def batch(self, values: np.ndarray, actions: np.ndarray) -> np.ndarray:
         """(n, K) scores of n frames."""
         return log_probs(self.policies, values, actions)
+
+    @property
+    def views(self) -> set[str]:
+        return {p.view for p in self.policies}
+
+    def observed(self, observed: dict[str, np.ndarray], actions: np.ndarray) -> np.ndarray:
+        """(n, K) scores of n frames already observed in every view of `views` (the batched
+        engine's observations: the same values as `__call__` reads from world values)."""
+        return observed_log_probs(self.policies, observed, actions)
 
 
 def ood_threshold(partner_role: str, window: int, path: Path = CALIBRATION) -> float:
@@ -296,12 +311,7 @@ class Adapter:
 
     def forward(self, scores: np.ndarray) -> None:
         """One forward step of the hidden Markov model, in log space."""
-        k, h, eta = len(scores), self.config.hazard_rate, self.config.noise
-        belief = np.exp(self.log_belief)
-        predicted = (1.0 - h) * belief + h * (1.0 - belief) / max(k - 1, 1)
-        likelihood = (1.0 - eta) * np.exp(scores) + eta / N_ACTIONS
-        log_post = np.log(predicted) + np.log(likelihood)
-        self.log_belief = log_post - np.logaddexp.reduce(log_post)
+        self.log_belief = forward(self.log_belief, scores, self.config)
 
     def belief(self) -> np.ndarray:
         return np.exp(self.log_belief)
@@ -334,3 +344,74 @@ class Adapter:
             else {},
             "out_of_library": self.out_of_library,
         }
+
+
+def forward(log_belief: np.ndarray, scores: np.ndarray, config: AdapterConfig) -> np.ndarray:
+    """The hidden Markov model's forward step in log space, for one lane's (K,) or n lanes' (n, K)
+    beliefs and scores: the same operations, element by element, either way."""
+    k, h, eta = scores.shape[-1], config.hazard_rate, config.noise
+    belief = np.exp(log_belief)
+    predicted = (1.0 - h) * belief + h * (1.0 - belief) / max(k - 1, 1)
+    likelihood = (1.0 - eta) * np.exp(scores) + eta / N_ACTIONS
+    log_post = np.log(predicted) + np.log(likelihood)
+    return log_post - np.logaddexp.reduce(log_post, axis=-1, keepdims=True)
+
+
+class AdapterLanes:
+    """`Adapter` in n games at once, which see their frames together (bulk evaluation): lane i
+    takes exactly the decisions an `Adapter` would from the same scores. Estimates and policies
+    are indices into the payoff's partners and ours."""
+
+    def __init__(
+        self, config: AdapterConfig, payoff: Payoff, lanes: int, threshold: float | None = None
+    ) -> None:
+        if "ood" in config.strategy and threshold is None:
+            raise ValueError(f"strategy {config.strategy} needs an out-of-library threshold")
+        self.config, self.payoff, self.threshold = config, payoff, threshold
+        k = len(payoff.partners)
+        self.ring = np.zeros((lanes, config.window, k))  # Window, lane by lane
+        self.sums = np.zeros((lanes, k))
+        self.filled = self.next = self.frames = 0
+        self.log_belief = np.full((lanes, k), -math.log(k))
+        self.policy = np.full(lanes, payoff.ours.index(payoff.initial(config)))
+        self.partner = np.full(lanes, -1)  # the estimated type, -1 until warmup ends
+        self.candidate, self.held = self.policy.copy(), np.zeros(lanes, np.int64)
+        self.responses = np.array([payoff.best_response(i) for i in range(k)])
+
+    def update(self, scores: np.ndarray) -> np.ndarray:
+        """Take every lane's scores of one frame, (n, K); True where a lane's policy changes."""
+        self.frames += 1
+        if self.filled == self.config.window:
+            self.sums -= self.ring[:, self.next]
+        else:
+            self.filled += 1
+        self.ring[:, self.next] = scores
+        self.sums += scores
+        self.next = (self.next + 1) % self.config.window
+        bayes = self.config.strategy.startswith("bayes")
+        if bayes:
+            self.log_belief = forward(self.log_belief, scores, self.config)
+        if self.frames < self.config.warmup_frames:
+            return np.zeros(len(scores), bool)
+        means = self.sums / max(self.filled, 1)
+        if bayes:
+            belief = np.exp(self.log_belief)
+            self.partner = np.argmax(belief, axis=1)
+            choice = np.argmax(belief @ self.payoff.values, axis=1)
+        else:
+            self.partner = np.argmax(means, axis=1)
+            choice = self.responses[self.partner]
+        if self.threshold is not None:
+            choice = np.where(means.max(axis=1) < self.threshold, self.payoff.best_average(), choice)
+        return self._choose(choice)
+
+    def _choose(self, choice: np.ndarray) -> np.ndarray:
+        """Adapter._choose, lane by lane."""
+        same = choice == self.policy
+        fresh = ~same & (choice != self.candidate)
+        self.candidate = np.where(same | fresh, choice, self.candidate)
+        self.held = np.where(same | fresh, 0, self.held) + ~same
+        switch = ~same & (self.held >= self.config.dwell_frames)
+        self.policy = np.where(switch, choice, self.policy)
+        self.held[switch] = 0
+        return switch

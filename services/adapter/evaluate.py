@@ -1,22 +1,33 @@
 """Evaluating the adaptive agent in-process: the games every measurement plays.
 
-`play_partner` plays one game of a partner (services/adapter/partners.py) with our seat played by a
-static library policy or adaptively. Games are the same core as everywhere (engine, library
-policies, the adapter core); the adaptive agent switches as the agent service does: from the frame
-after the adapter's choice, with the policy reset by `switch_seed`. Work is spread over processes
-(`run_parallel`), each with its own loaded library. The measurements built on it:
-identification.py (is the partner identified), team.py (does adapting help), thresholds.py (the
-out-of-library thresholds) and results.py (the numbers and summary written out).
+`play_games` plays many games of partners (services/adapter/partners.py) with our seat played by
+a static library policy or adaptively, as the lanes of one batched engine: the partners in their
+batched forms (partner_lanes.py), our seat's lanes grouped by the policy they play now, and every
+adaptive lane's update batched (`AdapterLanes`, which decides as `Adapter` does). `play_partner`
+is the same game on the scalar engine, one at a time, as a live match plays it: the reference the
+batched games are checked against, and the calibration's games. Either way the adaptive agent
+switches as the agent service does: from the frame after the adapter's choice. Draws differ: a
+batched game's come from `lane_uniforms` keyed by its seed (batch_play.py), a scalar game's from
+the policies' own generators, so the two agree in distribution, not game for game.
+
+Work is spread over processes (`run_parallel`), each with its own loaded library, in batches of
+consecutive games (`batches`). The measurements built on it: identification.py (is the partner
+identified), team.py (does adapting help), thresholds.py (the out-of-library thresholds) and
+results.py (the numbers and summary written out).
 """
 
 from __future__ import annotations
 
+import itertools
+import math
 import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from functools import cache
+from functools import cache, partial
 from multiprocessing import get_context
 from pathlib import Path
+
+import numpy as np
 
 from services.adapter.core import (
     AdapterConfig,
@@ -31,6 +42,8 @@ from services.sim.observation import observe, world_values
 from services.sim.play import policy_seed, switch_seed
 from services.table.table import DEFAULT_TABLE
 from shared.game import GameConfig, Policy, bait_first, other
+
+LANES = 1024  # games per batch at most
 
 
 @dataclass(frozen=True)
@@ -58,7 +71,76 @@ class Outcome:
     switches: int = 0
     timeline: list[tuple[int, str, str]] = field(default_factory=list)  # (frame, estimate, policy)
     values: list[list[float]] = field(default_factory=list)  # the partner's world-view states
-    actions: list[int] = field(default_factory=list)  # and actions, when recorded
+    actions: list[int] = field(default_factory=list)  # and actions, when recorded (scalar games)
+    scores: np.ndarray | None = None  # (frames, K) the partner's scores, when recorded (batched)
+    pairs: np.ndarray | None = None  # (frames, 2) both seats' actions, bait first, when recorded
+
+
+Agent = str | AdapterConfig  # a static library key of our seat, or an adaptive agent
+
+
+def play_games(
+    games: list[tuple[str, Agent, int]], role: str, config: GameConfig | None = None, record: bool = False
+) -> list[Outcome]:
+    """Games of (partner name, our agent, seed), our seat `role`, as the lanes of one batch. With
+    `record`, each outcome keeps the partner's scores under the library (the Scorer) and both
+    seats' actions, frame by frame."""
+    from services.adapter.partner_lanes import Partners  # bulk play only: numba loads with it
+    from services.sim.batch import BatchGame
+    from services.sim.batch_observation import observe as observe_lanes
+    from services.sim.batch_play import Seat
+
+    s, partner_role = setup(role), other(role)
+    seeds = np.array([seed for *_, seed in games], np.int64)
+    batch = BatchGame(len(games), config, seeds)
+    partners = Partners([name for name, *_ in games], partner_role, seeds)
+    adaptive: dict[AdapterConfig, list[int]] = {}
+    for lane, (_, agent, _) in enumerate(games):
+        if isinstance(agent, AdapterConfig):
+            adaptive.setdefault(agent, []).append(lane)
+    scored = np.arange(len(games)) if record else np.array(sorted(sum(adaptive.values(), [])), np.int64)
+    adapters = [
+        (np.array(lanes), np.searchsorted(scored, lanes), agent.build_lanes(len(lanes), s.payoff))
+        for agent, lanes in adaptive.items()
+    ]
+    ours = [agent if isinstance(agent, str) else s.payoff.initial(agent) for _, agent, _ in games]
+    seat = Seat(role, list(s.ours.values()), [s.payoff.ours.index(k) for k in ours], seeds)
+    outcomes = [Outcome(0.0) for _ in games]
+    frames = batch.config.frames
+    scores = np.zeros((len(scored), frames, len(s.payoff.partners))) if record else None
+    pairs = np.zeros((len(games), frames, 2), np.int64) if record else None
+    while not batch.done[0]:
+        frame = int(batch.state.frame[0])
+        observed = cache(partial(observe_lanes, batch, partner_role))  # each view once a frame
+        partner_actions, our_actions = partners.act(observed, frame), seat.act(batch)
+        if len(scored):
+            now = s.scorer.observed({v: observed(v)[scored] for v in s.scorer.views}, partner_actions[scored])
+            if scores is not None:
+                scores[:, frame] = now
+        for lanes, rows, adapter in adapters:
+            for j in np.flatnonzero(adapter.update(now[rows])).tolist():
+                seat.choice[lanes[j]] = adapter.policy[j]
+                outcomes[lanes[j]].switches += 1
+                chosen = (s.payoff.partners[adapter.partner[j]], s.payoff.ours[adapter.policy[j]])
+                outcomes[lanes[j]].timeline.append((frame + 1, *chosen))
+        pair = bait_first(partner_role, partner_actions, our_actions)
+        if pairs is not None:
+            pairs[:, frame] = np.stack(pair, axis=1)
+        batch.step(*pair)
+    for lane, kpm in enumerate(batch.kills_per_minute().tolist()):
+        outcomes[lane].kills_per_minute = kpm
+        if record:
+            outcomes[lane].scores, outcomes[lane].pairs = scores[lane], pairs[lane]
+    return outcomes
+
+
+def batches(items: list, workers: int, lanes: int = LANES) -> list[list]:
+    """Consecutive slices of `items`, of even sizes, to play as batches: at most `lanes` each, and
+    at least one per worker. (The fewer the batches, the fewer the calls per game: a frame costs
+    about the same whether a policy answers for ten lanes or a hundred.)"""
+    count = min(len(items), max(math.ceil(len(items) / lanes), workers))
+    bounds = [len(items) * i // count for i in range(count + 1)] if count else [0]
+    return [items[a:b] for a, b in itertools.pairwise(bounds)]
 
 
 def play_partner(
@@ -116,6 +198,12 @@ def run_parallel(
             if progress:
                 progress(len(results), len(tasks))
     return results
+
+
+def games_done(parts: list[list], progress: Callable[[int, int], None]) -> Callable[[int, int], None]:
+    """`progress` in games, for run_parallel over `parts` (which reports batches done, in order)."""
+    total = sum(map(len, parts))
+    return lambda done, _: progress(sum(map(len, parts[:done])), total)
 
 
 def _star(job: tuple[Callable, tuple]) -> object:

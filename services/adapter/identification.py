@@ -4,18 +4,14 @@ confusion matrix, and how many frames the estimate takes to follow a partner tha
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import numpy as np
 
-from services.adapter.core import (
-    Adapter,
-    AdapterConfig,
-    Payoff,
-)
-from services.adapter.evaluate import play_partner, run_parallel, setup
-from services.adapter.partners import SWITCH_AT, Noisy, Switching, make_partner
-from shared.game import other
+from services.adapter.core import AdapterConfig, Payoff, forward
+from services.adapter.evaluate import batches, games_done, play_games, run_parallel, setup
+from services.adapter.partners import SWITCH_AT
 
 FOLLOW_HOLD = 30  # frames the estimate must stay on the new type to count as following it
 
@@ -27,30 +23,33 @@ def windowed(scores: np.ndarray, window: int) -> np.ndarray:
 
 
 def bayes_estimates(scores: np.ndarray, config: AdapterConfig, payoff: Payoff) -> np.ndarray:
-    """The Bayesian filter's most likely type at every frame (the same code the adapter runs)."""
-    adapter = Adapter(config, payoff)
-    estimates = np.empty(len(scores), dtype=int)
-    for t, row in enumerate(scores):
-        adapter.forward(row)
-        estimates[t] = int(np.argmax(adapter.log_belief))
+    """The Bayesian filter's most likely type at every frame of every stream, (streams, frames),
+    from (streams, frames, K) scores (the same update the adapter runs, all streams at once)."""
+    k = len(payoff.partners)
+    log_belief = np.full((len(scores), k), -math.log(k))
+    estimates = np.empty(scores.shape[:2], dtype=int)
+    for t in range(scores.shape[1]):
+        log_belief = forward(log_belief, scores[:, t], config)
+        estimates[:, t] = np.argmax(log_belief, axis=1)
     return estimates
 
 
-def _stream(partner: str, teammate: str, seed: int, role: str) -> np.ndarray:
-    """Scores of a noisy partner's frames (rows) under each library policy of its role (columns)."""
-    s = setup(role)
-    outcome = play_partner(Noisy(make_partner(partner, other(role))), teammate, seed, role, record=True)
-    return s.scorer.batch(np.array(outcome.values), np.array(outcome.actions))
+def _scores(games: list[tuple[str, str, int]], role: str) -> list[np.ndarray]:
+    """Each game's partner scores: frames (rows) under each library policy of its role (columns)."""
+    return [outcome.scores for outcome in play_games(games, role, record=True)]
+
+
+def _switch_game(first: str, second: str, seed: int, role: str) -> tuple[str, str, int]:
+    """A noisy partner that switches from `first` to `second` at SWITCH_AT, playing with our best
+    response to `first` (what the adaptive agent plays before the switch)."""
+    payoff = setup(role).payoff
+    teammate = payoff.ours[payoff.best_response(payoff.partners.index(first))]
+    return f"noisy(switch({first},{second}))", teammate, seed
 
 
 def switch_scores(first: str, second: str, seed: int, role: str) -> np.ndarray:
-    """Scores of a noisy partner that switches from `first` to `second` at SWITCH_AT, playing with
-    our best response to `first` (what the adaptive agent plays before the switch)."""
-    s, partner_role = setup(role), other(role)
-    teammate = s.payoff.ours[s.payoff.best_response(s.payoff.partners.index(first))]
-    switching = Switching(make_partner(first, partner_role), make_partner(second, partner_role))
-    outcome = play_partner(Noisy(switching), teammate, seed, role, record=True)
-    return s.scorer.batch(np.array(outcome.values), np.array(outcome.actions))
+    """The scores of one `_switch_game`."""
+    return _scores([_switch_game(first, second, seed, role)], role)[0]
 
 
 def follow_lag(estimates: np.ndarray, target: int, start: int, hold: int = FOLLOW_HOLD) -> int | None:
@@ -75,30 +74,33 @@ def identification(
     keys = list(s.payoff.partners)
     teammate = {k: s.payoff.ours[s.payoff.best_response(i)] for i, k in enumerate(keys)}
     pairs = [(a, b) for a in keys for b in keys if a != b]
-    tasks = [(k, teammate[k], seed, role) for k in keys for seed in seeds]
-    switch_tasks = [(a, b, seed, role) for a, b in pairs for seed in seeds[:1]]
-    total = len(tasks) + len(switch_tasks)
-    streams = run_parallel(_stream, tasks, workers, progress and (lambda d, _: progress(d, total)))
-    switched = run_parallel(
-        switch_scores, switch_tasks, workers, progress and (lambda d, _: progress(len(tasks) + d, total))
+    tasks = [(k, seed) for k in keys for seed in seeds]
+    switch_tasks = [(a, b) for a, b in pairs for _ in seeds[:1]]
+    games = [(f"noisy({k})", teammate[k], seed) for k, seed in tasks]
+    games += [_switch_game(a, b, seeds[0], role) for a, b in switch_tasks]
+    parts = batches(games, workers)
+    played = run_parallel(
+        _scores, [(part, role) for part in parts], workers, progress and games_done(parts, progress)
     )
+    scores = np.stack([stream for part in played for stream in part])
+    streams, switched = scores[: len(tasks)], scores[len(tasks) :]
     out: dict = {"partners": keys, "seeds": seeds, "noise": 0.1, "windows": {}}
     for window in windows:
         confusion = np.zeros((len(keys), len(keys)), dtype=int)
-        bayes_right = bayes_total = 0
         config = AdapterConfig(role, window, "bayes")
-        for (key, *_), scores in zip(tasks, streams, strict=True):
-            estimates = windowed(scores, window).argmax(axis=1)
+        for (key, _), stream in zip(tasks, streams, strict=True):
+            estimates = windowed(stream, window).argmax(axis=1)
             np.add.at(confusion[keys.index(key)], estimates, 1)
-            bayes = bayes_estimates(scores, config, s.payoff)[window - 1 :]
-            bayes_right += int((bayes == keys.index(key)).sum())
-            bayes_total += len(bayes)
+        truth = np.array([keys.index(key) for key, _ in tasks])
+        bayes = bayes_estimates(streams, config, s.payoff)[:, window - 1 :]
+        bayes_right, bayes_total = int((bayes == truth[:, None]).sum()), bayes.size
         lags, bayes_lags = [], []
-        for (_, second, *_), scores in zip(switch_tasks, switched, strict=True):
+        bayes_switched = bayes_estimates(switched, config, s.payoff)
+        for (_, second), stream, filtered in zip(switch_tasks, switched, bayes_switched, strict=True):
             target = keys.index(second)
-            estimates = np.concatenate([np.full(window - 1, -1), windowed(scores, window).argmax(axis=1)])
+            estimates = np.concatenate([np.full(window - 1, -1), windowed(stream, window).argmax(axis=1)])
             lags.append(follow_lag(estimates, target, SWITCH_AT))
-            bayes_lags.append(follow_lag(bayes_estimates(scores, config, s.payoff), target, SWITCH_AT))
+            bayes_lags.append(follow_lag(filtered, target, SWITCH_AT))
         out["windows"][window] = {
             "accuracy": float(np.trace(confusion) / confusion.sum()),
             "bayes_accuracy": bayes_right / bayes_total,

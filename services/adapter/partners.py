@@ -73,6 +73,7 @@ class Noisy(Wrapper):
 class Delayed(Wrapper):
     def __init__(self, inner: Partner, delay: int = DELAY) -> None:
         super().__init__(inner, f"delayed({inner.key})")
+        self.delay = delay
         self.seen: deque[np.ndarray] = deque(maxlen=delay + 1)
 
     def reset(self, seed: int | None = None) -> None:

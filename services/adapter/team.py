@@ -12,21 +12,23 @@ import numpy as np
 from services.adapter.core import (
     AdapterConfig,
 )
-from services.adapter.evaluate import play_partner, run_parallel
-from services.adapter.partners import group_of, make_partner
-from shared.game import other
+from services.adapter.evaluate import batches, games_done, play_games, run_parallel
+from services.adapter.partners import group_of
 
 
-def _team_game(partner: str, agent: str, seed: int, role: str) -> dict:
-    config = AdapterConfig.parse(agent, role=role)
-    outcome = play_partner(make_partner(partner, other(role)), config or agent, seed, role)
-    return {
-        "partner": partner,
-        "agent": agent,
-        "seed": seed,
-        "kills_per_minute": outcome.kills_per_minute,
-        "switches": outcome.switches,
-    }
+def _team_batch(games: list[tuple[str, str, int]], role: str) -> list[dict]:
+    agents = [AdapterConfig.parse(agent, role=role) or agent for _, agent, _ in games]
+    played = play_games([(p, a, seed) for (p, _, seed), a in zip(games, agents, strict=True)], role)
+    return [
+        {
+            "partner": partner,
+            "agent": agent,
+            "seed": seed,
+            "kills_per_minute": outcome.kills_per_minute,
+            "switches": outcome.switches,
+        }
+        for (partner, agent, seed), outcome in zip(games, played, strict=True)
+    ]
 
 
 def team(
@@ -37,9 +39,14 @@ def team(
     workers: int = 1,
     progress: Callable[[int, int], None] | None = None,
 ) -> list[dict]:
-    """Kills/min of every (partner, agent, seed); agents are static keys or adaptive variant names."""
-    tasks = [(p, a, s, role) for p in partners for a in agents for s in seeds]
-    return run_parallel(_team_game, tasks, workers, progress)
+    """Kills/min of every (partner, agent, seed); agents are static keys or adaptive variant names.
+    Games are played in batches (evaluate.batches), partner by partner."""
+    games = [(p, a, s) for p in partners for a in agents for s in seeds]
+    parts = batches(games, workers)
+    rows = run_parallel(
+        _team_batch, [(part, role) for part in parts], workers, progress and games_done(parts, progress)
+    )
+    return [row for part in rows for row in part]
 
 
 def _stderr(values: np.ndarray) -> float:

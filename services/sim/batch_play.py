@@ -5,9 +5,16 @@ with `lane_uniforms` keyed by the game's seed, the seat and the frame: a game's 
 its seed and the two policies only, never on the batch it was played in or on the worker. The
 draws are not the scalar policies' `random.Random` streams, so a batched game is not the scalar
 game of the same seed; the two agree in distribution (bench/engine.py, docs/rules.md).
+
+One batch may hold games of different pairs (`play_pairs`): a seat's lanes are grouped by their
+policy, and each policy answers once per frame for all its lanes, so the cost of a frame grows
+with the number of distinct policies, not of pairs.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from functools import cache, partial
 
 import numpy as np
 
@@ -18,19 +25,74 @@ from services.sim.sampling import batch_act, lane_uniforms
 from shared.game import ROLES, GameConfig, Policy
 
 
+class Seat:
+    """One seat in every lane of a batch: lane i plays `policies[choice[i]]` (a choice may change
+    between frames), with draws from `lane_uniforms(keys, stream, frame)`; by default the keys are
+    the games' seeds and the stream is the seat's index, as in `play_batch`."""
+
+    def __init__(
+        self, role: str, policies: Sequence[Policy], choice: object, keys: object, stream: int | None = None
+    ) -> None:
+        self.role, self.policies = role, list(policies)
+        self.choice = np.array(choice, dtype=np.int64)
+        self.keys = np.asarray(keys)
+        self.stream = ROLES.index(role) if stream is None else stream
+
+    def act(self, batch: BatchGame) -> np.ndarray:
+        """Every lane's action this frame: each policy in use asked once, for its lanes."""
+        uniforms = lane_uniforms(self.keys, self.stream, batch.state.frame)
+        return act_lanes(self.policies, self.choice, cache(partial(observe, batch, self.role)), uniforms)
+
+
+def act_lanes(
+    policies: Sequence[Policy],
+    choice: np.ndarray,
+    observed: Callable[[str], np.ndarray],
+    uniforms: np.ndarray,
+) -> np.ndarray:
+    """One action per lane: lane i's drawn from `policies[choice[i]]` with `uniforms[i]`, each
+    policy asked once for all its lanes; `observed(view)`: every lane's observation in that view."""
+    used = np.unique(choice)
+    if len(used) == 1:  # one policy for every lane: no gathering
+        policy = policies[used[0]]
+        return batch_act(policy, observed(policy.view), uniforms)
+    out = np.empty(len(choice), np.int64)
+    for k in used:
+        policy, lanes = policies[k], np.flatnonzero(choice == k)
+        out[lanes] = batch_act(policy, observed(policy.view)[lanes], uniforms[lanes])
+    return out
+
+
 def play_batch(
     bait: Policy, shooter: Policy, seeds: list[int], config: GameConfig | None = None
 ) -> list[GameResult]:
     """One full game per seed between two policies, all lanes of one batch."""
+    zeros = np.zeros(len(seeds), np.int64)
+    return play_pairs([bait], [shooter], zeros, zeros, seeds, config)
+
+
+def play_pairs(
+    baits: Sequence[Policy],
+    shooters: Sequence[Policy],
+    bait_of: object,
+    shooter_of: object,
+    seeds: list[int],
+    config: GameConfig | None = None,
+) -> list[GameResult]:
+    """One full game per lane of `baits[bait_of[i]]` with `shooters[shooter_of[i]]` and seed
+    `seeds[i]`, all lanes of one batch; each game is the one `play_batch` plays for its pair and seed."""
     batch = BatchGame(len(seeds), config, seeds)
-    keys = np.asarray(seeds)
+    seats = [
+        Seat(role, policies, choice, seeds)
+        for role, policies, choice in zip(ROLES, (baits, shooters), (bait_of, shooter_of), strict=True)
+    ]
     while not batch.done[0]:
-        frame = batch.state.frame
-        actions = [
-            batch_act(policy, observe(batch, role, policy.view), lane_uniforms(keys, seat, frame))
-            for seat, (role, policy) in enumerate(zip(ROLES, (bait, shooter), strict=True))
-        ]
-        batch.step(*actions)
+        batch.step(*(seat.act(batch) for seat in seats))
+    return results(batch, seeds)
+
+
+def results(batch: BatchGame, seeds: list[int]) -> list[GameResult]:
+    """Every lane's finished game."""
     kpm = batch.kills_per_minute()
     return [
         GameResult(

@@ -131,6 +131,9 @@ def test_resetting_some_lanes_starts_their_games_afresh_and_leaves_the_others() 
         ([0, 0, 0], [0, 0, -1], "invalid action for shooter in lane 2: -1"),
         ([0, 0], [0, 0, 0], r"bait actions: expected shape \(3,\), got \(2,\)"),
         ([0, 0, 0], [0.0, 1.0, 2.0], "shooter actions: expected integers"),
+        ([0, 0, 0], [[0, 0, 0]], r"shooter actions: expected shape \(3,\), got \(1, 3\)"),
+        (np.array([0, 0, 200], np.uint8), [0, 0, 0], "invalid action for bait in lane 2: 200"),
+        ([0, 0, 0], [True, False, True], "shooter actions: expected integers 0..11, got dtype bool"),
     ],
 )
 def test_bad_actions_raise_naming_lane_role_and_value_and_change_no_lane(bait, shooter, message) -> None:
@@ -138,7 +141,7 @@ def test_bad_actions_raise_naming_lane_role_and_value_and_change_no_lane(bait, s
     batch.step(np.full(3, 3), np.full(3, 9))
     before = [batch.state_values(lane) for lane in range(3)]
     with pytest.raises(ValueError, match=message):
-        batch.step(np.array(bait), np.array(shooter))
+        batch.step(np.asarray(bait), np.asarray(shooter))
     assert [batch.state_values(lane) for lane in range(3)] == before
 
 

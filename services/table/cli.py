@@ -10,8 +10,10 @@ import typer
 from rich.table import Table
 
 from services.options import GAMES, WORKERS, bus_options, console, number, output
+from services.table.table import LANES
 from shared.bus import BusConfig, stop_on_signals
 from shared.errors import Failure
+from shared.game import Range
 from shared.messages import JOB_SEEDS
 
 commands = typer.Typer()
@@ -34,7 +36,8 @@ def sweep(
     baits: str = typer.Option("", help="Comma-separated baits (default: all)."),
     shooters: str = typer.Option("", help="Comma-separated shooters (default: all)."),
     workers: int = number(2, WORKERS, "Worker processes to start here (0: only remote workers)."),
-    chunk: int = number(20, JOB_SEEDS, "Games per job, played as the lanes of one batch."),
+    chunk: int = number(20, JOB_SEEDS, "Games per job."),
+    lanes: int = number(LANES, Range(1, 100_000), "Games a worker plays at once, as the lanes of one batch."),
     out: Path = output(
         Path("tsf-table.json"),
         "Where the table goes (and its journal, OUT.journal). The shipped table is written only "
@@ -61,7 +64,7 @@ def sweep(
         task = bar.add_task("jobs", total=None)
         table = run_sweep(
             bus, sweep_id, out, bait_keys, shooter_keys, games, chunk,
-            lambda done, total: bar.update(task, completed=done, total=total), stop,
+            lambda done, total: bar.update(task, completed=done, total=total), stop, lanes=lanes,
         )  # fmt: skip
     if table is None:
         raise Failure(f"stopped; run the same command again to resume from {journal_path(out)}")

@@ -1,7 +1,8 @@
 """Distributed self-play sweeps over zenoh: a coordinator hands table jobs to live workers.
 
-Workers announce themselves with liveliness tokens; the coordinator keeps one job in flight per
-live worker, hands a dead worker's job to another, counts each job's first result only, and
+Workers announce themselves with liveliness tokens; the coordinator keeps a batch of jobs in flight
+per live worker (up to `lanes` games, which the worker plays as the lanes of one batched engine),
+hands a dead worker's jobs to another, counts each job's first result only, and
 appends every result to a journal beside the table, so that a stopped sweep resumes from what it
 has. A worker exits when the coordinator it has seen goes away. The games themselves are played
 by the pure core (table.py): results do not depend on which worker, or how many, computed them.
@@ -11,6 +12,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import queue
 import subprocess
 import sys
@@ -24,7 +26,7 @@ import zenoh
 
 from services.agent import library
 from services.processes import Processes
-from services.table.table import CHUNK, Job, Table, assemble, jobs, run_job
+from services.table.table import CHUNK, LANES, Job, Table, assemble, jobs, run_jobs
 from shared import keys
 from shared.bus import BusConfig, Drops, session, subscribe
 from shared.game import GameConfig
@@ -52,13 +54,16 @@ def read_journal(path: Path) -> dict[str, list[float]]:
 
 
 class Coordinator:
-    """The bookkeeping of a sweep, apart from the bus: which jobs wait, which worker has which."""
+    """The bookkeeping of a sweep, apart from the bus: which jobs wait, which worker has which.
+    An idle worker gets up to `per_worker` jobs at once, fewer when that would leave other idle
+    workers without a share."""
 
-    def __init__(self, todo: list[Job], done: dict[str, list[float]]) -> None:
+    def __init__(self, todo: list[Job], done: dict[str, list[float]], per_worker: int = 1) -> None:
         self.jobs = {job.id: job for job in todo}
         self.done = {k: v for k, v in done.items() if k in self.jobs}
         self.waiting = [job for job in todo if job.id not in self.done]
-        self.flying: dict[str, tuple[str, float]] = {}  # worker -> (job id, since)
+        self.per_worker = max(per_worker, 1)
+        self.flying: dict[str, dict[str, float]] = {}  # worker -> {job id: since}
         self.idle: set[str] = set()
         self.live: set[str] = set()
         self.duplicates = 0
@@ -75,18 +80,22 @@ class Coordinator:
         with self.changed:
             self.live.discard(worker)
             self.idle.discard(worker)
-            if worker in self.flying:
-                job, _ = self.flying.pop(worker)
-                if job not in self.done:
-                    log.warning("worker %s left with job %s; handing it to another", worker, job)
-                    self.waiting.insert(0, self.jobs[job])
+            left = [job for job in self.flying.pop(worker, {}) if job not in self.done]
+            if left:
+                log.warning("worker %s left with jobs %s; handing them to another", worker, left)
+                self._requeue(left)
             self.changed.notify_all()
+
+    def _requeue(self, ids: list[str]) -> None:
+        self.waiting[:0] = [self.jobs[job] for job in ids]
 
     def result(self, worker: str, job: str, values: list[float]) -> bool:
         """Record a job's result; False for a duplicate (a job counts once)."""
         with self.changed:
-            if self.flying.get(worker, ("",))[0] == job:
-                del self.flying[worker]
+            if job in self.flying.get(worker, {}):
+                del self.flying[worker][job]
+                if not self.flying[worker]:
+                    del self.flying[worker]
             if worker in self.live and worker not in self.flying:
                 self.idle.add(worker)
             fresh = job in self.jobs and job not in self.done
@@ -101,27 +110,32 @@ class Coordinator:
     def failed(self, worker: str, job: str) -> None:
         """A worker could not run a job (its library or rules differ): give it nothing more."""
         with self.changed:
-            self.flying.pop(worker, None)
+            mine = self.flying.pop(worker, {})
             self.live.discard(worker)
             self.idle.discard(worker)
-            if job in self.jobs and job not in self.done:
-                self.waiting.insert(0, self.jobs[job])
+            ids = [*mine, *([] if job in mine else [job])]
+            self._requeue([j for j in ids if j in self.jobs and j not in self.done])
             self.changed.notify_all()
 
     def assignments(self, now: float, timeout: float) -> list[tuple[str, Job]]:
-        """Jobs to send now: one per idle worker; a job in flight past `timeout` is sent again."""
+        """Jobs to send now: a batch per idle worker; a job in flight past `timeout` is sent again."""
         with self.changed:
-            for worker, (job, since) in list(self.flying.items()):
-                if now - since > timeout and job not in self.done:
-                    log.warning("job %s on %s took over %.0f s; handing it to another", job, worker, timeout)
+            for worker, mine in list(self.flying.items()):
+                late = [job for job, since in mine.items() if now - since > timeout and job not in self.done]
+                if late:
+                    log.warning(
+                        "jobs %s on %s took over %.0f s; handing them to another", late, worker, timeout
+                    )
                     del self.flying[worker]
-                    self.waiting.insert(0, self.jobs[job])
+                    self._requeue(late)
             out = []
             while self.idle and self.waiting:
-                worker, job = min(self.idle), self.waiting.pop(0)
+                worker = min(self.idle)
+                share = min(self.per_worker, math.ceil(len(self.waiting) / len(self.idle)))
+                batch, self.waiting = self.waiting[:share], self.waiting[share:]
                 self.idle.discard(worker)
-                self.flying[worker] = (job.id, now)
-                out.append((worker, job))
+                self.flying[worker] = {job.id: now for job in batch}
+                out += [(worker, job) for job in batch]
             return out
 
     @property
@@ -140,13 +154,15 @@ def run_sweep(
     progress: Progress | None = None,
     stop: threading.Event | None = None,
     job_timeout: float = 900.0,
+    lanes: int = LANES,
 ) -> Table | None:
     """Coordinate a sweep until every job has a result, then write the table to `out` (None if
-    stopped first; the journal keeps what was collected)."""
+    stopped first; the journal keeps what was collected). A worker gets up to `lanes` games at a
+    time (whole jobs, at least one)."""
     stop = stop or threading.Event()
     todo = jobs(baits, shooters, games, chunk)
     journal = journal_path(out)
-    state = Coordinator(todo, read_journal(journal))
+    state = Coordinator(todo, read_journal(journal), lanes // chunk)
     library_hash, config_hash = library.manifest_hash(), GameConfig().hash()
     drops = Drops("sweep")
     journal_lock = threading.Lock()
@@ -249,29 +265,39 @@ def run_worker(bus: BusConfig, sweep: str, worker: str, stop: threading.Event | 
         ):
             while not stop.is_set():
                 try:
-                    job = inbox.get(timeout=0.2)
+                    batch = [inbox.get(timeout=0.2)]
                 except queue.Empty:
                     continue
+                batch += _drain(inbox)
                 started = time.monotonic()
-                if (job.library, job.config) != (library_hash, config_hash):
-                    error = (
-                        f"library/rules {library_hash}/{config_hash} here, {job.library}/{job.config} "
-                        "in the sweep: update this worker's checkout"
-                    )
+                fits = [job for job in batch if (job.library, job.config) == (library_hash, config_hash)]
+                error = (
+                    f"library/rules {library_hash}/{config_hash} here, {{}} in the sweep: update this "
+                    "worker's checkout"
+                )
+                answers = [
+                    (job, [], error.format(f"{job.library}/{job.config}")) for job in batch if job not in fits
+                ]
+                if fits:
+                    played = run_jobs([Job(job.bait, job.shooter, tuple(job.seeds)) for job in fits])
+                    answers += [(job, values, "") for job, values in zip(fits, played, strict=True)]
+                seconds = time.monotonic() - started
+                for job, values, why in answers:
                     result = SweepResult(
-                        match=sweep, frame=0, sender=sender, job=job.job, kills_per_minute=[], error=error
-                    )
-                else:
-                    values = run_job(Job(job.bait, job.shooter, tuple(job.seeds)))
-                    result = SweepResult(
-                        match=sweep,
-                        frame=0,
-                        sender=sender,
-                        job=job.job,
-                        kills_per_minute=values,
-                        error="",
-                        seconds=time.monotonic() - started,
-                    )
-                    done += 1
-                publisher.put(result.encode())
+                        match=sweep, frame=0, sender=sender, job=job.job, kills_per_minute=values, error=why,
+                        seconds=seconds,
+                    )  # fmt: skip
+                    publisher.put(result.encode())
+                done += len(fits)
     return done
+
+
+def _drain(inbox: queue.Queue[SweepJob], quiet: float = 0.05) -> list[SweepJob]:
+    """The rest of a batch: the coordinator sends a worker's jobs back to back, so whatever
+    arrives until the inbox has been quiet for `quiet` seconds."""
+    more = []
+    while True:
+        try:
+            more.append(inbox.get(timeout=quiet))
+        except queue.Empty:
+            return more

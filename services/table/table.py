@@ -36,7 +36,8 @@ class Job:
         return f"{self.bait}-{self.shooter}-{self.seeds[0]}-{len(self.seeds)}"
 
 
-CHUNK = 20  # games per job, played as the lanes of one batch: a whole cell at the default 20 games
+CHUNK = 20  # games per job: a whole cell at the default 20 games
+LANES = 640  # games a worker plays as the lanes of one batch (whole jobs): half the 9x7 table at 20
 
 
 def jobs(baits: list[str], shooters: list[str], games: int, chunk: int = CHUNK) -> list[Job]:
@@ -50,12 +51,31 @@ def jobs(baits: list[str], shooters: list[str], games: int, chunk: int = CHUNK) 
 
 
 def run_job(job: Job, config: GameConfig | None = None) -> list[float]:
-    """Kills per minute of each of the job's games, played as lanes of one batch (policies loaded
-    fresh, so nothing carries over; each game depends on its seed only, see batch_play)."""
-    from services.sim.batch_play import play_batch  # bulk play only: the table's readers never load numba
+    """Kills per minute of each of the job's games (see `run_jobs`)."""
+    return run_jobs([job], config)[0]
 
-    bait, shooter = library.load(job.bait, config), library.load(job.shooter, config)
-    return [result.kills_per_minute for result in play_batch(bait, shooter, list(job.seeds), config)]
+
+def run_jobs(todo: list[Job], config: GameConfig | None = None) -> list[list[float]]:
+    """Kills per minute of each game of each job, all played as lanes of one batch: each policy
+    answers once per frame for the lanes of every job it plays in (policies loaded fresh, so
+    nothing carries over). Each game depends on its pair and seed only (see batch_play), so a job's
+    results are the same whichever jobs share its batch."""
+    from services.sim.batch_play import play_pairs  # bulk play only: the table's readers never load numba
+
+    baits = list(dict.fromkeys(job.bait for job in todo))
+    shooters = list(dict.fromkeys(job.shooter for job in todo))
+    lanes = [(baits.index(job.bait), shooters.index(job.shooter), seed) for job in todo for seed in job.seeds]
+    bait_of, shooter_of, seeds = (list(column) for column in zip(*lanes, strict=True))
+    played = play_pairs(
+        [library.load(k, config) for k in baits],
+        [library.load(k, config) for k in shooters],
+        bait_of, shooter_of, seeds, config,
+    )  # fmt: skip
+    out, start = [], 0
+    for job in todo:
+        out.append([result.kills_per_minute for result in played[start : start + len(job.seeds)]])
+        start += len(job.seeds)
+    return out
 
 
 @dataclass(frozen=True)

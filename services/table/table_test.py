@@ -12,7 +12,7 @@ from services.agent import library
 from services.sim.batch_play import play_batch
 from services.sim.play import play, summarize
 from services.table.sweep import Coordinator, read_journal
-from services.table.table import StaleTable, Table, assemble, jobs, run_job
+from services.table.table import StaleTable, Table, assemble, jobs, run_job, run_jobs
 from shared.game import GameConfig
 
 BAITS, SHOOTERS = ["B4", "B5"], ["S4", "S6"]
@@ -47,6 +47,13 @@ def test_batched_games_agree_with_scalar_games_in_distribution():
 def small_table() -> Table:
     results = {job.id: run_job(job, GameConfig(frames=300)) for job in jobs(BAITS, SHOOTERS, 3, 2)}
     return assemble(BAITS, SHOOTERS, 3, results, 2)
+
+
+def test_jobs_played_together_are_the_jobs_played_alone(small_table):
+    todo = jobs(BAITS, SHOOTERS, 3, 2)
+    played = run_jobs(todo, GameConfig(frames=300))
+    together = assemble(BAITS, SHOOTERS, 3, {j.id: v for j, v in zip(todo, played, strict=True)}, 2)
+    assert together.results == small_table.results
 
 
 def test_table_statistics(small_table):
@@ -113,6 +120,21 @@ def test_a_slow_job_is_sent_again_and_a_failing_worker_gets_nothing_more():
     assert c.result("a", job.id, [3.0]) and "a" in c.idle  # the slow worker answers after all
     c.failed("b", job.id)
     assert "b" not in c.idle and all(w != "b" for w, _ in c.assignments(12.0, 10))
+
+
+def test_idle_workers_share_the_waiting_jobs_in_batches():
+    c = Coordinator(jobs(["B4"], ["S4"], games=7, chunk=1), {}, per_worker=3)
+    c.worker_up("a")
+    c.worker_up("b")
+    sent = c.assignments(0.0, 60)
+    assert [w for w, _ in sent] == ["a"] * 3 + ["b"] * 3  # 3 each, not 4 and 3: the cap holds
+    c.worker_down("a")
+    c.worker_up("c")
+    resent = c.assignments(1.0, 60)
+    assert [j for w, j in resent if w == "c"] == [j for w, j in sent if w == "a"]  # a's batch, whole
+    for worker, job in sent[3:]:
+        c.result(worker, job.id, [1.0])
+    assert "b" in c.idle and [j.id for _, j in c.assignments(2.0, 60)] == ["B4-S4-6-1"]
 
 
 def test_journal_resumes_and_skips_a_torn_line(tmp_path):

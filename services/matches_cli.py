@@ -136,10 +136,16 @@ def study(
     out: Path = typer.Option(Path("studies"), help="Studies go to OUT/<name>: progress and recordings."),
     host: Host = "127.0.0.1",
     port: Port = 8000,
+    max_matches: int = typer.Option(4, min=1, help="Matches at once; more participants wait in a queue."),
+    trial_timeout: float = typer.Option(
+        120.0,
+        min=1.0,
+        help="Seconds a trial's match may take beyond its length before it is ended and replayed.",
+    ),
 ) -> None:
     """Serve a study: participants open the link, consent, get a role and play every agent variant."""
     from services.study.core import StudyConfig
-    from services.study.runner import run_study
+    from services.study.runner import Serving, run_study
 
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     protocol = StudyConfig.load(config)
@@ -152,7 +158,8 @@ def study(
         )
         console.print(f"participants open [bold]{gateway.url}[/] (Ctrl-C ends the study server)")
 
-    done = run_study(protocol, directory, host, port, stop_on_signals(), show)
+    serving = Serving(max_matches, trial_timeout)
+    done = run_study(protocol, directory, host, port, stop_on_signals(), show, serving)
     finished = sum(done.next_trial(p) is None for p in done.participants.values())
     console.print(f"{len(done.participants)} participants, {finished} finished")
 

@@ -84,6 +84,7 @@ class BusConfig:
             args += ["--connect", endpoint]
         args += ["--multicast"] if self.multicast else []
         args += ["--user", self.user] if self.user else []
+        args += ["--wait-router", str(self.wait_router)] if self.mode == "client" else []
         return [*args, "--low-latency"] if self.low_latency else args
 
 

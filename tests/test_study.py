@@ -6,17 +6,44 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
+import signal
+import subprocess
+import sys
 import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
+
+import pytest
 
 from services.launch import HUMAN
 from services.recorder.recording import load
 from services.study.core import StudyConfig, Variant
-from services.study.runner import run_study
+from services.study.runner import Serving, run_study
 from services.study.standin import stand_in
 from shared.game import other
 
 VARIANTS = (Variant("strong", "B5", "S5"), Variant("adaptive", adapter="adaptive-T30-cem"))
+
+
+def serve(config, directory, serving=None):  # noqa: ANN001, ANN201 - test helper
+    """Run the study server in a thread: (stop, url, future of the Study)."""
+    stop, urls, pool = threading.Event(), [], ThreadPoolExecutor(1)
+    server = pool.submit(
+        run_study,
+        config,
+        directory,
+        port=0,
+        stop=stop,
+        on_ready=lambda g: urls.append(g.url),
+        serving=serving or Serving(),
+    )
+    deadline = time.monotonic() + 20
+    while not urls and not server.done() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    pool.shutdown(wait=False)
+    assert urls, server.exception() if server.done() else "no server"
+    return stop, urls[0], server
 
 
 def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_until):
@@ -78,3 +105,67 @@ def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_unti
             if attempt["status"] == "done":
                 assert any(s.applied[config.roles.index(participant.role)] for s in recording.states)
         assert sorted(set(met)) == sorted(v.name for v in VARIANTS)  # each variant met
+
+
+@pytest.mark.slow
+def test_eight_stand_ins_at_once_each_in_a_match_of_their_own(tmp_path):
+    """Eight participants arrive together with room for six matches at once: two wait in the queue
+    and are told their place; every trial is played, recorded completely and marked done."""
+    config = StudyConfig("many", (VARIANTS[0],), trials=1, trial_seconds=3.0, seed=5)
+    stop, url, server = serve(config, tmp_path, Serving(max_matches=6))
+    try:
+
+        async def crowd():  # noqa: ANN202
+            return await asyncio.gather(*(stand_in(url, seed=i) for i in range(8)))
+
+        reports = asyncio.run(asyncio.wait_for(crowd(), 600))
+    finally:
+        stop.set()
+    study = server.result(timeout=60)
+    assert all(r.done for r in reports), [(r.participant, r.refused) for r in reports]
+    assert sum(r.queued > 0 for r in reports) >= 2
+    assert sorted(r.participant for r in reports) == [f"P{i:03d}" for i in range(1, 9)]
+    for participant in study.participants.values():
+        assert [a["status"] for a in participant.attempts][-1] == "done"
+        done = next(a for a in participant.attempts if a["status"] == "done")
+        recording = load(tmp_path / "recordings" / f"{done['match']}.tsflog")
+        assert recording.problems() == [] and len(recording.states) == config.frames + 1
+
+
+def test_sigterm_ends_the_study_server_and_every_match_it_started(tmp_path):
+    config = tmp_path / "long.toml"
+    variant = '[[variants]]\nname = "s"\nbait = "B5"\nshooter = "S5"\n'
+    config.write_text(f'name = "long"\ntrials = 1\ntrial_seconds = 600\n{variant}')
+    server = subprocess.Popen(
+        [sys.executable, "-m", "services.cli", "study", str(config), "--out", str(tmp_path), "--port", "0"],
+        stdout=subprocess.PIPE, text=True, start_new_session=True,
+    )  # fmt: skip
+    try:
+        line = ""
+        while "http" not in line:
+            line = server.stdout.readline()
+            assert line, "the server printed no address"
+        url = line[line.index("http") :].split()[0]
+        asyncio.run(stand_in(url, leave_after=30))  # the match runs out for ten minutes
+        children = _children(server.pid)
+        assert len(children) >= 3, "sim, agent and recorder run"
+        server.send_signal(signal.SIGTERM)
+        assert server.wait(60) == 0
+        assert all(not _alive(pid) for pid in children), "no match process is left behind"
+    finally:
+        if server.poll() is None:
+            os.killpg(server.pid, signal.SIGKILL)
+
+
+def _children(pid: int) -> list[int]:
+    """The processes `pid` started, from any of its threads."""
+    tasks = os.listdir(f"/proc/{pid}/task")
+    return [int(c) for t in tasks for c in open(f"/proc/{pid}/task/{t}/children").read().split()]
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as stat:
+            return stat.read().split()[2] != "Z"
+    except FileNotFoundError:
+        return False

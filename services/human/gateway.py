@@ -210,16 +210,19 @@ def serve_page(connection: ServerConnection, request: Request) -> Response | Non
     return Response(200, "OK", headers, body)
 
 
-Handler = Callable[[ServerConnection, zenoh.Session], Awaitable[None]]
+Handler = Callable[[ServerConnection, zenoh.Session | None], Awaitable[None]]
 
 
 class Gateway:
     """The web server and one zenoh session, running in a thread of their own until closed.
 
     `handler(ws, z)` serves one socket. The session listens where `bus` says, so that a match's sim
-    can connect to it (MatchPlan.peers)."""
+    can connect to it (MatchPlan.peers); with no `bus` there is none (z is None): the study server
+    opens a session per trial instead, to that match's sim alone."""
 
-    def __init__(self, bus: BusConfig, handler: Handler, host: str = "127.0.0.1", port: int = 8000) -> None:
+    def __init__(
+        self, bus: BusConfig | None, handler: Handler, host: str = "127.0.0.1", port: int = 8000
+    ) -> None:
         self.bus, self.handler, self.host, self.port = bus, handler, host, port
         self.loop = asyncio.new_event_loop()
         self.ready = threading.Event()
@@ -247,7 +250,7 @@ class Gateway:
 
     async def _run(self) -> None:
         try:
-            with session(self.bus) as z:
+            with session(self.bus) if self.bus else contextlib.nullcontext() as z:
                 self.closing = self.loop.create_future()
                 server = await serve(
                     lambda ws: self.handler(ws, z),

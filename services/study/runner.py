@@ -2,10 +2,19 @@
 across all their trials; each trial is a match of its own (services/launch.run_match: sim, agent,
 adapter for adaptive variants, recorder), the participant's seat bridged from this process.
 
+Many participants play at once, each match on its own: its sim is the match's zenoh router on a
+loopback port of its own, its processes are clients of that sim alone, and this server opens a
+client session to it for the trial only (and closes it off the event loop). At most
+`max_matches` run at once; the other trials wait in a queue whose place and estimated wait the
+participant sees. A trial is done only if its recording is complete (read back and checked); a
+trial whose match fails to start, runs past its time or leaves an incomplete recording is marked
+`failed` and offered again as a new attempt.
+
 Study messages (down): `consent` (text), `participant` (id and resume key, kept by the browser),
-`trial` (session, trial, role, the agent's label; what to read first), then the gateway's
-`state`/`end` frames, and at last `done` (the end text) or `problem`. Up: `hello` (optionally
-with the participant id and key to resume), `consent`, `ready`, `keys`.
+`trial` (session, trial, role, the agent's label; what to read first), `queue` (place, seconds
+to wait, while the trial waits for a free match), then the gateway's `state`/`end` frames, and at
+last `done` (the end text) or `problem`. Up: `hello` (optionally with the participant id and key
+to resume), `consent`, `ready`, `keys`.
 
 Each trial's metadata goes into a sidecar `<match>.study.json` beside its recording, rather than
 onto the bus: the participant id is nobody's business but the study's (bus traffic may cross a lab
@@ -20,7 +29,8 @@ import contextlib
 import json
 import logging
 import threading
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import websockets
@@ -29,13 +39,27 @@ from websockets.asyncio.server import ServerConnection
 
 from services.human.core import BadInput, Controls
 from services.human.gateway import Bridge, Gateway, Handler, Outbox, receive_first, refuse
-from services.launch import HUMAN, MatchPlan, run_match
-from services.study.core import Participant, Study, StudyConfig, Trial
-from shared.bus import BusConfig, free_endpoint
+from services.launch import HUMAN, MatchPlan, match_buses, run_match
+from services.recorder.recording import load
+from services.recorder.service import recording_path
+from services.study.core import Admission, Participant, Study, StudyConfig, Trial
+from shared.bus import free_endpoint
 from shared.game import other
 
 log = logging.getLogger("tsf.study")
 PROBLEM = "The game could not be started. Please tell the experimenter."
+RETRIES = 3  # failed attempts in a row before the participant is told of a problem
+READ_TIMEOUT = 900.0  # seconds a participant may take to read the consent text or the instructions
+START_UP = 20.0  # seconds a match takes to start, for the estimated wait
+
+
+@dataclass(frozen=True)
+class Serving:
+    """How the server runs the study (not part of the protocol: changing it keeps the journal)."""
+
+    max_matches: int = 4  # matches at once; more trials wait in a queue
+    trial_timeout: float = 120.0  # seconds a match may take beyond its length, start-up included
+    low_latency: bool = True  # zenoh's low-latency transport within each match
 
 
 class Socket:
@@ -69,18 +93,22 @@ class Socket:
         with contextlib.suppress(websockets.ConnectionClosed):
             await self.outbox.pump(self.ws)
 
-    async def wait_for(self, kind: str) -> bool:
-        """Wait for the participant's `kind` message; False if the socket closed first."""
-        while True:
-            event = asyncio.ensure_future(self.events.get())
-            gone = asyncio.ensure_future(self.gone.wait())
-            await asyncio.wait({event, gone}, return_when=asyncio.FIRST_COMPLETED)
-            gone.cancel()
-            if not event.done():
-                event.cancel()
-                return False
-            if event.result() == kind:
-                return True
+    async def wait_for(self, kind: str, timeout: float = READ_TIMEOUT) -> bool:
+        """Wait for the participant's `kind` message; False if the socket closed first or it took
+        longer than `timeout` seconds (the socket is then closed: an idle socket holds nothing)."""
+        try:
+            async with asyncio.timeout(timeout):
+                while True:
+                    event = asyncio.ensure_future(self.events.get())
+                    await first(event, self.gone.wait())
+                    if not event.done():
+                        event.cancel()
+                        return False
+                    if event.result() == kind:
+                        return True
+        except TimeoutError:
+            await self.ws.close(1008, "idle for too long")
+            return False
 
     async def close(self) -> None:
         """Let the outbox empty (what was just offered is queued after one turn of the loop), then close."""
@@ -92,14 +120,84 @@ class Socket:
             task.cancel()
 
 
-def study_handler(
-    study: Study, endpoint: str, low_latency: bool = True, stop: threading.Event | None = None
-) -> Handler:
-    """Serve participants: consent or resume, then their trials one by one. `stop` ends a running
-    trial's match and its processes (run_match)."""
+async def first(*waits: Awaitable) -> None:
+    """Return when the first of `waits` is done; pending coroutines are cancelled, futures given
+    are left running."""
+    futures = [asyncio.ensure_future(w) for w in waits]
+    await asyncio.wait(futures, return_when=asyncio.FIRST_COMPLETED)
+    for wait, future in zip(waits, futures, strict=True):
+        if future is not wait:
+            future.cancel()
+
+
+def run_trial(plan: MatchPlan, role: str, stop: threading.Event) -> tuple[int | None, list[str]]:
+    """Run a trial's match and read its recording back: (kills, problems), no problems for a
+    complete recording with the participant's seat played from this server. The kills are the
+    recording's, when it has a summary (a stopped match's sim still sends one)."""
+    problems = []
+    try:
+        run_match(plan, stop=stop)
+    except Exception as error:  # noqa: BLE001 - any failure fails the trial, never the server
+        problems.append(str(error) or type(error).__name__)
+    try:
+        recording = load(recording_path(plan.directory, plan.match))
+    except (OSError, ValueError) as error:  # none, or not a recording
+        return None, [*problems, f"no recording: {error}"]
+    problems += recording.problems()
+    if not any(a.role == role and a.sender == f"human/{role}" for _, a in recording.actions):
+        problems.append(f"no action of the participant's {role} seat was recorded")
+    return (recording.summary.kills if recording.summary else None), problems
+
+
+class Matches:
+    """The running matches: slots (Admission), a stop per match, and each participant's one match."""
+
+    def __init__(self, cap: int) -> None:
+        self.admission = Admission(cap)
+        self.stops: dict[str, threading.Event] = {}  # match -> its stop
+        self.of: dict[str, tuple[asyncio.Future, threading.Event]] = {}  # participant -> their match
+        self.lock = threading.Lock()  # stops is read by stop_all from another thread
+        self.changed = asyncio.Event()  # replaced after each change; waiters hold the old one
+
+    def notify(self) -> None:
+        self.changed.set()
+        self.changed = asyncio.Event()
+
+    def add(self, trial: Trial, running: asyncio.Future, stop: threading.Event) -> None:
+        with self.lock:
+            self.stops[trial.match] = stop
+        self.of[trial.participant] = (running, stop)
+
+        def ended(_: asyncio.Future) -> None:
+            with self.lock:
+                del self.stops[trial.match]
+            if self.of.get(trial.participant, (None,))[0] is running:
+                del self.of[trial.participant]
+            self.admission.end(trial.match)
+            self.notify()
+
+        running.add_done_callback(ended)
+
+    async def end_previous(self, trial: Trial) -> None:
+        """One match per participant: a cut match still running out is ended first."""
+        if trial.participant in self.of:
+            running, stop = self.of[trial.participant]
+            stop.set()
+            await asyncio.wait({running})
+
+    def stop_all(self) -> None:
+        """From any thread: end every running match and its processes."""
+        with self.lock:
+            for stop in self.stops.values():
+                stop.set()
+
+
+def study_handler(study: Study, serving: Serving, matches: Matches) -> Handler:
+    """Serve participants: consent or resume, then their trials one by one, each in a free match."""
     config = study.config
     recordings = study.directory / "recordings"
     playing: set[str] = set()
+    match_seconds = config.trial_seconds + START_UP
 
     async def admit(socket: Socket, hello: dict) -> Participant | None:
         if "participant" in hello:
@@ -115,31 +213,67 @@ def study_handler(
         socket.send({"type": "participant", "participant": participant.id, "key": participant.key})
         return participant
 
-    async def play(socket: Socket, z: zenoh.Session, trial: Trial, obs: bool) -> dict | None:
+    async def slot(socket: Socket, match: str) -> bool:
+        """Wait for a free match, telling the participant their place; False if they leave."""
+        told = None
+        while not matches.admission.start(match):
+            place = matches.admission.place(match)
+            if place != told:
+                wait = round(matches.admission.wait(place, match_seconds))
+                socket.send({"type": "queue", "place": place, "wait": wait})
+                told = place
+            await first(matches.changed.wait(), socket.gone.wait())
+            if socket.gone.is_set():
+                matches.admission.end(match)
+                matches.notify()
+                return False
+        return True
+
+    async def bridge(socket: Socket, trial: Trial, endpoint: str, obs: bool) -> Callable[[], None]:
+        """Take the participant's seat in the trial's match from a session of its own (opened when
+        the sim listens); returns what gives the seat up again."""
+        z = await asyncio.to_thread(zenoh.open, match_buses(endpoint, serving.low_latency)[1].to_zenoh())
+        seat = Bridge(z, trial.match, trial.role, socket.controls, socket.outbox, obs)
+        seat.live()
+
+        def leave() -> None:
+            seat.close()
+            threading.Thread(target=z.close, daemon=True).start()  # never on the loop nor a callback
+
+        return leave
+
+    async def play(socket: Socket, trial: Trial, obs: bool) -> dict | None:
         """Run one trial with the participant in their seat; returns the sidecar, or None if the
         participant left (the match then runs out with their ship idle, and is marked dropped)."""
+        await matches.end_previous(trial)
+        if not await slot(socket, trial.match):
+            return None
         seats = {trial.role: HUMAN, **trial.variant.plan(other(trial.role), trial.seed)}
+        endpoint = free_endpoint()
         plan = MatchPlan(
-            trial.match, trial.seed, config.frames, directory=recordings, peers=(endpoint,),
-            low_latency=low_latency, **seats,
+            trial.match, trial.seed, config.frames, directory=recordings, endpoint=endpoint,
+            low_latency=serving.low_latency, wait_players=60.0, wait_services=30.0,
+            timeout=config.trial_seconds + serving.trial_timeout, **seats,
         )  # fmt: skip
-        bridge = Bridge(z, trial.match, trial.role, socket.controls, socket.outbox, obs)
-        bridge.live()
         study.record(trial, "running")
-        running = asyncio.ensure_future(asyncio.to_thread(run_match, plan, stop=stop))
-        gone = asyncio.ensure_future(socket.gone.wait())
-        await asyncio.wait({running, gone}, return_when=asyncio.FIRST_COMPLETED)
-        gone.cancel()
-        bridge.close()
-
+        stop = threading.Event()
+        running = asyncio.ensure_future(asyncio.to_thread(run_trial, plan, trial.role, stop))
+        matches.add(trial, running, stop)
+        leave = lambda: None  # noqa: E731 - replaced once the seat is taken
+        try:
+            leave = await bridge(socket, trial, endpoint, obs)
+        except zenoh.ZError as error:  # the sim never listened: the match fails
+            log.error("trial %s: no session to its sim: %s", trial.match, error)
+            stop.set()
+        await first(running, socket.gone.wait())
+        leave()
         dropped = not running.done()
 
         def finish(done: asyncio.Future) -> dict:
-            failed = done.exception()
-            if failed is not None:
-                log.error("trial %s failed: %s", trial.match, failed)
-            status = "failed" if failed else "dropped" if dropped else "done"
-            kills = None if failed else done.result()[0].kills
+            kills, problems = (None, ["cancelled"]) if done.cancelled() else done.result()
+            status = "dropped" if dropped else "failed" if problems else "done"
+            if problems and not dropped:
+                log.error("trial %s failed: %s", trial.match, "; ".join(problems))
             sidecar = study.record(trial, status, kills)
             recordings.mkdir(parents=True, exist_ok=True)
             (recordings / f"{trial.match}.study.json").write_text(json.dumps(sidecar, indent=1))
@@ -152,7 +286,36 @@ def study_handler(
             return None
         return finish(running)
 
-    async def handle(ws: ServerConnection, z: zenoh.Session) -> None:
+    async def trials(socket: Socket, participant: Participant, obs: bool) -> None:
+        """The participant's remaining trials; a failed one is offered again, RETRIES times."""
+        last, failures = None, 0
+        while (trial := study.next_trial(participant)) is not None:
+            socket.send(
+                {
+                    "type": "trial", "role": trial.role, "agent": trial.agent, "last": last,
+                    "session": trial.session, "sessions": len(config.variants),
+                    "trial": trial.trial, "trials": config.trials, "again": failures > 0,
+                    "instructions": config.instructions.get(trial.role, ""),
+                }
+            )  # fmt: skip
+            if not await socket.wait_for("ready"):
+                return
+            sidecar = await play(socket, trial, obs)
+            if sidecar is None:
+                return
+            if sidecar["status"] == "failed":
+                failures += 1
+                if failures < RETRIES:
+                    continue
+                socket.send({"type": "problem", "text": PROBLEM})
+                await socket.close()
+                return
+            last, failures = sidecar["kills"], 0
+        socket.send({"type": "done", "text": config.end})
+        log.info("participant %s is done", participant.id)
+        await socket.close()
+
+    async def handle(ws: ServerConnection, z: zenoh.Session | None) -> None:
         hello = await receive_first(ws, ("hello",))
         if hello is None:
             return
@@ -167,29 +330,7 @@ def study_handler(
                 participant = None
                 return
             playing.add(participant.id)
-            last = None
-            while (trial := study.next_trial(participant)) is not None:
-                socket.send(
-                    {
-                        "type": "trial", "role": trial.role, "agent": trial.agent, "last": last,
-                        "session": trial.session, "sessions": len(config.variants),
-                        "trial": trial.trial, "trials": config.trials,
-                        "instructions": config.instructions.get(trial.role, ""),
-                    }
-                )  # fmt: skip
-                if not await socket.wait_for("ready"):
-                    return
-                sidecar = await play(socket, z, trial, hello.get("obs", False))
-                if sidecar is None:
-                    return
-                if sidecar["status"] == "failed":
-                    socket.send({"type": "problem", "text": PROBLEM})
-                    await socket.close()
-                    return
-                last = sidecar["kills"]
-            socket.send({"type": "done", "text": config.end})
-            log.info("participant %s is done", participant.id)
-            await socket.close()
+            await trials(socket, participant, hello.get("obs", False))
         finally:
             if participant is not None:
                 playing.discard(participant.id)
@@ -206,14 +347,18 @@ def run_study(
     port: int = 8000,
     stop: threading.Event | None = None,
     on_ready: Callable[[Gateway], None] = lambda gateway: None,
-    low_latency: bool = True,
+    serving: Serving = Serving(),
 ) -> Study:
-    """Serve the study until `stop` is set; participants' progress lives in `directory`."""
+    """Serve the study until `stop` is set, then end every match it started; participants'
+    progress lives in `directory` (a restarted server resumes everyone)."""
     stop = stop or threading.Event()
     study = Study(config, directory)
-    endpoint = free_endpoint()
-    bus = BusConfig(listen=(endpoint,), low_latency=low_latency)
-    with Gateway(bus, study_handler(study, endpoint, low_latency, stop), host, port) as gateway:
-        on_ready(gateway)
-        stop.wait()
+    matches = Matches(serving.max_matches)
+    try:
+        with Gateway(None, study_handler(study, serving, matches), host, port) as gateway:
+            on_ready(gateway)
+            stop.wait()
+            matches.stop_all()
+    finally:
+        study.close()
     return study

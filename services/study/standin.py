@@ -28,6 +28,8 @@ class StandInReport:
     end: str = ""  # the end screen's text
     done: bool = False
     refused: str = ""
+    queued: int = 0  # the furthest place in the queue it was shown
+    again: int = 0  # trials offered again after a failed attempt
 
 
 async def stand_in(
@@ -57,7 +59,10 @@ async def stand_in(
                 await ws.send(json.dumps({"type": "consent"}))
             elif kind == "participant":
                 report.participant, report.key = message["participant"], message["key"]
+            elif kind == "queue":
+                report.queued = max(report.queued, message["place"])
             elif kind == "trial":
+                report.again += message.get("again", False)
                 report.role = message["role"]
                 report.agents.append(message["agent"])
                 policy = policy_for(policies[report.role], report.role)

@@ -122,9 +122,15 @@ const handlers = {
     tsf.phase = "instructions";
     const last = m.last === null || m.last === undefined ? "" :
       `Last game: your team destroyed ${m.last} fortress${m.last === 1 ? "" : "es"}.\n\n`;
+    const again = m.again ? "The last game could not be completed; please play it again.\n\n" : "";
     const intro = m.trial === 1 ? instructions(m.role, m.instructions) + "\n\n" : "";
     show(`Session ${m.session} of ${m.sessions}: game ${m.trial} of ${m.trials}`,
-      `${last}${intro}Your partner in this session: ${m.agent}.`, "Start", ready);
+      `${again}${last}${intro}Your partner in this session: ${m.agent}.`, "Start", ready);
+  },
+  queue(m) {
+    const minutes = Math.max(1, Math.round(m.wait / 60));
+    show("Please wait", `All game places are taken. You are number ${m.place} in the queue ` +
+      `(about ${minutes} minute${minutes === 1 ? "" : "s"}). Your game starts by itself.`);
   },
   problem(m) {
     tsf.phase = "done";

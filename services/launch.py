@@ -77,6 +77,13 @@ def match_buses(endpoint: str, low_latency: bool, peers: tuple[str, ...] = ()) -
     return sim, client
 
 
+def watcher_bus(endpoint: str, low_latency: bool) -> BusConfig:
+    """A session that only watches the match: a peer that dials the sim and listens nowhere, so it
+    opens at once and joins whenever the sim listens (a client's open would wait, and fail if the
+    match were over by then)."""
+    return BusConfig(listen=(), connect=(endpoint,), low_latency=low_latency)
+
+
 def service_command(name: str, bus: BusConfig, *args: str) -> list[str]:
     """The command line that starts one service of the `tsf` CLI in a new Python process."""
     return [sys.executable, "-m", "services.cli", name, *bus.to_args(), *args]
@@ -139,7 +146,8 @@ def run_match(
     path = recording_path(plan.directory, plan.match)
     make_way(path, overwrite)
     deadline = time.monotonic() + plan.timeout if plan.timeout else float("inf")
-    sim_bus, peer_bus = match_buses(plan.endpoint or free_endpoint(), plan.low_latency, plan.peers)
+    endpoint = plan.endpoint or free_endpoint()
+    sim_bus, peer_bus = match_buses(endpoint, plan.low_latency, plan.peers)
     summary: list[Summary] = []
     done = threading.Event()
 
@@ -184,7 +192,7 @@ def run_match(
                 ),
             )
         with (
-            session(peer_bus) as z,
+            session(watcher_bus(endpoint, plan.low_latency)) as z,
             subscribe(z, keys.state(plan.match), State, on_state_shown),
             subscribe(z, keys.summary(plan.match), Summary, on_summary),
             subscribe(z, keys.adapter(plan.match), AdapterStatus, on_adapter),

@@ -12,7 +12,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 import pytest
 
 from services.human.core import SeatBook
-from services.human.gateway import Gateway, seat_handler
+from services.human.gateway import Gateway, Web, seat_handler
 from services.human.play import play_with_people, seat_links
 from services.launch import HUMAN, MatchPlan, run_match
 from services.recorder.recording import load
@@ -107,11 +107,11 @@ def test_a_person_plays_the_bait_from_the_browser(browser, match, tmp_path):
 
 def test_a_wrong_seat_token_is_refused_in_the_page(browser, bus):
     book = SeatBook({"bait": "right-token"})
-    with Gateway(bus.config(listen=True), seat_handler("refused", book), port=0) as gateway:
+    with Gateway(bus.config(listen=True), seat_handler("refused", book), Web(port=0)) as gateway:
         page = browser.new_page()
         page.goto(seat_links(gateway.url, {"bait": "wrong-token"})["bait"])
         page.wait_for_function("window.tsf.phase === 'refused'", timeout=10_000)
-        assert page.locator("#title").inner_text() == "Seat refused"
+        assert page.locator("#title").inner_text() == "Not possible"
         assert page.locator("#text").inner_text() == "wrong seat token for the bait seat"
 
 
@@ -120,7 +120,7 @@ def test_a_spectator_watches_a_live_replay_in_the_page(browser, bus, tap, tmp_pa
     and watching puts nothing on the bus."""
     _, recording = run_match(MatchPlan("watched", 2, 120, "lockstep", "circle", "mirror", tmp_path))
     recorded = tap(bus.open(listen=True), "watched")
-    with Gateway(bus.config(), seat_handler("watched", SeatBook({})), port=0) as gateway:
+    with Gateway(bus.config(), seat_handler("watched", SeatBook({})), Web(port=0)) as gateway:
         page = browser.new_page()
         page.goto(f"{gateway.url}?watch=1")
         page.wait_for_function("window.tsf.phase === 'waiting'", timeout=10_000)

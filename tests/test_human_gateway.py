@@ -18,7 +18,7 @@ import websockets
 
 from services.agent.service import run_agent
 from services.human.core import SeatBook
-from services.human.gateway import REFUSED, Gateway, seat_handler
+from services.human.gateway import REFUSED, Gateway, Web, seat_handler
 from services.human.play import play_with_people
 from services.launch import HUMAN, MatchPlan
 from services.recorder.recording import load
@@ -32,7 +32,7 @@ TOKEN = "bait-token"
 
 
 def socket_url(gateway: Gateway) -> str:
-    return f"ws://{gateway.host}:{gateway.port}/ws"
+    return f"ws://{gateway.web.host}:{gateway.port}/ws"
 
 
 async def join(gateway: Gateway, role: str, token: str):  # noqa: ANN201 - a client connection
@@ -47,7 +47,9 @@ def keys_message(**held: bool) -> str:
 
 @pytest.fixture
 def gateway(bus):
-    with Gateway(bus.config(listen=True), seat_handler(MATCH, SeatBook({"bait": TOKEN})), port=0) as opened:
+    with Gateway(
+        bus.config(listen=True), seat_handler(MATCH, SeatBook({"bait": TOKEN})), Web(port=0)
+    ) as opened:
         yield opened
 
 

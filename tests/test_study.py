@@ -10,65 +10,36 @@ import os
 import signal
 import subprocess
 import sys
-import threading
-import time
-from concurrent.futures import ThreadPoolExecutor
 
 import pytest
+from conftest import STAND_IN_TOKEN
 
 from services.launch import HUMAN
 from services.recorder.recording import load
 from services.study.core import StudyConfig, Variant
-from services.study.runner import Serving, run_study
+from services.study.runner import Serving
 from services.study.standin import stand_in
 from shared.game import other
 
+TEST = STAND_IN_TOKEN
 VARIANTS = (Variant("strong", "B5", "S5"), Variant("adaptive", adapter="adaptive-T30-cem"))
 
 
-def serve(config, directory, serving=None):  # noqa: ANN001, ANN201 - test helper
-    """Run the study server in a thread: (stop, url, future of the Study)."""
-    stop, urls, pool = threading.Event(), [], ThreadPoolExecutor(1)
-    server = pool.submit(
-        run_study,
-        config,
-        directory,
-        port=0,
-        stop=stop,
-        on_ready=lambda g: urls.append(g.url),
-        serving=serving or Serving(),
-    )
-    deadline = time.monotonic() + 20
-    while not urls and not server.done() and time.monotonic() < deadline:
-        time.sleep(0.01)
-    pool.shutdown(wait=False)
-    assert urls, server.exception() if server.done() else "no server"
-    return stop, urls[0], server
-
-
-def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_until):
+def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_until, study_server):
     config = StudyConfig(
         "e2e", VARIANTS, trials=1, trial_seconds=1.5, seed=3, consent="Agree?", end="Bye now."
     )
-    stop, urls = threading.Event(), []
-    with ThreadPoolExecutor(1) as pool:
-        server = pool.submit(
-            run_study, config, tmp_path, port=0, stop=stop, on_ready=lambda g: urls.append(g.url)
-        )
-        try:
-            assert wait_until(lambda: urls or server.done(), timeout=10) and urls
-            url = urls[0]
-            leaver = asyncio.run(stand_in(url, leave_after=10))
-            assert not leaver.done and leaver.agents == ["Agent 1"] and leaver.participant == "P001"
-            refused = asyncio.run(stand_in(url, resume=(leaver.participant, "not-the-key")))
-            assert refused.refused == "unknown participant or resume key"
-            back = asyncio.run(stand_in(url, resume=(leaver.participant, leaver.key)))
-            second = asyncio.run(stand_in(url))
-            dropped = tmp_path / "recordings" / "e2e-P001-s1t1.study.json"
-            assert wait_until(dropped.exists, timeout=20), "the cut trial runs out and is written down"
-        finally:
-            stop.set()
-        study = server.result(timeout=10)
+    stop, url, server = study_server(config, tmp_path)
+    leaver = asyncio.run(stand_in(url, leave_after=10, test=TEST))
+    assert not leaver.done and leaver.agents == ["Agent 1"] and leaver.participant == "P001"
+    refused = asyncio.run(stand_in(url, resume=(leaver.participant, "not-the-key"), test=TEST))
+    assert refused.refused == "unknown participant or resume key"
+    back = asyncio.run(stand_in(url, resume=(leaver.participant, leaver.key), test=TEST))
+    second = asyncio.run(stand_in(url, test=TEST))
+    dropped = tmp_path / "recordings" / "e2e-P001-s1t1.study.json"
+    assert wait_until(dropped.exists, timeout=20), "the cut trial is ended and written down"
+    stop.set()
+    study = server.result(timeout=60)
 
     assert back.done and back.role == leaver.role and back.agents == ["Agent 1", "Agent 2"]
     assert second.done and second.participant == "P002" and second.role == other(leaver.role)
@@ -108,15 +79,15 @@ def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_unti
 
 
 @pytest.mark.slow
-def test_eight_stand_ins_at_once_each_in_a_match_of_their_own(tmp_path):
+def test_eight_stand_ins_at_once_each_in_a_match_of_their_own(tmp_path, study_server):
     """Eight participants arrive together with room for six matches at once: two wait in the queue
     and are told their place; every trial is played, recorded completely and marked done."""
     config = StudyConfig("many", (VARIANTS[0],), trials=1, trial_seconds=3.0, seed=5)
-    stop, url, server = serve(config, tmp_path, Serving(max_matches=6))
+    stop, url, server = study_server(config, tmp_path, Serving(max_matches=6, test_token=TEST))
     try:
 
         async def crowd():  # noqa: ANN202
-            return await asyncio.gather(*(stand_in(url, seed=i) for i in range(8)))
+            return await asyncio.gather(*(stand_in(url, seed=i, test=TEST) for i in range(8)))
 
         reports = asyncio.run(asyncio.wait_for(crowd(), 600))
     finally:
@@ -137,7 +108,8 @@ def test_sigterm_ends_the_study_server_and_every_match_it_started(tmp_path):
     variant = '[[variants]]\nname = "s"\nbait = "B5"\nshooter = "S5"\n'
     config.write_text(f'name = "long"\ntrials = 1\ntrial_seconds = 600\n{variant}')
     server = subprocess.Popen(
-        [sys.executable, "-m", "services.cli", "study", str(config), "--out", str(tmp_path), "--port", "0"],
+        [sys.executable, "-m", "services.cli", "study", str(config), "--out", str(tmp_path), "--port", "0",
+         "--test-token", TEST],
         stdout=subprocess.PIPE, text=True, start_new_session=True,
     )  # fmt: skip
     try:
@@ -146,7 +118,7 @@ def test_sigterm_ends_the_study_server_and_every_match_it_started(tmp_path):
             line = server.stdout.readline()
             assert line, "the server printed no address"
         url = line[line.index("http") :].split()[0]
-        asyncio.run(stand_in(url, leave_after=30))  # the match runs out for ten minutes
+        asyncio.run(stand_in(url, leave_after=30, test=TEST))  # the match runs out for ten minutes
         children = _children(server.pid)
         assert len(children) >= 3, "sim, agent and recorder run"
         server.send_signal(signal.SIGTERM)

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import hmac
 import json
 import logging
 import threading
@@ -37,8 +38,8 @@ import websockets
 import zenoh
 from websockets.asyncio.server import ServerConnection
 
-from services.human.core import BadInput, Controls
-from services.human.gateway import Bridge, Gateway, Handler, Outbox, receive_first, refuse
+from services.human.core import BadInput, Controls, RateLimit
+from services.human.gateway import Bridge, Gateway, Handler, Outbox, Web, receive_first, refuse
 from services.launch import HUMAN, MatchPlan, match_buses, run_match
 from services.recorder.recording import load
 from services.recorder.service import recording_path
@@ -51,6 +52,9 @@ PROBLEM = "The game could not be started. Please tell the experimenter."
 RETRIES = 3  # failed attempts in a row before the participant is told of a problem
 READ_TIMEOUT = 900.0  # seconds a participant may take to read the consent text or the instructions
 START_UP = 20.0  # seconds a match takes to start, for the estimated wait
+ARRIVAL_BURST = 20  # participant ids issued at once, beyond the rate
+BUSY = "Too many people are starting right now. Please try again in a minute."
+TAKEN = "This worker id has already taken part in this study."
 
 
 @dataclass(frozen=True)
@@ -60,6 +64,11 @@ class Serving:
     max_matches: int = 4  # matches at once; more trials wait in a queue
     trial_timeout: float = 120.0  # seconds a match may take beyond its length, start-up included
     low_latency: bool = True  # zenoh's low-latency transport within each match
+    test_token: str = ""  # a hello with this `test` token may ask for the observation values (stand-ins)
+    arrivals: float = 1.0  # new participant ids a second, on average (bursts of ARRIVAL_BURST)
+
+
+SERVING, WEB = Serving(), Web()
 
 
 class Socket:
@@ -198,17 +207,30 @@ def study_handler(study: Study, serving: Serving, matches: Matches) -> Handler:
     recordings = study.directory / "recordings"
     playing: set[str] = set()
     match_seconds = config.trial_seconds + START_UP
+    arrivals = RateLimit(serving.arrivals, ARRIVAL_BURST)
 
     async def admit(socket: Socket, hello: dict) -> Participant | None:
+        """The participant who resumes (id and key), or a new one once they consent: ids are
+        issued only then, at a limited rate, and once per crowd-sourcing worker id."""
         if "participant" in hello:
             participant = study.resume(hello["participant"], hello.get("key", ""))
             if participant is None:
                 await refuse(socket.ws, "unknown participant or resume key")
             return participant
+        worker = hello.get("worker", "")
+        if worker in study.workers:
+            await refuse(socket.ws, TAKEN)
+            return None
         socket.send({"type": "consent", "text": config.consent})
         if not await socket.wait_for("consent"):
             return None
-        participant = study.arrive()
+        if worker in study.workers:  # a second window of the same worker consented first
+            await refuse(socket.ws, TAKEN)
+            return None
+        if not arrivals.allow():
+            await refuse(socket.ws, BUSY)
+            return None
+        participant = study.arrive(worker)
         log.info("participant %s arrives and plays the %s", participant.id, participant.role)
         socket.send({"type": "participant", "participant": participant.id, "key": participant.key})
         return participant
@@ -311,7 +333,7 @@ def study_handler(study: Study, serving: Serving, matches: Matches) -> Handler:
                 await socket.close()
                 return
             last, failures = sidecar["kills"], 0
-        socket.send({"type": "done", "text": config.end})
+        socket.send({"type": "done", "text": config.end, "code": participant.code})
         log.info("participant %s is done", participant.id)
         await socket.close()
 
@@ -330,7 +352,8 @@ def study_handler(study: Study, serving: Serving, matches: Matches) -> Handler:
                 participant = None
                 return
             playing.add(participant.id)
-            await trials(socket, participant, hello.get("obs", False))
+            test = bool(serving.test_token) and hmac.compare_digest(hello.get("test", ""), serving.test_token)
+            await trials(socket, participant, hello.get("obs", False) and test)
         finally:
             if participant is not None:
                 playing.discard(participant.id)
@@ -343,11 +366,10 @@ def study_handler(study: Study, serving: Serving, matches: Matches) -> Handler:
 def run_study(
     config: StudyConfig,
     directory: str | Path,
-    host: str = "127.0.0.1",
-    port: int = 8000,
+    web: Web = WEB,
     stop: threading.Event | None = None,
     on_ready: Callable[[Gateway], None] = lambda gateway: None,
-    serving: Serving = Serving(),
+    serving: Serving = SERVING,
 ) -> Study:
     """Serve the study until `stop` is set, then end every match it started; participants'
     progress lives in `directory` (a restarted server resumes everyone)."""
@@ -355,7 +377,7 @@ def run_study(
     study = Study(config, directory)
     matches = Matches(serving.max_matches)
     try:
-        with Gateway(None, study_handler(study, serving, matches), host, port) as gateway:
+        with Gateway(None, study_handler(study, serving, matches), web) as gateway:
             on_ready(gateway)
             stop.wait()
             matches.stop_all()

@@ -26,6 +26,7 @@ class StandInReport:
     states: int = 0
     consent: str = ""  # the consent text shown
     end: str = ""  # the end screen's text
+    code: str = ""  # the completion code shown at the end
     done: bool = False
     refused: str = ""
     queued: int = 0  # the furthest place in the queue it was shown
@@ -38,18 +39,24 @@ async def stand_in(
     resume: tuple[str, str] | None = None,
     leave_after: int = 0,
     seed: int = 0,
+    test: str = "",
+    worker: str = "",
+    ssl: object = None,
 ) -> StandInReport:
     """Take part in the study served at `url` (the page's address), playing each role with a policy
     key (default: the scripted circle bait and mirror shooter). `resume` = (participant, key) comes
     back as an earlier participant; `leave_after` > 0 drops the connection after that many frames,
-    as a participant who walks away."""
+    as a participant who walks away. `test` is the server's test token (Serving.test_token),
+    without which it gets no observation values to play from; `worker` a crowd-sourcing worker
+    id; `ssl` an SSLContext for a wss:// server."""
     policies = policies or {"bait": "circle", "shooter": "mirror"}
     report = StandInReport()
-    hello: dict = {"type": "hello", "obs": True}
+    hello: dict = {"type": "hello", "obs": True, **({"test": test} if test else {})}
+    hello.update({"worker": worker} if worker else {})
     if resume:
         hello.update(participant=resume[0], key=resume[1])
     policy, held = None, None
-    async with websockets.connect(url.replace("http", "ws", 1).rstrip("/") + "/ws") as ws:
+    async with websockets.connect(url.replace("http", "ws", 1).rstrip("/") + "/ws", ssl=ssl) as ws:
         await ws.send(json.dumps(hello))
         async for text in ws:
             message = json.loads(text)
@@ -79,7 +86,7 @@ async def stand_in(
             elif kind == "end":
                 report.kills.append(message["kills"])
             elif kind == "done":
-                report.done, report.end = True, message["text"]
+                report.done, report.end, report.code = True, message["text"], message.get("code", "")
                 return report
             elif kind in ("refused", "problem"):
                 report.refused = message.get("reason") or message.get("text", "")

@@ -84,7 +84,7 @@ const handlers = {
   refused(m) {
     tsf.phase = "refused";
     document.body.classList.add("refused");
-    show("Seat refused", m.reason);
+    show("Not possible", m.reason);
   },
   setup(m) {
     tsf.geometry = m;
@@ -139,7 +139,7 @@ const handlers = {
   done(m) {
     tsf.phase = "done";
     localStorage.removeItem("tsf-participant");
-    show("The end", m.text);
+    show("The end", m.code ? `${m.text}\n\nYour completion code: ${m.code}` : m.text);
   },
 };
 
@@ -154,8 +154,10 @@ function connect() {
     } else {
       const saved = JSON.parse(localStorage.getItem("tsf-participant") || "{}");
       const participant = params.get("participant") || saved.participant;
+      // A crowd-sourcing platform's worker id, under the names the common ones use in the link.
+      const worker = params.get("worker") || params.get("workerId") || params.get("PROLIFIC_PID");
       send(participant ? { type: "hello", participant, key: params.get("key") || saved.key || "-" } :
-        { type: "hello" });
+        worker ? { type: "hello", worker: worker.slice(0, 64) } : { type: "hello" });
     }
   };
   socket.onmessage = (event) => {

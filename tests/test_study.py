@@ -1,15 +1,17 @@
 """The whole study end to end with headless stand-in participants over the page's WebSocket
-protocol: consent, balanced roles, sessions with hidden agents, a drop-out who resumes, and every
-trial recorded with its sidecar."""
+protocol: consent, balanced roles, sessions with hidden agents, a drop-out who resumes, a restarted
+server, trials past their time, many participants at once, and every trial recorded with its sidecar."""
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import os
 import signal
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from conftest import STAND_IN_TOKEN
@@ -17,7 +19,7 @@ from conftest import STAND_IN_TOKEN
 from services.launch import HUMAN
 from services.recorder.recording import load
 from services.study.core import StudyConfig, Variant
-from services.study.runner import Serving
+from services.study.runner import PROBLEM, RETRIES, Serving
 from services.study.standin import stand_in
 from shared.game import other
 
@@ -78,6 +80,34 @@ def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_unti
         assert sorted(set(met)) == sorted(v.name for v in VARIANTS)  # each variant met
 
 
+def test_a_trial_past_its_time_is_ended_and_offered_again_then_a_problem_is_shown(tmp_path, study_server):
+    config = StudyConfig("late", (VARIANTS[0],), trials=1, trial_seconds=2.0)
+    # 10 ms beyond its length from Ready: no match ends that soon (its summary comes after its last frame)
+    stop, url, server = study_server(config, tmp_path, Serving(trial_timeout=0.01, test_token=TEST))
+    report = asyncio.run(stand_in(url, test=TEST))
+    assert report.refused == PROBLEM and report.again == RETRIES - 1 and not report.done
+    assert not [p for p in _processes() if "late-P001" in p], "every match's processes were ended"
+    stop.set()
+    attempts = server.result(timeout=60).participants["P001"].attempts
+    assert [(a["attempt"], a["status"]) for a in attempts] == [(n, "failed") for n in range(1, RETRIES + 1)]
+    for attempt in attempts:
+        sidecar = json.loads((tmp_path / "recordings" / f"{attempt['match']}.study.json").read_text())
+        assert sidecar["status"] == "failed"
+
+
+def test_a_restarted_server_resumes_everyone(tmp_path, study_server):
+    config = StudyConfig("again", (VARIANTS[0],), trials=2, trial_seconds=1.0)
+    stop, url, server = study_server(config, tmp_path)
+    leaver = asyncio.run(stand_in(url, leave_after=10, test=TEST))
+    stop.set()
+    server.result(timeout=60)
+    _, url, server = study_server(config, tmp_path)  # the same study directory
+    back = asyncio.run(stand_in(url, resume=(leaver.participant, leaver.key), test=TEST))
+    assert back.done and back.role == leaver.role and len(back.kills) == 2
+    fresh = asyncio.run(stand_in(url, test=TEST))
+    assert fresh.participant == "P002" and fresh.role == other(leaver.role)
+
+
 @pytest.mark.slow
 def test_eight_stand_ins_at_once_each_in_a_match_of_their_own(tmp_path, study_server):
     """Eight participants arrive together with room for six matches at once: two wait in the queue
@@ -119,25 +149,19 @@ def test_sigterm_ends_the_study_server_and_every_match_it_started(tmp_path):
             assert line, "the server printed no address"
         url = line[line.index("http") :].split()[0]
         asyncio.run(stand_in(url, leave_after=30, test=TEST))  # the match runs out for ten minutes
-        children = _children(server.pid)
-        assert len(children) >= 3, "sim, agent and recorder run"
+        assert len([p for p in _processes() if "long-P001" in p]) >= 3, "sim, agent and recorder run"
         server.send_signal(signal.SIGTERM)
         assert server.wait(60) == 0
-        assert all(not _alive(pid) for pid in children), "no match process is left behind"
+        assert not [p for p in _processes() if "long-P001" in p], "no match process is left behind"
     finally:
         if server.poll() is None:
             os.killpg(server.pid, signal.SIGKILL)
 
 
-def _children(pid: int) -> list[int]:
-    """The processes `pid` started, from any of its threads."""
-    tasks = os.listdir(f"/proc/{pid}/task")
-    return [int(c) for t in tasks for c in open(f"/proc/{pid}/task/{t}/children").read().split()]
-
-
-def _alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as stat:
-            return stat.read().split()[2] != "Z"
-    except FileNotFoundError:
-        return False
+def _processes() -> list[str]:
+    """The command lines of every process running now."""
+    found = []
+    for cmdline in Path("/proc").glob("[0-9]*/cmdline"):
+        with contextlib.suppress(OSError):
+            found.append(cmdline.read_bytes().replace(b"\0", b" ").decode(errors="replace"))
+    return found

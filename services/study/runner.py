@@ -117,6 +117,7 @@ class Socket:
                         return True
         except TimeoutError:
             await self.ws.close(1008, "idle for too long")
+            self.gone.set()
             return False
 
     async def close(self) -> None:
@@ -133,10 +134,12 @@ async def first(*waits: Awaitable) -> None:
     """Return when the first of `waits` is done; pending coroutines are cancelled, futures given
     are left running."""
     futures = [asyncio.ensure_future(w) for w in waits]
-    await asyncio.wait(futures, return_when=asyncio.FIRST_COMPLETED)
-    for wait, future in zip(waits, futures, strict=True):
-        if future is not wait:
-            future.cancel()
+    try:
+        await asyncio.wait(futures, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        for wait, future in zip(waits, futures, strict=True):
+            if future is not wait:
+                future.cancel()
 
 
 def run_trial(plan: MatchPlan, role: str, stop: threading.Event) -> tuple[int | None, list[str]]:
@@ -251,45 +254,58 @@ def study_handler(study: Study, serving: Serving, matches: Matches) -> Handler:
                 return False
         return True
 
-    async def bridge(socket: Socket, trial: Trial, endpoint: str, obs: bool) -> Callable[[], None]:
-        """Take the participant's seat in the trial's match from a session of its own (opened when
-        the sim listens); returns what gives the seat up again."""
-        z = await asyncio.to_thread(zenoh.open, match_buses(endpoint, serving.low_latency)[1].to_zenoh())
-        seat = Bridge(z, trial.match, trial.role, socket.controls, socket.outbox, obs)
-        seat.live()
+    async def bridge(socket: Socket, trial: Trial, endpoint: str, obs: bool) -> Bridge | None:
+        """The participant's seat in the trial's match, from a session of its own (opened when the
+        sim listens, closed by `leave`); None if the sim never listened."""
+        try:
+            z = await asyncio.to_thread(zenoh.open, match_buses(endpoint, serving.low_latency)[1].to_zenoh())
+        except zenoh.ZError as error:
+            log.error("trial %s: no session to its sim: %s", trial.match, error)
+            return None
+        return Bridge(z, trial.match, trial.role, socket.controls, socket.outbox, obs)
 
-        def leave() -> None:
+    def leave(seat: Bridge | None) -> None:
+        if seat is not None:
             seat.close()
-            threading.Thread(target=z.close, daemon=True).start()  # never on the loop nor a callback
+            threading.Thread(target=seat.z.close, daemon=True).start()  # never on the loop nor a callback
 
-        return leave
-
-    async def play(socket: Socket, trial: Trial, obs: bool) -> dict | None:
-        """Run one trial with the participant in their seat; returns the sidecar, or None if the
-        participant left (the match then runs out with their ship idle, and is marked dropped)."""
+    async def play(socket: Socket, trial: Trial, obs: bool, offer: dict) -> dict | None:
+        """Run one trial: wait for a free match, start it (its processes start while the participant
+        reads the `offer`, and its sim waits for them: a warm start), then play it from their Ready
+        for at most its length and `trial_timeout`. Returns the sidecar, or None if the participant
+        left (a match they started runs out with their ship idle; one they had not is ended;
+        either is marked dropped)."""
         await matches.end_previous(trial)
         if not await slot(socket, trial.match):
             return None
         seats = {trial.role: HUMAN, **trial.variant.plan(other(trial.role), trial.seed)}
         endpoint = free_endpoint()
+        limit = config.trial_seconds + serving.trial_timeout
         plan = MatchPlan(
             trial.match, trial.seed, config.frames, directory=recordings, endpoint=endpoint,
-            low_latency=serving.low_latency, wait_players=60.0, wait_services=30.0,
-            timeout=config.trial_seconds + serving.trial_timeout, **seats,
+            low_latency=serving.low_latency, wait_players=READ_TIMEOUT + limit, wait_services=30.0,
+            timeout=READ_TIMEOUT + limit, **seats,
         )  # fmt: skip
         study.record(trial, "running")
         stop = threading.Event()
         running = asyncio.ensure_future(asyncio.to_thread(run_trial, plan, trial.role, stop))
         matches.add(trial, running, stop)
-        leave = lambda: None  # noqa: E731 - replaced once the seat is taken
-        try:
-            leave = await bridge(socket, trial, endpoint, obs)
-        except zenoh.ZError as error:  # the sim never listened: the match fails
-            log.error("trial %s: no session to its sim: %s", trial.match, error)
-            stop.set()
-        await first(running, socket.gone.wait())
-        leave()
-        dropped = not running.done()
+        seat = await bridge(socket, trial, endpoint, obs)
+        socket.send(offer)
+        ready = await socket.wait_for("ready")
+        if not ready or seat is None:
+            stop.set()  # not started, or cannot be: ended at once
+        else:
+            seat.live()
+            try:
+                async with asyncio.timeout(limit):
+                    await first(running, socket.gone.wait())
+            except TimeoutError:
+                log.error("trial %s ran past its %g s: ended", trial.match, limit)
+                stop.set()
+                await asyncio.wait({running})
+        leave(seat)
+        dropped = socket.gone.is_set() and not (ready and running.done())
 
         def finish(done: asyncio.Future) -> dict:
             kills, problems = (None, ["cancelled"]) if done.cancelled() else done.result()
@@ -302,27 +318,24 @@ def study_handler(study: Study, serving: Serving, matches: Matches) -> Handler:
             log.info("%s: %s, %s kills", trial.match, status, kills)
             return sidecar
 
-        if dropped:  # resumable at once; the sidecar follows when the match has run out
+        if dropped:  # resumable at once; the sidecar follows when the match has ended
             study.record(trial, "dropped")
             running.add_done_callback(finish)
             return None
+        await asyncio.wait({running})  # ended by the stop above, if not over
         return finish(running)
 
     async def trials(socket: Socket, participant: Participant, obs: bool) -> None:
         """The participant's remaining trials; a failed one is offered again, RETRIES times."""
         last, failures = None, 0
         while (trial := study.next_trial(participant)) is not None:
-            socket.send(
-                {
-                    "type": "trial", "role": trial.role, "agent": trial.agent, "last": last,
-                    "session": trial.session, "sessions": len(config.variants),
-                    "trial": trial.trial, "trials": config.trials, "again": failures > 0,
-                    "instructions": config.instructions.get(trial.role, ""),
-                }
-            )  # fmt: skip
-            if not await socket.wait_for("ready"):
-                return
-            sidecar = await play(socket, trial, obs)
+            offer = {
+                "type": "trial", "role": trial.role, "agent": trial.agent, "last": last,
+                "session": trial.session, "sessions": len(config.variants),
+                "trial": trial.trial, "trials": config.trials, "again": failures > 0,
+                "instructions": config.instructions.get(trial.role, ""),
+            }  # fmt: skip
+            sidecar = await play(socket, trial, obs, offer)
             if sidecar is None:
                 return
             if sidecar["status"] == "failed":

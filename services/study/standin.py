@@ -5,6 +5,7 @@ without anyone at a keyboard (tests, and dry runs of a new study config)."""
 from __future__ import annotations
 
 import json
+import time
 from dataclasses import dataclass, field
 
 import websockets
@@ -30,6 +31,7 @@ class StandInReport:
     done: bool = False
     refused: str = ""
     queued: int = 0  # the furthest place in the queue it was shown
+    first_frames: list[float] = field(default_factory=list)  # seconds from each Ready to its first frame
     again: int = 0  # trials offered again after a failed attempt
 
 
@@ -55,7 +57,7 @@ async def stand_in(
     hello.update({"worker": worker} if worker else {})
     if resume:
         hello.update(participant=resume[0], key=resume[1])
-    policy, held = None, None
+    policy, held, ready = None, None, None
     async with websockets.connect(url.replace("http", "ws", 1).rstrip("/") + "/ws", ssl=ssl) as ws:
         await ws.send(json.dumps(hello))
         async for text in ws:
@@ -75,7 +77,13 @@ async def stand_in(
                 policy = policy_for(policies[report.role], report.role)
                 policy.reset(seed + len(report.agents))
                 await ws.send(json.dumps({"type": "ready"}))
-            elif kind == "state" and policy is not None and "obs" in message:
+                ready = time.monotonic()
+            elif kind == "state":
+                if ready is not None:
+                    report.first_frames.append(time.monotonic() - ready)
+                    ready = None
+                if policy is None or "obs" not in message:
+                    continue
                 report.states += 1
                 if leave_after and report.states >= leave_after:
                     return report

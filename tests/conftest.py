@@ -184,3 +184,12 @@ def study_server() -> Iterator[Callable[..., tuple[threading.Event, str, Future]
         yield serve
         for stop in stops:
             stop.set()
+
+
+def wait_in_page(page, expression: str, timeout: int) -> None:  # noqa: ANN001 - a Playwright Page
+    """Poll `expression` in the page until true, within `timeout` ms. Playwright's wait_for_function
+    compiles its predicate with the page's own eval, which the page's CSP forbids; evaluate does not."""
+    deadline = time.monotonic() + timeout / 1000
+    while not page.evaluate(expression):
+        assert time.monotonic() < deadline, f"{expression} within {timeout} ms"
+        page.wait_for_timeout(50)

@@ -95,7 +95,9 @@ def test_matches_started_together_get_their_own_recordings_and_an_id_is_never_re
 def test_a_signal_ends_the_match_and_every_process_it_started(tsf_match, tmp_path, wait_until, sig):
     match = tsf_match("--duration", "60", "--match", "signalled")
     log = tmp_path / "signalled.tsflog"
-    assert wait_until(lambda: log.exists() and len(read_log(log)[0]) > 20, timeout=60)  # under way
+    assert wait_until(
+        lambda: log.exists() and log.stat().st_size > 8 and len(read_log(log)[0]) > 20, timeout=60
+    )  # under way
     started = children(match.pid)
     assert sorted(command.split()[3] for command in started.values()) == ["agent", "agent", "recorder", "sim"]
     os.kill(match.pid, sig)
@@ -107,7 +109,9 @@ def test_a_signal_ends_the_match_and_every_process_it_started(tsf_match, tmp_pat
 def test_a_service_that_fails_fails_the_match(tsf_match, tmp_path, wait_until):
     match = tsf_match("--duration", "3", "--match", "failing")
     log = tmp_path / "failing.tsflog"
-    assert wait_until(lambda: log.exists() and len(read_log(log)[0]) > 20, timeout=60)
+    assert wait_until(
+        lambda: log.exists() and log.stat().st_size > 8 and len(read_log(log)[0]) > 20, timeout=60
+    )
     [recorder] = [pid for pid, command in children(match.pid).items() if command.split()[3] == "recorder"]
     os.kill(recorder, signal.SIGKILL)
     assert match.wait(30) == 1

@@ -32,6 +32,7 @@ class StandInReport:
     refused: str = ""
     queued: int = 0  # the furthest place in the queue it was shown
     first_frames: list[float] = field(default_factory=list)  # seconds from each Ready to its first frame
+    waits: list[float] = field(default_factory=list)  # seconds each trial waited in the queue (if it did)
     again: int = 0  # trials offered again after a failed attempt
 
 
@@ -57,7 +58,7 @@ async def stand_in(
     hello.update({"worker": worker} if worker else {})
     if resume:
         hello.update(participant=resume[0], key=resume[1])
-    policy, held, ready = None, None, None
+    policy, held, ready, queued = None, None, None, 0.0
     async with websockets.connect(url.replace("http", "ws", 1).rstrip("/") + "/ws", ssl=ssl) as ws:
         await ws.send(json.dumps(hello))
         async for text in ws:
@@ -70,7 +71,11 @@ async def stand_in(
                 report.participant, report.key = message["participant"], message["key"]
             elif kind == "queue":
                 report.queued = max(report.queued, message["place"])
+                queued = queued or time.monotonic()
             elif kind == "trial":
+                if queued:
+                    report.waits.append(time.monotonic() - queued)
+                    queued = 0.0
                 report.again += message.get("again", False)
                 report.role = message["role"]
                 report.agents.append(message["agent"])

@@ -169,6 +169,7 @@ class Matches:
         self.stops: dict[str, threading.Event] = {}  # match -> its stop
         self.of: dict[str, tuple[asyncio.Future, threading.Event]] = {}  # participant -> their match
         self.lock = threading.Lock()  # stops is read by stop_all from another thread
+        self.closed = False  # set by stop_all: a match added later is stopped at once
         self.changed = asyncio.Event()  # replaced after each change; waiters hold the old one
 
     def notify(self) -> None:
@@ -178,6 +179,8 @@ class Matches:
     def add(self, trial: Trial, running: asyncio.Future, stop: threading.Event) -> None:
         with self.lock:
             self.stops[trial.match] = stop
+            if self.closed:
+                stop.set()
         self.of[trial.participant] = (running, stop)
 
         def ended(_: asyncio.Future) -> None:
@@ -200,6 +203,7 @@ class Matches:
     def stop_all(self) -> None:
         """From any thread: end every running match and its processes."""
         with self.lock:
+            self.closed = True
             for stop in self.stops.values():
                 stop.set()
 

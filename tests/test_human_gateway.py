@@ -53,6 +53,28 @@ def gateway(bus):
         yield opened
 
 
+def test_one_address_holds_at_most_per_address_sockets(bus):
+    with Gateway(
+        bus.config(listen=True), seat_handler(MATCH, SeatBook({})), Web(port=0, per_address=2)
+    ) as gateway:
+
+        async def scenario() -> int:
+            held = [await websockets.connect(socket_url(gateway)) for _ in range(2)]
+            try:
+                await websockets.connect(socket_url(gateway))
+            except websockets.InvalidStatus as refused:
+                assert "server" not in refused.response.headers  # no version banner
+                status = refused.response.status_code
+            await held[0].close()
+            await asyncio.sleep(0.2)
+            again = await websockets.connect(socket_url(gateway))  # a free place again
+            for ws in [*held, again]:
+                await ws.close()
+            return status
+
+        assert asyncio.run(scenario()) == 429
+
+
 def test_the_page_is_served_and_only_it(gateway):
     page = urllib.request.urlopen(gateway.url, timeout=5)
     assert page.status == 200 and b"<canvas" in page.read()

@@ -66,6 +66,7 @@ class Serving:
     low_latency: bool = True  # zenoh's low-latency transport within each match
     test_token: str = ""  # a hello with this `test` token may ask for the observation values (stand-ins)
     arrivals: float = 1.0  # new participant ids a second, on average (bursts of ARRIVAL_BURST)
+    starting: int = 2  # matches starting up at once (until their sim listens)
 
 
 SERVING, WEB = Serving(), Web()
@@ -215,6 +216,7 @@ def study_handler(study: Study, serving: Serving, matches: Matches) -> Handler:
     playing: set[str] = set()
     match_seconds = config.trial_seconds + START_UP
     arrivals = RateLimit(serving.arrivals, ARRIVAL_BURST)
+    starting = asyncio.Semaphore(serving.starting)
 
     async def admit(socket: Socket, hello: dict) -> Participant | None:
         """The participant who resumes (id and key), or a new one once they consent: ids are
@@ -292,9 +294,10 @@ def study_handler(study: Study, serving: Serving, matches: Matches) -> Handler:
         )  # fmt: skip
         study.record(trial, "running")
         stop = threading.Event()
-        running = asyncio.ensure_future(asyncio.to_thread(run_trial, plan, trial.role, stop))
-        matches.add(trial, running, stop)
-        seat = await bridge(socket, trial, endpoint, obs)
+        async with starting:  # start-up is CPU-bound: a burst of arrivals starts a few at a time
+            running = asyncio.ensure_future(asyncio.to_thread(run_trial, plan, trial.role, stop))
+            matches.add(trial, running, stop)
+            seat = await bridge(socket, trial, endpoint, obs)
         socket.send(offer)
         ready = await socket.wait_for("ready")
         if not ready or seat is None:

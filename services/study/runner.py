@@ -44,6 +44,7 @@ from services.launch import HUMAN, MatchPlan, match_buses, run_match
 from services.recorder.recording import load
 from services.recorder.service import recording_path
 from services.study.core import Admission, Participant, Study, StudyConfig, Trial
+from shared import keys
 from shared.bus import free_endpoint
 from shared.game import other
 
@@ -52,6 +53,7 @@ PROBLEM = "The game could not be started. Please tell the experimenter."
 RETRIES = 3  # failed attempts in a row before the participant is told of a problem
 READ_TIMEOUT = 900.0  # seconds a participant may take to read the consent text or the instructions
 START_UP = 20.0  # seconds a match takes to start, for the estimated wait
+WARM_UP = 60.0  # seconds to wait for a match's processes before offering its trial anyway
 ARRIVAL_BURST = 20  # participant ids issued at once, beyond the rate
 BUSY = "Too many people are starting right now. Please try again in a minute."
 TAKEN = "This worker id has already taken part in this study."
@@ -162,6 +164,25 @@ def run_trial(plan: MatchPlan, role: str, stop: threading.Event) -> tuple[int | 
     return (recording.summary.kills if recording.summary else None), problems
 
 
+def wait_alive(z: zenoh.Session, tokens: list[str], timeout: float) -> bool:
+    """Wait until every one of the liveliness `tokens` is declared (the match's processes are up);
+    False if some are still missing after `timeout` seconds. Declares and undeclares its
+    subscribers on the calling thread, never on zenoh's."""
+    present: set[str] = set()
+    changed = threading.Condition()
+
+    def on_alive(sample: zenoh.Sample) -> None:
+        with changed:
+            (present.add if sample.kind == zenoh.SampleKind.PUT else present.discard)(str(sample.key_expr))
+            changed.notify_all()
+
+    with contextlib.ExitStack() as stack:
+        for token in tokens:
+            stack.enter_context(z.liveliness().declare_subscriber(token, on_alive, history=True))
+        with changed:
+            return changed.wait_for(lambda: present >= set(tokens), timeout)
+
+
 class Matches:
     """The running matches: slots (Admission), a stop per match, and each participant's one match."""
 
@@ -262,12 +283,19 @@ def study_handler(study: Study, serving: Serving, matches: Matches) -> Handler:
 
     async def bridge(socket: Socket, trial: Trial, endpoint: str, obs: bool) -> Bridge | None:
         """The participant's seat in the trial's match, from a session of its own (opened when the
-        sim listens, closed by `leave`); None if the sim never listened."""
+        sim listens, closed by `leave`), once every process of the match is up (then a Ready
+        starts the game at once); None if the sim never listened."""
         try:
             z = await asyncio.to_thread(zenoh.open, match_buses(endpoint, serving.low_latency)[1].to_zenoh())
         except zenoh.ZError as error:
             log.error("trial %s: no session to its sim: %s", trial.match, error)
             return None
+        agent = other(trial.role)
+        tokens = [keys.alive(trial.match, "sim"), keys.alive(trial.match, "recorder")]
+        tokens += [keys.alive(trial.match, "agent", agent)]
+        tokens += [keys.alive(trial.match, "adapter")] if trial.variant.adaptive(agent, 0) else []
+        if not await asyncio.to_thread(wait_alive, z, tokens, WARM_UP):
+            log.warning("trial %s: not every process of its match is up after %g s", trial.match, WARM_UP)
         return Bridge(z, trial.match, trial.role, socket.controls, socket.outbox, obs)
 
     def leave(seat: Bridge | None) -> None:

@@ -326,10 +326,12 @@ def study_handler(study: Study, serving: Serving, matches: Matches) -> Handler:
             running = asyncio.ensure_future(asyncio.to_thread(run_trial, plan, trial.role, stop))
             matches.add(trial, running, stop)
             seat = await bridge(socket, trial, endpoint, obs)
-        socket.send(offer)
-        ready = await socket.wait_for("ready")
-        if not ready or seat is None:
-            stop.set()  # not started, or cannot be: ended at once
+        ready = False
+        if seat is not None:  # else the match cannot start: it fails at once
+            socket.send(offer)
+            ready = await socket.wait_for("ready")
+        if not ready:
+            stop.set()  # not started (or cannot be): ended at once
         else:
             seat.live()
             try:

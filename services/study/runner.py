@@ -53,6 +53,7 @@ PROBLEM = "The game could not be started. Please tell the experimenter."
 RETRIES = 3  # failed attempts in a row before the participant is told of a problem
 READ_TIMEOUT = 900.0  # seconds a participant may take to read the consent text or the instructions
 START_UP = 20.0  # seconds a match takes to start, for the estimated wait
+DRAIN = 60.0  # seconds the stopping server waits for its matches to end and be written down
 WARM_UP = 60.0  # seconds to wait for a match's processes before offering its trial anyway
 ARRIVAL_BURST = 20  # participant ids issued at once, beyond the rate
 BUSY = "Too many people are starting right now. Please try again in a minute."
@@ -190,6 +191,7 @@ class Matches:
         self.admission = Admission(cap)
         self.stops: dict[str, threading.Event] = {}  # match -> its stop
         self.of: dict[str, tuple[asyncio.Future, threading.Event]] = {}  # participant -> their match
+        self.running: set[asyncio.Future] = set()
         self.lock = threading.Lock()  # stops is read by stop_all from another thread
         self.closed = False  # set by stop_all: a match added later is stopped at once
         self.changed = asyncio.Event()  # replaced after each change; waiters hold the old one
@@ -204,8 +206,10 @@ class Matches:
             if self.closed:
                 stop.set()
         self.of[trial.participant] = (running, stop)
+        self.running.add(running)
 
         def ended(_: asyncio.Future) -> None:
+            self.running.discard(running)
             with self.lock:
                 del self.stops[trial.match]
             if self.of.get(trial.participant, (None,))[0] is running:
@@ -221,6 +225,12 @@ class Matches:
             running, stop = self.of[trial.participant]
             stop.set()
             await asyncio.wait({running})
+
+    async def drained(self) -> None:
+        """Every match has ended and been written down (a cut one's sidecar comes last)."""
+        while self.running:
+            await asyncio.wait(set(self.running))
+            await asyncio.sleep(0)  # the done callbacks run
 
     def stop_all(self) -> None:
         """From any thread: end every running match and its processes."""
@@ -431,6 +441,8 @@ def run_study(
             on_ready(gateway)
             stop.wait()
             matches.stop_all()
+            with contextlib.suppress(TimeoutError):  # a match's thread that hangs: leave it to exit
+                asyncio.run_coroutine_threadsafe(matches.drained(), gateway.loop).result(DRAIN)
     finally:
         study.close()
     return study

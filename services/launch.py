@@ -1,8 +1,11 @@
 """Starting a whole match on one machine: sim, two agents and the recorder as separate processes,
 and for an adaptive match the adapter that switches one agent's policy.
 
-The sim listens on a free loopback port; every other process connects to it in peer mode and
-listens on a port of its own, so zenoh's gossip links them all directly. No router, no multicast.
+The sim's session is the match's router: it listens on a loopback port of its own, and every other
+process of the match (and a gateway bridging a person's seat) is a client of it, connected to that
+endpoint alone. No gossip mesh and no multicast: concurrent matches never meet, a match's processes
+never learn of another's, and zenoh's peer routing (whose lock cycle, eclipse-zenoh issue 2581,
+wedged sessions when many peers came and went) is not used.
 """
 
 from __future__ import annotations
@@ -42,6 +45,9 @@ class MatchPlan:
     low_latency: bool = True
     peers: tuple[str, ...] = ()  # endpoints the sim also connects to (a human gateway's session)
     wait_players: float = 10.0  # seconds the sim waits for both seats (people take longer)
+    endpoint: str = ""  # where the sim listens; empty: a free loopback port
+    wait_services: float = 10.0  # seconds the sim waits for the recorder (and the adapter)
+    timeout: float = 0.0  # seconds the whole match may take, start-up included; 0: no limit
     adapter: AdapterConfig | None = None  # the adaptive agent, in the seat it names (that key is ignored)
 
     def __post_init__(self) -> None:
@@ -60,6 +66,23 @@ class MatchPlan:
         return keys_
 
 
+def match_buses(endpoint: str, low_latency: bool, peers: tuple[str, ...] = ()) -> tuple[BusConfig, BusConfig]:
+    """The sim's bus (the match's router, listening on `endpoint`) and its clients' bus. Clients wait
+    up to a minute for the sim: on a busy machine a match's processes start slowly and in any order."""
+    sim = BusConfig(mode="router", listen=(endpoint,), connect=peers, low_latency=low_latency)
+    client = BusConfig(
+        mode="client", listen=(), connect=(endpoint,), low_latency=low_latency, wait_router=60.0
+    )
+    return sim, client
+
+
+def watcher_bus(endpoint: str, low_latency: bool) -> BusConfig:
+    """A session that only watches the match: a peer that dials the sim and listens nowhere, so it
+    opens at once and joins whenever the sim listens (a client's open would wait, and fail if the
+    match were over by then)."""
+    return BusConfig(listen=(), connect=(endpoint,), low_latency=low_latency)
+
+
 def service_command(name: str, bus: BusConfig, *args: str) -> list[str]:
     """The command line that starts one service of the `tsf` CLI in a new Python process."""
     return [sys.executable, "-m", "services.cli", name, *bus.to_args(), *args]
@@ -75,14 +98,15 @@ def run_match(
     """Run the match to its end; `on_state` sees up to 10 states a second and `on_adapter` the
     adapter's reports (for a live scoreboard). A recording of the same id is never appended to:
     refused, or with `overwrite` renamed aside (log.make_way). `stop` (stop_on_signals: SIGINT,
-    SIGTERM, SIGHUP) ends the match and every process it started. A match that was stopped, ended
-    without a summary, or one of whose services failed is a Failure."""
+    SIGTERM, SIGHUP) ends the match and every process it started, as does running past
+    `plan.timeout`. A match that was stopped or timed out, ended without a summary, or one of whose
+    services failed is a Failure."""
     stop = stop or threading.Event()
     path = recording_path(plan.directory, plan.match)
     make_way(path, overwrite)
-    endpoint = free_endpoint()
-    sim_bus = BusConfig(listen=(endpoint,), connect=plan.peers, low_latency=plan.low_latency)
-    peer_bus = BusConfig(connect=(endpoint,), low_latency=plan.low_latency)
+    deadline = time.monotonic() + plan.timeout if plan.timeout else float("inf")
+    endpoint = plan.endpoint or free_endpoint()
+    sim_bus, peer_bus = match_buses(endpoint, plan.low_latency, plan.peers)
     summary: list[Summary] = []
     done = threading.Event()
 
@@ -109,8 +133,8 @@ def run_match(
             service_command(
                 "sim", sim_bus, *match, "--seed", str(plan.seed), "--frames", str(plan.frames),
                 "--sim-mode", plan.mode, "--bait", recorded["bait"], "--shooter", recorded["shooter"],
-                "--wait-recorder", "10", "--wait-players", str(plan.wait_players),
-                "--wait-adapter", "10" if plan.adapter else "0",
+                "--wait-recorder", str(plan.wait_services), "--wait-players", str(plan.wait_players),
+                "--wait-adapter", str(plan.wait_services) if plan.adapter else "0",
             ),
         )  # fmt: skip
         recorder = service_command("recorder", peer_bus, *match, "--out", str(plan.directory))
@@ -127,19 +151,22 @@ def run_match(
                 ),
             )
         with (
-            session(peer_bus) as z,
+            session(watcher_bus(endpoint, plan.low_latency)) as z,
             subscribe(z, keys.state(plan.match), State, on_state_shown),
             subscribe(z, keys.summary(plan.match), Summary, on_summary),
             subscribe(z, keys.adapter(plan.match), AdapterStatus, on_adapter),
         ):
-            while not done.wait(0.2) and not stop.is_set():
+            while not done.wait(0.2) and not stop.is_set() and time.monotonic() < deadline:
                 if processes.children["sim"].poll() is not None:
                     break
-        if not stop.is_set():
+        late = not done.is_set() and time.monotonic() >= deadline
+        if not stop.is_set() and not late:
             processes.wait("sim", 10)
             processes.wait("recorder", 10)
     if stop.is_set():
         raise Failure(f"match {plan.match} was stopped before its end; its processes ended")
+    if late:
+        raise Failure(f"match {plan.match} ran past its {plan.timeout:g} s; its processes ended")
     if failed := processes.failed():
         statuses = ", ".join(f"{name} exited with status {code}" for name, code in failed.items())
         raise Failure(f"match {plan.match}: {statuses}")

@@ -148,10 +148,29 @@ def study(
     out: Path = output(Path("studies"), "Studies go to OUT/<name>: progress and recordings.", directory=True),
     host: Host = "127.0.0.1",
     port: Port = 8000,
+    max_matches: int = typer.Option(4, min=1, help="Matches at once; more participants wait in a queue."),
+    trial_timeout: float = typer.Option(
+        120.0,
+        min=1.0,
+        help="Seconds a trial's match may take beyond its length before it is ended and replayed.",
+    ),
+    cert: Path | None = typer.Option(None, exists=True, dir_okay=False, help="TLS certificate chain (PEM)."),
+    key: Path | None = typer.Option(
+        None, exists=True, dir_okay=False, help="TLS private key (PEM), with --cert."
+    ),
+    origin: list[str] | None = typer.Option(
+        None,
+        help="Another origin whose pages may open the socket, e.g. https://study.example.org (repeatable).",
+    ),
+    per_address: int = typer.Option(8, min=0, help="Sockets one address may hold at once (0: no cap)."),
+    test_token: str = typer.Option(
+        "", envvar="TSF_TEST_TOKEN", help="Stand-ins that show this token get the observation values."
+    ),
 ) -> None:
     """Serve a study: participants open the link, consent, get a role and play every agent variant."""
+    from services.human.gateway import Web
     from services.study.core import StudyConfig
-    from services.study.runner import run_study
+    from services.study.runner import Serving, run_study
 
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     protocol = StudyConfig.load(config)
@@ -164,7 +183,11 @@ def study(
         )
         console.print(f"participants open [bold]{gateway.url}[/] (Ctrl-C ends the study server)")
 
-    done = run_study(protocol, directory, host, port, stop_on_signals(), show)
+    if (cert is None) != (key is None):
+        raise UsageError("--cert/--key", str(cert or key), "give both, or neither")
+    web = Web(host, port, cert, key, tuple(origin or ()), per_address)
+    serving = Serving(max_matches, trial_timeout, test_token=test_token)
+    done = run_study(protocol, directory, web, stop_on_signals(), show, serving)
     finished = sum(done.next_trial(p) is None for p in done.participants.values())
     console.print(f"{len(done.participants)} participants, {finished} finished")
 

@@ -111,6 +111,12 @@ User = Annotated[
 Password = Annotated[str, typer.Option("--password", envvar="TSF_BUS_PASSWORD", hidden=True)]
 
 
+WaitRouter = Annotated[
+    float,
+    typer.Option("--wait-router", min=0.0, help="Client mode: seconds to keep trying to reach the router."),
+]
+
+
 Match = Annotated[
     str, typer.Option("--match", envvar="TSF_MATCH", help="Match id: the key namespace tsf/<match>/...")
 ]
@@ -124,6 +130,7 @@ BUS_OPTIONS = {  # parameter name: (annotation, default)
     "low_latency": (LowLatency, False),
     "user": (User, ""),
     "password": (Password, ""),
+    "wait_router": (WaitRouter, 10.0),
 }
 
 
@@ -138,10 +145,14 @@ def bus_options(command: Callable[..., None]) -> Callable[..., None]:
 
     @functools.wraps(command)
     def with_bus(**options: object) -> None:
-        mode, listen, connect, multicast, low_latency, user, password = (options.pop(n) for n in BUS_OPTIONS)
+        mode, listen, connect, multicast, low_latency, user, password, wait = (
+            options.pop(n) for n in BUS_OPTIONS
+        )
         logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
         listen = listen or (() if mode == "client" else ("tcp/127.0.0.1:0",))
-        bus = BusConfig(mode, tuple(listen), tuple(connect or ()), multicast, low_latency, user, password)
+        bus = BusConfig(
+            mode, tuple(listen), tuple(connect or ()), multicast, low_latency, user, password, wait
+        )
         command(bus=bus, **options)
 
     with_bus.__signature__ = inspect.Signature(own + shared)

@@ -59,13 +59,12 @@ class Processes:
 
     def start(self, name: str, command: list[str], nice: int = 0) -> subprocess.Popen:
         """Start a child; `nice` > 0 lowers its CPU priority (for work off the latency path)."""
-        self.children[name] = subprocess.Popen(
-            command,
-            stdin=subprocess.DEVNULL,
-            env={**os.environ, PARENT: str(os.getpid())},
-            preexec_fn=(lambda: os.nice(nice)) if nice else None,
+        child = self.children[name] = subprocess.Popen(
+            command, stdin=subprocess.DEVNULL, env={**os.environ, PARENT: str(os.getpid())}
         )
-        return self.children[name]
+        if nice:  # set from here: a preexec_fn is unsafe in a process with threads (the study server)
+            os.setpriority(os.PRIO_PROCESS, child.pid, nice)
+        return child
 
     def wait(self, name: str, timeout: float) -> int | None:
         try:

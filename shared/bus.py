@@ -66,6 +66,10 @@ class BusConfig:
         # background for ever (zenoh's default).
         timeouts = {"client": round(self.wait_router * 1000), "peer": -1, "router": -1}
         config.insert_json5("connect/timeout_ms", json.dumps(timeouts))
+        # Retry soon and often (zenoh: from 1 s up to 4 s): a match's clients start together with
+        # its sim, and each second of back-off would delay its first frame.
+        retry = {"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2}
+        config.insert_json5("connect/retry", json.dumps(retry))
         if self.user:
             config.insert_json5(
                 "transport/auth/usrpwd", json.dumps({"user": self.user, "password": self.password})
@@ -84,6 +88,7 @@ class BusConfig:
             args += ["--connect", endpoint]
         args += ["--multicast"] if self.multicast else []
         args += ["--user", self.user] if self.user else []
+        args += ["--wait-router", str(self.wait_router)] if self.mode == "client" else []
         return [*args, "--low-latency"] if self.low_latency else args
 
 

@@ -154,3 +154,42 @@ def spawn(tmp_path) -> Iterator[Callable[..., subprocess.Popen]]:  # noqa: ANN00
         if child.poll() is None:
             child.kill()
         child.wait()
+
+
+STAND_IN_TOKEN = "stand-in-token"  # the study server's test token: stand-ins showing it get observations
+
+
+@pytest.fixture
+def study_server() -> Iterator[Callable[..., tuple[threading.Event, str, Future]]]:
+    """Start `run_study` in a thread: serve(config, directory, serving=..., web=...) -> (stop, url,
+    future of the Study). Served on a free port, with STAND_IN_TOKEN as the test token by default;
+    every server is stopped at teardown."""
+    from services.human.gateway import Web
+    from services.study.runner import Serving, run_study
+
+    stops: list[threading.Event] = []
+    with ThreadPoolExecutor(4) as pool:
+
+        def serve(config, directory, serving=None, web=None):  # noqa: ANN001, ANN202
+            stop, urls = threading.Event(), []
+            serving = serving or Serving(test_token=STAND_IN_TOKEN)
+            server = pool.submit(
+                run_study, config, directory, web or Web(port=0), stop, lambda g: urls.append(g.url), serving
+            )
+            stops.append(stop)
+            assert wait_until(lambda: urls or server.done(), timeout=20), "the server starts"
+            assert urls, server.exception()
+            return stop, urls[0], server
+
+        yield serve
+        for stop in stops:
+            stop.set()
+
+
+def wait_in_page(page, expression: str, timeout: int) -> None:  # noqa: ANN001 - a Playwright Page
+    """Poll `expression` in the page until true, within `timeout` ms. Playwright's wait_for_function
+    compiles its predicate with the page's own eval, which the page's CSP forbids; evaluate does not."""
+    deadline = time.monotonic() + timeout / 1000
+    while not page.evaluate(expression):
+        assert time.monotonic() < deadline, f"{expression} within {timeout} ms"
+        page.wait_for_timeout(50)

@@ -26,6 +26,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from conftest import wait_in_page
 
 from services.recorder.recording import load, replay
 from shared import keys
@@ -280,13 +281,13 @@ def test_the_human_profile_seats_a_person_from_the_browser(inputs: dict, tmp_pat
                     pass
                 assert time.monotonic() < deadline, "the human gateway never served its page"
                 time.sleep(1)
-            page.wait_for_function("window.tsf.phase === 'instructions'", timeout=30_000)
+            wait_in_page(page, "window.tsf.phase === 'instructions'", 30_000)
             page.keyboard.press("Space")  # start
-            page.wait_for_function("window.tsf.phase === 'playing'", timeout=60_000)
+            wait_in_page(page, "window.tsf.phase === 'playing'", 60_000)
             page.keyboard.down("ArrowLeft")
             page.wait_for_timeout(1000)
             page.keyboard.up("ArrowLeft")
-            page.wait_for_function("window.tsf.phase === 'ended'", timeout=frames / 30 * 1000 + 30_000)
+            wait_in_page(page, "window.tsf.phase === 'ended'", frames / 30 * 1000 + 30_000)
             browser.close()
         recorder = _run(["docker-compose", "ps", "-q", "recorder"], 60, env).stdout.strip()
         assert _run(["docker", "wait", recorder], 60).stdout.strip() == "0"

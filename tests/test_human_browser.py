@@ -10,9 +10,10 @@ import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 
 import pytest
+from conftest import wait_in_page
 
 from services.human.core import SeatBook
-from services.human.gateway import Gateway, seat_handler
+from services.human.gateway import Gateway, Web, seat_handler
 from services.human.play import play_with_people, seat_links
 from services.launch import HUMAN, MatchPlan, run_match
 from services.recorder.recording import load
@@ -62,10 +63,10 @@ def test_a_person_plays_the_bait_from_the_browser(browser, match, tmp_path):
     page = browser.new_page(viewport={"width": 900, "height": 800})
     page.goto(links["bait"])
     assert page.locator("canvas#game").is_visible()
-    page.wait_for_function("window.tsf.phase === 'instructions'", timeout=10_000)
+    wait_in_page(page, "window.tsf.phase === 'instructions'", 10_000)
     assert "BAIT" in page.locator("#text").inner_text()
     page.keyboard.press("Space")  # read the instructions: start
-    page.wait_for_function("window.tsf.phase === 'playing' && window.tsf.drawn > 5", timeout=30_000)
+    wait_in_page(page, "window.tsf.phase === 'playing' && window.tsf.drawn > 5", 30_000)
     page.keyboard.down("ArrowLeft")
     page.wait_for_timeout(1000)
     page.keyboard.up("ArrowLeft")
@@ -73,7 +74,7 @@ def test_a_person_plays_the_bait_from_the_browser(browser, match, tmp_path):
     page.wait_for_timeout(300)
     page.keyboard.up("Space")
     shot = page.locator("canvas#game").screenshot(path=str(tmp_path / "page.png"))
-    page.wait_for_function("window.tsf.phase === 'ended'", timeout=FRAMES / 30 * 1000 + 20_000)
+    wait_in_page(page, "window.tsf.phase === 'ended'", FRAMES / 30 * 1000 + 20_000)
     assert "Time is up" in page.locator("#title").inner_text()
     drawn = page.evaluate("window.tsf.drawn")
     print(f"the page drew {drawn} of the match's {FRAMES} frames")
@@ -107,11 +108,11 @@ def test_a_person_plays_the_bait_from_the_browser(browser, match, tmp_path):
 
 def test_a_wrong_seat_token_is_refused_in_the_page(browser, bus):
     book = SeatBook({"bait": "right-token"})
-    with Gateway(bus.config(listen=True), seat_handler("refused", book), port=0) as gateway:
+    with Gateway(bus.config(listen=True), seat_handler("refused", book), Web(port=0)) as gateway:
         page = browser.new_page()
         page.goto(seat_links(gateway.url, {"bait": "wrong-token"})["bait"])
-        page.wait_for_function("window.tsf.phase === 'refused'", timeout=10_000)
-        assert page.locator("#title").inner_text() == "Seat refused"
+        wait_in_page(page, "window.tsf.phase === 'refused'", 10_000)
+        assert page.locator("#title").inner_text() == "Not possible"
         assert page.locator("#text").inner_text() == "wrong seat token for the bait seat"
 
 
@@ -120,13 +121,13 @@ def test_a_spectator_watches_a_live_replay_in_the_page(browser, bus, tap, tmp_pa
     and watching puts nothing on the bus."""
     _, recording = run_match(MatchPlan("watched", 2, 120, "lockstep", "circle", "mirror", tmp_path))
     recorded = tap(bus.open(listen=True), "watched")
-    with Gateway(bus.config(), seat_handler("watched", SeatBook({})), port=0) as gateway:
+    with Gateway(bus.config(), seat_handler("watched", SeatBook({})), Web(port=0)) as gateway:
         page = browser.new_page()
         page.goto(f"{gateway.url}?watch=1")
-        page.wait_for_function("window.tsf.phase === 'waiting'", timeout=10_000)
+        wait_in_page(page, "window.tsf.phase === 'waiting'", 10_000)
         assert page.locator("#title").inner_text() == "Watching"
         sent = republish(bus.config(), recording, speed=2.0, delay=1.0)
-        page.wait_for_function("window.tsf.phase === 'ended'", timeout=30_000)
+        wait_in_page(page, "window.tsf.phase === 'ended'", 30_000)
         assert sent > 120 and page.evaluate("window.tsf.frame.frame") == 120
         assert page.evaluate("window.tsf.drawn") > 30  # frames drawn as they came (at most one per paint)
         assert page.locator("#title").inner_text() == "Time is up"

@@ -18,7 +18,7 @@ import websockets
 
 from services.agent.service import run_agent
 from services.human.core import SeatBook
-from services.human.gateway import REFUSED, Gateway, seat_handler
+from services.human.gateway import REFUSED, Gateway, Web, seat_handler
 from services.human.play import play_with_people
 from services.launch import HUMAN, MatchPlan
 from services.recorder.recording import load
@@ -32,7 +32,7 @@ TOKEN = "bait-token"
 
 
 def socket_url(gateway: Gateway) -> str:
-    return f"ws://{gateway.host}:{gateway.port}/ws"
+    return f"ws://{gateway.web.host}:{gateway.port}/ws"
 
 
 async def join(gateway: Gateway, role: str, token: str):  # noqa: ANN201 - a client connection
@@ -47,8 +47,32 @@ def keys_message(**held: bool) -> str:
 
 @pytest.fixture
 def gateway(bus):
-    with Gateway(bus.config(listen=True), seat_handler(MATCH, SeatBook({"bait": TOKEN})), port=0) as opened:
+    with Gateway(
+        bus.config(listen=True), seat_handler(MATCH, SeatBook({"bait": TOKEN})), Web(port=0)
+    ) as opened:
         yield opened
+
+
+def test_one_address_holds_at_most_per_address_sockets(bus):
+    with Gateway(
+        bus.config(listen=True), seat_handler(MATCH, SeatBook({})), Web(port=0, per_address=2)
+    ) as gateway:
+
+        async def scenario() -> int:
+            held = [await websockets.connect(socket_url(gateway)) for _ in range(2)]
+            try:
+                await websockets.connect(socket_url(gateway))
+            except websockets.InvalidStatus as refused:
+                assert "server" not in refused.response.headers  # no version banner
+                status = refused.response.status_code
+            await held[0].close()
+            await asyncio.sleep(0.2)
+            again = await websockets.connect(socket_url(gateway))  # a free place again
+            for ws in [*held, again]:
+                await ws.close()
+            return status
+
+        assert asyncio.run(scenario()) == 429
 
 
 def test_the_page_is_served_and_only_it(gateway):

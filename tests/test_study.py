@@ -1,47 +1,47 @@
 """The whole study end to end with headless stand-in participants over the page's WebSocket
-protocol: consent, balanced roles, sessions with hidden agents, a drop-out who resumes, and every
-trial recorded with its sidecar."""
+protocol: consent, balanced roles, sessions with hidden agents, a drop-out who resumes, a restarted
+server, trials past their time, many participants at once, and every trial recorded with its sidecar."""
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
-import threading
-from concurrent.futures import ThreadPoolExecutor
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from conftest import STAND_IN_TOKEN
 
 from services.launch import HUMAN
 from services.recorder.recording import load
 from services.study.core import StudyConfig, Variant
-from services.study.runner import run_study
+from services.study.runner import PROBLEM, RETRIES, Serving
 from services.study.standin import stand_in
 from shared.game import other
 
+TEST = STAND_IN_TOKEN
 VARIANTS = (Variant("strong", "B5", "S5"), Variant("adaptive", adapter="adaptive-T30-cem"))
 
 
-def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_until):
+def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_until, study_server):
     config = StudyConfig(
         "e2e", VARIANTS, trials=1, trial_seconds=1.5, seed=3, consent="Agree?", end="Bye now."
     )
-    stop, urls = threading.Event(), []
-    with ThreadPoolExecutor(1) as pool:
-        server = pool.submit(
-            run_study, config, tmp_path, port=0, stop=stop, on_ready=lambda g: urls.append(g.url)
-        )
-        try:
-            assert wait_until(lambda: urls or server.done(), timeout=10) and urls
-            url = urls[0]
-            leaver = asyncio.run(stand_in(url, leave_after=10))
-            assert not leaver.done and leaver.agents == ["Agent 1"] and leaver.participant == "P001"
-            refused = asyncio.run(stand_in(url, resume=(leaver.participant, "not-the-key")))
-            assert refused.refused == "unknown participant or resume key"
-            back = asyncio.run(stand_in(url, resume=(leaver.participant, leaver.key)))
-            second = asyncio.run(stand_in(url))
-            dropped = tmp_path / "recordings" / "e2e-P001-s1t1.study.json"
-            assert wait_until(dropped.exists, timeout=20), "the cut trial runs out and is written down"
-        finally:
-            stop.set()
-        study = server.result(timeout=10)
+    stop, url, server = study_server(config, tmp_path)
+    leaver = asyncio.run(stand_in(url, leave_after=10, test=TEST))
+    assert not leaver.done and leaver.agents == ["Agent 1"] and leaver.participant == "P001"
+    refused = asyncio.run(stand_in(url, resume=(leaver.participant, "not-the-key"), test=TEST))
+    assert refused.refused == "unknown participant or resume key"
+    back = asyncio.run(stand_in(url, resume=(leaver.participant, leaver.key), test=TEST))
+    second = asyncio.run(stand_in(url, test=TEST))
+    dropped = tmp_path / "recordings" / "e2e-P001-s1t1.study.json"
+    assert wait_until(dropped.exists, timeout=20), "the cut trial is ended and written down"
+    stop.set()
+    study = server.result(timeout=60)
 
     assert back.done and back.role == leaver.role and back.agents == ["Agent 1", "Agent 2"]
     assert second.done and second.participant == "P002" and second.role == other(leaver.role)
@@ -78,3 +78,90 @@ def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_unti
             if attempt["status"] == "done":
                 assert any(s.applied[config.roles.index(participant.role)] for s in recording.states)
         assert sorted(set(met)) == sorted(v.name for v in VARIANTS)  # each variant met
+
+
+def test_a_trial_past_its_time_is_ended_and_offered_again_then_a_problem_is_shown(tmp_path, study_server):
+    config = StudyConfig("late", (VARIANTS[0],), trials=1, trial_seconds=2.0)
+    # 10 ms beyond its length from Ready: no match ends that soon (its summary comes after its last frame)
+    stop, url, server = study_server(config, tmp_path, Serving(trial_timeout=0.01, test_token=TEST))
+    report = asyncio.run(stand_in(url, test=TEST))
+    assert report.refused == PROBLEM and report.again == RETRIES - 1 and not report.done
+    assert not [p for p in _processes() if "late-P001" in p], "every match's processes were ended"
+    stop.set()
+    attempts = server.result(timeout=60).participants["P001"].attempts
+    assert [(a["attempt"], a["status"]) for a in attempts] == [(n, "failed") for n in range(1, RETRIES + 1)]
+    for attempt in attempts:
+        sidecar = json.loads((tmp_path / "recordings" / f"{attempt['match']}.study.json").read_text())
+        assert sidecar["status"] == "failed"
+
+
+def test_a_restarted_server_resumes_everyone(tmp_path, study_server):
+    config = StudyConfig("again", (VARIANTS[0],), trials=2, trial_seconds=1.0)
+    stop, url, server = study_server(config, tmp_path)
+    leaver = asyncio.run(stand_in(url, leave_after=10, test=TEST))
+    stop.set()
+    server.result(timeout=60)
+    _, url, server = study_server(config, tmp_path)  # the same study directory
+    back = asyncio.run(stand_in(url, resume=(leaver.participant, leaver.key), test=TEST))
+    assert back.done and back.role == leaver.role and len(back.kills) == 2
+    fresh = asyncio.run(stand_in(url, test=TEST))
+    assert fresh.participant == "P002" and fresh.role == other(leaver.role)
+
+
+@pytest.mark.slow
+def test_eight_stand_ins_at_once_each_in_a_match_of_their_own(tmp_path, study_server):
+    """Eight participants arrive together with room for six matches at once: two wait in the queue
+    and are told their place; every trial is played, recorded completely and marked done."""
+    config = StudyConfig("many", (VARIANTS[0],), trials=1, trial_seconds=3.0, seed=5)
+    stop, url, server = study_server(config, tmp_path, Serving(max_matches=6, test_token=TEST))
+    try:
+
+        async def crowd():  # noqa: ANN202
+            return await asyncio.gather(*(stand_in(url, seed=i, test=TEST) for i in range(8)))
+
+        reports = asyncio.run(asyncio.wait_for(crowd(), 600))
+    finally:
+        stop.set()
+    study = server.result(timeout=60)
+    assert all(r.done for r in reports), [(r.participant, r.refused) for r in reports]
+    assert sum(r.queued > 0 for r in reports) >= 2
+    assert sorted(r.participant for r in reports) == [f"P{i:03d}" for i in range(1, 9)]
+    for participant in study.participants.values():
+        assert [a["status"] for a in participant.attempts][-1] == "done"
+        done = next(a for a in participant.attempts if a["status"] == "done")
+        recording = load(tmp_path / "recordings" / f"{done['match']}.tsflog")
+        assert recording.problems() == [] and len(recording.states) == config.frames + 1
+
+
+def test_sigterm_ends_the_study_server_and_every_match_it_started(tmp_path):
+    config = tmp_path / "long.toml"
+    variant = '[[variants]]\nname = "s"\nbait = "B5"\nshooter = "S5"\n'
+    config.write_text(f'name = "long"\ntrials = 1\ntrial_seconds = 600\n{variant}')
+    server = subprocess.Popen(
+        [sys.executable, "-m", "services.cli", "study", str(config), "--out", str(tmp_path), "--port", "0",
+         "--test-token", TEST],
+        stdout=subprocess.PIPE, text=True, start_new_session=True,
+    )  # fmt: skip
+    try:
+        line = ""
+        while "http" not in line:
+            line = server.stdout.readline()
+            assert line, "the server printed no address"
+        url = line[line.index("http") :].split()[0]
+        asyncio.run(stand_in(url, leave_after=30, test=TEST))  # the match runs out for ten minutes
+        assert len([p for p in _processes() if "long-P001" in p]) >= 3, "sim, agent and recorder run"
+        server.send_signal(signal.SIGTERM)
+        assert server.wait(60) == 0
+        assert not [p for p in _processes() if "long-P001" in p], "no match process is left behind"
+    finally:
+        if server.poll() is None:
+            os.killpg(server.pid, signal.SIGKILL)
+
+
+def _processes() -> list[str]:
+    """The command lines of every process running now."""
+    found = []
+    for cmdline in Path("/proc").glob("[0-9]*/cmdline"):
+        with contextlib.suppress(OSError):
+            found.append(cmdline.read_bytes().replace(b"\0", b" ").decode(errors="replace"))
+    return found

@@ -81,7 +81,13 @@ _FIELDS: dict[str, dict[str, Callable[[object], bool]]] = {
     "ready": {},
     "keys": dict.fromkeys(KEYS, _is_bool),
     # the study runner's messages (services/study/runner.py)
-    "hello": {"participant": _short_text, "key": _short_text, "obs": _is_bool},
+    "hello": {
+        "participant": _short_text,
+        "key": _short_text,
+        "obs": _is_bool,
+        "worker": _short_text,
+        "test": _short_text,
+    },
     "consent": {},
 }
 

@@ -17,9 +17,13 @@ import contextlib
 import json
 import logging
 import mimetypes
+import ssl
 import threading
+from collections import Counter
 from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
 from pathlib import Path
+from urllib.parse import urlsplit
 
 import websockets
 import zenoh
@@ -40,6 +44,42 @@ SOCKET_PATH = "/ws"
 JOIN_TIMEOUT = 60.0  # seconds a new socket has to say who it is
 REFUSED = 4003  # WebSocket close code: seat refused
 CLOSE_TIMEOUT = 1.0  # seconds a closing connection gets to answer (a browser that never does holds exit)
+OPEN_TIMEOUT = 10.0  # seconds a new connection has to finish its HTTP request or WebSocket handshake
+# The page loads its own script and talks to its own server; nothing else, and no one may frame it.
+HEADERS = (
+    (
+        "Content-Security-Policy",
+        "default-src 'none'; script-src 'self'; style-src 'unsafe-inline'; connect-src 'self'; "
+        "img-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'",
+    ),
+    ("X-Frame-Options", "DENY"),
+    ("X-Content-Type-Options", "nosniff"),
+    ("Referrer-Policy", "no-referrer"),
+    ("Cache-Control", "no-store"),
+)
+
+
+@dataclass(frozen=True)
+class Web:
+    """How the page is served. `cert`/`key` (PEM files) turn on TLS; `origins` are further origins
+    (`https://study.example.org`) whose pages may open the socket besides the server's own (the
+    Host the browser asked for); `per_address` caps the sockets one address holds at once (0: no
+    cap; behind a reverse proxy every client has the proxy's address, so let the proxy cap them)."""
+
+    host: str = "127.0.0.1"
+    port: int = 8000
+    cert: Path | None = None
+    key: Path | None = None
+    origins: tuple[str, ...] = ()
+    per_address: int = 8
+
+    def tls(self) -> ssl.SSLContext | None:
+        if self.cert is None:
+            return None
+        context = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
+        context.minimum_version = ssl.TLSVersion.TLSv1_2
+        context.load_cert_chain(self.cert, self.key)
+        return context
 
 
 class Outbox:
@@ -201,35 +241,42 @@ def serve_page(connection: ServerConnection, request: Request) -> Response | Non
     body = (STATIC / name).read_bytes()
     kind = mimetypes.guess_type(name)[0] or "application/octet-stream"
     headers = Headers(
-        [
-            ("Content-Type", f"{kind}; charset=utf-8"),
-            ("Content-Length", str(len(body))),
-            ("Cache-Control", "no-store"),
-        ]
+        [("Content-Type", f"{kind}; charset=utf-8"), ("Content-Length", str(len(body))), *HEADERS]
     )
     return Response(200, "OK", headers, body)
 
 
-Handler = Callable[[ServerConnection, zenoh.Session], Awaitable[None]]
+def same_origin(request: Request, allowed: tuple[str, ...]) -> bool:
+    """A browser's socket comes from the server's own page (Origin names the Host it asked for) or
+    from an allowed origin; a client that sends no Origin is no browser, and no web page drives it."""
+    origin = request.headers.get("Origin")
+    return origin is None or origin in allowed or urlsplit(origin).netloc == request.headers.get("Host")
+
+
+Handler = Callable[[ServerConnection, zenoh.Session | None], Awaitable[None]]
 
 
 class Gateway:
     """The web server and one zenoh session, running in a thread of their own until closed.
 
     `handler(ws, z)` serves one socket. The session listens where `bus` says, so that a match's sim
-    can connect to it (MatchPlan.peers)."""
+    can connect to it (MatchPlan.peers); with no `bus` there is none (z is None): the study server
+    opens a session per trial instead, to that match's sim alone. Served as `web` says: TLS, the
+    Origin check, a cap on sockets per address, no version banner."""
 
-    def __init__(self, bus: BusConfig, handler: Handler, host: str = "127.0.0.1", port: int = 8000) -> None:
-        self.bus, self.handler, self.host, self.port = bus, handler, host, port
+    def __init__(self, bus: BusConfig | None, handler: Handler, web: Web = Web()) -> None:
+        self.bus, self.handler, self.web = bus, handler, web
+        self.port = web.port
         self.loop = asyncio.new_event_loop()
         self.ready = threading.Event()
         self.failed: BaseException | None = None
         self.thread = threading.Thread(target=self.loop.run_until_complete, args=(self._run(),), daemon=True)
         self.closing: asyncio.Future | None = None
+        self.sockets: Counter[str] = Counter()  # open sockets per address
 
     @property
     def url(self) -> str:
-        return f"http://{self.host}:{self.port}/"
+        return f"{'https' if self.web.cert else 'http'}://{self.web.host}:{self.port}/"
 
     def __enter__(self) -> Gateway:
         self.thread.start()
@@ -245,14 +292,33 @@ class Gateway:
         if not self.thread.is_alive():
             self.loop.close()
 
+    def _request(self, connection: ServerConnection, request: Request) -> Response | None:
+        if request.path.split("?", 1)[0] == SOCKET_PATH:
+            if not same_origin(request, self.web.origins):
+                return connection.respond(403, "forbidden\n")
+            if self.web.per_address and self.sockets[connection.remote_address[0]] >= self.web.per_address:
+                return connection.respond(429, "too many connections\n")
+        return serve_page(connection, request)
+
+    async def _handle(self, ws: ServerConnection, z: zenoh.Session | None) -> None:
+        address = ws.remote_address[0]
+        self.sockets[address] += 1
+        try:
+            await self.handler(ws, z)
+        finally:
+            self.sockets[address] -= 1
+            if not self.sockets[address]:
+                del self.sockets[address]
+
     async def _run(self) -> None:
         try:
-            with session(self.bus) as z:
+            with session(self.bus) if self.bus else contextlib.nullcontext() as z:
                 self.closing = self.loop.create_future()
                 server = await serve(
-                    lambda ws: self.handler(ws, z),
-                    self.host, self.port, process_request=serve_page, max_size=MAX_MESSAGE,
-                    close_timeout=CLOSE_TIMEOUT,
+                    lambda ws: self._handle(ws, z),
+                    self.web.host, self.web.port, process_request=self._request, max_size=MAX_MESSAGE,
+                    close_timeout=CLOSE_TIMEOUT, open_timeout=OPEN_TIMEOUT, ssl=self.web.tls(),
+                    server_header=None,
                 )  # fmt: skip
                 self.port = server.sockets[0].getsockname()[1]
                 self.ready.set()
@@ -327,6 +393,6 @@ def run_human(
     """The `tsf human` service: serve the page and the seats of `match` that have tokens, until a
     player has seen the match end and left, or `stop` is set."""
     stop = stop or threading.Event()
-    with Gateway(bus, seat_handler(match, SeatBook(tokens), stop), host, port) as gateway:
+    with Gateway(bus, seat_handler(match, SeatBook(tokens), stop), Web(host, port)) as gateway:
         on_ready(gateway)
         stop.wait()

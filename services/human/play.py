@@ -9,7 +9,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from services.human.core import SeatBook
-from services.human.gateway import Gateway, seat_handler
+from services.human.gateway import Gateway, Web, seat_handler
 from services.launch import HUMAN, MatchPlan, run_match
 from shared.bus import BusConfig, free_endpoint
 from shared.game import ROLES
@@ -38,6 +38,6 @@ def play_with_people(
     tokens = {role: secrets.token_urlsafe(9) for role in people}
     endpoint = free_endpoint()
     bus = BusConfig(listen=(endpoint,), low_latency=plan.low_latency)
-    with Gateway(bus, seat_handler(plan.match, SeatBook(tokens)), host, port) as gateway:
+    with Gateway(bus, seat_handler(plan.match, SeatBook(tokens)), Web(host, port)) as gateway:
         on_links(seat_links(gateway.url, tokens))
         return run_match(dataclasses.replace(plan, peers=(endpoint,)), on_state, stop=stop)

@@ -13,9 +13,13 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import math
+import os
+import queue
 import random
 import re
 import secrets
+import threading
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -159,6 +163,8 @@ class Participant:
     role: str
     order: list[int]
     attempts: list[dict] = field(default_factory=list)  # {session, trial, attempt, match, status, kills}
+    worker: str = ""  # the crowd-sourcing platform's worker id, if the link gave one
+    code: str = ""  # the completion code shown at the end (for the platform's payment)
 
     def done(self, session: int, trial: int) -> bool:
         return any(
@@ -166,33 +172,83 @@ class Participant:
         )
 
 
+class Journal:
+    """An append-only file of JSON lines, written by a thread of its own: the caller (the web
+    server's event loop) never waits for the disk, and each line is flushed and synced before the
+    next, so a crash loses at most the lines not yet written and never garbles earlier ones (a torn
+    last line is skipped when read)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.lines: queue.SimpleQueue[str | None] = queue.SimpleQueue()
+        self.thread = threading.Thread(target=self._write, daemon=True)
+        self.thread.start()
+
+    @staticmethod
+    def read(path: Path) -> list[dict]:
+        records = []
+        for line in path.read_text().splitlines() if path.exists() else []:
+            try:
+                records.append(json.loads(line))
+            except ValueError:  # a line cut short by a crash: only ever the last
+                break
+        return records
+
+    def append(self, record: dict) -> None:
+        self.lines.put(json.dumps(record, separators=(",", ":")))
+
+    def close(self) -> None:
+        """Write what is queued, then stop."""
+        self.lines.put(None)
+        self.thread.join()
+
+    def _write(self) -> None:
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        with self.path.open("a") as out:
+            while (line := self.lines.get()) is not None:
+                out.write(line + "\n")
+                out.flush()
+                os.fsync(out.fileno())
+
+
 class Study:
-    """Participants and their progress, kept in `<directory>/study.json` (rewritten whole after
-    each change, through a temporary file, so a crash never leaves half a file)."""
+    """Participants and their progress, kept in the journal `<directory>/study.jsonl`: a header,
+    then one line per new participant and one per change of an attempt. Read back on start, so a
+    restarted server resumes everyone; a trial that was running when it stopped is played again."""
 
     def __init__(self, config: StudyConfig, directory: str | Path) -> None:
         self.config, self.directory = config, Path(directory)
-        self.path = self.directory / "study.json"
+        self.path = self.directory / "study.jsonl"
         self.participants: dict[str, Participant] = {}
-        if self.path.exists():
-            saved = json.loads(self.path.read_text())
-            if saved["config"] != config.hash():
-                raise ValueError(f"{self.path} belongs to another version of study {saved['name']!r}")
-            self.participants = {p["id"]: Participant(**p) for p in saved["participants"]}
+        self.workers: dict[str, str] = {}  # worker id -> participant id
+        records = Journal.read(self.path)
+        if records and records[0].get("config") != config.hash():
+            raise ValueError(f"{self.path} belongs to another version of study {records[0].get('study')!r}")
+        for record in records[1:]:
+            if "participant" in record:
+                self._add(Participant(**record["participant"]))
+            else:
+                self._attempt(record["id"], record["attempt"])
+        self.journal = Journal(self.path)
+        if not records:
+            self.journal.append({"study": config.name, "config": config.hash()})
 
-    def save(self) -> None:
-        self.directory.mkdir(parents=True, exist_ok=True)
-        record = {
-            "name": self.config.name,
-            "config": self.config.hash(),
-            "participants": [dataclasses.asdict(p) for p in self.participants.values()],
-        }
-        temporary = self.path.with_suffix(".tmp")
-        temporary.write_text(json.dumps(record, indent=1))
-        temporary.replace(self.path)
+    def close(self) -> None:
+        self.journal.close()
 
-    def arrive(self) -> Participant:
-        """A new participant, who has consented: the next id, a role and an order of variants."""
+    def _add(self, participant: Participant) -> None:
+        self.participants[participant.id] = participant
+        if participant.worker:
+            self.workers[participant.worker] = participant.id
+
+    def _attempt(self, participant: str, entry: dict) -> None:
+        found = self.participants[participant]
+        same = ("session", "trial", "attempt")
+        found.attempts = [a for a in found.attempts if any(a[k] != entry[k] for k in same)] + [entry]
+
+    def arrive(self, worker: str = "") -> Participant:
+        """A new participant, who has consented: the next id, a role, an order of variants and a
+        completion code. A worker id already seen is the shell's to refuse (`workers`)."""
         index = len(self.participants)
         participant = Participant(
             f"P{index + 1:03d}",
@@ -200,9 +256,11 @@ class Study:
             index,
             assigned_role(self.config, index),
             variant_order(self.config, index),
+            worker=worker,
+            code=secrets.token_hex(4).upper(),
         )
-        self.participants[participant.id] = participant
-        self.save()
+        self._add(participant)
+        self.journal.append({"participant": dataclasses.asdict(participant)})
         return participant
 
     def resume(self, participant: str, key: str) -> Participant | None:
@@ -232,10 +290,8 @@ class Study:
         goes beside the trial's recording."""
         participant = self.participants[trial.participant]
         entry = {"session": trial.session, "trial": trial.trial, "attempt": trial.attempt}
-        participant.attempts = [a for a in participant.attempts if {k: a[k] for k in entry} != entry] + [
-            {**entry, "match": trial.match, "status": status, "kills": kills}
-        ]
-        self.save()
+        self._attempt(participant.id, {**entry, "match": trial.match, "status": status, "kills": kills})
+        self.journal.append({"id": participant.id, "attempt": participant.attempts[-1]})
         return {
             "study": self.config.name,
             "config": self.config.hash(),
@@ -249,3 +305,38 @@ class Study:
             "status": status,
             "kills": kills,
         }
+
+
+class Admission:
+    """At most `cap` matches at once; the trials that must wait are served in arrival order.
+
+    A trial asks with `start(match)`: True if it may start now (it then holds a slot until `end`),
+    else it joins the queue, and `place(match)` says how many wait before it, itself included."""
+
+    def __init__(self, cap: int) -> None:
+        self.cap = cap
+        self.running: set[str] = set()
+        self.waiting: list[str] = []
+
+    def start(self, match: str) -> bool:
+        if match not in self.waiting:
+            self.waiting.append(match)
+        if self.waiting.index(match) < self.cap - len(self.running):
+            self.waiting.remove(match)
+            self.running.add(match)
+            return True
+        return False
+
+    def place(self, match: str) -> int:
+        return self.waiting.index(match) + 1 - max(0, self.cap - len(self.running))
+
+    def end(self, match: str) -> None:
+        """The match has ended, or the trial gave up waiting."""
+        self.running.discard(match)
+        if match in self.waiting:
+            self.waiting.remove(match)
+
+    def wait(self, place: int, match_seconds: float) -> float:
+        """About how long the trial at `place` waits: every `cap` matches that end free a slot
+        for the next `cap` in the queue (a running match is half over, on average)."""
+        return (math.ceil(place / self.cap) - 0.5) * match_seconds

@@ -11,7 +11,7 @@ import pytest
 
 from services.adapter.core import AdapterConfig
 from services.agent.library import keys as library_keys
-from services.study.core import Study, StudyConfig, Variant, assigned_role, variant_order
+from services.study.core import Admission, Study, StudyConfig, Variant, assigned_role, variant_order
 
 CONFIGS = Path(__file__).parent / "configs"
 
@@ -99,6 +99,7 @@ def test_progress_resume_and_drop_outs(tmp_path: Path) -> None:
     assert sidecar["participant"] == "P001" and sidecar["variant"] == again.variant.name
     assert sidecar["role"] == first.role and sidecar["session"] == 1 and sidecar["kills"] == 3
 
+    study.close()
     reopened = Study(config(), tmp_path)  # the server restarts: progress is kept
     back = reopened.resume("P001", first.key)
     assert (
@@ -111,13 +112,40 @@ def test_progress_resume_and_drop_outs(tmp_path: Path) -> None:
         assert (current.session, current.trial, current.agent) == (session, number, f"Agent {session}")
         reopened.record(current, "done", kills=0)
     assert reopened.next_trial(back) is None
-    statuses = [
-        a["status"] for a in json.loads((tmp_path / "study.json").read_text())["participants"][0]["attempts"]
-    ]
-    assert statuses == ["dropped"] + ["done"] * 6
+    reopened.close()
+    assert [a["status"] for a in Study(config(), tmp_path).participants["P001"].attempts] == (
+        ["dropped"] + ["done"] * 6
+    )
+    lines = (tmp_path / "study.jsonl").read_text().splitlines()  # appended, one line per change
+    assert len(lines) == 1 + 2 + 3 + 5 and json.loads(lines[0])["config"] == config().hash()
+
+
+def test_a_line_cut_short_by_a_crash_is_skipped(tmp_path: Path) -> None:
+    study = Study(config(), tmp_path)
+    first = study.arrive()
+    study.close()
+    with (tmp_path / "study.jsonl").open("a") as journal:
+        journal.write('{"participant": {"id": "P0')
+    back = Study(config(), tmp_path)
+    assert list(back.participants) == ["P001"] and back.resume("P001", first.key) is not None
+    back.close()
+
+
+def test_admission_serves_waiting_trials_in_order() -> None:
+    slots = Admission(2)
+    assert slots.start("a") and slots.start("b") and not slots.start("c") and not slots.start("d")
+    assert (slots.place("c"), slots.place("d")) == (1, 2)
+    assert slots.wait(1, 60) == 30 and slots.wait(3, 60) == 90
+    slots.end("a")
+    assert not slots.start("d"), "c came first"
+    assert slots.start("c") and not slots.start("d") and slots.place("d") == 1
+    slots.end("d")  # gave up waiting
+    assert slots.waiting == [] and slots.running == {"b", "c"}
 
 
 def test_a_changed_study_does_not_reuse_another_versions_file(tmp_path: Path) -> None:
-    Study(config(), tmp_path).arrive()
+    study = Study(config(), tmp_path)
+    study.arrive()
+    study.close()
     with pytest.raises(ValueError, match="another version"):
         Study(config(trials=3), tmp_path)

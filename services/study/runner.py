@@ -2,10 +2,19 @@
 across all their trials; each trial is a match of its own (services/launch.run_match: sim, agent,
 adapter for adaptive variants, recorder), the participant's seat bridged from this process.
 
+Many participants play at once, each match on its own: its sim is the match's zenoh router on a
+loopback port of its own, its processes are clients of that sim alone, and this server opens a
+client session to it for the trial only (and closes it off the event loop). At most
+`max_matches` run at once; the other trials wait in a queue whose place and estimated wait the
+participant sees. A trial is done only if its recording is complete (read back and checked); a
+trial whose match fails to start, runs past its time or leaves an incomplete recording is marked
+`failed` and offered again as a new attempt.
+
 Study messages (down): `consent` (text), `participant` (id and resume key, kept by the browser),
-`trial` (session, trial, role, the agent's label; what to read first), then the gateway's
-`state`/`end` frames, and at last `done` (the end text) or `problem`. Up: `hello` (optionally
-with the participant id and key to resume), `consent`, `ready`, `keys`.
+`trial` (session, trial, role, the agent's label; what to read first), `queue` (place, seconds
+to wait, while the trial waits for a free match), then the gateway's `state`/`end` frames, and at
+last `done` (the end text) or `problem`. Up: `hello` (optionally with the participant id and key
+to resume), `consent`, `ready`, `keys`.
 
 Each trial's metadata goes into a sidecar `<match>.study.json` beside its recording, rather than
 onto the bus: the participant id is nobody's business but the study's (bus traffic may cross a lab
@@ -17,25 +26,53 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import hmac
 import json
 import logging
 import threading
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import websockets
 import zenoh
 from websockets.asyncio.server import ServerConnection
 
-from services.human.core import BadInput, Controls
-from services.human.gateway import Bridge, Gateway, Handler, Outbox, receive_first, refuse
-from services.launch import HUMAN, MatchPlan, run_match
-from services.study.core import Participant, Study, StudyConfig, Trial
-from shared.bus import BusConfig, free_endpoint
+from services.human.core import BadInput, Controls, RateLimit
+from services.human.gateway import Bridge, Gateway, Handler, Outbox, Web, receive_first, refuse
+from services.launch import HUMAN, MatchPlan, match_buses, run_match
+from services.recorder.recording import load
+from services.recorder.service import recording_path
+from services.study.core import Admission, Participant, Study, StudyConfig, Trial
+from shared import keys
+from shared.bus import free_endpoint
 from shared.game import other
 
 log = logging.getLogger("tsf.study")
 PROBLEM = "The game could not be started. Please tell the experimenter."
+RETRIES = 3  # failed attempts in a row before the participant is told of a problem
+READ_TIMEOUT = 900.0  # seconds a participant may take to read the consent text or the instructions
+START_UP = 20.0  # seconds a match takes to start, for the estimated wait
+DRAIN = 60.0  # seconds the stopping server waits for its matches to end and be written down
+WARM_UP = 60.0  # seconds to wait for a match's processes before offering its trial anyway
+ARRIVAL_BURST = 20  # participant ids issued at once, beyond the rate
+BUSY = "Too many people are starting right now. Please try again in a minute."
+TAKEN = "This worker id has already taken part in this study."
+
+
+@dataclass(frozen=True)
+class Serving:
+    """How the server runs the study (not part of the protocol: changing it keeps the journal)."""
+
+    max_matches: int = 4  # matches at once; more trials wait in a queue
+    trial_timeout: float = 120.0  # seconds a match may take beyond its length, start-up included
+    low_latency: bool = True  # zenoh's low-latency transport within each match
+    test_token: str = ""  # a hello with this `test` token may ask for the observation values (stand-ins)
+    arrivals: float = 1.0  # new participant ids a second, on average (bursts of ARRIVAL_BURST)
+    starting: int = 2  # matches starting up at once (until their sim listens)
+
+
+SERVING, WEB = Serving(), Web()
 
 
 class Socket:
@@ -69,18 +106,23 @@ class Socket:
         with contextlib.suppress(websockets.ConnectionClosed):
             await self.outbox.pump(self.ws)
 
-    async def wait_for(self, kind: str) -> bool:
-        """Wait for the participant's `kind` message; False if the socket closed first."""
-        while True:
-            event = asyncio.ensure_future(self.events.get())
-            gone = asyncio.ensure_future(self.gone.wait())
-            await asyncio.wait({event, gone}, return_when=asyncio.FIRST_COMPLETED)
-            gone.cancel()
-            if not event.done():
-                event.cancel()
-                return False
-            if event.result() == kind:
-                return True
+    async def wait_for(self, kind: str, timeout: float = READ_TIMEOUT) -> bool:
+        """Wait for the participant's `kind` message; False if the socket closed first or it took
+        longer than `timeout` seconds (the socket is then closed: an idle socket holds nothing)."""
+        try:
+            async with asyncio.timeout(timeout):
+                while True:
+                    event = asyncio.ensure_future(self.events.get())
+                    await first(event, self.gone.wait())
+                    if not event.done():
+                        event.cancel()
+                        return False
+                    if event.result() == kind:
+                        return True
+        except TimeoutError:
+            await self.ws.close(1008, "idle for too long")
+            self.gone.set()
+            return False
 
     async def close(self) -> None:
         """Let the outbox empty (what was just offered is queued after one turn of the loop), then close."""
@@ -92,67 +134,270 @@ class Socket:
             task.cancel()
 
 
-def study_handler(
-    study: Study, endpoint: str, low_latency: bool = True, stop: threading.Event | None = None
-) -> Handler:
-    """Serve participants: consent or resume, then their trials one by one. `stop` ends a running
-    trial's match and its processes (run_match)."""
+async def first(*waits: Awaitable) -> None:
+    """Return when the first of `waits` is done; pending coroutines are cancelled, futures given
+    are left running."""
+    futures = [asyncio.ensure_future(w) for w in waits]
+    try:
+        await asyncio.wait(futures, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        for wait, future in zip(waits, futures, strict=True):
+            if future is not wait:
+                future.cancel()
+
+
+def run_trial(plan: MatchPlan, role: str, stop: threading.Event) -> tuple[int | None, list[str]]:
+    """Run a trial's match and read its recording back: (kills, problems), no problems for a
+    complete recording with the participant's seat played from this server. The kills are the
+    recording's, when it has a summary (a stopped match's sim still sends one)."""
+    problems = []
+    try:
+        run_match(plan, stop=stop)
+    except Exception as error:  # noqa: BLE001 - any failure fails the trial, never the server
+        problems.append(str(error) or type(error).__name__)
+    try:
+        recording = load(recording_path(plan.directory, plan.match))
+    except (OSError, ValueError) as error:  # none, or not a recording
+        return None, [*problems, f"no recording: {error}"]
+    problems += recording.problems()
+    if not any(a.role == role and a.sender == f"human/{role}" for _, a in recording.actions):
+        problems.append(f"no action of the participant's {role} seat was recorded")
+    return (recording.summary.kills if recording.summary else None), problems
+
+
+def wait_alive(z: zenoh.Session, tokens: list[str], timeout: float) -> bool:
+    """Wait until every one of the liveliness `tokens` is declared (the match's processes are up);
+    False if some are still missing after `timeout` seconds. Declares and undeclares its
+    subscribers on the calling thread, never on zenoh's."""
+    present: set[str] = set()
+    changed = threading.Condition()
+
+    def on_alive(sample: zenoh.Sample) -> None:
+        with changed:
+            (present.add if sample.kind == zenoh.SampleKind.PUT else present.discard)(str(sample.key_expr))
+            changed.notify_all()
+
+    with contextlib.ExitStack() as stack:
+        for token in tokens:
+            stack.enter_context(z.liveliness().declare_subscriber(token, on_alive, history=True))
+        with changed:
+            return changed.wait_for(lambda: present >= set(tokens), timeout)
+
+
+class Matches:
+    """The running matches: slots (Admission), a stop per match, and each participant's one match."""
+
+    def __init__(self, cap: int) -> None:
+        self.admission = Admission(cap)
+        self.stops: dict[str, threading.Event] = {}  # match -> its stop
+        self.of: dict[str, tuple[asyncio.Future, threading.Event]] = {}  # participant -> their match
+        self.running: set[asyncio.Future] = set()
+        self.lock = threading.Lock()  # stops is read by stop_all from another thread
+        self.closed = False  # set by stop_all: a match added later is stopped at once
+        self.changed = asyncio.Event()  # replaced after each change; waiters hold the old one
+
+    def notify(self) -> None:
+        self.changed.set()
+        self.changed = asyncio.Event()
+
+    def add(self, trial: Trial, running: asyncio.Future, stop: threading.Event) -> None:
+        with self.lock:
+            self.stops[trial.match] = stop
+            if self.closed:
+                stop.set()
+        self.of[trial.participant] = (running, stop)
+        self.running.add(running)
+
+        def ended(_: asyncio.Future) -> None:
+            self.running.discard(running)
+            with self.lock:
+                del self.stops[trial.match]
+            if self.of.get(trial.participant, (None,))[0] is running:
+                del self.of[trial.participant]
+            self.admission.end(trial.match)
+            self.notify()
+
+        running.add_done_callback(ended)
+
+    async def end_previous(self, trial: Trial) -> None:
+        """One match per participant: a cut match still running out is ended first."""
+        if trial.participant in self.of:
+            running, stop = self.of[trial.participant]
+            stop.set()
+            await asyncio.wait({running})
+
+    async def drained(self) -> None:
+        """Every match has ended and been written down (a cut one's sidecar comes last)."""
+        while self.running:
+            await asyncio.wait(set(self.running))
+            await asyncio.sleep(0)  # the done callbacks run
+
+    def stop_all(self) -> None:
+        """From any thread: end every running match and its processes."""
+        with self.lock:
+            self.closed = True
+            for stop in self.stops.values():
+                stop.set()
+
+
+def study_handler(study: Study, serving: Serving, matches: Matches) -> Handler:
+    """Serve participants: consent or resume, then their trials one by one, each in a free match."""
     config = study.config
     recordings = study.directory / "recordings"
     playing: set[str] = set()
+    match_seconds = config.trial_seconds + START_UP
+    arrivals = RateLimit(serving.arrivals, ARRIVAL_BURST)
+    starting = asyncio.Semaphore(serving.starting)
 
     async def admit(socket: Socket, hello: dict) -> Participant | None:
+        """The participant who resumes (id and key), or a new one once they consent: ids are
+        issued only then, at a limited rate, and once per crowd-sourcing worker id."""
         if "participant" in hello:
             participant = study.resume(hello["participant"], hello.get("key", ""))
             if participant is None:
                 await refuse(socket.ws, "unknown participant or resume key")
             return participant
+        worker = hello.get("worker", "")
+        if worker in study.workers:
+            await refuse(socket.ws, TAKEN)
+            return None
         socket.send({"type": "consent", "text": config.consent})
         if not await socket.wait_for("consent"):
             return None
-        participant = study.arrive()
+        if worker in study.workers:  # a second window of the same worker consented first
+            await refuse(socket.ws, TAKEN)
+            return None
+        if not arrivals.allow():
+            await refuse(socket.ws, BUSY)
+            return None
+        participant = study.arrive(worker)
         log.info("participant %s arrives and plays the %s", participant.id, participant.role)
         socket.send({"type": "participant", "participant": participant.id, "key": participant.key})
         return participant
 
-    async def play(socket: Socket, z: zenoh.Session, trial: Trial, obs: bool) -> dict | None:
-        """Run one trial with the participant in their seat; returns the sidecar, or None if the
-        participant left (the match then runs out with their ship idle, and is marked dropped)."""
-        seats = {trial.role: HUMAN, **trial.variant.plan(other(trial.role), trial.seed)}
-        plan = MatchPlan(
-            trial.match, trial.seed, config.frames, directory=recordings, peers=(endpoint,),
-            low_latency=low_latency, **seats,
-        )  # fmt: skip
-        bridge = Bridge(z, trial.match, trial.role, socket.controls, socket.outbox, obs)
-        bridge.live()
-        study.record(trial, "running")
-        running = asyncio.ensure_future(asyncio.to_thread(run_match, plan, stop=stop))
-        gone = asyncio.ensure_future(socket.gone.wait())
-        await asyncio.wait({running, gone}, return_when=asyncio.FIRST_COMPLETED)
-        gone.cancel()
-        bridge.close()
+    async def slot(socket: Socket, match: str) -> bool:
+        """Wait for a free match, telling the participant their place; False if they leave."""
+        told = None
+        while not matches.admission.start(match):
+            place = matches.admission.place(match)
+            if place != told:
+                wait = round(matches.admission.wait(place, match_seconds))
+                socket.send({"type": "queue", "place": place, "wait": wait})
+                told = place
+            await first(matches.changed.wait(), socket.gone.wait())
+            if socket.gone.is_set():
+                matches.admission.end(match)
+                matches.notify()
+                return False
+        return True
 
-        dropped = not running.done()
+    async def bridge(socket: Socket, trial: Trial, endpoint: str, obs: bool) -> Bridge | None:
+        """The participant's seat in the trial's match, from a session of its own (opened when the
+        sim listens, closed by `leave`), once every process of the match is up (then a Ready
+        starts the game at once); None if the sim never listened."""
+        try:
+            z = await asyncio.to_thread(zenoh.open, match_buses(endpoint, serving.low_latency)[1].to_zenoh())
+        except zenoh.ZError as error:
+            log.error("trial %s: no session to its sim: %s", trial.match, error)
+            return None
+        agent = other(trial.role)
+        tokens = [keys.alive(trial.match, "sim"), keys.alive(trial.match, "recorder")]
+        tokens += [keys.alive(trial.match, "agent", agent)]
+        tokens += [keys.alive(trial.match, "adapter")] if trial.variant.adaptive(agent, 0) else []
+        if not await asyncio.to_thread(wait_alive, z, tokens, WARM_UP):
+            log.warning("trial %s: not every process of its match is up after %g s", trial.match, WARM_UP)
+        return Bridge(z, trial.match, trial.role, socket.controls, socket.outbox, obs)
+
+    def leave(seat: Bridge | None) -> None:
+        if seat is not None:
+            seat.close()
+            threading.Thread(target=seat.z.close, daemon=True).start()  # never on the loop nor a callback
+
+    async def play(socket: Socket, trial: Trial, obs: bool, offer: dict) -> dict | None:
+        """Run one trial: wait for a free match, start it (its processes start while the participant
+        reads the `offer`, and its sim waits for them: a warm start), then play it from their Ready
+        for at most its length and `trial_timeout`. Returns the sidecar, or None if the participant
+        left (a match they started runs out with their ship idle; one they had not is ended;
+        either is marked dropped)."""
+        await matches.end_previous(trial)
+        if not await slot(socket, trial.match):
+            return None
+        seats = {trial.role: HUMAN, **trial.variant.plan(other(trial.role), trial.seed)}
+        endpoint = free_endpoint()
+        limit = config.trial_seconds + serving.trial_timeout
+        plan = MatchPlan(
+            trial.match, trial.seed, config.frames, directory=recordings, endpoint=endpoint,
+            low_latency=serving.low_latency, wait_players=READ_TIMEOUT + limit, wait_services=30.0,
+            timeout=READ_TIMEOUT + limit, **seats,
+        )  # fmt: skip
+        study.record(trial, "running")
+        stop = threading.Event()
+        async with starting:  # start-up is CPU-bound: a burst of arrivals starts a few at a time
+            running = asyncio.ensure_future(asyncio.to_thread(run_trial, plan, trial.role, stop))
+            matches.add(trial, running, stop)
+            seat = await bridge(socket, trial, endpoint, obs)
+        ready = False
+        if seat is not None:  # else the match cannot start: it fails at once
+            socket.send(offer)
+            ready = await socket.wait_for("ready")
+        if not ready:
+            stop.set()  # not started (or cannot be): ended at once
+        else:
+            seat.live()
+            try:
+                async with asyncio.timeout(limit):
+                    await first(running, socket.gone.wait())
+            except TimeoutError:
+                log.error("trial %s ran past its %g s: ended", trial.match, limit)
+                stop.set()
+                await asyncio.wait({running})
+        leave(seat)
+        dropped = socket.gone.is_set() and not (ready and running.done())
 
         def finish(done: asyncio.Future) -> dict:
-            failed = done.exception()
-            if failed is not None:
-                log.error("trial %s failed: %s", trial.match, failed)
-            status = "failed" if failed else "dropped" if dropped else "done"
-            kills = None if failed else done.result()[0].kills
+            kills, problems = (None, ["cancelled"]) if done.cancelled() else done.result()
+            status = "dropped" if dropped else "failed" if problems else "done"
+            if problems and not dropped:
+                log.error("trial %s failed: %s", trial.match, "; ".join(problems))
             sidecar = study.record(trial, status, kills)
             recordings.mkdir(parents=True, exist_ok=True)
             (recordings / f"{trial.match}.study.json").write_text(json.dumps(sidecar, indent=1))
             log.info("%s: %s, %s kills", trial.match, status, kills)
             return sidecar
 
-        if dropped:  # resumable at once; the sidecar follows when the match has run out
+        if dropped:  # resumable at once; the sidecar follows when the match has ended
             study.record(trial, "dropped")
             running.add_done_callback(finish)
             return None
+        await asyncio.wait({running})  # ended by the stop above, if not over
         return finish(running)
 
-    async def handle(ws: ServerConnection, z: zenoh.Session) -> None:
+    async def trials(socket: Socket, participant: Participant, obs: bool) -> None:
+        """The participant's remaining trials; a failed one is offered again, RETRIES times."""
+        last, failures = None, 0
+        while (trial := study.next_trial(participant)) is not None:
+            offer = {
+                "type": "trial", "role": trial.role, "agent": trial.agent, "last": last,
+                "session": trial.session, "sessions": len(config.variants),
+                "trial": trial.trial, "trials": config.trials, "again": failures > 0,
+                "instructions": config.instructions.get(trial.role, ""),
+            }  # fmt: skip
+            sidecar = await play(socket, trial, obs, offer)
+            if sidecar is None:
+                return
+            if sidecar["status"] == "failed":
+                failures += 1
+                if failures < RETRIES:
+                    continue
+                socket.send({"type": "problem", "text": PROBLEM})
+                await socket.close()
+                return
+            last, failures = sidecar["kills"], 0
+        socket.send({"type": "done", "text": config.end, "code": participant.code})
+        log.info("participant %s is done", participant.id)
+        await socket.close()
+
+    async def handle(ws: ServerConnection, z: zenoh.Session | None) -> None:
         hello = await receive_first(ws, ("hello",))
         if hello is None:
             return
@@ -167,29 +412,8 @@ def study_handler(
                 participant = None
                 return
             playing.add(participant.id)
-            last = None
-            while (trial := study.next_trial(participant)) is not None:
-                socket.send(
-                    {
-                        "type": "trial", "role": trial.role, "agent": trial.agent, "last": last,
-                        "session": trial.session, "sessions": len(config.variants),
-                        "trial": trial.trial, "trials": config.trials,
-                        "instructions": config.instructions.get(trial.role, ""),
-                    }
-                )  # fmt: skip
-                if not await socket.wait_for("ready"):
-                    return
-                sidecar = await play(socket, z, trial, hello.get("obs", False))
-                if sidecar is None:
-                    return
-                if sidecar["status"] == "failed":
-                    socket.send({"type": "problem", "text": PROBLEM})
-                    await socket.close()
-                    return
-                last = sidecar["kills"]
-            socket.send({"type": "done", "text": config.end})
-            log.info("participant %s is done", participant.id)
-            await socket.close()
+            test = bool(serving.test_token) and hmac.compare_digest(hello.get("test", ""), serving.test_token)
+            await trials(socket, participant, hello.get("obs", False) and test)
         finally:
             if participant is not None:
                 playing.discard(participant.id)
@@ -202,18 +426,23 @@ def study_handler(
 def run_study(
     config: StudyConfig,
     directory: str | Path,
-    host: str = "127.0.0.1",
-    port: int = 8000,
+    web: Web = WEB,
     stop: threading.Event | None = None,
     on_ready: Callable[[Gateway], None] = lambda gateway: None,
-    low_latency: bool = True,
+    serving: Serving = SERVING,
 ) -> Study:
-    """Serve the study until `stop` is set; participants' progress lives in `directory`."""
+    """Serve the study until `stop` is set, then end every match it started; participants'
+    progress lives in `directory` (a restarted server resumes everyone)."""
     stop = stop or threading.Event()
     study = Study(config, directory)
-    endpoint = free_endpoint()
-    bus = BusConfig(listen=(endpoint,), low_latency=low_latency)
-    with Gateway(bus, study_handler(study, endpoint, low_latency, stop), host, port) as gateway:
-        on_ready(gateway)
-        stop.wait()
+    matches = Matches(serving.max_matches)
+    try:
+        with Gateway(None, study_handler(study, serving, matches), web) as gateway:
+            on_ready(gateway)
+            stop.wait()
+            matches.stop_all()
+            with contextlib.suppress(TimeoutError):  # a match's thread that hangs: leave it to exit
+                asyncio.run_coroutine_threadsafe(matches.drained(), gateway.loop).result(DRAIN)
+    finally:
+        study.close()
     return study

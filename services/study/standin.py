@@ -5,6 +5,7 @@ without anyone at a keyboard (tests, and dry runs of a new study config)."""
 from __future__ import annotations
 
 import json
+import time
 from dataclasses import dataclass, field
 
 import websockets
@@ -26,8 +27,13 @@ class StandInReport:
     states: int = 0
     consent: str = ""  # the consent text shown
     end: str = ""  # the end screen's text
+    code: str = ""  # the completion code shown at the end
     done: bool = False
     refused: str = ""
+    queued: int = 0  # the furthest place in the queue it was shown
+    first_frames: list[float] = field(default_factory=list)  # seconds from each Ready to its first frame
+    waits: list[float] = field(default_factory=list)  # seconds each trial waited in the queue (if it did)
+    again: int = 0  # trials offered again after a failed attempt
 
 
 async def stand_in(
@@ -36,18 +42,24 @@ async def stand_in(
     resume: tuple[str, str] | None = None,
     leave_after: int = 0,
     seed: int = 0,
+    test: str = "",
+    worker: str = "",
+    ssl: object = None,
 ) -> StandInReport:
     """Take part in the study served at `url` (the page's address), playing each role with a policy
     key (default: the scripted circle bait and mirror shooter). `resume` = (participant, key) comes
     back as an earlier participant; `leave_after` > 0 drops the connection after that many frames,
-    as a participant who walks away."""
+    as a participant who walks away. `test` is the server's test token (Serving.test_token),
+    without which it gets no observation values to play from; `worker` a crowd-sourcing worker
+    id; `ssl` an SSLContext for a wss:// server."""
     policies = policies or {"bait": "circle", "shooter": "mirror"}
     report = StandInReport()
-    hello: dict = {"type": "hello", "obs": True}
+    hello: dict = {"type": "hello", "obs": True, **({"test": test} if test else {})}
+    hello.update({"worker": worker} if worker else {})
     if resume:
         hello.update(participant=resume[0], key=resume[1])
-    policy, held = None, None
-    async with websockets.connect(url.replace("http", "ws", 1).rstrip("/") + "/ws") as ws:
+    policy, held, ready, queued = None, None, None, 0.0
+    async with websockets.connect(url.replace("http", "ws", 1).rstrip("/") + "/ws", ssl=ssl) as ws:
         await ws.send(json.dumps(hello))
         async for text in ws:
             message = json.loads(text)
@@ -57,13 +69,26 @@ async def stand_in(
                 await ws.send(json.dumps({"type": "consent"}))
             elif kind == "participant":
                 report.participant, report.key = message["participant"], message["key"]
+            elif kind == "queue":
+                report.queued = max(report.queued, message["place"])
+                queued = queued or time.monotonic()
             elif kind == "trial":
+                if queued:
+                    report.waits.append(time.monotonic() - queued)
+                    queued = 0.0
+                report.again += message.get("again", False)
                 report.role = message["role"]
                 report.agents.append(message["agent"])
                 policy = policy_for(policies[report.role], report.role)
                 policy.reset(seed + len(report.agents))
                 await ws.send(json.dumps({"type": "ready"}))
-            elif kind == "state" and policy is not None and "obs" in message:
+                ready = time.monotonic()
+            elif kind == "state":
+                if ready is not None:
+                    report.first_frames.append(time.monotonic() - ready)
+                    ready = None
+                if policy is None or "obs" not in message:
+                    continue
                 report.states += 1
                 if leave_after and report.states >= leave_after:
                     return report
@@ -74,7 +99,7 @@ async def stand_in(
             elif kind == "end":
                 report.kills.append(message["kills"])
             elif kind == "done":
-                report.done, report.end = True, message["text"]
+                report.done, report.end, report.code = True, message["text"], message.get("code", "")
                 return report
             elif kind in ("refused", "problem"):
                 report.refused = message.get("reason") or message.get("text", "")

@@ -84,7 +84,7 @@ const handlers = {
   refused(m) {
     tsf.phase = "refused";
     document.body.classList.add("refused");
-    show("Seat refused", m.reason);
+    show("Not possible", m.reason);
   },
   setup(m) {
     tsf.geometry = m;
@@ -122,9 +122,15 @@ const handlers = {
     tsf.phase = "instructions";
     const last = m.last === null || m.last === undefined ? "" :
       `Last game: your team destroyed ${m.last} fortress${m.last === 1 ? "" : "es"}.\n\n`;
+    const again = m.again ? "The last game could not be completed; please play it again.\n\n" : "";
     const intro = m.trial === 1 ? instructions(m.role, m.instructions) + "\n\n" : "";
     show(`Session ${m.session} of ${m.sessions}: game ${m.trial} of ${m.trials}`,
-      `${last}${intro}Your partner in this session: ${m.agent}.`, "Start", ready);
+      `${again}${last}${intro}Your partner in this session: ${m.agent}.`, "Start", ready);
+  },
+  queue(m) {
+    const minutes = Math.max(1, Math.round(m.wait / 60));
+    show("Please wait", `All game places are taken. You are number ${m.place} in the queue ` +
+      `(about ${minutes} minute${minutes === 1 ? "" : "s"}). Your game starts by itself.`);
   },
   problem(m) {
     tsf.phase = "done";
@@ -133,7 +139,7 @@ const handlers = {
   done(m) {
     tsf.phase = "done";
     localStorage.removeItem("tsf-participant");
-    show("The end", m.text);
+    show("The end", m.code ? `${m.text}\n\nYour completion code: ${m.code}` : m.text);
   },
 };
 
@@ -148,8 +154,10 @@ function connect() {
     } else {
       const saved = JSON.parse(localStorage.getItem("tsf-participant") || "{}");
       const participant = params.get("participant") || saved.participant;
+      // A crowd-sourcing platform's worker id, under the names the common ones use in the link.
+      const worker = params.get("worker") || params.get("workerId") || params.get("PROLIFIC_PID");
       send(participant ? { type: "hello", participant, key: params.get("key") || saved.key || "-" } :
-        { type: "hello" });
+        worker ? { type: "hello", worker: worker.slice(0, 64) } : { type: "hello" });
     }
   };
   socket.onmessage = (event) => {

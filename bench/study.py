@@ -1,0 +1,179 @@
+"""How many participants one machine serves at once, how fast their games start, and what a crowd
+arriving at random gets.
+
+Stand-ins (services/study/standin.py) take part in a study served here (`run_study`), over the
+page's WebSocket protocol, each playing `--trials` trials of `--trial-seconds`.
+
+Load: for each count of participants, all arrive together with a match for each; reported are
+the trials done of all (done = the recording read back complete), the worst tick jitter p99 of
+the matches' sims, Ready-to-first-frame p50/p99 over all trials, and what one participant costs:
+CPU seconds of the match processes per second of play, and the resident memory of one match's
+processes (peak over the run, divided by the matches then running). The most participants served
+is the largest count with every trial done and tick jitter p99 <= 5 ms.
+
+Arrivals (`--arrivals N --over S`): N participants arrive at random times over S seconds with at
+most `--max-matches` matches at once: completed (goal N), lost (goal 0) and the queue wait
+p50/p99 of the trials that waited.
+
+    nice .venv/bin/python bench/study.py [--counts 1 2 4 8] [--trial-seconds 10]
+    nice .venv/bin/python bench/study.py --arrivals 20 --over 120 --trial-seconds 5 --max-matches 4
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import random
+import resource
+import statistics
+import tempfile
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+from services.human.gateway import Web
+from services.recorder.recording import load
+from services.study.core import StudyConfig, Variant
+from services.study.runner import Serving, run_study
+from services.study.standin import StandInReport, stand_in
+
+TOKEN = "bench"
+JITTER_MS = 5.0
+
+
+def quantile(values: list[float], q: int) -> float:
+    return statistics.quantiles(values, n=100, method="inclusive")[q - 1] if len(values) > 1 else values[0]
+
+
+class Memory:
+    """Samples the resident memory of this process's children (the match processes) twice a second."""
+
+    def __init__(self) -> None:
+        self.peak_per_match, self.stop = 0.0, threading.Event()
+        self.thread = threading.Thread(target=self._sample, daemon=True)
+        self.thread.start()
+
+    def _sample(self) -> None:
+        page = os.sysconf("SC_PAGE_SIZE")
+        while not self.stop.wait(0.5):
+            total, sims = 0, 0
+            for stat in Path("/proc").glob("[0-9]*/stat"):
+                try:
+                    fields = stat.read_text().rsplit(")", 1)[1].split()
+                    if int(fields[1]) != os.getpid():
+                        continue
+                    total += int((stat.parent / "statm").read_text().split()[1]) * page
+                    sims += b" sim " in (stat.parent / "cmdline").read_bytes().replace(b"\0", b" ")
+                except (OSError, IndexError, ValueError):
+                    continue
+            if sims:
+                self.peak_per_match = max(self.peak_per_match, total / sims)
+
+
+def serve(
+    config: StudyConfig, serving: Serving, arrivals: list[float]
+) -> tuple[list[StandInReport], list, list]:
+    """Run the study with one stand-in arriving at each of `arrivals` (seconds from now): their
+    reports, every attempt, and the tick jitter p99 of each match done."""
+    stop, urls = threading.Event(), []
+    with tempfile.TemporaryDirectory() as directory, ThreadPoolExecutor(1) as pool:
+        server = pool.submit(
+            run_study, config, directory, Web(port=0, per_address=0), stop, urls.append, serving
+        )
+        while not urls:
+            if server.done():
+                server.result()
+            time.sleep(0.01)
+        url = urls[0].url
+
+        async def arrive(at: float, seed: int) -> StandInReport:
+            await asyncio.sleep(at)
+            return await stand_in(url, seed=seed, test=TOKEN)
+
+        async def crowd() -> list[StandInReport]:
+            return await asyncio.gather(*(arrive(at, i) for i, at in enumerate(arrivals)))
+
+        try:
+            reports = asyncio.run(crowd())
+        finally:
+            stop.set()
+        study = server.result()
+        attempts = [(a, Path(directory)) for p in study.participants.values() for a in p.attempts]
+        jitters = [
+            load(d / "recordings" / f"{a['match']}.tsflog").summary.timing.get("tick_jitter_ms_p99", 0.0)
+            for a, d in attempts
+            if a["status"] == "done"
+        ]
+    return reports, [a for a, _ in attempts], jitters
+
+
+def load_test(counts: list[int], trials: int, seconds: float) -> None:
+    config = StudyConfig("bench", (Variant("s", "B5", "S5"),), trials=trials, trial_seconds=seconds)
+    served = 0
+    print(f"load: everyone arrives at once, {trials} trial(s) of {seconds:g} s each, a match for each")
+    for count in counts:
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        memory = Memory()
+        reports, attempts, jitters = serve(
+            config, Serving(max_matches=count, test_token=TOKEN), [0.0] * count
+        )
+        memory.stop.set()
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+        done = sum(a["status"] == "done" for a in attempts)
+        first = [f for r in reports for f in r.first_frames]
+        jitter = max(jitters, default=float("nan"))
+        complete = done == count * trials and all(r.done for r in reports)
+        if complete and jitter <= JITTER_MS:
+            served = max(served, count)
+        print(
+            f"  {count:3d} participants: trials done {done}/{count * trials} ({len(attempts)} attempts); "
+            f"tick jitter p99 worst {jitter:.1f} ms; Ready-to-first-frame p50 {quantile(first, 50):.3f} s, "
+            f"p99 {quantile(first, 99):.3f} s; per participant {cpu / (count * trials * seconds):.2f} CPU s "
+            f"per s of play, {memory.peak_per_match / 2**20:.0f} MiB"
+        )
+    print(f"most participants served with every trial done and tick jitter p99 <= {JITTER_MS:g} ms: {served}")
+
+
+def arrival_test(n: int, over: float, seconds: float, cap: int, seed: int) -> None:
+    config = StudyConfig("arrive", (Variant("s", "B5", "S5"),), trials=1, trial_seconds=seconds)
+    arrivals = sorted(random.Random(seed).uniform(0, over) for _ in range(n))
+    print(
+        f"arrivals: {n} participants at random over {over:g} s, one {seconds:g} s trial each, {cap} matches"
+    )
+    reports, attempts, _ = serve(config, Serving(max_matches=cap, test_token=TOKEN), arrivals)
+    completed = sum(r.done for r in reports)
+    waits = [w for r in reports for w in r.waits] or [0.0]
+    first = [f for r in reports for f in r.first_frames]
+    print(
+        f"  completed {completed} (goal {n}), lost {n - completed} (goal 0); {len(attempts)} attempts; "
+        f"{sum(bool(r.waits) for r in reports)} waited in the queue: p50 {quantile(waits, 50):.1f} s, "
+        f"p99 {quantile(waits, 99):.1f} s; Ready-to-first-frame p50 {quantile(first, 50):.3f} s, "
+        f"p99 {quantile(first, 99):.3f} s"
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--counts", type=int, nargs="+", default=[1, 2, 4, 8], help="participants at once")
+    parser.add_argument("--trials", type=int, default=1, help="trials per participant")
+    parser.add_argument("--trial-seconds", type=float, default=10.0)
+    parser.add_argument(
+        "--arrivals", type=int, default=0, help="run the arrival test with this many participants"
+    )
+    parser.add_argument(
+        "--over", type=float, default=600.0, help="arrival test: seconds over which they arrive"
+    )
+    parser.add_argument("--max-matches", type=int, default=4, help="arrival test: matches at once")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    if args.arrivals:
+        arrival_test(args.arrivals, args.over, args.trial_seconds, args.max_matches, args.seed)
+    else:
+        load_test(args.counts, args.trials, args.trial_seconds)
+
+
+if __name__ == "__main__":
+    main()

@@ -71,3 +71,29 @@ def test_numpy_network_matches_torch(tmp_path, key):
         else:
             expected = model.policy.action_net(model.policy.mlp_extractor.forward_actor(x)).numpy()
     np.testing.assert_allclose(network(features), expected, rtol=1e-4, atol=1e-5)
+
+
+def test_drawing_fire_pays_the_frames_the_fortress_opens_to_the_shooter_and_kills() -> None:
+    from services.agent.train import drawing_fire_reward, opening
+    from services.sim.batch import BatchGame
+    from services.sim.batch_observation import observe
+    from services.sim.sampling import batch_act, lane_uniforms
+
+    bait, shooter = library.policy_for("circle", "bait"), library.policy_for("mirror", "shooter")
+    batch = BatchGame(8, seeds=list(range(8)))
+    paid = kills = 0.0
+    for _ in range(1800):
+        frame = batch.state.frame
+        batch.step(
+            *(
+                batch_act(p, observe(batch, role, p.view), lane_uniforms(batch.seeds, seat, frame))
+                for seat, (role, p) in enumerate([("bait", bait), ("shooter", shooter)])
+            )
+        )
+        s, is_open = batch.state, opening(batch, 0)
+        reward = drawing_fire_reward(batch, 0, s.points, {"kill": 10.0})
+        assert (~is_open | ((s.lock == 0) & (s.vulnerable > 0) & s.fortress_alive)).all()
+        np.testing.assert_array_equal(reward, is_open + 10.0 * batch.event_counts("kill"))
+        paid += is_open.sum()
+        kills += batch.event_counts("kill").sum()
+    assert paid > 100 and kills > 10  # a competent pair opens the fortress and kills, and is paid

@@ -14,6 +14,7 @@ from services.table import cli as table_cli
 app = typer.Typer(no_args_is_help=True, add_completion=False, help="Team Space Fortress.")
 for group in (agent_cli, table_cli, services_cli, matches_cli, adapter_cli, report_cli):
     app.registered_commands += group.commands.registered_commands
+    app.registered_groups += group.commands.registered_groups
 
 
 def main() -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import enum
 from pathlib import Path
 
 import typer
@@ -10,11 +11,14 @@ from rich.table import Table
 from services.agent.calibration import calibrate
 from services.agent.library import policy_for
 from services.options import console
+from services.sim.observation import VIEWS
 from services.sim.play import play, summarize
 from shared.errors import Failure
-from shared.game import FPS, GameConfig
+from shared.game import FPS, ROLES, GameConfig
 
 commands = typer.Typer()
+Role = enum.Enum("Role", {r: r for r in ROLES}, type=str)
+View = enum.Enum("View", {v: v for v in VIEWS}, type=str)
 
 
 @commands.command()
@@ -84,9 +88,17 @@ def _score_text(score: dict) -> str:
     return f"{score['kills_per_minute']:.2f} ± {score['stderr']:.2f} kills/min with {score['partner']}"
 
 
-@commands.command("library")
-def library_command() -> None:
-    """List the policy library: recipe, training record and score of each policy."""
+library_commands = typer.Typer(
+    invoke_without_command=True, help="List the policy library; `tsf library add` adds a model of yours."
+)
+commands.add_typer(library_commands, name="library")
+
+
+@library_commands.callback()
+def library_command(context: typer.Context) -> None:
+    """List the policy library (and those in TSF_LIBRARY): each policy's recipe, record and score."""
+    if context.invoked_subcommand is not None:
+        return
     from services.agent import library
 
     manifest = library.manifest()
@@ -99,5 +111,29 @@ def library_command() -> None:
         steps = entry.get("steps", "untrained" if recipe.algorithm else "-")
         seed = str(entry.get("seed", "-"))
         score = _score_text(score) if score else "-"
-        table.add_row(key, recipe.role, recipe.family, recipe.algorithm or "rule", str(steps), seed, score)
+        algorithm = entry.get("algorithm") or recipe.algorithm or "rule"
+        table.add_row(key, recipe.role, recipe.family, algorithm, str(steps), seed, score)
     console.print(table)
+
+
+@library_commands.command("add")
+def library_add(
+    key: str = typer.Argument(..., help="The new policy's key (a letter, then letters, digits, - and _)."),
+    model: Path = typer.Argument(..., help="A Stable-Baselines3 model (.zip) trained on tsf/Role-v0."),
+    role: Role = typer.Option(..., help="The seat it plays."),
+    library_dir: Path = typer.Option(..., "--library", help="Your library directory (created if need be)."),
+    view: View = typer.Option(View.world, help="The observation view it was trained on."),
+    partner: str = typer.Option(
+        "", help="Partner it is scored with (default: S5 for a bait, B5 for a shooter)"
+    ),
+    games: int = typer.Option(10, min=0, help="One-minute games it is scored over (0: not scored)."),
+) -> None:
+    """Export an SB3 model into a library of yours: numpy weights, registry and manifest entries with
+    hashes and provenance. List the directory in TSF_LIBRARY to play its keys everywhere."""
+    from services.agent.outside import add
+
+    entry = add(key, model, role.value, library_dir, view.value, partner, games)
+    console.print(f"{key}: {library_dir / entry['file']} sha256 {entry['sha256'][:12]}")
+    if entry.get("score"):
+        console.print(f"  {_score_text(entry['score'])}")
+    console.print(f"  play it everywhere with TSF_LIBRARY={library_dir.resolve()}")

@@ -38,7 +38,8 @@ def match_command(
     """Start a complete match on this machine: sim, two agents and the recorder as processes (and
     with --adaptive, the adapter, set by the adapter options)."""
     from services.launch import MatchPlan, new_match_id, run_match
-    from services.recorder.recording import export_parquet, load
+    from services.recorder.export import export
+    from services.recorder.recording import load
 
     if adaptive and adaptive not in ROLES:
         raise UsageError("--adaptive", adaptive, "not a seat", ROLES)
@@ -64,7 +65,7 @@ def match_command(
             )
 
         summary, path = run_match(plan, scoreboard, adapted, overwrite, stop_on_signals())
-    export = export_parquet(load(path), path.with_suffix(".parquet"))
+    tables = export(load(path), path.with_suffix(".tables"))
     console.print(
         f"[bold]{plan.match}[/]: {summary.kills} kills in {summary.frame} frames "
         f"= {summary.kills_per_minute:.2f} kills/min, points {summary.points}"
@@ -75,7 +76,7 @@ def match_command(
         console.print(f"  {role}: kills {counters['kills']}, deaths by cause: {deaths}, shield hits {hits}")
     if summary.timing:
         console.print("  timing (ms): " + ", ".join(f"{k} {v:.2f}" for k, v in summary.timing.items()))
-    console.print(f"  recording: {path}  (Parquet: {export['states'].parent})")
+    console.print(f"  recording: {path}  (Parquet tables: {tables['states'].parent})")
 
 
 @commands.command("play")

@@ -186,7 +186,7 @@ def make_way(path: Path, overwrite: bool) -> Path | None:
 
 
 def _with_export(path: Path) -> tuple[Path, Path]:
-    return path, path.with_suffix(".parquet")
+    return path, path.with_suffix(".tables")
 
 
 class GapTracker:

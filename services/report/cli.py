@@ -1,4 +1,4 @@
-"""`tsf report`: the study report from recordings."""
+"""`tsf report` and `tsf export`: recordings as the study report, and as tidy Parquet tables."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from services.options import console
-from shared.errors import Failure
+from shared.errors import Failure, UsageError
 from shared.game import ROLES
 
 commands = typer.Typer()
@@ -43,3 +43,33 @@ def report_command(
     console.print(f"report: {report.html}  ({len(report.figures)} figures, numbers in {out / 'data'})")
     if not report.matches:
         raise Failure(f"none of the {len(recordings)} recordings is usable; {report.html} names why")
+
+
+@commands.command("export")
+def export_command(
+    recordings: list[Path] = typer.Argument(..., exists=True, dir_okay=False, help="Recordings (.tsflog)."),
+    out: Path = typer.Option(..., help="Directory for the tables: <match>.<table>.parquet."),
+    allow_damaged: bool = typer.Option(
+        False, "--allow-damaged", help="Export a damaged or incomplete recording too (its gaps are a table)."
+    ),
+) -> None:
+    """Export recordings as tidy Parquet tables, one file per table and match (docs/recording.md)."""
+    from services.recorder.export import export, name_of
+    from services.recorder.recording import load
+
+    loaded = []
+    for path in recordings:
+        try:
+            recording = load(path)
+        except ValueError as error:
+            raise Failure(f"{path}: {error}") from None
+        if recording.problems() and not allow_damaged:
+            raise Failure(f"{path}: {'; '.join(recording.problems())} (--allow-damaged exports it anyway)")
+        loaded.append(recording)
+    names = [name_of(r) for r in loaded]
+    if len(set(names)) < len(names):
+        twice = sorted({n for n in names if names.count(n) > 1})
+        raise UsageError("RECORDINGS", ", ".join(twice), "more than one recording of this match")
+    for recording, name in zip(loaded, names, strict=True):
+        export(recording, out, name)
+        console.print(f"{recording.path}: {out}/{name}.*.parquet")

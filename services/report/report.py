@@ -1,7 +1,7 @@
 """`tsf report`: recordings -> the original study's figures and numbers, in one directory.
 
 DIR/report.html (self-contained), DIR/figures/*.png, DIR/data/*.csv and *.parquet (every number
-behind the figures), DIR/parquet/<match>/ (each recording's Parquet export, which the analyses read).
+behind the figures), DIR/parquet/<match>.<table>.parquet (each recording's tables, which the analyses read).
 """
 
 from __future__ import annotations

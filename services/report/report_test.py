@@ -158,7 +158,7 @@ def test_seats_from_the_start_record_alone(
     [match], _ = load_matches([paths["static-B5-S5"]], tmp_path)
 
     def announcing(policies: dict[str, str]) -> Match:
-        info = match.tables["match"].assign(policies=json.dumps(policies))
+        info = match.tables["match"].assign(policies=[policies])
         return dataclasses.replace(match, tables={**match.tables, "match": info})
 
     [human] = seats(announcing({"bait": "human", "shooter": "S5"}))

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import datetime
 import hashlib
+import json
 import shlex
 import subprocess
 import sys
@@ -68,9 +69,10 @@ def file_hash(path: Path | None) -> str:
 
 
 def provenance(
-    config: GameConfig | None = None, table: Path | None = None, command: list[str] | None = None
+    config: GameConfig | None = None, table: Path | str | None = None, command: list[str] | None = None
 ) -> dict[str, str]:
-    """The record of FIELDS for an artifact made now with these rules and this table file."""
+    """The record of FIELDS for an artifact made now with these rules and this table file (default:
+    the library's; a string is taken as the table's name as it is)."""
     from services.agent import library
     from services.table.table import DEFAULT_TABLE
 
@@ -84,7 +86,7 @@ def provenance(
         "version": project_version(),
         "commit": commit(),
         "library": manifest,
-        "table": file_hash(DEFAULT_TABLE if table is None else table),
+        "table": table if isinstance(table, str) else file_hash(DEFAULT_TABLE if table is None else table),
         "config": (config or GameConfig()).hash(),
         "command": shlex.join(["tsf", *argv[1:]] if Path(argv[0]).name == "tsf" else argv),
     }
@@ -93,3 +95,17 @@ def provenance(
 def lines(record: dict[str, str]) -> list[str]:
     """The record as `field: value` lines, in FIELDS order."""
     return [f"{name}: {record.get(name, 'unknown')}" for name in FIELDS]
+
+
+def sidecar(recording: Path) -> Path:
+    """Where the recorder names what made a recording: `<match>.provenance.json` beside it."""
+    return recording.with_name(recording.name.removesuffix(".tsflog") + ".provenance.json")
+
+
+def read_sidecar(recording: Path) -> dict[str, str] | None:
+    """The provenance beside a recording, or None (none written, or unreadable)."""
+    try:
+        record = json.loads(sidecar(recording).read_text())
+    except (OSError, ValueError):
+        return None
+    return {name: str(record.get(name, "unknown")) for name in FIELDS} if isinstance(record, dict) else None

@@ -4,7 +4,8 @@
 id, unless given). Every table has a `match` column, so the files of many matches read as one
 table (`'study/*.states.parquet'` in DuckDB). Nested values are Parquet structs, lists and maps,
 wall-clock times are UTC timestamps, and every column has its type even in an empty table. The
-`match` table also names what made the recording and the export (services/provenance.py).
+`match` table also names what made the recording (the recorder's `<match>.provenance.json`) and
+the export (services/provenance.py).
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from pathlib import Path
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from services.provenance import FIELDS, provenance
+from services.provenance import FIELDS, provenance, read_sidecar
 from services.recorder.recording import Recording
 from shared.game import ROLES, GameConfig
 
@@ -37,7 +38,7 @@ SCHEMAS = {
         "frames": pa.int64(), "kills": pa.int64(), "kills_per_minute": pa.float64(), "points": pa.int64(),
         "counters": pa.map_(pa.string(), COUNTERS), "timing": pa.map_(pa.string(), pa.float64()),
         "drops": pa.map_(pa.string(), pa.int64()), "clean": pa.bool_(), "missing_frames": pa.int64(),
-        "started": TIME, "exported_by": PROVENANCE,
+        "started": TIME, "recorded_by": PROVENANCE, "exported_by": PROVENANCE,
     }),
     "states": pa.schema({
         "match": pa.string(), "frame": pa.int64(), "sent": TIME, "hash": pa.string(), "kills": pa.int64(),
@@ -177,6 +178,7 @@ def _match(recording: Recording, name: str) -> dict:
     start, summary = recording.start, recording.summary
     row: dict = {"match": name, "clean": recording.clean, "missing_frames": recording.missing_frames}
     row["exported_by"] = provenance(GameConfig.from_dict(start.config) if start else None)
+    row["recorded_by"] = read_sidecar(recording.path)  # null for a log without one
     if start:
         row |= {"seed": start.seed, "mode": start.mode, "config": start.config, "policies": start.policies}
     if summary:

@@ -25,6 +25,7 @@ def report_command(
     reference_games: int = typer.Option(2, min=1, help="Games per library policy for the reference points."),
 ) -> None:
     """The study's figures and numbers from recordings: one self-contained HTML report."""
+    from services import provenance
     from services.report.report import build_report
     from services.table.table import DEFAULT_TABLE, StaleTable
 
@@ -41,6 +42,7 @@ def report_command(
         colour = "yellow" if problem.used else "red"
         console.print(f"[{colour}]{problem.name}: {problem.reason}[/]")
     console.print(f"report: {report.html}  ({len(report.figures)} figures, numbers in {out / 'data'})")
+    console.print("\n".join(provenance.lines(report.provenance)), highlight=False)
     if not report.matches:
         raise Failure(f"none of the {len(recordings)} recordings is usable; {report.html} names why")
 

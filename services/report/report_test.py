@@ -19,6 +19,7 @@ from scipy import stats
 
 from services.adapter.cem import log_probs
 from services.agent import library
+from services.provenance import FIELDS
 from services.recorder.recording import Recording, load
 from services.recorder.recording_test import Script, record_match
 from services.report.analysis import adaptive_tests, seats, variants
@@ -305,6 +306,8 @@ def test_figures_and_page(built: tuple[Report, dict[str, Path], Path]) -> None:
     page = report.html.read_text()
     assert page.count("data:image/png;base64,") == len(report.figures)
     assert "Welch" in page and "Pearson" in page
+    assert "Provenance" in page and report.provenance["commit"] in page and report.provenance["table"] in page
+    assert set(pd.read_csv(out / "data" / "provenance.csv")["field"]) == set(FIELDS)
 
 
 def test_a_report_with_nothing_usable_still_builds(tmp_path: Path) -> None:

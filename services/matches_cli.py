@@ -2,13 +2,21 @@
 
 from __future__ import annotations
 
-import logging
 from pathlib import Path
 
 import typer
 from rich.live import Live
 
-from services.options import AdapterFactory, Host, Port, adapter_options, bus_options, console
+from services.options import (
+    AdapterFactory,
+    Host,
+    Port,
+    Seat,
+    adapter_options,
+    bus_options,
+    console,
+    keys_help,
+)
 from shared.bus import BusConfig, stop_on_signals
 from shared.errors import Failure, UsageError
 from shared.game import FPS, ROLES, other
@@ -21,8 +29,8 @@ commands = typer.Typer()
 def match_command(
     seed: int = typer.Option(0, help="The game's seed."),
     duration: float = typer.Option(60.0, min=0.1, help=f"Game length in seconds ({FPS} frames each)."),
-    bait: str = typer.Option("circle", help="Bait agent's policy key."),
-    shooter: str = typer.Option("mirror", help="Shooter agent's policy key."),
+    bait: str = typer.Option("circle", help=keys_help("bait", "Bait agent's policy key")),
+    shooter: str = typer.Option("mirror", help=keys_help("shooter", "Shooter agent's policy key")),
     lockstep: bool = typer.Option(
         False, help="Lockstep (as fast as the agents answer) instead of real time."
     ),
@@ -31,7 +39,7 @@ def match_command(
     overwrite: bool = typer.Option(
         False, "--overwrite", help="Reuse the id of an existing recording; the old one is renamed aside."
     ),
-    adaptive: str = typer.Option("", help="Make this seat (bait or shooter) the adaptive agent."),
+    adaptive: Seat | None = typer.Option(None, help="Make this seat the adaptive agent."),
     *,
     adapter: AdapterFactory,
 ) -> None:
@@ -82,7 +90,7 @@ def match_command(
 @commands.command("play")
 @adapter_options("role", "seed")
 def play_command(
-    role: str = typer.Option("bait", help="The seat you play: bait or shooter."),
+    role: Seat = typer.Option("bait", help="The seat you play."),
     partner: str = typer.Option(
         "adaptive",
         help="Who plays the other seat: `adaptive` (the adaptive agent), a policy key (see `tsf "
@@ -142,7 +150,6 @@ def study(
     from services.study.core import StudyConfig
     from services.study.runner import run_study
 
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     protocol = StudyConfig.load(config)
     directory = out / protocol.name
 

@@ -10,7 +10,20 @@ from typing import Annotated
 import typer
 
 from services.adapter.core import AdapterConfig
-from services.options import AdapterFactory, Connect, Host, Match, Port, adapter_options, bus_options, console
+from services.options import (
+    AdapterFactory,
+    Connect,
+    Host,
+    Match,
+    Port,
+    Seat,
+    Service,
+    SimMode,
+    adapter_options,
+    bus_options,
+    console,
+    keys_help,
+)  # fmt: skip
 from shared.bus import BusConfig, stop_on_signals
 from shared.game import FPS, GameConfig
 
@@ -23,7 +36,9 @@ def sim(
     match: Match,
     seed: int = typer.Option(0),
     frames: int = typer.Option(GameConfig.frames, min=1),
-    mode: str = typer.Option("realtime", "--sim-mode", help=f"realtime ({FPS} Hz) or lockstep."),
+    mode: SimMode = typer.Option(
+        "realtime", "--sim-mode", help=f"realtime: {FPS} Hz; lockstep: as fast as answered."
+    ),
     bait: str = typer.Option("", help="Bait's policy key, for the record."),
     shooter: str = typer.Option("", help="Shooter's policy key, for the record."),
     wait_players: float = typer.Option(10.0, help="Seconds to wait for both seats before starting."),
@@ -48,11 +63,12 @@ def sim(
 @bus_options
 def agent(
     match: Match,
-    role: str = typer.Option(..., help="bait or shooter"),
+    role: Seat = typer.Option(..., help="The seat."),
     policy: str = typer.Option(
         ...,
-        help="Policy key to play (a library or scripted key), or an adaptive agent's name "
-        "(adaptive-T<window>-<strategy>) to start with its initial policy.",
+        help=keys_help(
+            None, "Policy key to play, or an adaptive agent's name (adaptive-T<window>-<strategy>)"
+        ),
     ),
     seed: int = typer.Option(0, help="The match's seed (the policy's seed derives from it)."),
     *,
@@ -130,7 +146,6 @@ def router(
     """Run a zenoh router (a Python session in router mode) for matches across machines."""
     from services.router import run_router
 
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     endpoints = tuple(listen or ("tcp/0.0.0.0:7447",))
     logging.getLogger("tsf.router").info("routing on %s%s", endpoints, " (secured)" if credentials else "")
     run_router(endpoints, credentials, stop_on_signals())
@@ -139,8 +154,8 @@ def router(
 @commands.command()
 def alive(
     match: Match,
-    service: str = typer.Option(..., help="sim, agent, recorder, adapter or human."),
-    role: str = typer.Option("", help="The seat, for an agent or a human."),
+    service: Service = typer.Option(..., help="The service asked about."),
+    role: Seat | None = typer.Option(None, help="The seat, for an agent or a human."),
     connect: Connect = None,
     timeout: float = typer.Option(2.0, help="Seconds to wait for the bus."),
 ) -> None:

@@ -10,7 +10,7 @@ from rich.table import Table
 
 from services.adapter.core import STRATEGIES, AdapterConfig
 from services.agent.library import policy_for
-from services.options import console
+from services.options import Seat, console
 from shared.errors import UsageError
 from shared.game import FPS, ROLES, other
 
@@ -51,7 +51,7 @@ def diversity(
 
 @commands.command("eval")
 def eval_command(
-    role: str = typer.Option("shooter", help="The adaptive agent's seat; the partners play the other."),
+    role: Seat = typer.Option("shooter", help="The adaptive agent's seat; the partners play the other."),
     seeds: int = typer.Option(5, min=1, help="Seeded one-minute games per partner and agent."),
     windows: str = typer.Option("150,400,800", help="Windows T of the study's CEM agent (comma-separated)."),
     strategies: str = typer.Option(",".join(STRATEGIES), help="Strategies compared at --strategy-window."),

@@ -10,7 +10,7 @@ from rich.table import Table
 
 from services.agent.calibration import calibrate
 from services.agent.library import policy_for
-from services.options import console
+from services.options import Seat, console, keys_help
 from services.sim.observation import VIEWS
 from services.sim.play import play, summarize
 from shared.errors import Failure
@@ -23,8 +23,8 @@ View = enum.Enum("View", {v: v for v in VIEWS}, type=str)
 
 @commands.command()
 def game(
-    bait: str = typer.Option("circle", help="Bait seat's policy key."),
-    shooter: str = typer.Option("mirror", help="Shooter seat's policy key."),
+    bait: str = typer.Option("circle", help=keys_help("bait", "Bait seat's policy key")),
+    shooter: str = typer.Option("mirror", help=keys_help("shooter", "Shooter seat's policy key")),
     seed: int = typer.Option(0, help="Seed of the first game; game i uses seed + i."),
     games: int = typer.Option(1, min=1, help="Number of games."),
     frames: int = typer.Option(GameConfig.frames, min=1, help=f"Frames per game ({FPS} per second)."),
@@ -137,3 +137,31 @@ def library_add(
     if entry.get("score"):
         console.print(f"  {_score_text(entry['score'])}")
     console.print(f"  play it everywhere with TSF_LIBRARY={library_dir.resolve()}")
+
+
+@commands.command("keys")
+def keys_command(role: Seat | None = typer.Option(None, help="Only the keys of this seat.")) -> None:
+    """Every valid policy key with the seat it plays (the library's, yours in TSF_LIBRARY, the
+    scripted ones), and the other forms a key can take."""
+    from services.adapter.core import STRATEGIES
+    from services.agent import library
+    from services.agent.scripted import scripted_keys
+
+    table = Table(title="Policy keys")
+    for column in ("key", "seat", "kind", "what"):
+        table.add_column(column)
+    for key, recipe in library.registry().items():
+        if role in (None, recipe.role):
+            kind = "library" if recipe.root == library.LIBRARY else f"yours ({recipe.root})"
+            table.add_row(key, recipe.role, kind, recipe.description)
+    for seat in [role] if role else ROLES:
+        for key in scripted_keys(seat):
+            table.add_row(key, seat, "scripted", "a scripted rule")
+    seats = role or "either"
+    table.add_row("PATH.zip", seats, "yours", "an SB3 model trained on tsf/Role-v0 (docs/library.md)")
+    table.add_row("package.module:attr", "its own", "yours", "a policy object of yours (docs/library.md)")
+    strategies = ", ".join(STRATEGIES)
+    table.add_row(
+        "adaptive-T<window>-<strategy>", seats, "agents", f"the adaptive agent (tsf agent); strategies: {strategies}"
+    )
+    console.print(table)

@@ -6,9 +6,8 @@ from pathlib import Path
 
 import typer
 
-from services.options import console
+from services.options import Seat, console
 from shared.errors import Failure, UsageError
-from shared.game import ROLES
 
 commands = typer.Typer()
 
@@ -18,8 +17,8 @@ def report_command(
     recordings: list[Path] = typer.Argument(..., help="Recordings (.tsflog); bad ones are named, left out."),
     out: Path = typer.Option(Path("report"), help="Directory for report.html, figures/, data/ and parquet/."),
     table: Path | None = typer.Option(None, help="The self-play table (default: the library's)."),
-    partner_role: str = typer.Option(
-        "", help="Only this seat is the partner in agent-agent matches (default: each seat in turn)."
+    partner_role: Seat | None = typer.Option(
+        None, help="Only this seat is the partner in agent-agent matches (default: each seat in turn)."
     ),
     trial: str = typer.Option("", help="Match whose log-prob curves are drawn (default: the first)."),
     reference_games: int = typer.Option(2, min=1, help="Games per library policy for the reference points."),
@@ -29,11 +28,9 @@ def report_command(
     from services.report.report import build_report
     from services.table.table import DEFAULT_TABLE, StaleTable
 
-    if partner_role not in ("", *ROLES):
-        raise typer.BadParameter("bait or shooter", param_hint="--partner-role")
     try:
         report = build_report(
-            recordings, out, table or DEFAULT_TABLE, partner_role or None, trial or None, reference_games
+            recordings, out, table or DEFAULT_TABLE, partner_role, trial or None, reference_games
         )
     except StaleTable as error:
         console.print(f"[red]{error}[/]")

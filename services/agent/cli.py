@@ -162,6 +162,6 @@ def keys_command(role: Seat | None = typer.Option(None, help="Only the keys of t
     table.add_row("package.module:attr", "its own", "yours", "a policy object of yours (docs/library.md)")
     strategies = ", ".join(STRATEGIES)
     table.add_row(
-        "adaptive-T<window>-<strategy>", seats, "agents", f"the adaptive agent (tsf agent); strategies: {strategies}"
+        "adaptive-T<window>-<strategy>", seats, "agents", f"the adaptive agent; strategies: {strategies}"
     )
     console.print(table)

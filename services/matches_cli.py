@@ -9,17 +9,20 @@ from rich.live import Live
 
 from services.options import (
     AdapterFactory,
+    Duration,
+    Frames,
     Host,
     Port,
     Seat,
     adapter_options,
     bus_options,
     console,
+    game_frames,
     keys_help,
 )
 from shared.bus import BusConfig, stop_on_signals
 from shared.errors import Failure, UsageError
-from shared.game import FPS, ROLES, other
+from shared.game import ROLES, other
 
 commands = typer.Typer()
 
@@ -28,7 +31,8 @@ commands = typer.Typer()
 @adapter_options("role", "seed")
 def match_command(
     seed: int = typer.Option(0, help="The game's seed."),
-    duration: float = typer.Option(60.0, min=0.1, help=f"Game length in seconds ({FPS} frames each)."),
+    duration: Duration = None,
+    frames: Frames = None,
     bait: str = typer.Option("circle", help=keys_help("bait", "Bait agent's policy key")),
     shooter: str = typer.Option("mirror", help=keys_help("shooter", "Shooter agent's policy key")),
     lockstep: bool = typer.Option(
@@ -53,7 +57,7 @@ def match_command(
         raise UsageError("--adaptive", adaptive, "not a seat", ROLES)
     config = adapter(role=adaptive or ROLES[1], seed=seed)  # its options are checked with or without
     plan = MatchPlan(
-        match or new_match_id(), seed, round(duration * FPS), "lockstep" if lockstep else "realtime",
+        match or new_match_id(), seed, game_frames(duration, frames), "lockstep" if lockstep else "realtime",
         bait, shooter, out, adapter=config if adaptive else None,
     )  # fmt: skip
     seats = plan.policies()
@@ -97,7 +101,8 @@ def play_command(
         "library`), or `human` for a person.",
     ),
     seed: int = typer.Option(0, help="The game's seed."),
-    duration: float = typer.Option(60.0, min=0.1, help=f"Game length in seconds ({FPS} frames each)."),
+    duration: Duration = None,
+    frames: Frames = None,
     wait: float = typer.Option(600.0, help="Seconds to wait for the players to press start."),
     host: Host = "127.0.0.1",
     port: Port = 8000,
@@ -122,8 +127,8 @@ def play_command(
             check_seat(partner, partner_role, "--partner")  # before anyone opens the page
         seats[partner_role] = partner
     plan = MatchPlan(
-        match or new_match_id(), seed, round(duration * FPS), "realtime", directory=out, wait_players=wait,
-        **seats,
+        match or new_match_id(), seed, game_frames(duration, frames), "realtime", directory=out,
+        wait_players=wait, **seats,
     )  # fmt: skip
 
     def links(urls: dict[str, str]) -> None:

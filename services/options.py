@@ -5,6 +5,7 @@ choices of enumerated options, and the web page's host and port."""
 from __future__ import annotations
 
 import dataclasses
+import enum
 import functools
 import inspect
 import logging
@@ -17,13 +18,14 @@ from rich.console import Console
 from services.adapter.core import STRATEGIES, AdapterConfig
 from shared.bus import BusConfig
 from shared.errors import UsageError
-from shared.game import ROLES
+from shared.game import FPS, ROLES, GameConfig
 
 console = Console()
 
 # Enumerated options: Literal types, so that --help lists the choices and click refuses the rest.
 Seat = Literal[ROLES]
 Strategy = Literal[STRATEGIES]
+Strategies = enum.StrEnum("Strategies", [(s, s) for s in STRATEGIES])  # repeatable: typer lists take Enums
 SimMode = Literal["realtime", "lockstep"]
 ZenohMode = Literal["peer", "client", "router"]
 LogLevel = Literal["debug", "info", "warning", "error"]
@@ -43,6 +45,22 @@ LOG_OPTIONS = {  # parameter name: (annotation, default)
     "verbose": (Annotated[bool, typer.Option("--verbose", "-v", help="Log level debug.")], False),
     "quiet": (Annotated[bool, typer.Option("--quiet", "-q", help="Log level warning.")], False),
 }
+
+
+# Game time is in seconds everywhere (--duration); --frames gives it in frames instead.
+Duration = Annotated[
+    float | None, typer.Option(min=0.1, help=f"Game length in seconds, default 60 ({FPS} frames each).")
+]
+Frames = Annotated[int | None, typer.Option(min=1, help="Game length in frames, instead of --duration.")]
+
+
+def game_frames(duration: float | None, frames: int | None) -> int:
+    """The game's length in frames from --duration (seconds) or --frames (one of them; default 60 s)."""
+    if duration is not None and frames is not None:
+        raise UsageError("--frames", frames, "give the length once: --duration (seconds) or --frames")
+    if frames is not None:
+        return frames
+    return round(duration * FPS) if duration is not None else GameConfig.frames
 
 
 def keys_help(role: str | None, what: str) -> str:

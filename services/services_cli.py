@@ -13,6 +13,8 @@ from services.adapter.core import AdapterConfig
 from services.options import (
     AdapterFactory,
     Connect,
+    Duration,
+    Frames,
     Host,
     Match,
     Port,
@@ -22,6 +24,7 @@ from services.options import (
     adapter_options,
     bus_options,
     console,
+    game_frames,
     keys_help,
 )  # fmt: skip
 from shared.bus import BusConfig, stop_on_signals
@@ -35,7 +38,8 @@ commands = typer.Typer()
 def sim(
     match: Match,
     seed: int = typer.Option(0),
-    frames: int = typer.Option(GameConfig.frames, min=1),
+    duration: Duration = None,
+    frames: Frames = None,
     mode: SimMode = typer.Option(
         "realtime", "--sim-mode", help=f"realtime: {FPS} Hz; lockstep: as fast as answered."
     ),
@@ -50,8 +54,9 @@ def sim(
     """Run the sim service for one match."""
     from services.sim.service import run_sim
 
+    config = GameConfig(frames=game_frames(duration, frames))
     summary = run_sim(
-        bus, match, seed, GameConfig(frames=frames), mode, {"bait": bait, "shooter": shooter},
+        bus, match, seed, config, mode, {"bait": bait, "shooter": shooter},
         stop_on_signals(), wait_players, wait_recorder, wait_adapter=wait_adapter,
     )  # fmt: skip
     logging.getLogger("tsf.sim").info(
@@ -147,7 +152,6 @@ def router(
     from services.router import run_router
 
     endpoints = tuple(listen or ("tcp/0.0.0.0:7447",))
-    logging.getLogger("tsf.router").info("routing on %s%s", endpoints, " (secured)" if credentials else "")
     run_router(endpoints, credentials, stop_on_signals())
 
 

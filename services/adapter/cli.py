@@ -8,9 +8,9 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from services.adapter.core import STRATEGIES, AdapterConfig
+from services.adapter.core import AdapterConfig
 from services.agent.library import policy_for
-from services.options import Seat, console
+from services.options import Seat, Strategies, console
 from shared.errors import UsageError
 from shared.game import FPS, ROLES, other
 
@@ -53,8 +53,12 @@ def diversity(
 def eval_command(
     role: Seat = typer.Option("shooter", help="The adaptive agent's seat; the partners play the other."),
     seeds: int = typer.Option(5, min=1, help="Seeded one-minute games per partner and agent."),
-    windows: str = typer.Option("150,400,800", help="Windows T of the study's CEM agent (comma-separated)."),
-    strategies: str = typer.Option(",".join(STRATEGIES), help="Strategies compared at --strategy-window."),
+    window: list[int] | None = typer.Option(
+        None, min=1, help="A window T of the study's CEM agent, repeatable (default: 150, 400, 800)."
+    ),
+    strategy: list[Strategies] | None = typer.Option(
+        None, help="A strategy compared at --strategy-window, repeatable (default: all)."
+    ),
     strategy_window: int = typer.Option(
         AdapterConfig.window, min=1, help="The window of the strategies other than cem."
     ),
@@ -80,12 +84,10 @@ def eval_command(
     if role not in ROLES:
         raise UsageError("--role", role, "not a seat", ROLES)
     workers = workers or os.cpu_count() or 1
-    try:
-        window_list = [int(w) for w in windows.split(",") if w.strip()]
-    except ValueError:
-        raise UsageError("--windows", windows, "not whole numbers separated by commas") from None
+    window_list = window or [150, 400, 800]
     partners = partner or [p for group in population(other(role)).values() for p in group]
-    agents = library.keys(role) + team.variants(window_list, strategies.split(","), strategy_window)
+    strategies = [s.value for s in strategy or Strategies]
+    agents = library.keys(role) + team.variants(window_list, strategies, strategy_window)
     columns = (BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
     ident, rows, comparison = None, [], None
     with Progress(*columns, console=console) as bar:

@@ -10,11 +10,11 @@ from rich.table import Table
 
 from services.agent.calibration import calibrate
 from services.agent.library import policy_for
-from services.options import Seat, console, keys_help
+from services.options import Duration, Frames, Seat, console, game_frames, keys_help
 from services.sim.observation import VIEWS
 from services.sim.play import play, summarize
 from shared.errors import Failure
-from shared.game import FPS, ROLES, GameConfig
+from shared.game import ROLES, GameConfig
 
 commands = typer.Typer()
 Role = enum.Enum("Role", {r: r for r in ROLES}, type=str)
@@ -27,10 +27,11 @@ def game(
     shooter: str = typer.Option("mirror", help=keys_help("shooter", "Shooter seat's policy key")),
     seed: int = typer.Option(0, help="Seed of the first game; game i uses seed + i."),
     games: int = typer.Option(1, min=1, help="Number of games."),
-    frames: int = typer.Option(GameConfig.frames, min=1, help=f"Frames per game ({FPS} per second)."),
+    duration: Duration = None,
+    frames: Frames = None,
 ) -> None:
     """Play headless games in-process between two policies and print the score."""
-    config = GameConfig(frames=frames)
+    config = GameConfig(frames=game_frames(duration, frames))
     results = []
     for s in range(seed, seed + games):
         result = play(

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from services.adapter.core import AdapterConfig
 from services.agent.library import check_seat
+from services.agent.outside import record_name
 from services.recorder.log import make_way
 from services.recorder.recording import load
 from services.recorder.service import recording_path
@@ -141,7 +142,7 @@ def run_match(
 
     match = ["--match", plan.match]
     policies = plan.policies()
-    recorded = dict(policies)
+    recorded = {role: record_name(key) for role, key in policies.items()}  # a .zip path: its name
     if plan.adapter is not None:
         recorded[plan.adapter.role] = plan.adapter.name
     with Processes() as processes:

@@ -37,3 +37,12 @@ def test_a_saved_table_names_what_made_it(tmp_path):
     made = json.loads(path.read_text())["provenance"]
     assert made["library"] == library.manifest_hash() and made["table"] == "self"
     assert Table.load(path).library == made["library"]  # the table still loads
+
+
+def test_an_eval_summary_names_what_made_it(tmp_path):
+    from services.adapter.results import write_results
+
+    summary = write_results(tmp_path, None, [], None).read_text()
+    made = json.loads((tmp_path / "provenance.json").read_text())
+    assert tuple(made) == provenance.FIELDS
+    assert "## Provenance" in summary and f"- commit: {made['commit']}" in summary

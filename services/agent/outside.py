@@ -34,6 +34,17 @@ if TYPE_CHECKING:
 
 ACTIVATIONS = {"Tanh": "tanh", "ReLU": "relu"}  # torch module name: library.Network's name
 KEY = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
+NAME = re.compile(r"^[A-Za-z0-9_.:-]{1,32}$")  # a policy's name in messages (shared/messages.py)
+
+
+def record_name(key: str) -> str:
+    """How a policy key is named in messages and recordings, which take 1-32 of [A-Za-z0-9_.:-]: a
+    library or scripted key as it is, a `.zip` by its file name, a `module:attr` as it is where it
+    fits, else by its attr."""
+    if not is_outside(key) or NAME.match(key):
+        return key
+    name = Path(key).name if key.endswith(".zip") else key.rpartition(":")[2]
+    return re.sub(r"[^A-Za-z0-9_.:-]", "_", name)[-32:] or "outside"
 
 
 def is_outside(key: str) -> bool:
@@ -61,6 +72,8 @@ def _object(path: str, option: str) -> Policy:
     policy = found() if isinstance(found, type) or not _is_policy(found) else found
     if not _is_policy(policy):
         raise UsageError(option, path, "is not a policy (key, role, view, reset, act)")
+    if not NAME.match(str(policy.key)):
+        raise UsageError(option, path, f"its key {policy.key!r} is not 1-32 of letters, digits, _ . : -")
     return policy
 
 
@@ -110,7 +123,7 @@ def zip_policy(path: Path, role: str, view: str = "world", option: str = "--poli
     _check(role, view)
     arrays = network_arrays(path, {}, option)
     meta = json.loads(bytes(arrays.pop("meta")).decode())
-    return JointPolicy(str(path), role, view, Network(arrays, meta["activation"]))
+    return JointPolicy(record_name(str(path)), role, view, Network(arrays, meta["activation"]))
 
 
 def _check(role: str, view: str) -> None:

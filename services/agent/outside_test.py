@@ -6,18 +6,24 @@ import json
 import gymnasium
 import numpy as np
 import pytest
-import torch as th
-from stable_baselines3 import PPO
 
-from services.agent import library
+pytest.importorskip("stable_baselines3", reason="the `train` extra is not installed")
+
+import torch as th  # noqa: E402
+from stable_baselines3 import PPO  # noqa: E402
+
+from services.agent import library, outside
 from services.agent.library import FLOOR, policy_for
+from services.agent.player import Player
 from services.cli import app
 from services.entry import run
 from services.sim.engine import Game
+from services.sim.match import state_message
 from services.sim.observation import observe
 from services.sim.play import play
 from shared.errors import UsageError
 from shared.game import GameConfig
+from shared.messages import decode_any
 
 
 @pytest.fixture(scope="module")
@@ -59,6 +65,17 @@ def test_a_zip_plays_a_seat_with_the_models_exact_distribution(model_zip):
     assert np.abs(counts - expected[0]).max() < 0.03
     result = play(policy, policy_for("S5", "shooter"), 0, GameConfig(frames=200))
     assert result.frames == 200
+
+
+def test_a_zip_is_named_in_messages_by_its_file_name(model_zip):
+    path, _ = model_zip
+    long = path.parent / ("x" * 40) / "my_bait.zip"
+    assert outside.record_name(str(long)) == "my_bait.zip" == policy_for(str(path), "bait").key
+    assert outside.record_name("S5") == "S5"
+    assert outside.record_name("services.agent.scripted:CircleBait") == "CircleBait"
+    player = Player("bait", str(path), seed=1)
+    state = state_message(Game(seed=1), "m", "sim", (0, 0))
+    assert decode_any(player.act(state, "agent/bait").encode()).policy == "my_bait.zip"
 
 
 def test_a_zip_or_object_is_refused_with_one_line_when_it_cannot_play(tmp_path, model_zip):

@@ -88,6 +88,12 @@ def roots() -> list[Path]:
     return [LIBRARY, *(Path(p) for p in extra.split(os.pathsep) if p)]
 
 
+def table_path() -> Path:
+    """Where the self-play table of the libraries in use is: table.json in the last library directory
+    (the shipped one without TSF_LIBRARY), since a table is bound to every library it measured."""
+    return roots()[-1] / "table.json"
+
+
 def registry(root: Path | None = None) -> dict[str, Recipe]:
     """The recipes of the library at `root`, or of every library (roots()), by key in file order."""
     if root is not None:

@@ -2,6 +2,9 @@
 with exact probabilities, and `tsf library add` exports it into a library of the user's."""
 
 import json
+import os
+import subprocess
+import sys
 
 import gymnasium
 import numpy as np
@@ -117,3 +120,11 @@ def test_library_add_exports_into_a_library_of_the_users_that_tsf_library_lists(
     shipped_dir = str(library.LIBRARY)
     assert run(app, ["library", "add", "X", str(path), "--role", "bait", "--library", shipped_dir]) == 2
     assert "X" not in json.loads((library.LIBRARY / "manifest.json").read_text())
+
+
+def test_with_a_library_of_yours_the_table_is_in_its_directory(tmp_path):
+    (tmp_path / "registry.toml").write_text("")
+    code = "from services.table.table import DEFAULT_TABLE; print(DEFAULT_TABLE)"
+    env = os.environ | {"TSF_LIBRARY": str(tmp_path)}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == str(tmp_path / "table.json")

@@ -19,7 +19,7 @@ from services.provenance import provenance
 from shared.game import GameConfig
 
 TABLE_VERSION = 1
-DEFAULT_TABLE = library.LIBRARY / "table.json"
+DEFAULT_TABLE = library.table_path()  # with TSF_LIBRARY: the table in your library directory
 
 
 class StaleTable(ValueError):

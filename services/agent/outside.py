@@ -142,7 +142,7 @@ def add(
     from services import envs
     from services.agent import library
     from services.agent.scripted import scripted_keys
-    from services.agent.train import _record, score
+    from services.agent.train import record_entry, score
     from services.provenance import provenance
 
     _check(role, view)
@@ -179,8 +179,8 @@ def add(
         "source": {"file": str(Path(model).resolve()), "sha256": library.file_hash(Path(model))},
         "provenance": provenance(),
     }
-    _record(directory, key, entry)
+    record_entry(directory, key, entry)
     if games:
         entry["score"] = score(key, partner or envs.DEFAULT_PARTNER[role], games, root=directory)
-        _record(directory, key, entry)
+        record_entry(directory, key, entry)
     return entry

@@ -340,13 +340,13 @@ def train(
         "versions": {p: version(p) for p in ("stable-baselines3", "sb3-contrib", "torch", "numpy")},
     }
     if score_games:
-        _record(out, key, entry)  # score() loads the policy through the manifest
+        record_entry(out, key, entry)  # score() loads the policy through the manifest
         entry["score"] = score(key, recipe.partners[0], score_games, root=out)
-    _record(out, key, entry)
+    record_entry(out, key, entry)
     return entry
 
 
-def _record(out: Path, key: str, entry: dict) -> None:
+def record_entry(out: Path, key: str, entry: dict) -> None:
     """Write one manifest entry; a lock keeps parallel trainings from losing each other's."""
     with open(out / ".manifest.lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)

@@ -10,6 +10,7 @@ one.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import threading
 import time
 from collections.abc import Iterator
@@ -79,10 +80,10 @@ def labelled(recording: Recording) -> Iterator[tuple[State, Game, list[str]]]:
 
 def caption(image: np.ndarray, lines: list[str], scale: float = 1.0) -> np.ndarray:
     """The image with a band of text lines below it (Pillow's built-in font; no font files needed)."""
-    from PIL import Image, ImageDraw, ImageFont
+    from PIL import Image, ImageDraw
 
     size = max(10, round(16 * scale))
-    font = ImageFont.load_default(size)
+    font = _font(size)
     step = round(size * 1.3)
     height, width = image.shape[:2]
     band = Image.new("RGB", (width, step * CAPTION_LINES + size // 2), BACKGROUND)
@@ -135,6 +136,13 @@ def write_video(recording: Recording, path: Path, scale: float = 1.0, every: int
         raise ValueError(f"{recording.path}: no states to draw")
     writer.close()
     return count
+
+
+@functools.cache
+def _font(size: int):  # noqa: ANN202 - a Pillow font
+    from PIL import ImageFont
+
+    return ImageFont.load_default(size)
 
 
 def _gif_delay(fps: float) -> int:

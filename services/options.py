@@ -9,6 +9,7 @@ import enum
 import functools
 import inspect
 import logging
+import sys
 from collections.abc import Callable
 from typing import Annotated, Literal
 
@@ -78,10 +79,26 @@ def setup_logging(log_level: str | None = None, verbose: bool = False, quiet: bo
     if verbose and quiet:
         raise UsageError("--verbose", "--quiet", "choose one of them")
     level = log_level or ("debug" if verbose else "warning" if quiet else "info")
-    logging.basicConfig(
-        level=logging.DEBUG if level == "debug" else logging.WARNING, format=LOG_FORMAT, force=True
-    )
+    root = logging.getLogger()
+    root.setLevel(logging.DEBUG if level == "debug" else logging.WARNING)
+    for handler in [h for h in root.handlers if isinstance(h, _Stderr)]:
+        root.removeHandler(handler)  # the one an earlier command in this process set up
+    handler = _Stderr()
+    handler.setFormatter(logging.Formatter(LOG_FORMAT))
+    root.addHandler(handler)
     logging.getLogger("tsf").setLevel(level.upper())
+
+
+class _Stderr(logging.StreamHandler):
+    """Writes to whatever sys.stderr is when a line comes (a redirected or captured stream too)."""
+
+    @property
+    def stream(self):  # noqa: ANN201 - a text stream
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value: object) -> None:
+        pass
 
 
 def log_options(command: Callable[..., object]) -> Callable[..., object]:

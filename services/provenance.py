@@ -16,6 +16,7 @@ from __future__ import annotations
 import datetime
 import hashlib
 import json
+import os
 import shlex
 import subprocess
 import sys
@@ -28,11 +29,19 @@ from shared.game import GameConfig
 ROOT = Path(__file__).resolve().parent.parent
 FIELDS = ("date", "version", "commit", "library", "table", "config", "command")
 _command: list[str] = []  # the `tsf` command line being run (services/entry.py), else sys.argv
+COMMAND = "TSF_COMMAND"  # "<pid> <command line>" of the `tsf` command that started this process tree
 
 
 def set_command(args: list[str]) -> None:
-    """Name the `tsf` command line being run (its arguments), for the records made while it runs."""
+    """Name the `tsf` command line being run (its arguments), for the records made while it runs. A
+    process that a `tsf` command started (the recorder of `tsf match`) names that command instead:
+    it is what the user typed."""
+    pid, _, line = os.environ.get(COMMAND, "").partition(" ")
+    if line and pid != str(os.getpid()):
+        _command[:] = shlex.split(line)
+        return
     _command[:] = ["tsf", *args]
+    os.environ[COMMAND] = f"{os.getpid()} {shlex.join(_command)}"
 
 
 @cache

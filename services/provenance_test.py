@@ -46,3 +46,12 @@ def test_an_eval_summary_names_what_made_it(tmp_path):
     made = json.loads((tmp_path / "provenance.json").read_text())
     assert tuple(made) == provenance.FIELDS
     assert "## Provenance" in summary and f"- commit: {made['commit']}" in summary
+
+
+def test_a_process_started_by_a_tsf_command_names_that_command(monkeypatch):
+    monkeypatch.setenv(provenance.COMMAND, "1 tsf match --duration 2")  # another process's
+    provenance.set_command(["recorder", "--match", "m"])
+    assert provenance.provenance()["command"] == "tsf match --duration 2"
+    monkeypatch.delenv(provenance.COMMAND)
+    provenance.set_command(["recorder", "--match", "m"])
+    assert provenance.provenance()["command"] == "tsf recorder --match m"

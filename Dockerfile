@@ -11,12 +11,12 @@ ARG OFFLINE=
 ENV PIP_DISABLE_PIP_VERSION_CHECK=1 PIP_NO_CACHE_DIR=1 PIP_FIND_LINKS=/tmp/wheels
 WORKDIR /app
 COPY docker/wheels/ /tmp/wheels/
-COPY pyproject.toml README.md ./
-# The pinned dependencies first, in their own layer: code changes do not reinstall them.
+COPY pyproject.toml requirements.lock README.md ./
+# The dependencies first, at the lock's versions, in their own layer: code changes do not reinstall them.
 RUN python3 -m venv /opt/venv \
     && python3 -c "import tomllib; print(*tomllib.load(open('pyproject.toml', 'rb'))['project']['dependencies'], sep='\n')" \
         >/tmp/requirements.txt \
-    && /opt/venv/bin/pip install ${OFFLINE:+--no-index} -r /tmp/requirements.txt
+    && /opt/venv/bin/pip install ${OFFLINE:+--no-index} -r /tmp/requirements.txt -c requirements.lock
 COPY services/ services/
 COPY shared/ shared/
 # Editable: the policy library's weights and table are read from the source tree.

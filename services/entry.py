@@ -14,6 +14,7 @@ from collections.abc import Sequence
 
 import typer
 
+from services import provenance
 from services.processes import adopt
 from shared.errors import Failure, UsageError
 
@@ -43,6 +44,7 @@ def run(app: typer.Typer, args: Sequence[str] | None = None) -> int:
     args = list(sys.argv[1:] if args is None else args)
     debug = "--debug" in args or os.environ.get("TSF_DEBUG", "") not in ("", "0")
     args = [a for a in args if a != "--debug"]
+    provenance.set_command(args)
     where = f"tsf {args[0]}" if args and not args[0].startswith("-") else "tsf"  # the command, for the line
     try:
         status = typer.main.get_command(app).main(args or ["--help"], prog_name="tsf", standalone_mode=False)

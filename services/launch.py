@@ -20,6 +20,7 @@ from pathlib import Path
 
 from services.adapter.core import AdapterConfig
 from services.agent.library import check_seat
+from services.agent.outside import record_name
 from services.processes import Processes
 from services.recorder.log import make_way
 from services.recorder.recording import load
@@ -124,7 +125,7 @@ def run_match(
 
     match = ["--match", plan.match]
     policies = plan.policies()
-    recorded = dict(policies)
+    recorded = {role: record_name(key) for role, key in policies.items()}  # a .zip path: its name
     if plan.adapter is not None:
         recorded[plan.adapter.role] = plan.adapter.name
     with Processes() as processes:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import logging
 from pathlib import Path
 
 import typer
@@ -12,18 +11,22 @@ from services.options import (
     SECONDS,
     AdapterFactory,
     Duration,
+    Frames,
     Host,
     Port,
+    Seat,
     Seed,
     adapter_options,
     bus_options,
     console,
+    game_frames,
+    keys_help,
     number,
     output,
 )
 from shared.bus import BusConfig, stop_on_signals
 from shared.errors import Failure, UsageError
-from shared.game import FPS, FRAMES, ROLES, Range, other
+from shared.game import FRAMES, ROLES, Range, other
 
 commands = typer.Typer()
 
@@ -32,9 +35,10 @@ commands = typer.Typer()
 @adapter_options("role", "seed")
 def match_command(
     seed: Seed = 0,
-    duration: Duration = 60.0,
-    bait: str = typer.Option("circle", help="Bait agent's policy key."),
-    shooter: str = typer.Option("mirror", help="Shooter agent's policy key."),
+    duration: Duration = None,
+    frames: Frames = None,
+    bait: str = typer.Option("circle", help=keys_help("bait", "Bait agent's policy key")),
+    shooter: str = typer.Option("mirror", help=keys_help("shooter", "Shooter agent's policy key")),
     lockstep: bool = typer.Option(
         False, help="Lockstep (as fast as the agents answer) instead of real time."
     ),
@@ -43,20 +47,21 @@ def match_command(
     overwrite: bool = typer.Option(
         False, "--overwrite", help="Reuse the id of an existing recording; the old one is renamed aside."
     ),
-    adaptive: str = typer.Option("", help="Make this seat (bait or shooter) the adaptive agent."),
+    adaptive: Seat | None = typer.Option(None, help="Make this seat the adaptive agent."),
     *,
     adapter: AdapterFactory,
 ) -> None:
     """Start a complete match on this machine: sim, two agents and the recorder as processes (and
     with --adaptive, the adapter, set by the adapter options)."""
     from services.launch import MatchPlan, new_match_id, run_match
-    from services.recorder.recording import export_parquet, load
+    from services.recorder.export import export
+    from services.recorder.recording import load
 
     if adaptive and adaptive not in ROLES:
         raise UsageError("--adaptive", adaptive, "not a seat", ROLES)
     config = adapter(role=adaptive or ROLES[1], seed=seed)  # its options are checked with or without
     plan = MatchPlan(
-        match or new_match_id(), seed, round(duration * FPS), "lockstep" if lockstep else "realtime",
+        match or new_match_id(), seed, game_frames(duration, frames), "lockstep" if lockstep else "realtime",
         bait, shooter, out, adapter=config if adaptive else None,
     )  # fmt: skip
     seats = plan.policies()
@@ -76,7 +81,7 @@ def match_command(
             )
 
         summary, path = run_match(plan, scoreboard, adapted, overwrite, stop_on_signals())
-    export = export_parquet(load(path), path.with_suffix(".parquet"))
+    tables = export(load(path), path.with_suffix(".tables"))
     console.print(
         f"[bold]{plan.match}[/]: {summary.kills} kills in {summary.frame} frames "
         f"= {summary.kills_per_minute:.2f} kills/min, points {summary.points}"
@@ -87,20 +92,21 @@ def match_command(
         console.print(f"  {role}: kills {counters['kills']}, deaths by cause: {deaths}, shield hits {hits}")
     if summary.timing:
         console.print("  timing (ms): " + ", ".join(f"{k} {v:.2f}" for k, v in summary.timing.items()))
-    console.print(f"  recording: {path}  (Parquet: {export['states'].parent})")
+    console.print(f"  recording: {path}  (Parquet tables: {tables['states'].parent})")
 
 
 @commands.command("play")
 @adapter_options("role", "seed")
 def play_command(
-    role: str = typer.Option("bait", help="The seat you play: bait or shooter."),
+    role: Seat = typer.Option("bait", help="The seat you play."),
     partner: str = typer.Option(
         "adaptive",
         help="Who plays the other seat: `adaptive` (the adaptive agent), a policy key (see `tsf "
         "library`), or `human` for a person.",
     ),
     seed: Seed = 0,
-    duration: Duration = 60.0,
+    duration: Duration = None,
+    frames: Frames = None,
     wait: float = number(600.0, SECONDS, "Seconds to wait for the players to press start."),
     host: Host = "127.0.0.1",
     port: Port = 8000,
@@ -125,8 +131,8 @@ def play_command(
             check_seat(partner, partner_role, "--partner")  # before anyone opens the page
         seats[partner_role] = partner
     plan = MatchPlan(
-        match or new_match_id(), seed, round(duration * FPS), "realtime", directory=out, wait_players=wait,
-        **seats,
+        match or new_match_id(), seed, game_frames(duration, frames), "realtime", directory=out,
+        wait_players=wait, **seats,
     )  # fmt: skip
 
     def links(urls: dict[str, str]) -> None:
@@ -172,7 +178,6 @@ def study(
     from services.study.core import StudyConfig
     from services.study.runner import Serving, run_study
 
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     protocol = StudyConfig.load(config)
     directory = out / protocol.name
 

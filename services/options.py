@@ -1,24 +1,29 @@
 """What the `tsf` command groups share: the console, numeric options checked against their limits,
-the bus options every service takes, the adaptive agent's options (built from AdapterConfig) and the
-web page's host and port."""
+the logging options every command takes, the bus options every service takes, the adaptive agent's
+options (built from AdapterConfig), the choices of enumerated options, and the web page's host and
+port."""
 
 from __future__ import annotations
 
 import dataclasses
+import enum
 import functools
 import inspect
 import logging
 import os
+import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any
+from types import EllipsisType
+from typing import Annotated, Any, Literal
 
 import typer
 from rich.console import Console
 
-from services.adapter.core import AdapterConfig
+from services.adapter.core import STRATEGIES, AdapterConfig
 from shared.bus import BusConfig
-from shared.game import DURATION, FPS, SEEDS, Range
+from shared.errors import UsageError
+from shared.game import DURATION, FPS, FRAMES, ROLES, SEEDS, GameConfig, Range
 
 console = Console()
 
@@ -55,13 +60,15 @@ def number(default: object, limits: Range, help: str) -> Any:
 
 
 Seed = Annotated[int, number(..., SEEDS, "The game's seed.")]
-Duration = Annotated[float, number(..., DURATION, f"Game length in seconds ({FPS} frames each).")]
 
 
-def output(default: Path | None, help: str, directory: bool = False, names: tuple[str, ...] = ()) -> Any:
+def output(
+    default: Path | None | EllipsisType, help: str, directory: bool = False, names: tuple[str, ...] = ()
+) -> Any:
     """An option naming where a command writes (a file, or with `directory` a directory made if
     missing), refused before the command starts when nothing could be written there. Defaults are
-    relative to the current directory: a shipped artifact is written only when named."""
+    relative to the current directory: a shipped artifact is written only when named (`...`: the
+    option is required)."""
 
     def check(path: Path | None) -> Path | None:
         if path is None:
@@ -78,11 +85,104 @@ def output(default: Path | None, help: str, directory: bool = False, names: tupl
     return typer.Option(default, *names, callback=check, help=help)
 
 
+# Enumerated options: Literal types, so that --help lists the choices and click refuses the rest.
+Seat = Literal[ROLES]
+Strategy = Literal[STRATEGIES]
+Strategies = enum.StrEnum("Strategies", [(s, s) for s in STRATEGIES])  # repeatable: typer lists take Enums
+SimMode = Literal["realtime", "lockstep"]
+ZenohMode = Literal["peer", "client", "router"]
+LogLevel = Literal["debug", "info", "warning", "error"]
+Service = Literal["sim", "agent", "recorder", "adapter", "human"]  # what `tsf alive` asks about
+LOG_FORMAT = "%(asctime)s %(name)s %(levelname)s %(message)s"
+
+LOG_OPTIONS = {  # parameter name: (annotation, default)
+    "log_level": (
+        Annotated[
+            LogLevel | None,
+            typer.Option(
+                "--log-level", help="The project's log level (default info; other libraries: warning)."
+            ),
+        ],
+        None,
+    ),
+    "verbose": (Annotated[bool, typer.Option("--verbose", "-v", help="Log level debug.")], False),
+    "quiet": (Annotated[bool, typer.Option("--quiet", "-q", help="Log level warning.")], False),
+}
+
+
+# Game time is in seconds everywhere (--duration); --frames gives it in frames instead.
+Duration = Annotated[
+    float | None, number(..., DURATION, f"Game length in seconds, default 60 ({FPS} frames each).")
+]
+Frames = Annotated[int | None, number(..., FRAMES, "Game length in frames, instead of --duration.")]
+
+
+def game_frames(duration: float | None, frames: int | None) -> int:
+    """The game's length in frames from --duration (seconds) or --frames (one of them; default 60 s)."""
+    if duration is not None and frames is not None:
+        raise UsageError("--frames", frames, "give the length once: --duration (seconds) or --frames")
+    if frames is not None:
+        return frames
+    return round(duration * FPS) if duration is not None else GameConfig.frames
+
+
+def keys_help(role: str | None, what: str) -> str:
+    """An option's help that lists the policy keys of its seat (or of both), as `tsf keys` does."""
+    from services.agent.library import seat_keys
+
+    roles = [role] if role else list(ROLES)
+    listed = "; ".join(f"{r}: {', '.join(seat_keys(r))}" for r in roles)
+    return f"{what} ({listed}; or a .zip or module:attr: `tsf keys`)."
+
+
+def setup_logging(log_level: str | None = None, verbose: bool = False, quiet: bool = False) -> None:
+    """The project's loggers (tsf.*) at the chosen level, every other library's at warning (debug
+    opens them too): a command's own lines stay readable among zenoh's, numba's, matplotlib's."""
+    if verbose and quiet:
+        raise UsageError("--verbose", "--quiet", "choose one of them")
+    level = log_level or ("debug" if verbose else "warning" if quiet else "info")
+    root = logging.getLogger()
+    root.setLevel(logging.DEBUG if level == "debug" else logging.WARNING)
+    for handler in [h for h in root.handlers if isinstance(h, _Stderr)]:
+        root.removeHandler(handler)  # the one an earlier command in this process set up
+    handler = _Stderr()
+    handler.setFormatter(logging.Formatter(LOG_FORMAT))
+    root.addHandler(handler)
+    logging.getLogger("tsf").setLevel(level.upper())
+
+
+class _Stderr(logging.StreamHandler):
+    """Writes to whatever sys.stderr is when a line comes (a redirected or captured stream too)."""
+
+    @property
+    def stream(self):  # noqa: ANN201 - a text stream
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value: object) -> None:
+        pass
+
+
+def log_options(command: Callable[..., object]) -> Callable[..., object]:
+    """Give a command --log-level, -v/--verbose and -q/--quiet, and set logging up before it runs."""
+    signature = inspect.signature(command, eval_str=True)
+    added = [
+        inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=default, annotation=annotation)
+        for name, (annotation, default) in LOG_OPTIONS.items()
+    ]
+
+    @functools.wraps(command)
+    def with_logs(*args: object, **options: object) -> object:
+        setup_logging(*(options.pop(name) for name in LOG_OPTIONS))
+        return command(*args, **options)
+
+    with_logs.__signature__ = signature.replace(parameters=[*signature.parameters.values(), *added])
+    return with_logs
+
+
 # Options every bus service shares. The environment can set them (space-separated endpoints), so that
 # one deployment file configures every service's bus in one place (compose.yaml).
-Mode = Annotated[
-    str, typer.Option("--mode", envvar="TSF_MODE", help="zenoh mode: peer (default), client or router.")
-]
+Mode = Annotated[ZenohMode, typer.Option("--mode", envvar="TSF_MODE", help="zenoh mode.")]
 
 
 Listen = Annotated[
@@ -136,7 +236,7 @@ BUS_OPTIONS = {  # parameter name: (annotation, default)
 
 def bus_options(command: Callable[..., None]) -> Callable[..., None]:
     """Give a service's command the bus options every service shares; the command receives them as
-    one `bus: BusConfig` (and logging is set up, since services log)."""
+    one `bus: BusConfig`."""
     own = [p for p in inspect.signature(command, eval_str=True).parameters.values() if p.name != "bus"]
     shared = [
         inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=default, annotation=annotation)
@@ -148,7 +248,6 @@ def bus_options(command: Callable[..., None]) -> Callable[..., None]:
         mode, listen, connect, multicast, low_latency, user, password, wait = (
             options.pop(n) for n in BUS_OPTIONS
         )
-        logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
         listen = listen or (() if mode == "client" else ("tcp/127.0.0.1:0",))
         bus = BusConfig(
             mode, tuple(listen), tuple(connect or ()), multicast, low_latency, user, password, wait
@@ -173,12 +272,15 @@ def adapter_options(*fixed: str) -> Callable[[Callable[..., None]], Callable[...
         own = [
             p for p in inspect.signature(command, eval_str=True).parameters.values() if p.name != "adapter"
         ]
+        kinds = {"role": Seat, "strategy": Strategy}  # the enumerated fields, as choices
         added = [
             inspect.Parameter(
                 f.name,
                 inspect.Parameter.KEYWORD_ONLY,
                 default=f.default,
-                annotation=Annotated[type(f.default), typer.Option(help=f.metadata["help"])],
+                annotation=Annotated[
+                    kinds.get(f.name, type(f.default)), typer.Option(help=f.metadata["help"])
+                ],
             )
             for f in fields
         ]

@@ -11,6 +11,7 @@ an operator. USERS lists the names the rules know.
 from __future__ import annotations
 
 import json
+import logging
 import threading
 from pathlib import Path
 
@@ -78,6 +79,7 @@ def router_config(listen: tuple[str, ...], credentials: Path | None = None) -> z
 def run_router(listen: tuple[str, ...], credentials: Path | None, stop: threading.Event) -> None:
     """Route until `stop` is set."""
     router = zenoh.open(router_config(listen, credentials))
+    logging.getLogger("tsf.router").info("routing on %s%s", listen, " (secured)" if credentials else "")
     try:
         stop.wait()
     finally:

@@ -14,18 +14,25 @@ from services.options import (
     SECONDS,
     AdapterFactory,
     Connect,
+    Duration,
+    Frames,
     Host,
     Match,
     Port,
+    Seat,
     Seed,
+    Service,
+    SimMode,
     adapter_options,
     bus_options,
     console,
+    game_frames,
+    keys_help,
     number,
     output,
 )
 from shared.bus import BusConfig, stop_on_signals
-from shared.game import FPS, FRAMES, SEEDS, GameConfig
+from shared.game import FPS, SEEDS, GameConfig
 
 commands = typer.Typer()
 
@@ -35,8 +42,11 @@ commands = typer.Typer()
 def sim(
     match: Match,
     seed: Seed = 0,
-    frames: int = number(GameConfig.frames, FRAMES, f"Game length in frames ({FPS} a second)."),
-    mode: str = typer.Option("realtime", "--sim-mode", help=f"realtime ({FPS} Hz) or lockstep."),
+    duration: Duration = None,
+    frames: Frames = None,
+    mode: SimMode = typer.Option(
+        "realtime", "--sim-mode", help=f"realtime: {FPS} Hz; lockstep: as fast as answered."
+    ),
     bait: str = typer.Option("", help="Bait's policy key, for the record."),
     shooter: str = typer.Option("", help="Shooter's policy key, for the record."),
     wait_players: float = number(10.0, SECONDS, "Seconds to wait for both seats before starting."),
@@ -48,8 +58,9 @@ def sim(
     """Run the sim service for one match."""
     from services.sim.service import run_sim
 
+    config = GameConfig(frames=game_frames(duration, frames))
     summary = run_sim(
-        bus, match, seed, GameConfig(frames=frames), mode, {"bait": bait, "shooter": shooter},
+        bus, match, seed, config, mode, {"bait": bait, "shooter": shooter},
         stop_on_signals(), wait_players, wait_recorder, wait_adapter=wait_adapter,
     )  # fmt: skip
     logging.getLogger("tsf.sim").info(
@@ -61,11 +72,12 @@ def sim(
 @bus_options
 def agent(
     match: Match,
-    role: str = typer.Option(..., help="bait or shooter"),
+    role: Seat = typer.Option(..., help="The seat."),
     policy: str = typer.Option(
         ...,
-        help="Policy key to play (a library or scripted key), or an adaptive agent's name "
-        "(adaptive-T<window>-<strategy>) to start with its initial policy.",
+        help=keys_help(
+            None, "Policy key to play, or an adaptive agent's name (adaptive-T<window>-<strategy>)"
+        ),
     ),
     seed: int = number(0, SEEDS, "The match's seed (the policy's seed derives from it)."),
     *,
@@ -143,17 +155,15 @@ def router(
     """Run a zenoh router (a Python session in router mode) for matches across machines."""
     from services.router import run_router
 
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
     endpoints = tuple(listen or ("tcp/0.0.0.0:7447",))
-    logging.getLogger("tsf.router").info("routing on %s%s", endpoints, " (secured)" if credentials else "")
     run_router(endpoints, credentials, stop_on_signals())
 
 
 @commands.command()
 def alive(
     match: Match,
-    service: str = typer.Option(..., help="sim, agent, recorder, adapter or human."),
-    role: str = typer.Option("", help="The seat, for an agent or a human."),
+    service: Service = typer.Option(..., help="The service asked about."),
+    role: Seat | None = typer.Option(None, help="The seat, for an agent or a human."),
     connect: Connect = None,
     timeout: float = number(2.0, SECONDS, "Seconds to wait for the bus."),
 ) -> None:

@@ -237,7 +237,7 @@ def test_compose_run_starts_sweep_workers_for_a_coordinator_on_the_host(inputs: 
             assert started.returncode == 0, _tail(started.stdout + started.stderr)
         table = tmp_path / "table.json"
         sweep = [sys.executable, "-m", "services.cli", "sweep", "--sweep", "compose", "--workers", "0"]
-        sweep += ["--games", "4", "--chunk", "1", "--baits", "B5", "--shooters", "S5", "--out", str(table)]
+        sweep += ["--games", "4", "--chunk", "1", "--bait", "B5", "--shooter", "S5", "--out", str(table)]
         swept = _run([*sweep, "--connect", f"tcp/127.0.0.1:{port}"], 300)
         assert swept.returncode == 0, _tail(swept.stdout + swept.stderr)
         workers = _run(["docker", "ps", "-aq", "--filter", f"name={env['COMPOSE_PROJECT_NAME']}_worker"], 60)

@@ -100,7 +100,7 @@ def test_matches_started_together_get_their_own_recordings_and_an_id_is_never_re
     again = tsf_match(*SHORT, "--match", taken, "--overwrite")
     assert again.wait(120) == 0
     assert (tmp_path / f"{taken}.tsflog.replaced-1").read_bytes() == before
-    assert (tmp_path / f"{taken}.parquet.replaced-1" / "states.parquet").exists()
+    assert (tmp_path / f"{taken}.tables.replaced-1" / f"{taken}.states.parquet").exists()
     recording = load(paths[0])
     assert recording.problems() == [] and recording.starts == 1 and replay(recording) == []
 

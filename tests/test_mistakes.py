@@ -30,6 +30,20 @@ SEED_RANGE = "0 to 4294967295"
 # (command line, exit status, what the one line says); {tmp} is a directory that holds the finished
 # recording {done} (match id M), its torn copy {torn}, one with a wrong state hash {tampered}, and
 # {garbage}, a file that is no recording.
+
+
+def refused(option: str, value: str, choices: str, envvar: str = "") -> str:
+    """Click's line for a value outside an option's choices."""
+    env = f" (env var: '{envvar}')" if envvar else ""
+    return f"Invalid value for '{option}'{env}: Value error, '{value}' is not one of {choices}"
+
+
+SEATS = "'bait', 'shooter'"
+MODES = "'peer', 'client', 'router'"
+SIM_MODES = "'realtime', 'lockstep'"
+STRATEGY_CHOICES = "'cem', 'cem-dwell', 'cem-ood', 'bayes', 'bayes-dwell-ood'"
+SERVICES = "'sim', 'agent', 'recorder'"
+
 MISTAKES = [
     ("nosuch", 2, "tsf: No such command 'nosuch'."),
     ("game --nosuch", 2, "tsf game: No such option: --nosuch"),
@@ -58,12 +72,20 @@ MISTAKES = [
         2,
         f"--shooter-partner ZZ: no policy of the bait seat; valid: {BAITS}",
     ),
-    ("sweep --baits B99", 2, "tsf sweep: Invalid value: not baits of the library: ['B99']"),
-    ("sweep --shooters B1", 2, "not shooters of the library: ['B1']"),
+    ("sweep --bait B99", 2, "tsf sweep: Invalid value: not baits of the library: ['B99']"),
+    ("sweep --shooter B1", 2, "not shooters of the library: ['B1']"),
     ("sweep --games 0", 2, "Invalid value for '--games'"),
     ("sweep --chunk 0", 2, "Invalid value for '--chunk'"),
-    ("sweep --mode banana", 2, "tsf sweep: --mode banana: unknown zenoh mode; valid: peer, client, router"),
-    ("worker --mode banana", 2, "tsf worker: --mode banana: unknown zenoh mode"),
+    (
+        "sweep --mode banana",
+        2,
+        "tsf sweep: " + refused("--mode", "banana", MODES, "TSF_MODE"),
+    ),
+    (
+        "worker --mode banana",
+        2,
+        "tsf worker: " + refused("--mode", "banana", MODES, "TSF_MODE"),
+    ),
     ("worker --connect nowhere", 2, "--connect nowhere: not a zenoh endpoint such as tcp/127.0.0.1:7447"),
     (
         "table {tmp}/none.json",
@@ -71,14 +93,22 @@ MISTAKES = [
         "tsf table: Invalid value for 'path': file '{tmp}/none.json' does not exist.",
     ),
     ("sim --match a/b", 2, "tsf sim: --match a/b: invalid match id: use 1-64 letters, digits, '-' or '_'"),
-    ("sim --match x --sim-mode fast", 2, "tsf sim: --sim-mode fast: unknown; valid: realtime, lockstep"),
+    (
+        "sim --match x --sim-mode fast",
+        2,
+        "tsf sim: " + refused("--sim-mode", "fast", SIM_MODES),
+    ),
     ("sim --match x --frames 0", 2, "Invalid value for '--frames'"),
     ("sim --match x --listen garbage", 2, "tsf sim: --listen garbage: not a zenoh endpoint"),
-    ("sim --match x --mode hub", 2, "tsf sim: --mode hub: unknown zenoh mode"),
+    (
+        "sim --match x --mode hub",
+        2,
+        "tsf sim: " + refused("--mode", "hub", MODES, "TSF_MODE"),
+    ),
     (
         "agent --match x --role pilot --policy circle",
         2,
-        "tsf agent: --role pilot: not a seat; valid: bait, shooter",
+        "tsf agent: " + refused("--role", "pilot", SEATS),
     ),
     (
         "agent --match x --role bait --policy S4",
@@ -94,19 +124,31 @@ MISTAKES = [
     ("agent --match 'bad id' --role bait --policy circle", 2, "--match bad id: invalid match id"),
     ("recorder --match x/y", 2, "tsf recorder: --match x/y: invalid match id"),
     ("recorder --match " + M + " --out {tmp}", 2, f"--match {M}: {{done}} holds a finished match of this id"),
-    ("adapter --match x --role pilot", 2, "tsf adapter: --role pilot: unknown; valid: bait, shooter"),
+    (
+        "adapter --match x --role pilot",
+        2,
+        "tsf adapter: " + refused("--role", "pilot", SEATS),
+    ),
     (
         "adapter --match x --strategy oracle",
         2,
-        f"tsf adapter: --strategy oracle: unknown; valid: {STRATEGIES}",
+        "tsf adapter: " + refused("--strategy", "oracle", STRATEGY_CHOICES),
     ),
     ("adapter --match x --initial best", 2, "--initial best: unknown; valid: best-average, random"),
     ("adapter --match x --window 0", 2, "tsf adapter: --window 0: outside the range 1 to 108000"),
     ("adapter --match x --hazard 1.5", 2, "tsf adapter: --hazard 1.5: a probability in [0, 1)"),
     ("adapter --match x --noise -1", 2, "tsf adapter: --noise -1.0: a probability in [0, 1)"),
     ("router --credentials {tmp}/none.txt", 2, "tsf router: --credentials {tmp}/none.txt: no such file"),
-    ("alive --match x --service banana", 2, "--service banana: unknown service; valid: sim, agent, recorder"),
-    ("alive --match x --service agent --role pilot", 2, "tsf alive: --role pilot: unknown role; valid: bait"),
+    (
+        "alive --match x --service banana",
+        2,
+        refused("--service", "banana", SERVICES),
+    ),
+    (
+        "alive --match x --service agent --role pilot",
+        2,
+        "tsf alive: " + refused("--role", "pilot", SEATS),
+    ),
     ("match --bait B99", 2, f"tsf match: --bait B99: no policy of the bait seat; valid: {BAITS}"),
     ("match --bait S4", 2, f"tsf match: --bait S4: plays the shooter seat, not the bait; valid: {BAITS}"),
     (
@@ -115,8 +157,16 @@ MISTAKES = [
         f"tsf match: --shooter B1: plays the bait seat, not the shooter; valid: {SHOOTERS}",
     ),
     ("match --shooter circle", 2, "tsf match: --shooter circle: plays the bait seat, not the shooter"),
-    ("match --adaptive pilot", 2, "tsf match: --adaptive pilot: not a seat; valid: bait, shooter"),
-    ("match --adaptive shooter --strategy oracle", 2, f"--strategy oracle: unknown; valid: {STRATEGIES}"),
+    (
+        "match --adaptive pilot",
+        2,
+        "tsf match: " + refused("--adaptive", "pilot", SEATS),
+    ),
+    (
+        "match --adaptive shooter --strategy oracle",
+        2,
+        refused("--strategy", "oracle", STRATEGY_CHOICES),
+    ),
     (
         "match --adaptive bait --bait zz --shooter zz",
         2,
@@ -151,22 +201,39 @@ MISTAKES = [
     ("human --match x --token bait", 2, "tsf human: Invalid value: give each seat as ROLE=TOKEN"),
     ("human --match x --token pilot=t", 2, "tsf human: --token pilot: unknown roles; valid: bait, shooter"),
     ("human --match x --port 70000", 2, "Invalid value for '--port'"),
-    ("play --role pilot", 2, "tsf play: Invalid value: role is bait or shooter"),
+    (
+        "play --role pilot",
+        2,
+        "tsf play: " + refused("--role", "pilot", SEATS),
+    ),
     ("play --partner B99", 2, f"tsf play: --partner B99: no policy of the shooter seat; valid: {SHOOTERS}"),
     (
         "play --role shooter --partner S4",
         2,
         f"tsf play: --partner S4: plays the shooter seat, not the bait; valid: {BAITS}",
     ),
-    ("play --strategy oracle", 2, f"tsf play: --strategy oracle: unknown; valid: {STRATEGIES}"),
+    (
+        "play --strategy oracle",
+        2,
+        "tsf play: " + refused("--strategy", "oracle", STRATEGY_CHOICES),
+    ),
     ("play --window 0", 2, "tsf play: --window 0: outside the range 1 to 108000"),
     ("play --match a/b --partner S4", 2, "tsf play: --match a/b: invalid match id"),
-    ("eval --role pilot", 2, "tsf eval: --role pilot: not a seat; valid: bait, shooter"),
-    ("eval --windows 1,x", 2, "tsf eval: --windows 1,x: not whole numbers separated by commas"),
+    (
+        "eval --role pilot",
+        2,
+        "tsf eval: " + refused("--role", "pilot", SEATS),
+    ),
+    ("eval --window x", 2, "Invalid value for '--window'"),
+    ("eval --strategy nope", 2, "Invalid value for '--strategy'"),
     ("eval --strategy-window 0", 2, "Invalid value for '--strategy-window'"),
     ("calibrate-adapter --workers -1", 2, "Invalid value for '--workers'"),
     ("report", 2, "tsf report: Missing argument 'recordings'."),
-    ("report {done} --partner-role pilot", 2, "Invalid value for --partner-role: bait or shooter"),
+    (
+        "report {done} --partner-role pilot",
+        2,
+        refused("--partner-role", "pilot", SEATS),
+    ),
     ("report {done} --reference-games 0", 2, "Invalid value for '--reference-games'"),
     ("report {garbage} {torn} --out {tmp}/report", 1, "none of the 2 recordings is usable; {tmp}/report"),
     (
@@ -236,7 +303,27 @@ MISTAKES = [
         "tsf diversity: Invalid value for '--games': -3 is outside the range 1 to 10000",
     ),
     ("eval --seeds 0", 2, "tsf eval: Invalid value for '--seeds': 0 is outside the range 1 to 10000"),
-    ("eval --windows 0,400", 2, "tsf eval: --windows 0,400: each window must be in the range 1 to 108000"),
+    (
+        "eval --window 150 --window 0",
+        2,
+        "tsf eval: Invalid value for '--window': 0 is outside the range 1 to 108000",
+    ),
+    (
+        "game --duration 1e9",
+        2,
+        "tsf game: Invalid value for '--duration': 1e9 is outside the range 0.1 to 3600.0",
+    ),
+    (
+        "game --duration 1 --frames 30",
+        2,
+        "tsf game: --frames 30: give the length once: --duration (seconds) or --frames",
+    ),
+    ("sim --match x --duration 0", 2, "'--duration': 0 is outside the range 0.1 to 3600.0"),
+    (
+        "library add K {garbage} --role bait --games -1 --library {tmp}/lib",
+        2,
+        "tsf library add: Invalid value for '--games': -1 is outside the range 0 to 10000",
+    ),
     ("eval --identify-seeds 1e6", 2, "'--identify-seeds': 1e6 is outside the range 1 to 10000"),
     ("eval --workers 9999", 2, "tsf eval: Invalid value for '--workers': 9999 is outside the range 0 to 256"),
     ("eval --strategy-window 1000000", 2, "'--strategy-window': 1000000 is outside the range 1 to 108000"),
@@ -284,7 +371,11 @@ MISTAKES = [
         2,
         "tsf sweep: Invalid value for '--out': {garbage}/t.json: {garbage} is not a",
     ),
-    ("train --out {garbage}", 2, "tsf train: Invalid value for '--out': {garbage} is not a directory"),
+    (
+        "train --out {garbage}",
+        2,
+        "tsf train: Invalid value for '--library' / '--out': {garbage} is not a directory",
+    ),
     (
         "report {done} --out {garbage}",
         2,
@@ -293,6 +384,16 @@ MISTAKES = [
     ("match --out {garbage}", 2, "tsf match: Invalid value for '--out': {garbage} is not a directory"),
     ("table --plot {tmp}", 2, "tsf table: Invalid value for '--plot': {tmp} is a directory"),
     ("replay {done} --video {garbage}/m.gif", 2, "'--video': {garbage}/m.gif: {garbage} is not a directory"),
+    (
+        "export {done} --out {garbage}",
+        2,
+        "tsf export: Invalid value for '--out': {garbage} is not a directory",
+    ),
+    (
+        "library add K {garbage} --role bait --library {garbage}",
+        2,
+        "tsf library add: Invalid value for '--library': {garbage} is not a directory",
+    ),
 ]
 
 

@@ -9,6 +9,7 @@ import msgpack
 import pytest
 import zenoh
 
+from services.provenance import read_sidecar
 from services.recorder.log import read_log
 from services.recorder.recording import load
 from services.recorder.service import recording_path, run_recorder
@@ -138,6 +139,8 @@ def test_everything_valid_exactly_once_a_gap_for_the_hole_and_no_garbage(recorde
     assert [s.frame for s in recording.states] == [0, 1, 2, 3, 4, 7, 8, 9]
     assert (recording.gaps, recording.missing_frames, recording.undecodable) == ([(5, 6)], 2, 0)
     assert recording.start is not None and recording.summary is not None and len(recording.events) == 1
+    made = read_sidecar(path)  # what made the recording, beside it
+    assert made["config"] == GameConfig.from_dict(recording.start.config).hash() and made["library"]
 
 
 def test_a_restarted_recorder_cuts_a_torn_tail_and_records_the_gap(recorder, wait_until, tmp_path):

@@ -4,13 +4,14 @@ calibrate-adapter."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Annotated
 
 import typer
 from rich.table import Table
 
-from services.adapter.core import STRATEGIES, WINDOWS, AdapterConfig
+from services.adapter.core import WINDOWS, AdapterConfig
 from services.agent.library import policy_for
-from services.options import GAMES, WORKERS, console, number, output
+from services.options import GAMES, WORKERS, Seat, Strategies, console, number, output
 from shared.errors import UsageError
 from shared.game import FPS, ROLES, other
 
@@ -53,10 +54,15 @@ def diversity(
 
 @commands.command("eval")
 def eval_command(
-    role: str = typer.Option("shooter", help="The adaptive agent's seat; the partners play the other."),
+    role: Seat = typer.Option("shooter", help="The adaptive agent's seat; the partners play the other."),
     seeds: int = number(5, GAMES, "Seeded one-minute games per partner and agent."),
-    windows: str = typer.Option("150,400,800", help="Windows T of the study's CEM agent (comma-separated)."),
-    strategies: str = typer.Option(",".join(STRATEGIES), help="Strategies compared at --strategy-window."),
+    window: Annotated[
+        list[int] | None,
+        number(..., WINDOWS, "A window T of the study's CEM agent, repeatable (default: 150, 400, 800)."),
+    ] = None,
+    strategy: list[Strategies] | None = typer.Option(
+        None, help="A strategy compared at --strategy-window, repeatable (default: all)."
+    ),
     strategy_window: int = number(
         AdapterConfig.window, WINDOWS, "The window of the strategies other than cem."
     ),
@@ -86,14 +92,10 @@ def eval_command(
     if role not in ROLES:
         raise UsageError("--role", role, "not a seat", ROLES)
     workers = workers or os.cpu_count() or 1
-    try:
-        window_list = [int(w) for w in windows.split(",") if w.strip()]
-    except ValueError:
-        raise UsageError("--windows", windows, "not whole numbers separated by commas") from None
-    if not window_list or any(w not in WINDOWS for w in window_list):
-        raise UsageError("--windows", windows, f"each window must be in the range {WINDOWS}")
+    window_list = window or [150, 400, 800]
     partners = partner or [p for group in population(other(role)).values() for p in group]
-    agents = library.keys(role) + team.variants(window_list, strategies.split(","), strategy_window)
+    strategies = [s.value for s in strategy or Strategies]
+    agents = library.keys(role) + team.variants(window_list, strategies, strategy_window)
     columns = (BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
     ident, rows, comparison = None, [], None
     with Progress(*columns, console=console) as bar:

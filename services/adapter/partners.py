@@ -10,13 +10,13 @@ any worker process:
     switch(B5,B7)      plays B5 until SWITCH_AT, then B7 (a partner who changes style mid-game)
     package.module:attr  your own partner: an object with the policy protocol's key, role, view,
                          reset(seed) and act(obs), or a callable that returns a new one
+    my_bait.zip          a model trained with Stable-Baselines3 (services/agent/outside.py)
 
 Wrappers nest: `noisy(switch(B5,B7))`.
 """
 
 from __future__ import annotations
 
-import importlib
 import random
 import re
 from collections import deque
@@ -130,9 +130,7 @@ def make_partner(name: str, role: str) -> Partner:
     if call and call[1] == "switch":
         first, second = _split_arguments(call[2])
         return Switching(make_partner(first, role), make_partner(second, role))
-    if ":" in name:
-        return _external(name, role)
-    return policy_for(name, role, "--partner")
+    return policy_for(name, role, "--partner")  # also a .zip or module:attr (services/agent/outside.py)
 
 
 def _split_arguments(text: str) -> tuple[str, str]:
@@ -143,17 +141,6 @@ def _split_arguments(text: str) -> tuple[str, str]:
         if char == "," and depth == 0:
             return text[:i].strip(), text[i + 1 :].strip()
     raise ValueError(f"switch({text}) needs two partners")
-
-
-def _external(path: str, role: str) -> Partner:
-    module, _, attr = path.partition(":")
-    found = getattr(importlib.import_module(module), attr)
-    partner = found() if isinstance(found, type) or not isinstance(found, Partner) else found
-    if not isinstance(partner, Partner):
-        raise TypeError(f"{path} is not a partner (key, role, view, reset, act)")
-    if partner.role != role:
-        raise ValueError(f"{path} plays {partner.role}, not {role}")
-    return partner
 
 
 def group_of(name: str) -> str:

@@ -11,6 +11,8 @@ from services.adapter.core import (
     AdapterConfig,
 )
 from services.adapter.partners import group_of
+from services.provenance import lines as provenance_lines
+from services.provenance import provenance
 
 
 def _csv(path: Path, header: list[str], rows: Iterable[Iterable]) -> None:
@@ -92,6 +94,9 @@ def write_results(
             ),
             "",
         ]
+    made = provenance()
+    (out / "provenance.json").write_text(json.dumps(made, indent=1) + "\n")
+    lines += ["## Provenance", "", *(f"- {line}" for line in provenance_lines(made)), ""]
     path = out / "summary.md"
     path.write_text("\n".join(lines))
     return path

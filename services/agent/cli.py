@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import enum
 from pathlib import Path
 
 import typer
@@ -9,29 +10,34 @@ from rich.table import Table
 
 from services.agent.calibration import calibrate
 from services.agent.library import policy_for
-from services.options import GAMES, console, number, output
+from services.options import GAMES, Duration, Frames, Seat, console, game_frames, keys_help, number, output
+from services.sim.observation import VIEWS
 from services.sim.play import play, summarize
 from shared.errors import Failure, UsageError
-from shared.game import FPS, FRAMES, SEEDS, GameConfig, Range
+from shared.game import ROLES, SEEDS, GameConfig, Range
 
 commands = typer.Typer()
 STEPS = Range(1, 10**9)  # environment steps of one training
+SCORED = Range(0, GAMES.high)  # games a trained or added policy is scored over (0: not scored)
+Role = enum.Enum("Role", {r: r for r in ROLES}, type=str)
+View = enum.Enum("View", {v: v for v in VIEWS}, type=str)
 
 
 @commands.command()
 def game(
-    bait: str = typer.Option("circle", help="Bait seat's policy key."),
-    shooter: str = typer.Option("mirror", help="Shooter seat's policy key."),
+    bait: str = typer.Option("circle", help=keys_help("bait", "Bait seat's policy key")),
+    shooter: str = typer.Option("mirror", help=keys_help("shooter", "Shooter seat's policy key")),
     seed: int = number(0, SEEDS, "Seed of the first game; game i uses seed + i."),
     games: int = number(1, GAMES, "Number of games."),
-    frames: int = number(GameConfig.frames, FRAMES, f"Frames per game ({FPS} per second)."),
+    duration: Duration = None,
+    frames: Frames = None,
 ) -> None:
     """Play headless games in-process between two policies and print the score."""
     if seed + games - 1 not in SEEDS:
         raise UsageError(
             "--seed", seed, f"the last game's seed {seed + games - 1} is outside the range {SEEDS}"
         )
-    config = GameConfig(frames=frames)
+    config = GameConfig(frames=game_frames(duration, frames))
     results = []
     for s in range(seed, seed + games):
         result = play(
@@ -79,9 +85,7 @@ def train(
         False, help="Imitate the recipe's scripted demonstrator before RL (not the shipped recipes)."
     ),
     jobs: int = number(1, Range(1, 64), "Policies trained at once (processes)."),
-    score_games: int = number(
-        20, Range(0, GAMES.high), "Games scored with the first partner after training."
-    ),
+    score_games: int = number(20, SCORED, "Games scored with the first partner after training."),
 ) -> None:
     """Train library policies by their registry recipes into a library directory (needs the
     `train` extra). A run stopped part way resumes from its last checkpoint in RUNS/KEY."""
@@ -114,9 +118,17 @@ def _score_text(score: dict) -> str:
     return f"{score['kills_per_minute']:.2f} ± {score['stderr']:.2f} kills/min with {score['partner']}"
 
 
-@commands.command("library")
-def library_command() -> None:
-    """List the policy library: recipe, training record and score of each policy."""
+library_commands = typer.Typer(
+    invoke_without_command=True, help="List the policy library; `tsf library add` adds a model of yours."
+)
+commands.add_typer(library_commands, name="library")
+
+
+@library_commands.callback()
+def library_command(context: typer.Context) -> None:
+    """List the policy library (and those in TSF_LIBRARY): each policy's recipe, record and score."""
+    if context.invoked_subcommand is not None:
+        return
     from services.agent import library
 
     manifest = library.manifest()
@@ -129,5 +141,59 @@ def library_command() -> None:
         steps = entry.get("steps", "untrained" if recipe.algorithm else "-")
         seed = str(entry.get("seed", "-"))
         score = _score_text(score) if score else "-"
-        table.add_row(key, recipe.role, recipe.family, recipe.algorithm or "rule", str(steps), seed, score)
+        algorithm = entry.get("algorithm") or recipe.algorithm or "rule"
+        table.add_row(key, recipe.role, recipe.family, algorithm, str(steps), seed, score)
+    console.print(table)
+
+
+@library_commands.command("add")
+def library_add(
+    key: str = typer.Argument(..., help="The new policy's key (a letter, then letters, digits, - and _)."),
+    model: Path = typer.Argument(..., help="A Stable-Baselines3 model (.zip) trained on tsf/Role-v0."),
+    role: Role = typer.Option(..., help="The seat it plays."),
+    library_dir: Path = output(
+        ..., "Your library directory (created if need be).", directory=True, names=("--library",)
+    ),
+    view: View = typer.Option(View.world, help="The observation view it was trained on."),
+    partner: str = typer.Option(
+        "", help="Partner it is scored with (default: S5 for a bait, B5 for a shooter)"
+    ),
+    games: int = number(10, SCORED, "One-minute games it is scored over (0: not scored)."),
+) -> None:
+    """Export an SB3 model into a library of yours: numpy weights, registry and manifest entries with
+    hashes and provenance. List the directory in TSF_LIBRARY to play its keys everywhere."""
+    from services.agent.outside import add
+
+    entry = add(key, model, role.value, library_dir, view.value, partner, games)
+    console.print(f"{key}: {library_dir / entry['file']} sha256 {entry['sha256'][:12]}")
+    if entry.get("score"):
+        console.print(f"  {_score_text(entry['score'])}")
+    console.print(f"  play it everywhere with TSF_LIBRARY={library_dir.resolve()}")
+
+
+@commands.command("keys")
+def keys_command(role: Seat | None = typer.Option(None, help="Only the keys of this seat.")) -> None:
+    """Every valid policy key with the seat it plays (the library's, yours in TSF_LIBRARY, the
+    scripted ones), and the other forms a key can take."""
+    from services.adapter.core import STRATEGIES
+    from services.agent import library
+    from services.agent.scripted import scripted_keys
+
+    table = Table(title="Policy keys")
+    for column in ("key", "seat", "kind", "what"):
+        table.add_column(column)
+    for key, recipe in library.registry().items():
+        if role in (None, recipe.role):
+            kind = "library" if recipe.root == library.LIBRARY else f"yours ({recipe.root})"
+            table.add_row(key, recipe.role, kind, recipe.description)
+    for seat in [role] if role else ROLES:
+        for key in scripted_keys(seat):
+            table.add_row(key, seat, "scripted", "a scripted rule")
+    seats = role or "either"
+    table.add_row("PATH.zip", seats, "yours", "an SB3 model trained on tsf/Role-v0 (docs/library.md)")
+    table.add_row("package.module:attr", "its own", "yours", "a policy object of yours (docs/library.md)")
+    strategies = ", ".join(STRATEGIES)
+    table.add_row(
+        "adaptive-T<window>-<strategy>", seats, "agents", f"the adaptive agent; strategies: {strategies}"
+    )
     console.print(table)

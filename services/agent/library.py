@@ -6,6 +6,11 @@ and the command that made it. Weights are plain arrays in `.npz` files read with
 `allow_pickle=False`, and inference is numpy: loading a policy never executes code from a file and
 playing one needs no torch.
 
+Libraries of your own (made by `tsf library add`, services/agent/outside.py) join the shipped one
+when their directories are listed in TSF_LIBRARY (separated by the OS path separator): their keys
+play, enter the table and the adapter's candidates like the shipped ones. Outside a library, a
+policy key may also be an SB3 `.zip` or a `package.module:attr` object (outside.py).
+
 A learned policy chooses some heads (turn; or turn and thrust) with its network and leaves the
 others to rules; every head spreads a small probability over its other choices (rules: EPSILON,
 networks: FLOOR mixed into the softmax), so the joint distribution is never zero.
@@ -16,22 +21,26 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
 import random
 import shutil
 import tomllib
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
+from dataclasses import fields as dataclass_fields
 from functools import cache
 from pathlib import Path
 
 import numpy as np
 
+from services.agent import outside
 from services.agent.policy import RulePolicy, factored_probs, factored_probs_batch, rule_head_probs
 from services.agent.scripted import MirrorShooter, good_shot, good_shot_batch, scripted_keys, scripted_policy
 from services.sim import observation as ob
 from shared.errors import UsageError
-from shared.game import N_FIRE, N_THRUST, N_TURN, ROLES, GameConfig, Policy, join_action
+from shared.game import N_FIRE, N_THRUST, N_TURN, OBS_SIZE, ROLES, GameConfig, Policy, join_action
 
 LIBRARY = Path(__file__).parent / "library"
+OUTSIDE = "outside"  # the family of a policy added from outside (a network over all 12 actions)
 FLOOR = 1e-3  # weight of the uniform mixed into a network head's softmax
 HEADS = ("turn", "thrust", "fire")
 HEAD_SIZES = {"turn": N_TURN, "thrust": N_THRUST, "fire": N_FIRE}
@@ -47,6 +56,7 @@ FEATURES: dict[str, list[int]] = {
     "self+shells": _SELF + _SHELLS2 + _UP,
     "self+shells+partner": _SELF + _SHELLS2 + _UP + _PARTNER,
     "shooter": _SELF + _PARTNER + [ob.PARTNER + ob.IN_REGION] + _FORTRESS,
+    "all": list(range(OBS_SIZE)),
 }
 
 
@@ -71,19 +81,47 @@ class Recipe:
     partners: tuple[str, ...] = ()
     rule: dict[str, float] = field(default_factory=dict)  # a rule-based policy's parameters
     demonstrator: dict[str, float] = field(default_factory=dict)  # a bait's warm start (train.py)
+    root: Path = field(default=LIBRARY, compare=False)  # the library directory it is listed in
+
+
+def roots() -> list[Path]:
+    """The library directories: the shipped one, then those listed in TSF_LIBRARY."""
+    extra = os.environ.get("TSF_LIBRARY", "")
+    return [LIBRARY, *(Path(p) for p in extra.split(os.pathsep) if p)]
+
+
+def table_path() -> Path:
+    """Where the self-play table of the libraries in use is: table.json in the last library directory
+    (the shipped one without TSF_LIBRARY), since a table is bound to every library it measured."""
+    return roots()[-1] / "table.json"
+
+
+def registry(root: Path | None = None) -> dict[str, Recipe]:
+    """The recipes of the library at `root`, or of every library (roots()), by key in file order."""
+    if root is not None:
+        return _registry(Path(root))
+    merged: dict[str, Recipe] = {}
+    for path in roots():
+        for key, recipe in _registry(path).items():
+            if key in merged:
+                raise UsageError("TSF_LIBRARY", path, f"lists {key}, a key of {merged[key].root} already")
+            merged[key] = recipe
+    return merged
 
 
 @cache
-def registry(root: Path = LIBRARY) -> dict[str, Recipe]:
-    """The recipes of the library at `root` (its registry.toml), by key in file order."""
-    with open(root / "registry.toml", "rb") as f:
+def _registry(root: Path) -> dict[str, Recipe]:
+    path = root / "registry.toml"
+    if not path.exists():
+        raise UsageError("TSF_LIBRARY", root, "is not a policy library (no registry.toml)")
+    with open(path, "rb") as f:
         raw = tomllib.load(f)
     recipes = {}
     for key, entry in raw.items():
         entry = {k: tuple(v) if isinstance(v, list) else v for k, v in entry.items()}
         if "frame" in entry:  # the registry's name for the view; renaming it would unbind the table
             entry["view"] = entry.pop("frame")
-        recipe = Recipe(key=key, **entry)
+        recipe = Recipe(key=key, root=root, **entry)
         if recipe.role not in ROLES:
             raise ValueError(f"registry entry {key}: unknown role {recipe.role!r}")
         if recipe.algorithm and recipe.features not in FEATURES:
@@ -97,22 +135,31 @@ def keys(role: str | None = None) -> list[str]:
     return [k for k, r in registry().items() if role is None or r.role == role]
 
 
-def manifest(root: Path = LIBRARY) -> dict[str, dict]:
-    """The training record of each trained policy: weights file, sha256, steps, seed, score, command."""
-    path = root / "manifest.json"
-    return json.loads(path.read_text()) if path.exists() else {}
+def manifest(root: Path | None = None) -> dict[str, dict]:
+    """The training record of each trained policy: weights file, sha256, steps, seed, score, command
+    (of the library at `root`, or of every library)."""
+    entries: dict[str, dict] = {}
+    for path in [root] if root else roots():
+        file = Path(path) / "manifest.json"
+        entries |= json.loads(file.read_text()) if file.exists() else {}
+    return entries
 
 
-def manifest_hash(root: Path = LIBRARY) -> str:
-    """Hash of the registry and manifest: what a table measured with this library is bound to."""
-    h = hashlib.sha256((root / "registry.toml").read_bytes())
+def manifest_hash(root: Path | None = None) -> str:
+    """Hash of the registries and manifests: what a table measured with these libraries is bound to
+    (the shipped library alone hashes as it always has)."""
+    paths = [Path(root)] if root else roots()
+    h = hashlib.sha256()
+    for path in paths:
+        h.update((path / "registry.toml").read_bytes())
     h.update(json.dumps(manifest(root), sort_keys=True).encode())
     return h.hexdigest()[:16]
 
 
 def recipe_hash(recipe: Recipe) -> str:
     """Hash of a recipe's fields: a training checkpoint resumes only under the recipe it began with."""
-    return hashlib.sha256(json.dumps(asdict(recipe), sort_keys=True).encode()).hexdigest()[:16]
+    fields = {f.name: getattr(recipe, f.name) for f in dataclass_fields(recipe) if f.compare}  # not its root
+    return hashlib.sha256(json.dumps(fields, sort_keys=True).encode()).hexdigest()[:16]
 
 
 def copy(to: Path) -> Path:
@@ -269,16 +316,40 @@ class LearnedPolicy:
 
     def act(self, obs: np.ndarray) -> int:
         heads = self.head_probs(obs)
-        turn, thrust, fire = (self._sample(heads[name]) for name in HEADS)
+        turn, thrust, fire = (draw(self.rng, heads[name]) for name in HEADS)
         return join_action(turn, thrust, fire)
 
-    def _sample(self, p: np.ndarray) -> int:
-        u, total = self.rng.random(), 0.0
-        for i, pi in enumerate(p):
-            total += pi
-            if u < total:
-                return i
-        return len(p) - 1
+
+def draw(rng: random.Random, p: np.ndarray) -> int:
+    """An index drawn from the distribution p with one uniform of rng."""
+    u, total = rng.random(), 0.0
+    for i, pi in enumerate(p):
+        total += pi
+        if u < total:
+            return i
+    return len(p) - 1
+
+
+class JointPolicy:
+    """A network over the whole observation that scores all 12 actions (a policy from outside the
+    library: outside.py). Its distribution is the network's softmax with FLOOR mixed in; act()
+    draws from exactly that, so probs() is what the adapter's likelihoods need."""
+
+    def __init__(self, key: str, role: str, view: str, network: Network) -> None:
+        self.key, self.role, self.view, self.network = key, role, view, network
+        self.rng = random.Random(0)
+
+    def reset(self, seed: int | None = None) -> None:
+        self.rng = random.Random(seed)
+
+    def probs_batch(self, observations: np.ndarray) -> np.ndarray:
+        return LearnedPolicy._floor(softmax(self.network(observations.astype(np.float64))))
+
+    def probs(self, obs: np.ndarray) -> np.ndarray:
+        return self.probs_batch(obs[None])[0]
+
+    def act(self, obs: np.ndarray) -> int:
+        return draw(self.rng, self.probs(obs))
 
 
 class MirrorVariant(MirrorShooter):
@@ -289,16 +360,16 @@ class MirrorVariant(MirrorShooter):
         self.key, self.role, self.view = recipe.key, recipe.role, "world"
 
 
-def load(key: str, config: GameConfig | None = None, root: Path = LIBRARY) -> Policy:
-    """A library policy by key; a learned one's weights are checked against the manifest hash."""
+def load(key: str, config: GameConfig | None = None, root: Path | None = None) -> Policy:
+    """A library policy by key; a network's weights are checked against the manifest hash."""
     recipes = registry(root)
     if key not in recipes:
         raise KeyError(f"unknown library policy {key!r}; expected one of {list(recipes)}")
     recipe = recipes[key]
-    if recipe.algorithm is None:
+    if recipe.algorithm is None and recipe.family != OUTSIDE:
         return MirrorVariant(recipe)
-    entry = manifest(root).get(key)
-    path = root / entry["file"] if entry else None
+    entry = manifest(recipe.root).get(key)
+    path = recipe.root / entry["file"] if entry else None
     if path is None or not path.exists():
         raise FileNotFoundError(
             f"library policy {key} is not trained yet: run `tsf train {key} --out {root}`"
@@ -306,6 +377,8 @@ def load(key: str, config: GameConfig | None = None, root: Path = LIBRARY) -> Po
     if file_hash(path) != entry["sha256"]:
         raise ValueError(f"{path} does not match its manifest hash; retrain {key} or restore the file")
     network, _ = Network.load(path)
+    if recipe.family == OUTSIDE:
+        return JointPolicy(key, recipe.role, recipe.view, network)
     return LearnedPolicy(recipe, network, config)
 
 
@@ -325,9 +398,13 @@ def learned(chosen: list[str]) -> list[str]:
 
 def check_seat(key: str, role: str, option: str = "--policy") -> None:
     """Refuse (UsageError) a seat that is not one, or a key that cannot play it: the line names the
-    option, the value and every key that can."""
+    option, the value and every key that can. A policy from outside (outside.py) is loaded to see
+    which seat it plays."""
     if role not in ROLES:
         raise UsageError("--role", role, "not a seat", ROLES)
+    if outside.is_outside(key):
+        outside.load(key, role, option)
+        return
     if key not in seat_keys(role):
         other = [r for r in ROLES if key in seat_keys(r)]
         problem = f"plays the {other[0]} seat, not the {role}" if other else f"no policy of the {role} seat"
@@ -335,7 +412,10 @@ def check_seat(key: str, role: str, option: str = "--policy") -> None:
 
 
 def policy_for(key: str, role: str, option: str = "--policy") -> Policy:
-    """Any policy a seat can play, by key: a library policy (B1-B9, S1-S7) or a scripted one; a key
-    that cannot play the seat is a UsageError about `option` (check_seat)."""
+    """Any policy a seat can play, by key: a library policy (B1-B9, S1-S7, and those of TSF_LIBRARY),
+    a scripted one, an SB3 `.zip` or a `module:attr` (outside.py); a key that cannot play the seat is
+    a UsageError about `option` (check_seat)."""
+    if outside.is_outside(key):
+        return outside.load(key, role, option)
     check_seat(key, role, option)
     return load(key) if key in registry() else scripted_policy(key, role)

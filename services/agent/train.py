@@ -328,18 +328,22 @@ def imitation_loss(model, x: th.Tensor, a: th.Tensor, g: th.Tensor) -> th.Tensor
 
 
 def export(model, recipe: Recipe) -> dict[str, np.ndarray]:  # noqa: ANN001 - an SB3 model
-    """The policy network as plain arrays w0, b0, ... plus a JSON `meta` (activation, shapes)."""
+    """The policy network as plain arrays (linear_arrays) with the recipe's key and algorithm."""
     if recipe.algorithm == "DQN":
         layers, activation = model.policy.q_net.q_net, "relu"
     else:
         net = model.policy
         layers, activation = [*net.mlp_extractor.policy_net, net.action_net], "tanh"
+    return linear_arrays(layers, {"activation": activation, "key": recipe.key, "algorithm": recipe.algorithm})
+
+
+def linear_arrays(layers: list[th.nn.Module], meta: dict) -> dict[str, np.ndarray]:
+    """The linear layers among `layers` as arrays w0, b0, ... plus `meta` as JSON (library.Network)."""
     linear = [m for m in layers if isinstance(m, th.nn.Linear)]
     arrays = {}
     for i, m in enumerate(linear):
         arrays[f"w{i}"] = m.weight.detach().cpu().numpy().astype(np.float32)
         arrays[f"b{i}"] = m.bias.detach().cpu().numpy().astype(np.float32)
-    meta = {"activation": activation, "key": recipe.key, "algorithm": recipe.algorithm}
     arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
     return arrays
 
@@ -507,7 +511,7 @@ def train(
     if score_games:  # on seeds the selection did not see
         chosen = library.LearnedPolicy(recipe, library.Network.load(path)[0])
         entry["score"] = team_score(chosen, partner, range(score_games))
-    _record(out, key, entry)
+    record_entry(out, key, entry)
     return entry
 
 
@@ -550,7 +554,7 @@ def _resume(run_dir: Path, recipe: Recipe, settings: dict, out: Path) -> tuple:
     return model, state, state.get("agreement")
 
 
-def _record(out: Path, key: str, entry: dict) -> None:
+def record_entry(out: Path, key: str, entry: dict) -> None:
     """Write one manifest entry; a lock keeps parallel trainings from losing each other's."""
     with open(out / ".manifest.lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)

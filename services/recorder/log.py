@@ -185,8 +185,8 @@ def make_way(path: Path, overwrite: bool) -> Path | None:
     return path.with_name(f"{path.name}.replaced-{n}")
 
 
-def _with_export(path: Path) -> tuple[Path, Path]:
-    return path, path.with_suffix(".parquet")
+def _with_export(path: Path) -> tuple[Path, Path, Path]:
+    return path, path.with_suffix(".tables"), path.with_suffix(".provenance.json")
 
 
 class GapTracker:

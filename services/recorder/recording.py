@@ -1,14 +1,10 @@
-"""Reading a recording: decoded messages, a replay check, and the Parquet export for pandas / DuckDB."""
+"""Reading a recording: decoded messages and a replay check (export.py: its tables as Parquet)."""
 
 from __future__ import annotations
 
-import json
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-
-import pyarrow as pa
-import pyarrow.parquet as pq
 
 from services.recorder.log import Damage, read_log
 from services.sim.engine import Game
@@ -24,8 +20,6 @@ from shared.messages import (
     Summary,
     decode_any,
 )
-
-TABLES = ("states", "actions", "switches", "events", "gaps", "match", "adapter")
 
 
 @dataclass
@@ -155,80 +149,3 @@ def replay(recording: Recording) -> list[int]:
     """The frames whose recorded state hash differs from the re-simulated one (empty: every
     recorded state reproduced)."""
     return [state.frame for state, game in simulate(recording) if state.hash != game.state_hash()]
-
-
-def export_parquet(recording: Recording, out: str | Path) -> dict[str, Path]:
-    """Write one Parquet file per table (states, actions, switches, events, gaps, match, adapter)."""
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    start, summary = recording.start, recording.summary
-    tables = {
-        "states": {
-            "frame": [s.frame for s in recording.states],
-            "hash": [s.hash for s in recording.states],
-            "kills": [s.kills for s in recording.states],
-            "points": [s.points for s in recording.states],
-            "bait_action": [s.applied[0] for s in recording.states],
-            "shooter_action": [s.applied[1] for s in recording.states],
-            "sent_ns": [s.sent_ns for s in recording.states],
-            "bait_obs": [s.obs["bait"] for s in recording.states],
-            "shooter_obs": [s.obs["shooter"] for s in recording.states],
-            "ships": [s.ships for s in recording.states],
-            "fortress": [s.fortress for s in recording.states],
-        },
-        "actions": {
-            "frame": [a.frame for _, a in recording.actions],
-            "role": [a.role for _, a in recording.actions],
-            "action": [a.action for _, a in recording.actions],
-            "policy": [a.policy for _, a in recording.actions],
-            "received_ns": [t for t, _ in recording.actions],
-        },
-        "switches": {
-            "frame": [s.frame for s in recording.switches],
-            "role": [s.role for s in recording.switches],
-            "policy": [s.policy for s in recording.switches],
-            "reason": [s.reason for s in recording.switches],
-        },
-        "events": {
-            "frame": [e.frame for e in recording.events],
-            "kind": [e.kind for e in recording.events],
-            "role": [e.role for e in recording.events],
-            "detail": [e.detail for e in recording.events],
-        },
-        "gaps": {"first": [g[0] for g in recording.gaps], "last": [g[1] for g in recording.gaps]},
-        "match": {
-            "match": [start.match if start else ""],
-            "seed": [start.seed if start else None],
-            "mode": [start.mode if start else ""],
-            "config": [json.dumps(start.config) if start else ""],
-            "policies": [json.dumps(start.policies) if start else ""],
-            "frames": [summary.frame if summary else None],
-            "kills": [summary.kills if summary else None],
-            "kills_per_minute": [summary.kills_per_minute if summary else None],
-            "counters": [json.dumps(summary.counters) if summary else ""],
-            "clean": [recording.clean],
-            "missing_frames": [recording.missing_frames],
-        },
-        "adapter": {
-            "frame": pa.array([a.frame for a in recording.adapter], pa.int64()),
-            "role": pa.array([a.role for a in recording.adapter], pa.string()),
-            "partner": pa.array([a.partner for a in recording.adapter], pa.string()),
-            "policy": pa.array([a.policy for a in recording.adapter], pa.string()),
-            "strategy": pa.array([a.strategy for a in recording.adapter], pa.string()),
-            "window": pa.array([a.window for a in recording.adapter], pa.int64()),
-            "filled": pa.array([a.filled for a in recording.adapter], pa.int64()),
-            "out_of_library": pa.array([a.out_of_library for a in recording.adapter], pa.bool_()),
-            "scores": pa.array([json.dumps(a.scores) for a in recording.adapter], pa.string()),
-            "belief": pa.array([json.dumps(a.belief) for a in recording.adapter], pa.string()),
-        },
-    }
-    paths = {}
-    for name, columns in tables.items():
-        paths[name] = out / f"{name}.parquet"
-        pq.write_table(pa.table(columns), paths[name])
-    return paths
-
-
-def read_parquet(directory: str | Path) -> dict[str, pa.Table]:
-    """The exported tables of one recording (`.to_pandas()` on each, or query the files with DuckDB)."""
-    return {name: pq.read_table(Path(directory) / f"{name}.parquet") for name in TABLES}

@@ -4,15 +4,15 @@ through the engine and exported to Parquet."""
 from __future__ import annotations
 
 import dataclasses
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
 
 from services.agent.player import Player
+from services.recorder.export import TABLES, export, read
 from services.recorder.log import GapTracker, LogWriter
-from services.recorder.recording import TABLES, Recording, export_parquet, load, read_parquet, replay
+from services.recorder.recording import Recording, load, replay
 from services.sim.engine import Game
 from services.sim.match import event_messages, start_message, state_message, summary_message
 from shared import keys
@@ -149,9 +149,9 @@ def test_lost_state_is_a_gap(tmp_path: Path) -> None:
     assert recording.gaps == [(20, 20)] and recording.missing_frames == 1 and recording.summary is None
     with pytest.raises(ValueError, match="frame 20 is missing"):
         replay(recording)
-    export_parquet(recording, tmp_path / "pq")
-    tables = read_parquet(tmp_path / "pq")
-    assert tables["gaps"].to_pydict() == {"first": [20], "last": [20]}
+    export(recording, tmp_path / "pq")
+    tables = read(tmp_path / "pq", M)
+    assert tables["gaps"].to_pydict() == {"match": [M], "first": [20], "last": [20]}
     assert tables["match"].to_pydict()["missing_frames"] == [1]
     assert tables["match"].to_pydict()["kills"] == [None]
 
@@ -163,30 +163,33 @@ def test_replay_needs_a_start(recorded: tuple[Recording, list[State]]) -> None:
 
 def test_parquet_round_trip(recorded: tuple[Recording, list[State]], tmp_path: Path) -> None:
     recording, _ = recorded
-    paths = export_parquet(recording, tmp_path / "out")
+    paths = export(recording, tmp_path / "out")
     assert set(paths) == set(TABLES) and all(p.exists() for p in paths.values())
-    tables = {name: table.to_pydict() for name, table in read_parquet(tmp_path / "out").items()}
+    tables = {name: table.to_pydict() for name, table in read(tmp_path / "out", M).items()}
     states, actions = tables["states"], tables["actions"]
 
     assert len(states["frame"]) == len(recording.states)
     assert states["hash"] == [s.hash for s in recording.states]
     assert states["bait_obs"][10] == recording.states[10].obs["bait"]
     assert states["shooter_action"] == [s.applied[1] for s in recording.states]
-    assert states["ships"][5] == recording.states[5].ships
+    ship = states["shooter_ship"][5]
+    assert [ship[k] for k in ("x", "y", "vx", "vy", "heading")] == recording.states[5].ships[1][:5]
     for role in ROLES:
         mine = [i for i, r in enumerate(actions["role"]) if r == role]
         assert [actions["action"][i] for i in mine] == [
             a.action for _, a in recording.actions if a.role == role
         ]
-    assert actions["received_ns"] == [t for t, _ in recording.actions]
+    received = read(tmp_path / "out", M)["actions"]["received"].cast("int64").to_pylist()
+    assert received == [t for t, _ in recording.actions]  # UTC timestamps, to the nanosecond
     assert len(tables["events"]["kind"]) == len(recording.events)
     assert tables["switches"] == {
+        "match": [M],
         "frame": [SWITCH_AT],
         "role": ["bait"],
         "policy": ["idle"],
         "reason": ["test"],
     }
-    assert tables["gaps"] == {"first": [], "last": []}
+    assert tables["gaps"] == {"match": [], "first": [], "last": []}
     assert recording.adapter == [ADAPTER]
     adapter = {name: values[0] for name, values in tables["adapter"].items()}
     assert (adapter["frame"], adapter["role"], adapter["partner"], adapter["policy"]) == (
@@ -196,11 +199,11 @@ def test_parquet_round_trip(recorded: tuple[Recording, list[State]], tmp_path: P
         "S5",
     )
     assert (adapter["strategy"], adapter["window"], adapter["out_of_library"]) == ("cem", 20, False)
-    assert json.loads(adapter["scores"]) == ADAPTER.scores and json.loads(adapter["belief"]) == {}
+    assert dict(adapter["scores"]) == ADAPTER.scores and adapter["belief"] == []
 
     match = {name: values[0] for name, values in tables["match"].items()}
     assert len(tables["match"]["seed"]) == 1
     assert (match["match"], match["seed"], match["mode"]) == (M, SEED, "lockstep")
     assert (match["kills"], match["frames"]) == (recording.summary.kills, FRAMES)
     assert match["clean"] and match["missing_frames"] == 0
-    assert GameConfig.from_dict(json.loads(match["config"])) == GameConfig(frames=FRAMES)
+    assert GameConfig.from_dict(match["config"]) == GameConfig(frames=FRAMES)

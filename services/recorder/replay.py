@@ -10,6 +10,7 @@ one.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import threading
 import time
 from collections.abc import Iterator
@@ -19,14 +20,17 @@ import numpy as np
 
 from services.recorder.log import read_log
 from services.recorder.recording import Recording, simulate
-from services.sim.render import render
+from services.sim.engine import Game
+from services.sim.render import BACKGROUND, render
 from shared import keys
 from shared.bus import BusConfig, session
 from shared.errors import UsageError
-from shared.game import GameConfig
+from shared.game import ROLES, GameConfig
 from shared.messages import AdapterStatus, GameEvent, Message, MessageError, Start, State, Summary, decode_any
 
 VIDEO_FORMATS = (".gif", ".mp4")
+CAPTION_LINES = 3  # score and time; both seats' policies; the adapter's estimate (when there is one)
+TEXT = (235, 235, 235)
 # What a watcher needs: the sim's messages and the adapter's view. Actions and policy switches are
 # left out, so a re-broadcast can never drive a sim or an agent that listens on the same match id.
 REPUBLISHED: dict[type[Message], object] = {
@@ -38,18 +42,60 @@ REPUBLISHED: dict[type[Message], object] = {
 }
 
 
-def frames(recording: Recording, scale: float = 1.0, every: int = 1) -> Iterator[np.ndarray]:
-    """Rendered RGB frames of every `every`-th recorded state, each checked against its hash first."""
-    for state, game in simulate(recording):
+def frames(
+    recording: Recording, scale: float = 1.0, every: int = 1, captions: bool = True
+) -> Iterator[np.ndarray]:
+    """Rendered RGB frames of every `every`-th recorded state, each checked against its hash first;
+    with `captions`, a band below the arena says what a reader needs (caption_lines)."""
+    for state, game, lines in labelled(recording):
         if state.hash != game.state_hash():
             raise ValueError(f"{recording.path}: frame {state.frame} does not reproduce its recorded hash")
         if state.frame % every == 0:
-            yield render(game, scale)
+            image = render(game, scale)
+            yield caption(image, lines, scale) if captions else image
+
+
+def labelled(recording: Recording) -> Iterator[tuple[State, Game, list[str]]]:
+    """simulate() with each frame's caption: score, game time, both seats' policies (the start
+    record's, then each switch or adapter status from its frame on) and the adapter's estimate."""
+    config = GameConfig.from_dict(recording.start.config) if recording.start else GameConfig()
+    seats = dict(recording.start.policies) if recording.start else {}
+    changes = sorted([*recording.switches, *recording.adapter], key=lambda m: m.frame)
+    estimate, due = "", 0
+    for state, game in simulate(recording):
+        while due < len(changes) and changes[due].frame <= state.frame:
+            change = changes[due]
+            seats[change.role] = change.policy
+            if isinstance(change, AdapterStatus):
+                outside = " (out of library)" if change.out_of_library else ""
+                estimate = f"adapter ({change.role}): partner like {change.partner or '?'}{outside}"
+            due += 1
+        seconds, total = state.frame / config.fps, config.frames / config.fps
+        lines = [
+            f"kills {state.kills}   points {state.points}   time {seconds:5.1f} / {total:.0f} s",
+            "   ".join(f"{role} {seats.get(role) or 'person'}" for role in ROLES),
+        ]
+        yield state, game, lines + ([estimate] if estimate else [])
+
+
+def caption(image: np.ndarray, lines: list[str], scale: float = 1.0) -> np.ndarray:
+    """The image with a band of text lines below it (Pillow's built-in font; no font files needed)."""
+    from PIL import Image, ImageDraw
+
+    size = max(10, round(16 * scale))
+    font = _font(size)
+    step = round(size * 1.3)
+    height, width = image.shape[:2]
+    band = Image.new("RGB", (width, step * CAPTION_LINES + size // 2), BACKGROUND)
+    draw = ImageDraw.Draw(band)
+    for i, line in enumerate(lines[:CAPTION_LINES]):
+        draw.text((size // 2, size // 4 + i * step), line, fill=TEXT, font=font)
+    return np.concatenate([image, np.asarray(band)], axis=0)
 
 
 def write_video(recording: Recording, path: Path, scale: float = 1.0, every: int = 1) -> int:
     """Write the match as a GIF (Pillow) or an MP4 (H.264, the ffmpeg inside imageio-ffmpeg) at the
-    game's speed; returns the number of frames written."""
+    game's speed, captioned (frames()); returns the number of frames written."""
     if path.suffix not in VIDEO_FORMATS:
         raise UsageError("--video", path, "not a video file name", (f"*{s}" for s in VIDEO_FORMATS))
     if recording.start is None:
@@ -90,6 +136,13 @@ def write_video(recording: Recording, path: Path, scale: float = 1.0, every: int
         raise ValueError(f"{recording.path}: no states to draw")
     writer.close()
     return count
+
+
+@functools.cache
+def _font(size: int):  # noqa: ANN202 - a Pillow font
+    from PIL import ImageFont
+
+    return ImageFont.load_default(size)
 
 
 def _gif_delay(fps: float) -> int:

@@ -11,8 +11,8 @@ import pytest
 from PIL import Image
 
 from services.recorder.recording import load
-from services.recorder.recording_test import FRAMES, M, record_match
-from services.recorder.replay import frames, schedule, write_video
+from services.recorder.recording_test import FRAMES, SWITCH_AT, M, record_match
+from services.recorder.replay import caption, frames, labelled, schedule, write_video
 from services.sim.engine import Game
 from services.sim.render import render
 from shared import keys
@@ -28,11 +28,26 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_frames_are_the_engine_pictures(recorded: Path) -> None:
-    pictures = list(frames(load(recorded), every=10))
+    pictures = list(frames(load(recorded), every=10, captions=False))
     assert len(pictures) == FRAMES // 10 + 1
     first = render(Game(GameConfig(frames=FRAMES), 5))
     assert np.array_equal(pictures[0], first)
     assert not np.array_equal(pictures[-1], first)
+
+
+def test_each_frame_is_captioned_with_score_time_policies_and_the_adapters_estimate(recorded: Path) -> None:
+    by_frame = {state.frame: (state, lines) for state, _, lines in labelled(load(recorded))}
+    state, lines = by_frame[0]
+    assert lines == [f"kills 0   points {state.points}   time   0.0 / 2 s", "bait circle   shooter mirror"]
+    state, lines = by_frame[SWITCH_AT]  # the bait switched, the adapter put S5 in the shooter's seat
+    assert lines[0] == f"kills {state.kills}   points {state.points}   time   1.0 / 2 s"
+    assert lines[1:] == ["bait idle   shooter S5", "adapter (shooter): partner like B5"]
+    pictures = list(frames(load(recorded), every=SWITCH_AT))
+    arena = render(Game(GameConfig(frames=FRAMES), 5))
+    assert np.array_equal(pictures[0][: arena.shape[0]], arena)  # the arena as it was, text below it
+    bands = [p[arena.shape[0] :] for p in pictures[:2]]
+    assert all(len(np.unique(band.reshape(-1, 3), axis=0)) > 5 for band in bands)  # text, not blank
+    assert not np.array_equal(*bands)
 
 
 def test_tampered_frame_is_not_drawn(tmp_path: Path) -> None:
@@ -48,7 +63,7 @@ def test_gif(recorded: Path, tmp_path: Path) -> None:
     with Image.open(out) as gif:
         assert gif.n_frames == FRAMES // 2 + 1
         assert gif.info["duration"] == 70  # 1/15 s, in GIF's hundredths
-        assert gif.size == render(Game(GameConfig(), 0), 0.5).shape[1::-1]
+        assert gif.size == caption(render(Game(GameConfig(), 0), 0.5), [], 0.5).shape[1::-1]
 
 
 def test_mp4(recorded: Path, tmp_path: Path) -> None:

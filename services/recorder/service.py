@@ -6,6 +6,7 @@ thread); a drain thread validates, writes and tracks gaps. Bad input is counted 
 
 from __future__ import annotations
 
+import json
 import logging
 import queue
 import threading
@@ -18,7 +19,7 @@ from services.recorder.log import GapTracker, LogWriter, read_log
 from shared import keys
 from shared.bus import BusConfig, Drops, session
 from shared.errors import Failure, UsageError
-from shared.game import ROLES
+from shared.game import ROLES, GameConfig
 from shared.messages import Message, MessageError, Start, State, Summary, decode_any
 
 log = logging.getLogger("tsf.recorder")
@@ -75,6 +76,8 @@ def run_recorder(
                 second.append(message)
                 stop.set()
                 return
+            if isinstance(message, Start) and not started:
+                _write_provenance(path, message)
             started = started or isinstance(message, Start)
             if isinstance(message, State) and (gap := gaps.see(message.frame)):
                 writer.write_gap(*gap)
@@ -114,6 +117,17 @@ def _wait_for_seats(z: zenoh.Session, match: str, timeout: float, stop: threadin
     with z.liveliness().declare_subscriber(keys.seats_alive(match), on_seat, history=True):
         while not seen >= set(ROLES) and time.monotonic() < deadline and not stop.wait(0.005):
             pass
+
+
+def _write_provenance(path: Path, start: Start) -> None:
+    """Name what made the recording beside it (services/provenance.py), with the match's rules."""
+    from services.provenance import provenance, sidecar
+
+    try:
+        record = provenance(GameConfig.from_dict(start.config))
+        sidecar(path).write_text(json.dumps(record, indent=1) + "\n")
+    except (OSError, ValueError) as error:  # the log matters more than its label
+        log.warning("could not write the provenance of %s: %s", path, error)
 
 
 def _frame(data: bytes) -> int:

@@ -20,7 +20,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from services.recorder.recording import TABLES, export_parquet, load, replay
+from services.recorder.export import export
+from services.recorder.export import paths as table_paths
+from services.recorder.recording import load, replay
 from shared.game import GameConfig
 
 SIDECAR_FIELDS = ("participant", "role", "variant", "session", "trial", "attempt", "status")
@@ -42,11 +44,12 @@ class Match:
 
     @property
     def policies(self) -> dict[str, str]:
-        return json.loads(self.info["policies"])
+        return dict(self.info["policies"])
 
     @property
     def config(self) -> GameConfig:
-        return GameConfig.from_dict(json.loads(self.info["config"]))
+        config = self.info["config"]  # a struct: lists come back as arrays
+        return GameConfig.from_dict({k: v.tolist() if hasattr(v, "tolist") else v for k, v in config.items()})
 
     @property
     def kills_per_minute(self) -> float:
@@ -62,7 +65,8 @@ class Problem:
 
 
 def load_matches(paths: list[Path], parquet: Path) -> tuple[list[Match], list[Problem]]:
-    """Check and export each recording under `parquet/<name>/`; the usable ones, and every problem."""
+    """Check and export each recording into `parquet` (`<name>.<table>.parquet`); the usable ones, and
+    every problem."""
     matches: list[Match] = []
     problems: list[Problem] = []
     names: set[str] = set()
@@ -93,8 +97,8 @@ def load_matches(paths: list[Path], parquet: Path) -> tuple[list[Match], list[Pr
         if meta.get("status", "done") != "done":
             problem(f"the study marked this attempt {meta['status']}")
             continue
-        export_parquet(recording, parquet / name)
-        tables = {t: pd.read_parquet(parquet / name / f"{t}.parquet") for t in TABLES}
+        export(recording, parquet, name)
+        tables = {t: pd.read_parquet(path) for t, path in table_paths(parquet, name).items()}
         matches.append(Match(name, path, tables, meta))
     return matches, problems
 

@@ -1,7 +1,7 @@
 """`tsf report`: recordings -> the original study's figures and numbers, in one directory.
 
 DIR/report.html (self-contained), DIR/figures/*.png, DIR/data/*.csv and *.parquet (every number
-behind the figures), DIR/parquet/<match>/ (each recording's Parquet export, which the analyses read).
+behind the figures), DIR/parquet/<match>.<table>.parquet (each recording's tables, which the analyses read).
 """
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from services.provenance import provenance
 from services.report import analysis, figures
 from services.report.html import Section, write_html
 from services.report.load import Match, Problem, load_matches
@@ -29,6 +30,7 @@ class Report:
     data: dict[str, pd.DataFrame] = field(default_factory=dict)
     problems: list[Problem] = field(default_factory=list)
     matches: int = 0  # recordings in the analyses (none: the report names only problems)
+    provenance: dict[str, str] = field(default_factory=dict)  # what made it (services/provenance.py)
 
 
 def build_report(
@@ -67,6 +69,7 @@ def build_report(
     curves = analysis.curves(trial_match, seat) if seat else pd.DataFrame()
 
     report = Report(out / "report.html", problems=problems, matches=len(matches))
+    report.provenance = provenance(config, table_path)
     report.data = {
         "table": pd.DataFrame(
             [
@@ -97,6 +100,7 @@ def build_report(
         "adaptive_tests": tests,
         "adapter": timeline,
         "problems": pd.DataFrame([p.__dict__ for p in problems], columns=["name", "path", "reason", "used"]),
+        "provenance": pd.DataFrame(list(report.provenance.items()), columns=["field", "value"]),
     }
     for name, frame in report.data.items():
         frame.to_csv(out / "data" / f"{name}.csv", index=False)
@@ -204,4 +208,6 @@ def _sections(report: Report, seat: analysis.Seat | None) -> list[Section]:
         )
     sections.append(Section("Partners", "Every partner-agent pair and its similarity vector.", None,
                             [("Partners", d["partners"])]))  # fmt: skip
+    sections.append(Section("Provenance", "What made this report (services/provenance.py).", None,
+                            [("Made by", d["provenance"])]))  # fmt: skip
     return sections

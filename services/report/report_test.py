@@ -19,6 +19,7 @@ from scipy import stats
 
 from services.adapter.cem import log_probs
 from services.agent import library
+from services.provenance import FIELDS
 from services.recorder.recording import Recording, load
 from services.recorder.recording_test import Script, record_match
 from services.report.analysis import adaptive_tests, seats, variants
@@ -158,7 +159,7 @@ def test_seats_from_the_start_record_alone(
     [match], _ = load_matches([paths["static-B5-S5"]], tmp_path)
 
     def announcing(policies: dict[str, str]) -> Match:
-        info = match.tables["match"].assign(policies=json.dumps(policies))
+        info = match.tables["match"].assign(policies=[policies])
         return dataclasses.replace(match, tables={**match.tables, "match": info})
 
     [human] = seats(announcing({"bait": "human", "shooter": "S5"}))
@@ -305,6 +306,8 @@ def test_figures_and_page(built: tuple[Report, dict[str, Path], Path]) -> None:
     page = report.html.read_text()
     assert page.count("data:image/png;base64,") == len(report.figures)
     assert "Welch" in page and "Pearson" in page
+    assert "Provenance" in page and report.provenance["commit"] in page and report.provenance["table"] in page
+    assert set(pd.read_csv(out / "data" / "provenance.csv")["field"]) == set(FIELDS)
 
 
 def test_a_report_with_nothing_usable_still_builds(tmp_path: Path) -> None:

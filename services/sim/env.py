@@ -59,7 +59,12 @@ def _check_modes(view: str, render_mode: str | None) -> None:
 class TSFParallelEnv(ParallelEnv):
     """Both ships, stepped together; each agent observes in the env's frame and gets the team reward."""
 
-    metadata = {"name": "tsf_v0", "render_modes": list(RENDER_MODES), "render_fps": FPS}
+    metadata = {
+        "name": "tsf_v0",
+        "render_modes": list(RENDER_MODES),
+        "render_fps": FPS,
+        "is_parallelizable": True,
+    }
 
     def __init__(
         self, config: GameConfig | None = None, view: str = "world", render_mode: str | None = None

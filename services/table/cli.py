@@ -19,10 +19,10 @@ from shared.messages import JOB_SEEDS
 commands = typer.Typer()
 
 
-def _keys(text: str, role: str) -> list[str]:
+def _keys(chosen: list[str] | None, role: str) -> list[str]:
     from services.agent import library
 
-    keys = [k.strip() for k in text.split(",") if k.strip()] if text else library.keys(role)
+    keys = chosen or library.keys(role)
     unknown = [k for k in keys if k not in library.keys(role)]
     if unknown:
         raise typer.BadParameter(f"not {role}s of the library: {unknown}")
@@ -33,8 +33,8 @@ def _keys(text: str, role: str) -> list[str]:
 @bus_options
 def sweep(
     games: int = number(20, GAMES, "Seeded one-minute games per pair (seeds 0..games-1)."),
-    baits: str = typer.Option("", help="Comma-separated baits (default: all)."),
-    shooters: str = typer.Option("", help="Comma-separated shooters (default: all)."),
+    bait: list[str] | None = typer.Option(None, help="A library bait, repeatable (default: all)."),
+    shooter: list[str] | None = typer.Option(None, help="A library shooter, repeatable (default: all)."),
     workers: int = number(2, WORKERS, "Worker processes to start here (0: only remote workers)."),
     chunk: int = number(20, JOB_SEEDS, "Games per job."),
     lanes: int = number(LANES, Range(1, 100_000), "Games a worker plays at once, as the lanes of one batch."),
@@ -54,7 +54,7 @@ def sweep(
     from services.table.sweep import journal_path, local_workers, run_sweep
     from shared.bus import free_endpoint
 
-    bait_keys, shooter_keys = _keys(baits, "bait"), _keys(shooters, "shooter")
+    bait_keys, shooter_keys = _keys(bait, "bait"), _keys(shooter, "shooter")
     endpoint = free_endpoint()
     if bus.mode != "client":
         bus = dataclasses.replace(bus, listen=(*bus.listen, endpoint))

@@ -15,10 +15,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from services.agent import library
+from services.provenance import provenance
 from shared.game import GameConfig
 
 TABLE_VERSION = 1
-DEFAULT_TABLE = library.LIBRARY / "table.json"
+DEFAULT_TABLE = library.table_path()  # with TSF_LIBRARY: the table in your library directory
 
 
 class StaleTable(ValueError):
@@ -118,6 +119,7 @@ class Table:
             "mean": {b: {s: round(self.mean(b, s), 6) for s in self.shooters} for b in self.baits},
             "stderr": {b: {s: round(self.stderr(b, s), 6) for s in self.shooters} for b in self.baits},
             "results": self.results,
+            "provenance": provenance(table="self") | {"library": self.library, "config": self.config},
         }
         path.write_text(json.dumps(record, indent=1) + "\n")
 

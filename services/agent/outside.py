@@ -1,0 +1,187 @@
+"""Policies from outside the library, playing any seat a library key can.
+
+    my_bait.zip            a model trained with Stable-Baselines3 on the 64-value observation and
+                           the 12 actions (gymnasium.make("tsf/Role-v0"), services/envs.py)
+    package.module:attr    an object with the policy protocol's key, role, view, reset(seed) and
+                           act(obs) (and probs(obs) where the adapter scores it), or a callable
+                           that returns a new one
+
+A `.zip` is read with SB3 (the `train` extra) and played as numpy arrays (library.JointPolicy): the
+network's distribution over the 12 actions with library.FLOOR mixed in is what `probs` reports and
+what `act` draws from, so the adapter's likelihoods are exact. It reads the observation view it
+was trained on ("world", RoleEnv's default, unless told). `add` writes one into a library directory
+of your own (weights, registry and manifest entries); TSF_LIBRARY then makes its key a library key.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import re
+import zipfile
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from services.sim.observation import VIEWS
+from shared.errors import UsageError
+from shared.game import N_ACTIONS, OBS_SIZE, ROLES
+
+if TYPE_CHECKING:
+    from services.agent.library import JointPolicy
+    from shared.game import Policy
+
+ACTIVATIONS = {"Tanh": "tanh", "ReLU": "relu"}  # torch module name: library.Network's name
+KEY = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
+NAME = re.compile(r"^[A-Za-z0-9_.:-]{1,32}$")  # a policy's name in messages (shared/messages.py)
+
+
+def record_name(key: str) -> str:
+    """How a policy key is named in messages and recordings, which take 1-32 of [A-Za-z0-9_.:-]: a
+    library or scripted key as it is, a `.zip` by its file name, a `module:attr` as it is where it
+    fits, else by its attr."""
+    if not is_outside(key) or NAME.match(key):
+        return key
+    name = Path(key).name if key.endswith(".zip") else key.rpartition(":")[2]
+    return re.sub(r"[^A-Za-z0-9_.:-]", "_", name)[-32:] or "outside"
+
+
+def is_outside(key: str) -> bool:
+    """Whether a policy key names a policy from outside the library (a `.zip` or `module:attr`)."""
+    return key.endswith(".zip") or ":" in key
+
+
+def load(key: str, role: str, option: str = "--policy", view: str = "world") -> Policy:
+    """The policy a `.zip` or `module:attr` key names, checked to play `role` (UsageError if not);
+    a `.zip` plays whichever seat it is given."""
+    if key.endswith(".zip"):
+        return zip_policy(Path(key), role, view, option)
+    policy = _object(key, option)
+    if policy.role != role:
+        raise UsageError(option, key, f"plays {policy.role}, not {role}", [role])
+    return policy
+
+
+def _object(path: str, option: str) -> Policy:
+    module, _, attr = path.partition(":")
+    try:
+        found = getattr(importlib.import_module(module), attr)
+    except (ImportError, AttributeError) as error:
+        raise UsageError(option, path, f"cannot be imported ({error})") from None
+    policy = found() if isinstance(found, type) or not _is_policy(found) else found
+    if not _is_policy(policy):
+        raise UsageError(option, path, "is not a policy (key, role, view, reset, act)")
+    if not NAME.match(str(policy.key)):
+        raise UsageError(option, path, f"its key {policy.key!r} is not 1-32 of letters, digits, _ . : -")
+    return policy
+
+
+def _is_policy(thing: object) -> bool:
+    return all(hasattr(thing, name) for name in ("key", "role", "view", "reset", "act"))
+
+
+def network_arrays(path: Path, meta: dict, option: str = "MODEL") -> dict[str, np.ndarray]:
+    """An SB3 actor-critic model's policy network as library.Network arrays, with `meta` plus its
+    activation and policy class. Refused (UsageError) unless it maps the 64-value observation to the
+    12 actions through a feed-forward network."""
+    try:
+        from stable_baselines3.common.policies import ActorCriticPolicy
+        from stable_baselines3.common.save_util import load_from_zip_file
+
+        from services.agent.train import linear_arrays
+    except ModuleNotFoundError as error:
+        raise UsageError(option, path, f"reading a model needs the `train` extra ({error})") from None
+    if not path.is_file():
+        raise UsageError(option, path, "no such file")
+    try:
+        data, params, _ = load_from_zip_file(path, device="cpu", print_system_info=False)
+    except (zipfile.BadZipFile, ValueError, KeyError, OSError, RuntimeError) as error:
+        raise UsageError(option, path, f"not a Stable-Baselines3 model ({error})") from None
+    if not data or "policy_class" not in data or "policy" not in (params or {}):
+        raise UsageError(option, path, "not a Stable-Baselines3 model")
+    obs, actions, cls = data["observation_space"], data["action_space"], data["policy_class"]
+    if getattr(obs, "shape", None) != (OBS_SIZE,) or getattr(actions, "n", None) != N_ACTIONS:
+        raise UsageError(
+            option, path, f"maps {obs} to {actions}, not {OBS_SIZE} values to {N_ACTIONS} actions"
+        )
+    if not (isinstance(cls, type) and issubclass(cls, ActorCriticPolicy)) or "lstm" in cls.__name__.lower():
+        raise UsageError(option, path, f"{getattr(cls, '__name__', cls)}: not a feed-forward actor-critic")
+    policy = cls(obs, actions, lambda _: 0.0, **data.get("policy_kwargs", {}))
+    policy.load_state_dict(params["policy"])
+    activation = ACTIVATIONS.get(policy.activation_fn.__name__)
+    if activation is None:
+        raise UsageError(option, path, f"activation {policy.activation_fn.__name__}", ACTIVATIONS)
+    meta = meta | {"activation": activation, "policy_class": cls.__name__}
+    return linear_arrays([*policy.mlp_extractor.policy_net, policy.action_net], meta)
+
+
+def zip_policy(path: Path, role: str, view: str = "world", option: str = "--policy") -> JointPolicy:
+    """An SB3 `.zip` as a numpy policy of `role` reading the `view` observation."""
+    from services.agent.library import JointPolicy, Network
+
+    _check(role, view)
+    arrays = network_arrays(path, {}, option)
+    meta = json.loads(bytes(arrays.pop("meta")).decode())
+    return JointPolicy(record_name(str(path)), role, view, Network(arrays, meta["activation"]))
+
+
+def _check(role: str, view: str) -> None:
+    if role not in ROLES:
+        raise UsageError("--role", role, "not a seat", ROLES)
+    if view not in VIEWS:
+        raise UsageError("--view", view, "not an observation view", VIEWS)
+
+
+def add(
+    key: str, model: Path, role: str, directory: Path, view: str = "world", partner: str = "", games: int = 10
+) -> dict:
+    """Export an SB3 model into the library at `directory` (created if need be, never the shipped
+    one): weights/KEY.npz, a registry entry and a manifest entry with hashes and provenance, scored
+    with `partner` (default: envs.DEFAULT_PARTNER) over `games` games. Returns the manifest entry."""
+    from services import envs
+    from services.agent import library
+    from services.agent.scripted import scripted_keys
+    from services.agent.train import record_entry, team_score
+    from services.provenance import provenance
+
+    _check(role, view)
+    directory = Path(directory)
+    if directory.resolve() == library.LIBRARY.resolve():
+        raise UsageError("--library", directory, "is the shipped library; give a directory of your own")
+    if not KEY.match(key):
+        raise UsageError("KEY", key, "a key is a letter, then letters, digits, - and _")
+    taken = [*library.registry(), *scripted_keys("bait"), *scripted_keys("shooter")]
+    if (directory / "registry.toml").exists():
+        taken += list(library.registry(directory))
+    if key in taken:
+        raise UsageError("KEY", key, "is a policy key already")
+    arrays = network_arrays(Path(model), {"key": key, "role": role, "view": view})
+    meta = json.loads(bytes(arrays["meta"]).decode())
+    path = directory / "weights" / f"{key}.npz"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savez(path, **arrays)
+    description = f"{meta['policy_class']} from {Path(model).name}"
+    fields = {
+        "role": role,
+        "family": library.OUTSIDE,
+        "view": view,
+        "features": "all",
+        "description": description,
+    }
+    with open(directory / "registry.toml", "a") as f:  # JSON strings are TOML basic strings
+        f.write(f"\n[{key}]\n" + "".join(f"{name} = {json.dumps(value)}\n" for name, value in fields.items()))
+    library._registry.cache_clear()
+    entry = {
+        "file": str(path.relative_to(directory)),
+        "sha256": library.file_hash(path),
+        "algorithm": meta["policy_class"],
+        "source": {"file": str(Path(model).resolve()), "sha256": library.file_hash(Path(model))},
+        "provenance": provenance(),
+    }
+    record_entry(directory, key, entry)
+    if games:
+        mate = library.load(partner or envs.DEFAULT_PARTNER[role])
+        entry["score"] = team_score(library.load(key, root=directory), mate, range(games))
+        record_entry(directory, key, entry)
+    return entry

@@ -61,6 +61,9 @@ MISTAKES = [
     ("calibrate --games 1", 2, "Invalid value for '--games': 1 is outside the range 2 to 10000"),
     ("train NOPE", 2, "tsf train: KEYS NOPE: not a learned policy of the library; valid: B"),
     ("train --steps 0", 2, "Invalid value for '--steps'"),
+    ("train", 2, "tsf train: KEYS (none): give library keys or --all, not both"),
+    ("train B1 --all", 2, "tsf train: KEYS B1: give library keys or --all, not both"),
+    ("train B1 --jobs 0", 2, "'--jobs': 0 is outside the range 1 to 64"),
     ("diversity --games 0", 2, "Invalid value for '--games'"),
     (
         "diversity --bait-partner B1",

@@ -11,6 +11,8 @@ turns those scores into an estimated partner type C and our policy D (`Adapter`)
   the expected table entry under the belief instead of trusting the single most likely type.
 - `-dwell`: a new D must stay the choice for `dwell` frames before the agent switches to it, so
   that the agent does not flap between policies on noise.
+- `-guard`: when the team's realised kills under the adapted policy fall short of what the table
+  promised (guard.py), fall back to the best static policy for the rest of the game.
 - `-ood`: when the best window score is far below what library policies score on their own play
   (calibration.json, see `calibrate` in thresholds.py), the partner is out of library: we play the
   policy with the best average table entry and say so.
@@ -33,11 +35,12 @@ from typing import Any
 import numpy as np
 
 from services.adapter.cem import log_probs
+from services.adapter.guard import Guard
 from services.table.table import DEFAULT_TABLE, Table
 from shared.errors import UsageError
 from shared.game import N_ACTIONS, ROLES, Policy, other
 
-STRATEGIES = ("cem", "cem-dwell", "cem-ood", "bayes", "bayes-dwell-ood")
+STRATEGIES = ("cem", "cem-dwell", "cem-ood", "bayes", "bayes-dwell-ood", "bayes-dwell-ood-guard")
 INITIAL = ("best-average", "random")
 CALIBRATION = Path(__file__).parent / "calibration.json"
 ADAPTIVE = "adaptive-"  # how every adaptive agent's name begins
@@ -266,14 +269,20 @@ class Adapter:
         self.out_of_library = False
         self.candidate, self.held = self.policy, 0
         self.frames = 0
+        fallback = payoff.ours[payoff.best_average()]
+        self.guard = Guard(fallback) if config.strategy.endswith("-guard") else None
+        self.promise = 0.0  # kills/min the table promises for the current choice
 
     @property
     def bayes(self) -> bool:
         return self.config.strategy.startswith("bayes")
 
-    def update(self, scores: np.ndarray) -> bool:
-        """Take one frame's scores (log-probabilities, library order); True when our policy changes."""
+    def update(self, scores: np.ndarray, values: list[float] | None = None) -> bool:
+        """Take one frame's scores (log-probabilities, library order) and, for the guard, the
+        frame's world-view state values; True when our policy changes."""
         self.frames += 1
+        if self.guard is not None and values is not None:
+            self.guard.watch(values)
         self.window.push(scores)
         if self.bayes:
             self.forward(scores)
@@ -283,13 +292,16 @@ class Adapter:
         if self.bayes:
             belief = self.belief()
             estimate, choice = int(np.argmax(belief)), self.payoff.best_expected(belief)
+            promised = belief @ self.payoff.values
         else:
             estimate = int(np.argmax(means))
             choice = self.payoff.best_response(estimate)
+            promised = self.payoff.values[estimate]
         self.partner = self.payoff.partners[estimate]
         self.out_of_library = self.threshold is not None and float(means.max()) < self.threshold
-        if self.out_of_library:
+        if self.out_of_library or (self.guard is not None and self.guard.breached()):
             choice = self.payoff.best_average()
+        self.promise = float(promised[choice])
         return self._choose(self.payoff.ours[choice])
 
     def forward(self, scores: np.ndarray) -> None:
@@ -314,6 +326,8 @@ class Adapter:
         if self.held < self.config.dwell_frames:
             return False
         self.policy, self.held = choice, 0
+        if self.guard is not None:
+            self.guard.start(choice, self.promise)
         return True
 
     def status(self) -> dict:
@@ -332,3 +346,8 @@ class Adapter:
             else {},
             "out_of_library": self.out_of_library,
         }
+
+    @property
+    def guarded(self) -> bool:
+        """Whether the guard has fallen back to the best static policy in this game."""
+        return self.guard is not None and self.guard.tripped

@@ -54,6 +54,7 @@ class Outcome:
 
     kills_per_minute: float
     switches: int = 0
+    guarded: bool = False  # a -guard strategy fell back to the best static policy
     timeline: list[tuple[int, str, str]] = field(default_factory=list)  # (frame, estimate, policy)
     values: list[list[float]] = field(default_factory=list)  # the partner's world-view states
     actions: list[int] = field(default_factory=list)  # and actions, when recorded
@@ -86,7 +87,7 @@ def play_partner(
         if record:
             outcome.values.append(values)
             outcome.actions.append(partner_action)
-        if adapter is not None and adapter.update(s.scorer(values, partner_action)):
+        if adapter is not None and adapter.update(s.scorer(values, partner_action), values):
             ours = s.ours[adapter.policy]
             ours.reset(switch_seed(seed, role, game.frame + 1))
             outcome.switches += 1
@@ -94,6 +95,7 @@ def play_partner(
         pair = bait_first(partner_role, partner_action, our_action)
         game.step(*pair)
     outcome.kills_per_minute = game.kills_per_minute()
+    outcome.guarded = adapter is not None and adapter.guarded
     return outcome
 
 

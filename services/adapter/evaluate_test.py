@@ -9,7 +9,7 @@ from services.adapter.core import AdapterConfig
 from services.adapter.evaluate import play_partner
 from services.adapter.identification import follow_lag, windowed
 from services.adapter.partners import make_partner
-from services.adapter.team import compare, variants
+from services.adapter.team import compare, holm, paired_tests, variants
 from services.table.table import DEFAULT_TABLE, Table
 
 
@@ -51,8 +51,15 @@ def test_compare_pairs_by_partner_and_seed() -> None:
         for seed in range(6):
             base = rng.normal(5, 1)
             for agent, shift in (("S1", 0.0), ("S2", -1.0), ("adaptive-T150-cem", 0.5 + rng.normal(0, 0.3))):
+                switches = 2 if agent.startswith("adaptive") else 0
                 rows.append(
-                    {"partner": partner, "agent": agent, "seed": seed, "kills_per_minute": base + shift}
+                    {
+                        "partner": partner,
+                        "agent": agent,
+                        "seed": seed,
+                        "kills_per_minute": base + shift,
+                        "switches": switches,
+                    }
                 )
                 truth.setdefault(agent, []).append(base + shift)
     result = compare(rows)
@@ -66,3 +73,16 @@ def test_compare_pairs_by_partner_and_seed() -> None:
     assert np.isclose(result["agents"]["S2"]["mean"], np.mean(truth["S2"]))
     assert result["per_partner"]["P2"]["S1"]["n"] == 6 and set(result["per_group"]) == {"outside"}
     assert np.isclose(result["per_partner"]["P2"]["S1"]["mean"], np.mean(truth["S1"][6:12]))
+    assert result["switches"]["adaptive-T150-cem"] == {"mean": 2.0, "max": 2, "guarded_games": 0}
+    by_group = result["tests_by_group"]["adaptive-T150-cem"]["outside"]
+    assert by_group["noninferior"] and by_group["p_superior"] == test["p_t"] == test["p_holm"]
+
+
+def test_holm_and_non_inferiority() -> None:
+    adjusted = holm({"a": 0.01, "b": 0.04, "c": 0.03})
+    assert adjusted == {"a": 0.03, "c": 0.06, "b": 0.06}
+    rng = np.random.default_rng(2)
+    slightly_worse = rng.normal(-0.03, 0.1, 400)  # within the 0.1 margin
+    much_worse = rng.normal(-0.3, 0.1, 400)
+    assert paired_tests(slightly_worse)["noninferior"] and not paired_tests(much_worse)["noninferior"]
+    assert paired_tests(slightly_worse)["p_superior"] > 0.5

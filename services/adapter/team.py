@@ -26,6 +26,7 @@ def _team_game(partner: str, agent: str, seed: int, role: str) -> dict:
         "seed": seed,
         "kills_per_minute": outcome.kills_per_minute,
         "switches": outcome.switches,
+        "guarded": int(outcome.guarded),
     }
 
 
@@ -42,6 +43,39 @@ def team(
     return run_parallel(_team_game, tasks, workers, progress)
 
 
+MARGIN = 0.1  # kills/min: the non-inferiority margin against the best static policy
+
+
+def holm(pvalues: dict[str, float]) -> dict[str, float]:
+    """Holm's step-down adjustment of a family of p-values (monotone, capped at 1)."""
+    order = sorted(pvalues, key=pvalues.get)
+    adjusted, running = {}, 0.0
+    for rank, name in enumerate(order):
+        running = max(running, min(1.0, (len(order) - rank) * pvalues[name]))
+        adjusted[name] = running
+    return adjusted
+
+
+def paired_tests(diff: np.ndarray, margin: float = MARGIN) -> dict:
+    """One-sided paired t-tests of the differences (ours - best static): superiority (mean > 0)
+    and non-inferiority (mean > -margin)."""
+    from scipy import stats
+
+    def greater(shift: float) -> float:
+        if len(diff) < 2 or diff.std(ddof=1) == 0:
+            return 0.0 if diff.mean() + shift > 0 else 1.0
+        return float(stats.ttest_1samp(diff + shift, 0.0, alternative="greater").pvalue)
+
+    return {
+        "mean_difference": float(diff.mean()),
+        "stderr": _stderr(diff),
+        "p_superior": greater(0.0),
+        "p_noninferior": greater(margin),
+        "noninferior": greater(margin) < 0.05,
+        "n": len(diff),
+    }
+
+
 def _stderr(values: np.ndarray) -> float:
     return float(values.std(ddof=1) / math.sqrt(len(values))) if len(values) > 1 else 0.0
 
@@ -49,8 +83,10 @@ def _stderr(values: np.ndarray) -> float:
 def compare(rows: list[dict]) -> dict:
     """Each agent's mean and standard error over the population, and each adaptive variant against
     the best static policy (chosen on this same data, which favours the static side): a one-sided
-    paired t-test and a Wilcoxon signed-rank test over (partner, seed) pairs, the same t-test over
-    partner means (seeds averaged), and the effect size d_z = mean difference / sd of differences."""
+    paired t-test and a Wilcoxon signed-rank test over (partner, seed) pairs (with Holm's
+    correction over the variants), the same t-test over partner means (seeds averaged), the effect
+    size d_z = mean difference / sd of differences; per partner group, one-sided superiority and
+    non-inferiority (margin MARGIN) tests; and each variant's switches per game."""
     from scipy import stats
 
     units = sorted({(r["partner"], r["seed"]) for r in rows})
@@ -86,6 +122,23 @@ def compare(rows: list[dict]) -> dict:
             "partners_better": int((by_partner > 0).sum()),
             "partners": len(partners),
         }
+    holm_p = holm({a: t["p_t"] for a, t in tests.items()})
+    for a, t in tests.items():
+        t["p_holm"] = holm_p[a]
+    group_of_unit = np.array([group_of(u[0]) for u in units])
+    by_group = {
+        a: {
+            g: paired_tests(values[a][group_of_unit == g] - values[best][group_of_unit == g])
+            for g in sorted(set(group_of_unit))
+        }
+        for a in tests
+    }
+    switching = {}
+    for a in tests:
+        counts = [r["switches"] for r in rows if r["agent"] == a]
+        switching[a] = {"mean": float(np.mean(counts)), "max": int(max(counts))}
+        guarded = [r.get("guarded", 0) for r in rows if r["agent"] == a]
+        switching[a]["guarded_games"] = int(sum(guarded))
     per_partner = {
         p: {a: _summary([grid[a][u] for u in units if u[0] == p]) for a in values} for p in partners
     }
@@ -102,6 +155,9 @@ def compare(rows: list[dict]) -> dict:
         "tests": tests,
         "per_partner": per_partner,
         "per_group": per_group,
+        "tests_by_group": by_group,
+        "switches": switching,
+        "margin": MARGIN,
     }
 
 

@@ -13,6 +13,9 @@ turns those scores into an estimated partner type C and our policy D (`Adapter`)
   that the agent does not flap between policies on noise.
 - `-guard`: when the team's realised kills under the adapted policy fall short of what the table
   promised (guard.py), fall back to the best static policy for the rest of the game.
+- `-memory`: across the trials of a session with the same partner, the adapter goes on from the
+  previous trial (`next_trial`): its belief, window, policy and the guard's record carry over, and
+  the next trial needs no warm-up. Within one game it is the strategy without it.
 - `-ood`: when the best window score is far below what library policies score on their own play
   (calibration.json, see `calibrate` in thresholds.py), the partner is out of library: we play the
   policy with the best average table entry and say so.
@@ -40,7 +43,15 @@ from services.table.table import DEFAULT_TABLE, Table
 from shared.errors import UsageError
 from shared.game import N_ACTIONS, ROLES, Policy, other
 
-STRATEGIES = ("cem", "cem-dwell", "cem-ood", "bayes", "bayes-dwell-ood", "bayes-dwell-ood-guard")
+STRATEGIES = (
+    "cem",
+    "cem-dwell",
+    "cem-ood",
+    "bayes",
+    "bayes-dwell-ood",
+    "bayes-dwell-ood-guard",
+    "bayes-dwell-ood-guard-memory",
+)
 INITIAL = ("best-average", "random")
 CALIBRATION = Path(__file__).parent / "calibration.json"
 ADAPTIVE = "adaptive-"  # how every adaptive agent's name begins
@@ -270,7 +281,7 @@ class Adapter:
         self.candidate, self.held = self.policy, 0
         self.frames = 0
         fallback = payoff.ours[payoff.best_average()]
-        self.guard = Guard(fallback) if config.strategy.endswith("-guard") else None
+        self.guard = Guard(fallback) if "guard" in config.strategy else None
         self.promise = 0.0  # kills/min the table promises for the current choice
 
     @property
@@ -346,6 +357,15 @@ class Adapter:
             else {},
             "out_of_library": self.out_of_library,
         }
+
+    def next_trial(self) -> Adapter:
+        """The adapter for the next trial of a session with the same partner: this one going on
+        (`-memory`), or a fresh one."""
+        if "memory" not in self.config.strategy:
+            return Adapter(self.config, self.payoff, self.threshold)
+        if self.guard is not None:
+            self.guard.last = None  # a new game: no kill across the gap
+        return self
 
     @property
     def guarded(self) -> bool:

@@ -18,11 +18,13 @@ from multiprocessing import get_context
 from pathlib import Path
 
 from services.adapter.core import (
+    Adapter,
     AdapterConfig,
     Payoff,
     Scorer,
 )
-from services.adapter.partners import Partner
+from services.adapter.human_like import SESSION_TRIALS
+from services.adapter.partners import Partner, make_partner
 from services.agent import library
 from services.sim.engine import Game
 from services.sim.observation import observe, world_values
@@ -56,6 +58,7 @@ class Outcome:
     switches: int = 0
     guarded: bool = False  # a -guard strategy fell back to the best static policy
     timeline: list[tuple[int, str, str]] = field(default_factory=list)  # (frame, estimate, policy)
+    adapter: Adapter | None = field(default=None, repr=False, compare=False)  # its adapter at the end
     values: list[list[float]] = field(default_factory=list)  # the partner's world-view states
     actions: list[int] = field(default_factory=list)  # and actions, when recorded
 
@@ -67,14 +70,15 @@ def play_partner(
     role: str,
     config: GameConfig | None = None,
     record: bool = False,
+    adapter: Adapter | None = None,
 ) -> Outcome:
-    """One game of `partner` with our seat `role` played by a static library key or adaptively."""
+    """One game of `partner` with our seat `role` played by a static library key or adaptively
+    (by a new adapter, or by `adapter` going on from an earlier game of a session)."""
     s, partner_role = setup(role), other(role)
     game = Game(config, seed)
     partner.reset(policy_seed(seed, partner_role))
-    adapter = None
     if isinstance(agent, AdapterConfig):
-        adapter = agent.build(s.payoff)
+        adapter = adapter or agent.build(s.payoff)
         agent = adapter.policy
     ours = s.ours[agent]
     ours.reset(policy_seed(seed, role))
@@ -96,7 +100,19 @@ def play_partner(
         game.step(*pair)
     outcome.kills_per_minute = game.kills_per_minute()
     outcome.guarded = adapter is not None and adapter.guarded
+    outcome.adapter = adapter
     return outcome
+
+
+def play_session(partner: str, agent: AdapterConfig, person: int, role: str) -> list[Outcome]:
+    """The trials of one session (human_like.SESSION_TRIALS games, seeds person * trials + i)
+    with the same partner; the adapter of each trial is the previous one's `next_trial()`."""
+    outcomes: list[Outcome] = []
+    for trial in range(SESSION_TRIALS):
+        previous = outcomes[-1].adapter.next_trial() if outcomes else None
+        seed = person * SESSION_TRIALS + trial
+        outcomes.append(play_partner(make_partner(partner, other(role)), agent, seed, role, adapter=previous))
+    return outcomes
 
 
 def run_parallel(

@@ -53,3 +53,17 @@ def test_a_guarded_game_switches_at_most_once_more_and_reports_it():
     assert outcome.switches <= plain.switches + 1
     if outcome.guarded:
         assert outcome.timeline[-1][2] == "S5"
+
+
+def test_memory_carries_the_adapter_into_the_next_trial():
+    scores = np.log(np.full(9, 1 / 12))
+    scores[2] = np.log(0.9)  # the partner plays like B3
+    remembering = AdapterConfig("shooter", 150, "bayes-dwell-ood-guard-memory").build()
+    forgetting = AdapterConfig("shooter", 150, "bayes-dwell-ood-guard").build()
+    for adapter in (remembering, forgetting):
+        for v in frames(10**6, 200):
+            adapter.update(scores, v)
+    assert remembering.partner == forgetting.partner == "B3" and remembering.policy != "S5"
+    carried, fresh = remembering.next_trial(), forgetting.next_trial()
+    assert carried is remembering and carried.guard.last is None and carried.guard.frames > 0
+    assert fresh.partner == "" and fresh.policy == "S5" and fresh.frames == 0

@@ -12,7 +12,8 @@ import numpy as np
 from services.adapter.core import (
     AdapterConfig,
 )
-from services.adapter.evaluate import play_partner, run_parallel
+from services.adapter.evaluate import play_partner, play_session, run_parallel
+from services.adapter.human_like import SESSION_TRIALS
 from services.adapter.partners import group_of, make_partner
 from shared.game import other
 
@@ -74,6 +75,42 @@ def paired_tests(diff: np.ndarray, margin: float = MARGIN) -> dict:
         "noninferior": greater(margin) < 0.05,
         "n": len(diff),
     }
+
+
+def _session_games(partner: str, agent: str, person: int, role: str) -> list[dict]:
+    config = AdapterConfig.parse(agent, role=role)
+    seeds = [person * SESSION_TRIALS + trial for trial in range(SESSION_TRIALS)]
+    if config is None:
+        outcomes = [play_partner(make_partner(partner, other(role)), agent, seed, role) for seed in seeds]
+    else:
+        outcomes = play_session(partner, config, person, role)
+    return [
+        {
+            "partner": partner,
+            "agent": agent,
+            "seed": seed,
+            "trial": trial,
+            "kills_per_minute": o.kills_per_minute,
+            "switches": o.switches,
+            "guarded": int(o.guarded),
+        }
+        for trial, (seed, o) in enumerate(zip(seeds, outcomes, strict=True))
+    ]
+
+
+def sessions(
+    role: str,
+    partners: list[str],
+    agents: list[str],
+    people: list[int],
+    workers: int = 1,
+    progress: Callable[[int, int], None] | None = None,
+) -> list[dict]:
+    """`team`, played as sessions: SESSION_TRIALS one-minute trials of each person (seeds
+    person * SESSION_TRIALS + trial) with the same partner, an adaptive agent carrying over from
+    trial to trial where its strategy has `-memory`. One row per trial."""
+    tasks = [(p, a, person, role) for p in partners for a in agents for person in people]
+    return [row for rows in run_parallel(_session_games, tasks, workers, progress) for row in rows]
 
 
 def _stderr(values: np.ndarray) -> float:

@@ -39,6 +39,7 @@ import numpy as np
 
 from services.adapter.cem import log_probs
 from services.adapter.guard import Guard
+from services.agent.policy import stalled
 from services.table.table import DEFAULT_TABLE, Table
 from shared.errors import UsageError
 from shared.game import N_ACTIONS, ROLES, Policy, other
@@ -294,9 +295,13 @@ class Adapter:
         self.frames += 1
         if self.guard is not None and values is not None:
             self.guard.watch(values)
-        self.window.push(scores)
-        if self.bayes:
-            self.forward(scores)
+        # In a stalled round every library policy plays the same end-round rule (policy.stalled):
+        # the frame says nothing about the partner's type, and a partner who does not follow the
+        # rule would otherwise look out of library whenever our ship is dead.
+        if values is None or not stalled(np.asarray(values, np.float32)):
+            self.window.push(scores)
+            if self.bayes:
+                self.forward(scores)
         if self.frames < self.config.warmup_frames:
             return False
         means = self.window.means()

@@ -165,9 +165,9 @@ def seek(obs: np.ndarray, dvx: float, dvy: float, tolerance: float = 0.3) -> tup
 
 # --- stalled rounds --------------------------------------------------------------------------------
 # A dead ship stays dead until the fortress is destroyed or both ships are dead (docs/rules.md), and a
-# lone ship cannot kill: the fortress faces the only ship it can lock, so its rear never opens toward
-# it. With the partner dead the round can only end by this ship's death, so every agent seat ends it
-# at once (docs/library.md, "Stalled rounds").
+# lone ship can hardly kill: the fortress faces the only ship it can lock, so its rear opens away from
+# it. With the partner dead the round in practice ends only by this ship's death, so every agent seat
+# ends it at once (docs/library.md, "Stalled rounds").
 
 DIVE_SPEED = 8.0  # px/frame: the speed cap
 # The default rules' border and shield (px), as plain numbers for the compiled loops.

@@ -12,7 +12,8 @@ turns those scores into an estimated partner type C and our policy D (`Adapter`)
 - `-dwell`: a new D must stay the choice for `dwell` frames before the agent switches to it, so
   that the agent does not flap between policies on noise.
 - `-guard`: when the team's realised kills under the adapted policy fall short of what the table
-  promised (guard.py), fall back to the best static policy for the rest of the game.
+  promised (guard.py), fall back to the best static policy for the rest of the game; and every
+  switch doubles the dwell, so switching is bounded.
 - `-memory`: across the trials of a session with the same partner, the adapter goes on from the
   previous trial (`next_trial`): its belief, window, policy and the guard's record carry over, and
   the next trial needs no warm-up. Within one game it is the strategy without it.
@@ -284,6 +285,7 @@ class Adapter:
         fallback = payoff.ours[payoff.best_average()]
         self.guard = Guard(fallback) if "guard" in config.strategy else None
         self.promise = 0.0  # kills/min the table promises for the current choice
+        self.switches = 0
 
     @property
     def bayes(self) -> bool:
@@ -339,12 +341,18 @@ class Adapter:
         if choice != self.candidate:
             self.candidate, self.held = choice, 0
         self.held += 1
-        if self.held < self.config.dwell_frames:
+        if self.held < self.dwell():
             return False
         self.policy, self.held = choice, 0
+        self.switches += 1
         if self.guard is not None:
             self.guard.start(choice, self.promise)
         return True
+
+    def dwell(self) -> int:
+        """Frames a new choice must hold: the config's dwell, doubled after every switch under the
+        guard, which bounds a game's switches by about log2(frames / dwell) (6 for T = 400)."""
+        return self.config.dwell_frames * (2**self.switches if self.guard is not None else 1)
 
     def status(self) -> dict:
         """The adapter's view, as AdapterStatus fields."""

@@ -67,3 +67,22 @@ def test_memory_carries_the_adapter_into_the_next_trial():
     carried, fresh = remembering.next_trial(), forgetting.next_trial()
     assert carried is remembering and carried.guard.last is None and carried.guard.frames > 0
     assert fresh.partner == "" and fresh.policy == "S5" and fresh.frames == 0
+
+
+def flipping_switches(strategy: str) -> list[int]:
+    """The frames an adapter switches at with a partner that flips between B3 and B9 every 2 s."""
+    adapter, switched = AdapterConfig("shooter", 150, strategy, warmup=1).build(), []
+    for t in range(1800):
+        scores = np.log(np.full(9, 1 / 12))
+        scores[2 if (t // 60) % 2 else 8] = np.log(0.95)
+        if adapter.update(scores):
+            switched.append(t)
+    return switched
+
+
+def test_under_the_guard_every_switch_doubles_the_dwell():
+    assert len(flipping_switches("bayes-dwell-ood")) > 10
+    switched = flipping_switches("bayes-dwell-ood-guard")
+    assert 1 <= len(switched) <= 7
+    gaps = np.diff(switched)
+    assert all(gap >= 15 * 2 ** (i + 1) for i, gap in enumerate(gaps))

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 from services.adapter.core import Adapter, AdapterConfig, Payoff, Scorer, Window, ood_threshold
 from services.agent import library
 from services.agent.library import policy_for
+from services.sim import observation as ob
 from services.sim.engine import Game
 from services.sim.observation import world_values
 from shared.errors import UsageError
@@ -161,3 +162,14 @@ def test_shipped_calibration_has_a_threshold_per_role() -> None:
     for role in ("bait", "shooter"):
         assert -12.0 < ood_threshold(role, 400) < 0.0
         assert ood_threshold(role, 150) <= ood_threshold(role, 800) + 1e-9
+
+
+def test_frames_of_a_stalled_round_say_nothing_about_the_partner() -> None:
+    values = np.zeros(ob.TIME + 1)
+    values[ob.SELF + ob.ALIVE] = values[ob.FORTRESS + ob.F_ALIVE] = 1.0  # the partner's partner is dead
+    adapter = Adapter(AdapterConfig("shooter", 10, "bayes", warmup=1), PAYOFF)
+    adapter.update(frame(0), values.tolist())
+    assert adapter.window.filled == 0 and np.allclose(adapter.belief(), 1 / 3)
+    values[ob.PARTNER + ob.ALIVE] = 1.0
+    adapter.update(frame(0), values.tolist())
+    assert adapter.window.filled == 1 and adapter.belief()[0] > 0.5

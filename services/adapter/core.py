@@ -397,6 +397,7 @@ class Adapter:
         """Whether the guard has fallen back to the best static policy in this game."""
         return self.guard is not None and self.guard.tripped
 
+
 def forward(log_belief: np.ndarray, scores: np.ndarray, config: AdapterConfig) -> np.ndarray:
     """The hidden Markov model's forward step in log space, for one lane's (K,) or n lanes' (n, K)
     beliefs and scores: the same operations, element by element, either way."""

@@ -18,8 +18,9 @@ data (docs/adapter.md, "Human-like partners", cites them):
 Every draw is counter-based (sampling.lane_uniforms, keyed by the game's seed, a stream and the
 frame), so a game is a function of its seed, and `act` (one game) and `act_lanes` (n games at
 once, the batched form) give every lane the same actions. A session is SESSION_TRIALS consecutive
-seeds: seed s is trial s % SESSION_TRIALS of person s // SESSION_TRIALS, whose traits are drawn
-from the person's number only.
+game seeds: game s is trial s % SESSION_TRIALS of person s // SESSION_TRIALS, whose traits are
+drawn from the person's number only (the partner is reset with play.policy_seed of the game's
+seed, and reads the game's back).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ import math
 import numpy as np
 
 from services.sim import observation as ob
+from services.sim.play import game_seed, policy_seed
 from services.sim.sampling import batch_probs, lane_uniforms, sample
 from shared.game import N_ACTIONS, N_FIRE, N_THRUST, N_TURN, join_action, split_action
 
@@ -59,19 +61,22 @@ class HumanLike:
         self.first, self.second = first, second
         self.key = f"human({first.key})" if second is None else f"human({first.key},{second.key})"
         self.role, self.view = first.role, first.view
-        self.reset_lanes([0])
+        self.reset()
 
     def reset(self, seed: int | None = None) -> None:
-        self.reset_lanes([0 if seed is None else seed])
+        self.reset_lanes([policy_seed(0, self.role) if seed is None else seed])
 
     def reset_lanes(self, seeds: list[int]) -> None:
-        """Start one game per seed: the person's traits and this game's reaction delay."""
+        """Start one game per seed, the seed its seat resets its partner with (play.policy_seed of
+        the game's seed): the person's traits, drawn from the person of the game's seed, and this
+        game's reaction delay."""
         n = len(seeds)
         self.seeds = np.asarray(seeds, np.int64)
         for inner in (self.first, self.second):
             if inner is not None:
                 inner.reset(int(seeds[0]))
-        people = [np.random.default_rng([int(s) // SESSION_TRIALS, 17]) for s in seeds]
+        played = np.array([max(0, game_seed(int(s), self.role)) for s in seeds], np.int64)
+        people = [np.random.default_rng([int(g) // SESSION_TRIALS, 17]) for g in played]
         games = [np.random.default_rng([int(s), 29]) for s in seeds]
         low, high = np.log(LAPSES_PER_MINUTE)
         traits = np.array(
@@ -81,7 +86,7 @@ class HumanLike:
         # a lapse can start at any decision; decisions come every HOLD_MIN + HOLD_EXTRA frames
         per_decision = np.exp(traits[:, 1]) / (60.0 * 30.0) * (HOLD_MIN + HOLD_EXTRA)
         self.lapse, self.slip = per_decision, traits[:, 2]
-        self.trial = self.seeds % SESSION_TRIALS
+        self.trial = played % SESSION_TRIALS
         self.ring = np.zeros((n, HISTORY, ob.TIME + 1), np.float32)
         self.held = np.zeros(n, np.int64)
         self.hold_left = np.zeros(n, np.int64)

@@ -10,6 +10,7 @@ from services.adapter.partners import group_of, make_partner, population
 from services.agent import library
 from services.sim.engine import Game
 from services.sim.observation import observe
+from services.sim.play import policy_seed
 
 SEEDS = [3, 4, 5]
 
@@ -53,8 +54,9 @@ def test_keys_are_held_for_at_least_the_shortest_press():
 
 def test_traits_are_a_persons_and_the_delay_a_games():
     partner = make_partner("human(B5)", "bait")
-    session = list(range(SESSION_TRIALS))  # one person's trials
-    partner.reset_lanes(session + [SESSION_TRIALS])
+    games = list(range(SESSION_TRIALS + 1))  # one person's trials, and the next person's first
+    partner.reset_lanes([policy_seed(game, "bait") for game in games])
+    assert partner.trial.tolist() == [0, 1, 2, 0]
     assert len(set(partner.slip[:SESSION_TRIALS])) == 1 and partner.slip[SESSION_TRIALS] != partner.slip[0]
     assert len(set(partner.mu[:SESSION_TRIALS])) == SESSION_TRIALS  # drawn per game
     assert (partner.mu >= 120.0).all() and (partner.mu <= 400.0).all()

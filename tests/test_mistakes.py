@@ -24,7 +24,9 @@ from shared.errors import UsageError
 
 BAITS = "B1, B2, B3, B4, B5, B6, B7, B8, B9, circle, idle, random"
 SHOOTERS = "S1, S2, S3, S4, S5, S6, S7, mirror, idle, random"
-STRATEGIES = "cem, cem-dwell, cem-ood, bayes, bayes-dwell-ood"
+STRATEGIES = (
+    "cem, cem-dwell, cem-ood, bayes, bayes-dwell-ood, bayes-dwell-ood-guard, bayes-dwell-ood-guard-memory"
+)
 SEED_RANGE = "0 to 4294967295"
 
 # (command line, exit status, what the one line says); {tmp} is a directory that holds the finished

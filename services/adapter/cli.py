@@ -72,6 +72,9 @@ def eval_command(
     identify_seeds: int = number(3, GAMES, "Games per library partner for identification."),
     identify: bool = typer.Option(True, help="Measure identification accuracy."),
     performance: bool = typer.Option(True, help="Measure team performance."),
+    sessions: bool = typer.Option(
+        False, help="Play team games as sessions of three trials with the same partner (--seeds: people)."
+    ),
     workers: int = number(0, WORKERS, "Processes (default: one per core)."),
     out: Path = output(
         Path("tsf-eval"),
@@ -107,7 +110,8 @@ def eval_command(
             )  # fmt: skip
         if performance:
             task = bar.add_task("team games", total=None)
-            rows = team.team(
+            play = team.sessions if sessions else team.team
+            rows = play(
                 role, partners, agents, list(range(seeds)), workers,
                 lambda done, total: bar.update(task, completed=done, total=total),
             )  # fmt: skip

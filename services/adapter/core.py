@@ -11,6 +11,12 @@ turns those scores into an estimated partner type C and our policy D (`Adapter`)
   the expected table entry under the belief instead of trusting the single most likely type.
 - `-dwell`: a new D must stay the choice for `dwell` frames before the agent switches to it, so
   that the agent does not flap between policies on noise.
+- `-guard`: when the team's realised kills under the adapted policy fall short of what the table
+  promised (guard.py), fall back to the best static policy for the rest of the game; and every
+  switch doubles the dwell, so switching is bounded.
+- `-memory`: across the trials of a session with the same partner, the adapter goes on from the
+  previous trial (`next_trial`): its belief, window, policy and the guard's record carry over, and
+  the next trial needs no warm-up. Within one game it is the strategy without it.
 - `-ood`: when the best window score is far below what library policies score on their own play
   (calibration.json, see `calibrate` in thresholds.py), the partner is out of library: we play the
   policy with the best average table entry and say so.
@@ -33,11 +39,21 @@ from typing import Any
 import numpy as np
 
 from services.adapter.cem import log_probs, observed_log_probs
+from services.adapter.guard import Guard, GuardLanes
+from services.agent.policy import end_round_batch, stalled
 from services.table.table import DEFAULT_TABLE, Table
 from shared.errors import UsageError
 from shared.game import FRAMES, N_ACTIONS, ROLES, SEEDS, Policy, Range, other
 
-STRATEGIES = ("cem", "cem-dwell", "cem-ood", "bayes", "bayes-dwell-ood")
+STRATEGIES = (
+    "cem",
+    "cem-dwell",
+    "cem-ood",
+    "bayes",
+    "bayes-dwell-ood",
+    "bayes-dwell-ood-guard",
+    "bayes-dwell-ood-guard-memory",
+)
 INITIAL = ("best-average", "random")
 WINDOWS = Range(1, FRAMES.high)  # T: a window longer than a game never fills
 CALIBRATION = Path(__file__).parent / "calibration.json"
@@ -283,30 +299,44 @@ class Adapter:
         self.out_of_library = False
         self.candidate, self.held = self.policy, 0
         self.frames = 0
+        fallback = payoff.ours[payoff.best_average()]
+        self.guard = Guard(fallback) if "guard" in config.strategy else None
+        self.promise = 0.0  # kills/min the table promises for the current choice
+        self.switches = 0
 
     @property
     def bayes(self) -> bool:
         return self.config.strategy.startswith("bayes")
 
-    def update(self, scores: np.ndarray) -> bool:
-        """Take one frame's scores (log-probabilities, library order); True when our policy changes."""
+    def update(self, scores: np.ndarray, values: list[float] | None = None) -> bool:
+        """Take one frame's scores (log-probabilities, library order) and, for the guard, the
+        frame's world-view state values; True when our policy changes."""
         self.frames += 1
-        self.window.push(scores)
-        if self.bayes:
-            self.forward(scores)
+        if self.guard is not None and values is not None:
+            self.guard.watch(values)
+        # In a stalled round every library policy plays the same end-round rule (policy.stalled):
+        # the frame says nothing about the partner's type, and a partner who does not follow the
+        # rule would otherwise look out of library whenever our ship is dead.
+        if values is None or not stalled(np.asarray(values, np.float32)):
+            self.window.push(scores)
+            if self.bayes:
+                self.forward(scores)
         if self.frames < self.config.warmup_frames:
             return False
         means = self.window.means()
         if self.bayes:
             belief = self.belief()
             estimate, choice = int(np.argmax(belief)), self.payoff.best_expected(belief)
+            promised = belief @ self.payoff.values
         else:
             estimate = int(np.argmax(means))
             choice = self.payoff.best_response(estimate)
+            promised = self.payoff.values[estimate]
         self.partner = self.payoff.partners[estimate]
         self.out_of_library = self.threshold is not None and float(means.max()) < self.threshold
-        if self.out_of_library:
+        if self.out_of_library or (self.guard is not None and self.guard.breached()):
             choice = self.payoff.best_average()
+        self.promise = float(promised[choice])
         return self._choose(self.payoff.ours[choice])
 
     def forward(self, scores: np.ndarray) -> None:
@@ -323,10 +353,18 @@ class Adapter:
         if choice != self.candidate:
             self.candidate, self.held = choice, 0
         self.held += 1
-        if self.held < self.config.dwell_frames:
+        if self.held < self.dwell():
             return False
         self.policy, self.held = choice, 0
+        self.switches += 1
+        if self.guard is not None:
+            self.guard.start(choice, self.promise)
         return True
+
+    def dwell(self) -> int:
+        """Frames a new choice must hold: the config's dwell, doubled after every switch under the
+        guard, which bounds a game's switches by about log2(frames / dwell) (6 for T = 400)."""
+        return self.config.dwell_frames * (2**self.switches if self.guard is not None else 1)
 
     def status(self) -> dict:
         """The adapter's view, as AdapterStatus fields."""
@@ -345,6 +383,20 @@ class Adapter:
             "out_of_library": self.out_of_library,
         }
 
+    def next_trial(self) -> Adapter:
+        """The adapter for the next trial of a session with the same partner: this one going on
+        (`-memory`), or a fresh one."""
+        if "memory" not in self.config.strategy:
+            return Adapter(self.config, self.payoff, self.threshold)
+        if self.guard is not None:
+            self.guard.last = None  # a new game: no kill across the gap
+        return self
+
+    @property
+    def guarded(self) -> bool:
+        """Whether the guard has fallen back to the best static policy in this game."""
+        return self.guard is not None and self.guard.tripped
+
 
 def forward(log_belief: np.ndarray, scores: np.ndarray, config: AdapterConfig) -> np.ndarray:
     """The hidden Markov model's forward step in log space, for one lane's (K,) or n lanes' (n, K)
@@ -359,8 +411,10 @@ def forward(log_belief: np.ndarray, scores: np.ndarray, config: AdapterConfig) -
 
 class AdapterLanes:
     """`Adapter` in n games at once, which see their frames together (bulk evaluation): lane i
-    takes exactly the decisions an `Adapter` would from the same scores. Estimates and policies
-    are indices into the payoff's partners and ours."""
+    takes exactly the decisions an `Adapter` would from the same scores and states, the guard's
+    and the stalled rounds' included. Estimates and policies are indices into the payoff's
+    partners and ours. (Sessions, `-memory`'s trials, are played by `Adapter`: within one game
+    `-memory` is its strategy without it.)"""
 
     def __init__(
         self, config: AdapterConfig, payoff: Payoff, lanes: int, threshold: float | None = None
@@ -371,39 +425,67 @@ class AdapterLanes:
         k = len(payoff.partners)
         self.ring = np.zeros((lanes, config.window, k))  # Window, lane by lane
         self.sums = np.zeros((lanes, k))
-        self.filled = self.next = self.frames = 0
+        self.filled, self.next = np.zeros(lanes, np.int64), np.zeros(lanes, np.int64)
+        self.frames = 0
         self.log_belief = np.full((lanes, k), -math.log(k))
         self.policy = np.full(lanes, payoff.ours.index(payoff.initial(config)))
         self.partner = np.full(lanes, -1)  # the estimated type, -1 until warmup ends
         self.candidate, self.held = self.policy.copy(), np.zeros(lanes, np.int64)
         self.responses = np.array([payoff.best_response(i) for i in range(k)])
+        guarded = "guard" in config.strategy
+        self.guard = GuardLanes(payoff.best_average(), lanes) if guarded else None
+        self.switches = np.zeros(lanes, np.int64)
 
-    def update(self, scores: np.ndarray) -> np.ndarray:
-        """Take every lane's scores of one frame, (n, K); True where a lane's policy changes."""
+    def update(self, scores: np.ndarray, values: np.ndarray | None = None) -> np.ndarray:
+        """Take every lane's scores of one frame, (n, K), and, as `Adapter.update`, the lanes'
+        world-view states, (n, D); True where a lane's policy changes."""
         self.frames += 1
-        if self.filled == self.config.window:
-            self.sums -= self.ring[:, self.next]
-        else:
-            self.filled += 1
-        self.ring[:, self.next] = scores
-        self.sums += scores
-        self.next = (self.next + 1) % self.config.window
-        bayes = self.config.strategy.startswith("bayes")
-        if bayes:
-            self.log_belief = forward(self.log_belief, scores, self.config)
+        if self.guard is not None and values is not None:
+            self.guard.watch(values)
+        pushed = np.ones(len(scores), bool)
+        if values is not None:  # stalled rounds say nothing of the partner (Adapter.update)
+            pushed = ~end_round_batch(np.asarray(values, np.float32), "world")[0]
+        self._push(np.flatnonzero(pushed), scores)
         if self.frames < self.config.warmup_frames:
             return np.zeros(len(scores), bool)
-        means = self.sums / max(self.filled, 1)
-        if bayes:
+        means = self.sums / np.maximum(self.filled, 1)[:, None]
+        if self.bayes:
             belief = np.exp(self.log_belief)
             self.partner = np.argmax(belief, axis=1)
             choice = np.argmax(belief @ self.payoff.values, axis=1)
         else:
             self.partner = np.argmax(means, axis=1)
             choice = self.responses[self.partner]
+        fallback = np.zeros(len(scores), bool)
         if self.threshold is not None:
-            choice = np.where(means.max(axis=1) < self.threshold, self.payoff.best_average(), choice)
-        return self._choose(choice)
+            fallback = means.max(axis=1) < self.threshold
+        if self.guard is not None:  # asked only where not out of library, as Adapter's `or`
+            fallback |= self.guard.breached(~fallback)
+        choice = np.where(fallback, self.payoff.best_average(), choice)
+        switch = self._choose(choice)
+        if self.guard is not None and switch.any():
+            self._start_guard(np.flatnonzero(switch))
+        return switch
+
+    @property
+    def bayes(self) -> bool:
+        return self.config.strategy.startswith("bayes")
+
+    @property
+    def guarded(self) -> np.ndarray:
+        """Adapter.guarded, lane by lane."""
+        return self.guard.tripped.copy() if self.guard is not None else np.zeros(len(self.policy), bool)
+
+    def _push(self, lanes: np.ndarray, scores: np.ndarray) -> None:
+        """Window.push and the forward step in `lanes`."""
+        full = lanes[self.filled[lanes] == self.config.window]
+        self.sums[full] -= self.ring[full, self.next[full]]
+        self.filled[lanes[self.filled[lanes] < self.config.window]] += 1
+        self.ring[lanes, self.next[lanes]] = scores[lanes]
+        self.sums[lanes] += scores[lanes]
+        self.next[lanes] = (self.next[lanes] + 1) % self.config.window
+        if self.bayes:
+            self.log_belief[lanes] = forward(self.log_belief[lanes], scores[lanes], self.config)
 
     def _choose(self, choice: np.ndarray) -> np.ndarray:
         """Adapter._choose, lane by lane."""
@@ -411,7 +493,19 @@ class AdapterLanes:
         fresh = ~same & (choice != self.candidate)
         self.candidate = np.where(same | fresh, choice, self.candidate)
         self.held = np.where(same | fresh, 0, self.held) + ~same
-        switch = ~same & (self.held >= self.config.dwell_frames)
+        dwell = self.config.dwell_frames * (2**self.switches if self.guard is not None else 1)
+        switch = ~same & (self.held >= dwell)
         self.policy = np.where(switch, choice, self.policy)
         self.held[switch] = 0
+        self.switches += switch
         return switch
+
+    def _start_guard(self, lanes: np.ndarray) -> None:
+        """Guard.start in the lanes that switched, with the table's promise computed as Adapter
+        computes it, lane by lane."""
+        values = self.payoff.values
+        promises = []
+        for i in lanes.tolist():
+            promised = np.exp(self.log_belief[i]) @ values if self.bayes else values[self.partner[i]]
+            promises.append(float(promised[self.policy[i]]))
+        self.guard.start(lanes, self.policy[lanes], np.array(promises))

@@ -9,9 +9,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from services.adapter.core import Adapter, AdapterConfig, Payoff, Scorer, Window, ood_threshold
+from services.adapter.core import Adapter, AdapterConfig, AdapterLanes, Payoff, Scorer, Window, ood_threshold
 from services.agent import library
 from services.agent.library import policy_for
+from services.sim import observation as ob
 from services.sim.engine import Game
 from services.sim.observation import world_values
 from shared.errors import UsageError
@@ -161,3 +162,45 @@ def test_shipped_calibration_has_a_threshold_per_role() -> None:
     for role in ("bait", "shooter"):
         assert -12.0 < ood_threshold(role, 400) < 0.0
         assert ood_threshold(role, 150) <= ood_threshold(role, 800) + 1e-9
+
+
+def test_frames_of_a_stalled_round_say_nothing_about_the_partner() -> None:
+    values = np.zeros(ob.TIME + 1)
+    values[ob.SELF + ob.ALIVE] = values[ob.FORTRESS + ob.F_ALIVE] = 1.0  # the partner's partner is dead
+    adapter = Adapter(AdapterConfig("shooter", 10, "bayes", warmup=1), PAYOFF)
+    adapter.update(frame(0), values.tolist())
+    assert adapter.window.filled == 0 and np.allclose(adapter.belief(), 1 / 3)
+    values[ob.PARTNER + ob.ALIVE] = 1.0
+    adapter.update(frame(0), values.tolist())
+    assert adapter.window.filled == 1 and adapter.belief()[0] > 0.5
+
+
+def test_lanes_decide_as_one_adapter_per_lane_with_the_guard_and_stalled_rounds() -> None:
+    """AdapterLanes against one Adapter per lane on the same frames: partner types that change,
+    bursts out of library, stalled rounds (left out of window and filter), kills that keep or break
+    the table's promise (the guard) and the dwell doubling per switch."""
+    rng = np.random.default_rng(5)
+    lanes, frames = 8, 2400
+    kind = rng.integers(0, 2, (frames // 600 + 1, lanes))[np.arange(frames) // 600]  # X or Y
+    best = np.where(rng.random((frames, lanes)) < 0.7, kind, rng.integers(0, 3, (frames, lanes)))
+    scores = np.where(np.arange(3) == best[..., None], HIGH, LOW) + rng.normal(0, 0.1, (frames, lanes, 3))
+    scores[700:800, 5] = LOW - 3.0  # out of library for a while
+    values = np.zeros((frames, lanes, ob.TIME + 1))
+    values[..., ob.SELF + ob.ALIVE] = values[..., ob.FORTRESS + ob.F_ALIVE] = 1.0
+    values[..., ob.PARTNER + ob.ALIVE] = (np.arange(frames)[:, None] // 40 + np.arange(lanes)) % 5 != 0
+    values[::150, :3, ob.FORTRESS + ob.F_ALIVE] = 0.0  # lanes 0-2 kill every 5 s; the rest never
+    for strategy in ("bayes-dwell-ood-guard", "cem-dwell", "bayes"):
+        config = AdapterConfig("shooter", 60, strategy, warmup=30, dwell=10)
+        threshold = 2 * LOW if "ood" in strategy else None
+        scalar = [Adapter(config, PAYOFF, threshold) for _ in range(lanes)]
+        together = AdapterLanes(config, PAYOFF, lanes, threshold)
+        for t in range(frames):
+            switched = together.update(scores[t], values[t])
+            alone = [a.update(scores[t, i], values[t, i].tolist()) for i, a in enumerate(scalar)]
+            assert switched.tolist() == alone, (strategy, t)
+            assert [PAYOFF.ours[p] for p in together.policy] == [a.policy for a in scalar], (strategy, t)
+        assert together.guarded.tolist() == [a.guarded for a in scalar]
+        assert [a.window.filled for a in scalar] == together.filled.tolist()
+        if "guard" in strategy:
+            assert 0 < sum(a.guarded for a in scalar) < lanes and max(a.switches for a in scalar) >= 2
+            assert not any(a.guarded for a in scalar[:3])  # the lanes that kept the promise

@@ -30,11 +30,13 @@ from pathlib import Path
 import numpy as np
 
 from services.adapter.core import (
+    Adapter,
     AdapterConfig,
     Payoff,
     Scorer,
 )
-from services.adapter.partners import Partner
+from services.adapter.human_like import SESSION_TRIALS
+from services.adapter.partners import Partner, make_partner
 from services.agent import library
 from services.processes import pool_worker
 from services.sim.engine import Game
@@ -69,7 +71,9 @@ class Outcome:
 
     kills_per_minute: float
     switches: int = 0
+    guarded: bool = False  # a -guard strategy fell back to the best static policy
     timeline: list[tuple[int, str, str]] = field(default_factory=list)  # (frame, estimate, policy)
+    adapter: Adapter | None = field(default=None, repr=False, compare=False)  # its adapter at the end
     values: list[list[float]] = field(default_factory=list)  # the partner's world-view states
     actions: list[int] = field(default_factory=list)  # and actions, when recorded (scalar games)
     scores: np.ndarray | None = None  # (frames, K) the partner's scores, when recorded (batched)
@@ -115,10 +119,11 @@ def play_games(
         partner_actions, our_actions = partners.act(observed, frame), seat.act(batch)
         if len(scored):
             now = s.scorer.observed({v: observed(v)[scored] for v in s.scorer.views}, partner_actions[scored])
+            states = observed("world")[scored]  # what Adapter.update reads: stalls, the guard's kills
             if scores is not None:
                 scores[:, frame] = now
         for lanes, rows, adapter in adapters:
-            for j in np.flatnonzero(adapter.update(now[rows])).tolist():
+            for j in np.flatnonzero(adapter.update(now[rows], states[rows])).tolist():
                 seat.choice[lanes[j]] = adapter.policy[j]
                 outcomes[lanes[j]].switches += 1
                 chosen = (s.payoff.partners[adapter.partner[j]], s.payoff.ours[adapter.policy[j]])
@@ -127,6 +132,9 @@ def play_games(
         if pairs is not None:
             pairs[:, frame] = np.stack(pair, axis=1)
         batch.step(*pair)
+    for lanes, _, adapter in adapters:
+        for lane, guarded in zip(lanes.tolist(), adapter.guarded.tolist(), strict=True):
+            outcomes[lane].guarded = guarded
     for lane, kpm in enumerate(batch.kills_per_minute().tolist()):
         outcomes[lane].kills_per_minute = kpm
         if record:
@@ -150,14 +158,15 @@ def play_partner(
     role: str,
     config: GameConfig | None = None,
     record: bool = False,
+    adapter: Adapter | None = None,
 ) -> Outcome:
-    """One game of `partner` with our seat `role` played by a static library key or adaptively."""
+    """One game of `partner` with our seat `role` played by a static library key or adaptively
+    (by a new adapter, or by `adapter` going on from an earlier game of a session)."""
     s, partner_role = setup(role), other(role)
     game = Game(config, seed)
     partner.reset(policy_seed(seed, partner_role))
-    adapter = None
     if isinstance(agent, AdapterConfig):
-        adapter = agent.build(s.payoff)
+        adapter = adapter or agent.build(s.payoff)
         agent = adapter.policy
     ours = s.ours[agent]
     ours.reset(policy_seed(seed, role))
@@ -170,7 +179,7 @@ def play_partner(
         if record:
             outcome.values.append(values)
             outcome.actions.append(partner_action)
-        if adapter is not None and adapter.update(s.scorer(values, partner_action)):
+        if adapter is not None and adapter.update(s.scorer(values, partner_action), values):
             ours = s.ours[adapter.policy]
             ours.reset(switch_seed(seed, role, game.frame + 1))
             outcome.switches += 1
@@ -178,7 +187,20 @@ def play_partner(
         pair = bait_first(partner_role, partner_action, our_action)
         game.step(*pair)
     outcome.kills_per_minute = game.kills_per_minute()
+    outcome.guarded = adapter is not None and adapter.guarded
+    outcome.adapter = adapter
     return outcome
+
+
+def play_session(partner: str, agent: AdapterConfig, person: int, role: str) -> list[Outcome]:
+    """The trials of one session (human_like.SESSION_TRIALS games, seeds person * trials + i)
+    with the same partner; the adapter of each trial is the previous one's `next_trial()`."""
+    outcomes: list[Outcome] = []
+    for trial in range(SESSION_TRIALS):
+        previous = outcomes[-1].adapter.next_trial() if outcomes else None
+        seed = person * SESSION_TRIALS + trial
+        outcomes.append(play_partner(make_partner(partner, other(role)), agent, seed, role, adapter=previous))
+    return outcomes
 
 
 def run_parallel(

@@ -6,9 +6,11 @@ does what it does there, in arrays (noisy, delayed, sticky, switch), and the pro
 inside (library, scripted, random) draw from their distributions, each policy asked once a frame
 for all the lanes it plays in, as batch_play does. So `noisy(switch(B1,B5))` and
 `noisy(switch(B7,B2))` share one batched form, and a frame costs one call per policy, not per
-partner. A partner of any other kind (a plug-in `module:attr`, a kind this module does not know)
-is played as it is: one copy per lane, reset and asked lane by lane as in a scalar game, so it is
-exact, only slower.
+partner. A human-like partner of project policies (`human(B5)`, `human(B1,B5)`) plays its own
+batched form, `HumanLike.act_lanes`, which gives each lane the very actions of the scalar partner
+of the same seed. A partner of any other kind (a plug-in `module:attr`, a kind this module does
+not know, a human-like hand on a wrapper) is played as it is: one copy per lane, reset and asked
+lane by lane as in a scalar game, so it is exact, only slower.
 
 The draws of a policy and of each wrapper come from their own stream of `lane_uniforms`, keyed by
 the game's seed: a game's partner depends on its seed, never on which lanes share the batch. They
@@ -25,6 +27,7 @@ from typing import Protocol
 
 import numpy as np
 
+from services.adapter.human_like import HumanLike
 from services.adapter.partners import Delayed, Noisy, Partner, Sticky, Switching, make_partner
 from services.agent.library import LearnedPolicy
 from services.agent.policy import RulePolicy, UniformPolicy
@@ -134,6 +137,21 @@ class SwitchLanes:
         return (self.first if self.t <= self.at else self.second).act(obs, frame)
 
 
+class HumanLanes:
+    """human_like.HumanLike, whose `act_lanes` is its batched form: every lane gets the actions
+    `act` gives the scalar game of the same seed (reset with that game's seed, `offset` added)."""
+
+    def __init__(self, partner: HumanLike, offset: int = 0) -> None:
+        self.partner, self.offset, self.view = partner, offset, partner.view
+
+    def reset(self, keys: np.ndarray) -> None:
+        seeds = [policy_seed(key, self.partner.role) + self.offset for key in keys.tolist()]
+        self.partner.reset_lanes(seeds)
+
+    def act(self, obs: np.ndarray, frame: int) -> np.ndarray:
+        return self.partner.act_lanes(obs)
+
+
 class EachLane:
     """Any other partners, as they are: a copy per lane, reset with the scalar game's seed
     (`offset` added, as a switch's second partner gets) and asked lane by lane."""
@@ -162,7 +180,13 @@ def shape(partner: Partner) -> tuple:
     if kind in _SETTING:
         inner = (shape(partner.inner), *([shape(partner.second)] if kind is Switching else []))
         return (kind.__name__, getattr(partner, _SETTING[kind]), *inner)
-    return ("policy" if getattr(kind, "act", None) in _SAMPLED else "other", partner.view)
+    if kind is HumanLike and all(_sampled(p) for p in (partner.first, partner.second) if p is not None):
+        return ("HumanLike", partner.key)  # one batched form per pair of policies (HumanLanes)
+    return ("policy" if _sampled(partner) else "other", partner.view)
+
+
+def _sampled(partner: Partner) -> bool:
+    return getattr(type(partner), "act", None) in _SAMPLED
 
 
 def lanes(partners: list[Partner], stream: int, streams: Iterator[int], offset: int = 0) -> Lanes:
@@ -179,6 +203,8 @@ def lanes(partners: list[Partner], stream: int, streams: Iterator[int], offset: 
     if kind is Switching:
         second = lanes([p.second for p in partners], next(streams), streams, offset + 1)
         return SwitchLanes(lanes(inner, stream, streams, offset), second, first.at)
+    if shape(first)[0] == "HumanLike":
+        return HumanLanes(first, offset)
     if shape(first)[0] == "policy":
         return PolicyLanes(partners, stream)
     return EachLane(partners, offset)

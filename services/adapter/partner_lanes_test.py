@@ -7,9 +7,10 @@ import itertools
 
 import numpy as np
 
-from services.adapter.partner_lanes import EachLane, Partners, PolicyLanes, lanes
+from services.adapter.partner_lanes import EachLane, HumanLanes, Partners, PolicyLanes, lanes
 from services.adapter.partners import SWITCH_AT, Delayed, Noisy, Sticky, Switching, make_partner
 from services.adapter.partners_test import Constant, Counting
+from services.sim.play import policy_seed
 from shared.game import N_ACTIONS
 
 
@@ -70,3 +71,19 @@ def test_a_lanes_partner_depends_on_its_seed_not_its_batch() -> None:
     for t, obs in enumerate(frames):
         both = together.act(lambda view, obs=obs: obs, t)
         assert both[2] == alone.act(lambda view, obs=obs: obs[2:3], t)[0]
+
+
+def test_human_like_lanes_act_as_the_scalar_partners_of_the_same_games() -> None:
+    """human(...) of project policies plays HumanLike.act_lanes, reset as the scalar game resets
+    its partner (policy_seed), so every lane acts as that game's partner; on a wrapper it is
+    played lane by lane."""
+    keys, rng = [3, 4, 5], np.random.default_rng(1)
+    together = batched(make_partner("human(B1,B5)", "bait"), keys)
+    assert isinstance(together, HumanLanes)
+    assert isinstance(batched(make_partner("human(noisy(B4))", "bait"), keys), EachLane)
+    alone = [make_partner("human(B1,B5)", "bait") for _ in keys]
+    for partner, key in zip(alone, keys, strict=True):
+        partner.reset(policy_seed(key, "bait"))
+    for t in range(120):
+        obs = rng.normal(size=(3, 64)).astype(np.float32)
+        assert together.act(obs, t).tolist() == [p.act(row) for p, row in zip(alone, obs, strict=True)], t

@@ -8,6 +8,8 @@ any worker process:
     delayed(B5)        acts on the state of DELAY frames ago (a reaction time of 0.2 s)
     sticky(B5)         repeats its previous action with probability STICKY (keys held too long)
     switch(B5,B7)      plays B5 until SWITCH_AT, then B7 (a partner who changes style mid-game)
+    human(B5)          B5 played by a simulated hand: reaction delay, held keys, lapses, slips
+    human(B1,B5)       the same, drifting from B1's style to B5's over a session (human_like.py)
     package.module:attr  your own partner: an object with the policy protocol's key, role, view,
                          reset(seed) and act(obs), or a callable that returns a new one
     my_bait.zip          a model trained with Stable-Baselines3 (services/agent/outside.py)
@@ -24,6 +26,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from services.adapter.human_like import HumanLike
 from services.agent import library
 from services.agent.library import policy_for
 from shared.game import N_ACTIONS
@@ -127,19 +130,24 @@ def make_partner(name: str, role: str) -> Partner:
     call = _CALL.match(name)
     if call and call[1] in WRAPPERS:
         return WRAPPERS[call[1]](make_partner(call[2], role))
+    if call and call[1] == "human":
+        return HumanLike(*(make_partner(a, role) for a in _split_arguments(call[2], 1)))
     if call and call[1] == "switch":
         first, second = _split_arguments(call[2])
         return Switching(make_partner(first, role), make_partner(second, role))
     return policy_for(name, role, "--partner")  # also a .zip or module:attr (services/agent/outside.py)
 
 
-def _split_arguments(text: str) -> tuple[str, str]:
-    """The two top-level, comma-separated arguments of switch(...), which may nest."""
+def _split_arguments(text: str, fewest: int = 2) -> tuple[str, ...]:
+    """The top-level, comma-separated arguments of switch(...) or human(...), which may nest:
+    two, or one when `fewest` is 1."""
     depth = 0
     for i, char in enumerate(text):
         depth += {"(": 1, ")": -1}.get(char, 0)
         if char == "," and depth == 0:
             return text[:i].strip(), text[i + 1 :].strip()
+    if fewest == 1:
+        return (text.strip(),)
     raise ValueError(f"switch({text}) needs two partners")
 
 
@@ -147,16 +155,22 @@ def group_of(name: str) -> str:
     """A partner's group in the population: its outer wrapper, library, or outside."""
     call = _CALL.match(name)
     if call:
-        return {"noisy": "noisy", "delayed": "delayed", "sticky": "sticky", "switch": "switching"}.get(
-            call[1], "outside"
-        )
+        return {
+            "noisy": "noisy",
+            "delayed": "delayed",
+            "sticky": "sticky",
+            "switch": "switching",
+            "human": "human-like",
+        }.get(call[1], "outside")
     return "library" if name in library.registry() else "outside"
 
 
 def population(role: str) -> dict[str, list[str]]:
     """The default evaluation population of partners of `role`, by group: every library policy,
     its noisy, delayed and sticky stand-ins, switchers between library policies of different
-    families, and two partners outside the library (the scripted demonstrator and random)."""
+    families, human-like partners (every library policy played by a simulated hand, and hands that
+    drift between the switchers' styles over a session), and two partners outside the library
+    (the scripted demonstrator and random)."""
     keys = library.keys(role)
     half = len(keys) // 2
     switches = [f"switch({a},{b})" for a, b in zip(keys, keys[half:] + keys[:half], strict=True)]
@@ -167,5 +181,6 @@ def population(role: str) -> dict[str, list[str]]:
         "delayed": [f"delayed({k})" for k in keys],
         "sticky": [f"sticky({k})" for k in keys],
         "switching": switches,
+        "human-like": [f"human({k})" for k in keys] + [f"human{s[len('switch') :]}" for s in switches[:half]],
         "outside": outside,
     }

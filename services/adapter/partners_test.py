@@ -95,7 +95,7 @@ def test_switching_changes_policy_at_its_frame() -> None:
 
 def test_population_covers_every_group() -> None:
     groups = population("bait")
-    assert set(groups) == {"library", "noisy", "delayed", "sticky", "switching", "outside"}
+    assert set(groups) == {"library", "noisy", "delayed", "sticky", "switching", "human-like", "outside"}
     assert len(groups["library"]) == 9 and len(groups["switching"]) == 9
     for names in groups.values():
         for name in names:

@@ -32,6 +32,31 @@ def _group_table(comparison: dict) -> list[str]:
     return ["| agent | " + " | ".join(groups) + " |", "| --- |" + " --- |" * len(groups), *rows]
 
 
+def _group_tests(comparison: dict) -> list[str]:
+    """Each variant against the best static policy in every partner group: the difference, and the
+    one-sided superiority and non-inferiority (margin) p-values."""
+    by_group = comparison["tests_by_group"]
+    if not by_group:
+        return []
+    groups = list(next(iter(by_group.values())))
+    lines = [
+        f"By partner group, against {comparison['best_static']}: difference ± s.e. (p superior; "
+        f"p non-inferior, margin {comparison['margin']} kills/min; **bold**: non-inferior at 0.05):",
+        "",
+        "| adaptive | " + " | ".join(groups) + " |",
+        "| --- |" + " --- |" * len(groups),
+    ]
+    for agent, tests in by_group.items():
+        cells = []
+        for g in groups:
+            t = tests[g]
+            difference = f"{t['mean_difference']:+.2f} ± {t['stderr']:.2f}"
+            cell = f"{difference} ({t['p_superior']:.2g}; {t['p_noninferior']:.2g})"
+            cells.append(f"**{cell}**" if t["noninferior"] else cell)
+        lines.append(f"| {agent} | " + " | ".join(cells) + " |")
+    return [*lines, ""]
+
+
 def write_results(
     out: Path, identification_result: dict | None, rows: list[dict], comparison: dict | None
 ) -> Path:
@@ -84,15 +109,19 @@ def write_results(
             "",
             f"Best static policy: **{comparison['best_static']}**.",
             "",
-            "| adaptive | difference | d_z | p (paired t) | p (Wilcoxon) | p (partners) | partners better |",
-            "| --- | --- | --- | --- | --- | --- | --- |",
+            "| adaptive | difference | d_z | p (paired t) | p (Holm) | p (Wilcoxon) | p (partners) | "
+            "partners better | switches/game (max) | guard fell back |",
+            "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
             *(
                 f"| {a} | {t['mean_difference']:+.3f} ± {t['stderr']:.3f} | {t['d_z']:+.3f} | "
-                f"{t['p_t']:.3g} | {t['p_wilcoxon']:.3g} | {t['p_t_partners']:.3g} | "
-                f"{t['partners_better']}/{t['partners']} |"
+                f"{t['p_t']:.3g} | {t.get('p_holm', float('nan')):.3g} | {t['p_wilcoxon']:.3g} | "
+                f"{t['p_t_partners']:.3g} | {t['partners_better']}/{t['partners']} | "
+                f"{comparison['switches'][a]['mean']:.1f} ({comparison['switches'][a]['max']}) | "
+                f"{comparison['switches'][a]['guarded_games']} games |"
                 for a, t in comparison["tests"].items()
             ),
             "",
+            *_group_tests(comparison),
         ]
     made = provenance()
     (out / "provenance.json").write_text(json.dumps(made, indent=1) + "\n")

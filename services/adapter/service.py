@@ -64,7 +64,7 @@ def run_adapter(
             """Score one paired frame, and switch the agent when due (under `lock`)."""
             if pair is not None:
                 began = time.perf_counter()
-                adapter.update(scorer(*pair))
+                adapter.update(scorer(*pair), pair[0])
                 latest[0] = frame
                 if costs is not None:
                     costs.append(time.perf_counter() - began)

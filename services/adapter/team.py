@@ -12,23 +12,35 @@ import numpy as np
 from services.adapter.core import (
     AdapterConfig,
 )
-from services.adapter.evaluate import batches, games_done, play_games, run_parallel
-from services.adapter.partners import group_of
+from services.adapter.evaluate import (
+    Outcome,
+    batches,
+    games_done,
+    play_games,
+    play_partner,
+    play_session,
+    run_parallel,
+)
+from services.adapter.human_like import SESSION_TRIALS
+from services.adapter.partners import group_of, make_partner
+from shared.game import other
+
+
+def _row(partner: str, agent: str, seed: int, outcome: Outcome) -> dict:
+    return {
+        "partner": partner,
+        "agent": agent,
+        "seed": seed,
+        "kills_per_minute": outcome.kills_per_minute,
+        "switches": outcome.switches,
+        "guarded": int(outcome.guarded),
+    }
 
 
 def _team_batch(games: list[tuple[str, str, int]], role: str) -> list[dict]:
     agents = [AdapterConfig.parse(agent, role=role) or agent for _, agent, _ in games]
     played = play_games([(p, a, seed) for (p, _, seed), a in zip(games, agents, strict=True)], role)
-    return [
-        {
-            "partner": partner,
-            "agent": agent,
-            "seed": seed,
-            "kills_per_minute": outcome.kills_per_minute,
-            "switches": outcome.switches,
-        }
-        for (partner, agent, seed), outcome in zip(games, played, strict=True)
-    ]
+    return [_row(*game, outcome) for game, outcome in zip(games, played, strict=True)]
 
 
 def team(
@@ -49,6 +61,67 @@ def team(
     return [row for part in rows for row in part]
 
 
+MARGIN = 0.1  # kills/min: the non-inferiority margin against the best static policy
+
+
+def holm(pvalues: dict[str, float]) -> dict[str, float]:
+    """Holm's step-down adjustment of a family of p-values (monotone, capped at 1)."""
+    order = sorted(pvalues, key=pvalues.get)
+    adjusted, running = {}, 0.0
+    for rank, name in enumerate(order):
+        running = max(running, min(1.0, (len(order) - rank) * pvalues[name]))
+        adjusted[name] = running
+    return adjusted
+
+
+def paired_tests(diff: np.ndarray, margin: float = MARGIN) -> dict:
+    """One-sided paired t-tests of the differences (ours - best static): superiority (mean > 0)
+    and non-inferiority (mean > -margin)."""
+    from scipy import stats
+
+    def greater(shift: float) -> float:
+        if len(diff) < 2 or diff.std(ddof=1) == 0:
+            return 0.0 if diff.mean() + shift > 0 else 1.0
+        return float(stats.ttest_1samp(diff + shift, 0.0, alternative="greater").pvalue)
+
+    return {
+        "mean_difference": float(diff.mean()),
+        "stderr": _stderr(diff),
+        "p_superior": greater(0.0),
+        "p_noninferior": greater(margin),
+        "noninferior": greater(margin) < 0.05,
+        "n": len(diff),
+    }
+
+
+def _session_games(partner: str, agent: str, person: int, role: str) -> list[dict]:
+    config = AdapterConfig.parse(agent, role=role)
+    seeds = [person * SESSION_TRIALS + trial for trial in range(SESSION_TRIALS)]
+    if config is None:
+        outcomes = [play_partner(make_partner(partner, other(role)), agent, seed, role) for seed in seeds]
+    else:
+        outcomes = play_session(partner, config, person, role)
+    return [
+        _row(partner, agent, seed, o) | {"trial": trial}
+        for trial, (seed, o) in enumerate(zip(seeds, outcomes, strict=True))
+    ]
+
+
+def sessions(
+    role: str,
+    partners: list[str],
+    agents: list[str],
+    people: list[int],
+    workers: int = 1,
+    progress: Callable[[int, int], None] | None = None,
+) -> list[dict]:
+    """`team`, played as sessions: SESSION_TRIALS one-minute trials of each person (seeds
+    person * SESSION_TRIALS + trial) with the same partner, an adaptive agent carrying over from
+    trial to trial where its strategy has `-memory`. One row per trial."""
+    tasks = [(p, a, person, role) for p in partners for a in agents for person in people]
+    return [row for rows in run_parallel(_session_games, tasks, workers, progress) for row in rows]
+
+
 def _stderr(values: np.ndarray) -> float:
     return float(values.std(ddof=1) / math.sqrt(len(values))) if len(values) > 1 else 0.0
 
@@ -56,8 +129,10 @@ def _stderr(values: np.ndarray) -> float:
 def compare(rows: list[dict]) -> dict:
     """Each agent's mean and standard error over the population, and each adaptive variant against
     the best static policy (chosen on this same data, which favours the static side): a one-sided
-    paired t-test and a Wilcoxon signed-rank test over (partner, seed) pairs, the same t-test over
-    partner means (seeds averaged), and the effect size d_z = mean difference / sd of differences."""
+    paired t-test and a Wilcoxon signed-rank test over (partner, seed) pairs (with Holm's
+    correction over the variants), the same t-test over partner means (seeds averaged), the effect
+    size d_z = mean difference / sd of differences; per partner group, one-sided superiority and
+    non-inferiority (margin MARGIN) tests; and each variant's switches per game."""
     from scipy import stats
 
     units = sorted({(r["partner"], r["seed"]) for r in rows})
@@ -93,6 +168,23 @@ def compare(rows: list[dict]) -> dict:
             "partners_better": int((by_partner > 0).sum()),
             "partners": len(partners),
         }
+    holm_p = holm({a: t["p_t"] for a, t in tests.items()})
+    for a, t in tests.items():
+        t["p_holm"] = holm_p[a]
+    group_of_unit = np.array([group_of(u[0]) for u in units])
+    by_group = {
+        a: {
+            g: paired_tests(values[a][group_of_unit == g] - values[best][group_of_unit == g])
+            for g in sorted(set(group_of_unit))
+        }
+        for a in tests
+    }
+    switching = {}
+    for a in tests:
+        counts = [r["switches"] for r in rows if r["agent"] == a]
+        switching[a] = {"mean": float(np.mean(counts)), "max": int(max(counts))}
+        guarded = [r.get("guarded", 0) for r in rows if r["agent"] == a]
+        switching[a]["guarded_games"] = int(sum(guarded))
     per_partner = {
         p: {a: _summary([grid[a][u] for u in units if u[0] == p]) for a in values} for p in partners
     }
@@ -109,6 +201,9 @@ def compare(rows: list[dict]) -> dict:
         "tests": tests,
         "per_partner": per_partner,
         "per_group": per_group,
+        "tests_by_group": by_group,
+        "switches": switching,
+        "margin": MARGIN,
     }
 
 

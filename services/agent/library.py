@@ -33,7 +33,15 @@ from pathlib import Path
 import numpy as np
 
 from services.agent import outside
-from services.agent.policy import RulePolicy, factored_probs, factored_probs_batch, rule_head_probs
+from services.agent.policy import (
+    RulePolicy,
+    end_round_choice,
+    end_stalled_rounds,
+    factored_probs,
+    factored_probs_batch,
+    rule_head_probs,
+    stalled,
+)
 from services.agent.scripted import MirrorShooter, good_shot, good_shot_batch, scripted_keys, scripted_policy
 from services.sim import observation as ob
 from shared.errors import UsageError
@@ -263,6 +271,14 @@ def softmax(z: np.ndarray) -> np.ndarray:
     return e / e.sum(axis=-1, keepdims=True)
 
 
+def _rule_distributions(choices: dict[str, int]) -> dict[str, np.ndarray]:
+    """Each head's distribution for a rule's choice: the choice with 1 - EPSILON, the rest spread."""
+    return {
+        name: rule_head_probs(np.array([c]), HEAD_SIZES[name], RulePolicy.EPSILON)[0]
+        for name, c in choices.items()
+    }
+
+
 class LearnedPolicy:
     """A trained library policy: network heads plus rule heads, sampled independently."""
 
@@ -294,12 +310,14 @@ class LearnedPolicy:
 
     def rule_head_probs(self, obs: np.ndarray) -> dict[str, np.ndarray]:
         """The rule heads' distributions: the rule's choice with 1 - EPSILON, the rest spread."""
-        return {
-            name: rule_head_probs(np.array([choice]), HEAD_SIZES[name], RulePolicy.EPSILON)[0]
-            for name, choice in rule_heads(self.recipe, obs, self.config).items()
-        }
+        return _rule_distributions(rule_heads(self.recipe, obs, self.config))
 
     def head_probs(self, obs: np.ndarray) -> dict[str, np.ndarray]:
+        """Every head's distribution; in a stalled round the end-round rule's (policy.stalled)."""
+        if stalled(obs):
+            return _rule_distributions(
+                dict(zip(HEADS, end_round_choice(obs, self.view == "world"), strict=True))
+            )
         learned = dict(zip(self.recipe.learned, self.learned_heads(obs), strict=True))
         return learned | self.rule_head_probs(obs)
 
@@ -312,7 +330,8 @@ class LearnedPolicy:
         heads = dict(zip(self.recipe.learned, self.learned_heads(observations), strict=True))
         for name, choices in rule_heads_batch(self.recipe, observations, self.config).items():
             heads[name] = rule_head_probs(choices, HEAD_SIZES[name], RulePolicy.EPSILON)
-        return factored_probs_batch(*(heads[name] for name in HEADS))
+        probs = factored_probs_batch(*(heads[name] for name in HEADS))
+        return end_stalled_rounds(observations, self.view, probs, RulePolicy.EPSILON)
 
     def act(self, obs: np.ndarray) -> int:
         heads = self.head_probs(obs)

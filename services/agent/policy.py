@@ -10,8 +10,11 @@ import random
 
 import numpy as np
 
-from services.sim.jit import jitable
-from shared.game import N_ACTIONS, N_FIRE, N_THRUST, N_TURN, join_action
+from services.sim import observation as ob
+from services.sim.jit import compiled, jitable
+from shared.game import N_ACTIONS, N_FIRE, N_THRUST, N_TURN, GameConfig, join_action
+
+HEAD_SIZES = (N_TURN, N_THRUST, N_FIRE)
 
 
 def factored_probs(turn: np.ndarray, thrust: np.ndarray, fire: np.ndarray) -> np.ndarray:
@@ -31,6 +34,13 @@ def rule_head_probs(choices: np.ndarray, n: int, epsilon: float) -> np.ndarray:
     return out
 
 
+def rule_probs(choices: np.ndarray, epsilon: float) -> np.ndarray:
+    """(rows, 12) distributions of rules' (rows, 3) choices, each head a rule head."""
+    return factored_probs_batch(
+        *(rule_head_probs(choices[:, k], n, epsilon) for k, n in enumerate(HEAD_SIZES))
+    )
+
+
 class RulePolicy:
     """A rule picks one choice per head; the policy plays it with probability 1 - epsilon per head
     and spreads epsilon evenly over that head's other choices (EPSILON, documented in the library
@@ -40,6 +50,7 @@ class RulePolicy:
     key = "rule"
     role = "bait"
     view = "world"
+    ends_stalled_rounds = True  # plays end_round_choice while the round is stalled (stalled())
 
     def __init__(self, epsilon: float = EPSILON) -> None:
         if not 0.0 < epsilon < 1.0:
@@ -54,8 +65,22 @@ class RulePolicy:
         """The rule: (turn, thrust, fire) intended for this observation."""
         raise NotImplementedError
 
+    def rule(self, obs: np.ndarray) -> tuple[int, int, int]:
+        """What the policy intends: its own rule, or ending the round when it is stalled."""
+        if self.ends_stalled_rounds and stalled(obs):
+            return end_round_choice(obs, self.view == "world")
+        return self.choose(obs)
+
+    def rule_batch(self, observations: np.ndarray) -> np.ndarray:
+        """rule() of every row, (rows, 3)."""
+        choices = self.choose_batch(observations)
+        if self.ends_stalled_rounds:
+            mask, ending = end_round_batch(observations, self.view)
+            choices[mask] = ending[mask]
+        return choices
+
     def act(self, obs: np.ndarray) -> int:
-        turn, thrust, fire = self.choose(obs)
+        turn, thrust, fire = self.rule(obs)
         rng, eps = self.rng, self.epsilon
         if rng.random() < eps:
             turn = (turn + rng.randrange(1, N_TURN)) % N_TURN
@@ -66,8 +91,7 @@ class RulePolicy:
         return join_action(turn, thrust, fire)
 
     def probs(self, obs: np.ndarray) -> np.ndarray:
-        choices = zip(self.choose(obs), (N_TURN, N_THRUST, N_FIRE), strict=True)
-        return factored_probs(*(rule_head_probs(np.array([c]), n, self.epsilon)[0] for c, n in choices))
+        return rule_probs(np.array([self.rule(obs)]), self.epsilon)[0]
 
     def choose_batch(self, observations: np.ndarray) -> np.ndarray:
         """choose() of every row, (rows, 3); the project's rules run their compiled form."""
@@ -75,11 +99,7 @@ class RulePolicy:
 
     def probs_batch(self, observations: np.ndarray) -> np.ndarray:
         """probs() of every row of an (n, 64) array."""
-        choices = self.choose_batch(observations)
-        sizes = (N_TURN, N_THRUST, N_FIRE)
-        return factored_probs_batch(
-            *(rule_head_probs(choices[:, k], n, self.epsilon) for k, n in enumerate(sizes))
-        )
+        return rule_probs(self.rule_batch(observations), self.epsilon)
 
 
 class UniformPolicy:
@@ -114,3 +134,106 @@ def turn_toward(heading_cos: float, heading_sin: float, angle: float, deadband: 
     if error < -deadband:
         return 2
     return 0
+
+
+@jitable
+def ship(obs: np.ndarray, block: int) -> tuple[float, float, float, float]:
+    """Position (px) and velocity (px/frame) of the ship block starting at `block`."""
+    p, v = ob.POSITION_SCALE, ob.VELOCITY_SCALE
+    return (
+        float(obs[block + ob.X]) * p,
+        float(obs[block + ob.Y]) * p,
+        float(obs[block + ob.VX]) * v,
+        float(obs[block + ob.VY]) * v,
+    )
+
+
+@jitable
+def seek(obs: np.ndarray, dvx: float, dvy: float, tolerance: float = 0.3) -> tuple[bool, int, int]:
+    """(needed, turn, thrust): the turn and thrust that bring the own velocity toward (dvx, dvy);
+    not needed when it is already there."""
+    _, _, vx, vy = ship(obs, ob.SELF)
+    ex, ey = dvx - vx, dvy - vy
+    if math.hypot(ex, ey) < tolerance:
+        return False, 0, 0
+    cos_h, sin_h = float(obs[ob.SELF + ob.COS]), float(obs[ob.SELF + ob.SIN])
+    want = math.atan2(ey, ex)
+    turn = turn_toward(cos_h, sin_h, want)
+    aligned = cos_h * math.cos(want) + sin_h * math.sin(want) > math.cos(math.radians(40))
+    return True, turn, int(aligned)
+
+
+# --- stalled rounds --------------------------------------------------------------------------------
+# A dead ship stays dead until the fortress is destroyed or both ships are dead (docs/rules.md), and a
+# lone ship can hardly kill: the fortress faces the only ship it can lock, so its rear opens away from
+# it. With the partner dead the round in practice ends only by this ship's death, so every agent seat
+# ends it at once (docs/library.md, "Stalled rounds").
+
+DIVE_SPEED = 8.0  # px/frame: the speed cap
+# The default rules' border and shield (px), as plain numbers for the compiled loops.
+ARENA_X, ARENA_Y, SHIELD_RADIUS = GameConfig().arena_x, GameConfig().arena_y, GameConfig().shield_radius
+
+
+@jitable
+def stalled(obs: np.ndarray) -> bool:
+    """Whether the round is stalled for this ship: it lives, its partner is dead and the fortress is
+    up, and no missile in flight can still kill (none, or the shield is shut). Either view."""
+    if (
+        obs[ob.SELF + ob.ALIVE] < 0.5
+        or obs[ob.PARTNER + ob.ALIVE] > 0.5
+        or obs[ob.FORTRESS + ob.F_ALIVE] < 0.5
+    ):
+        return False
+    if obs[ob.FORTRESS + ob.F_VULNERABLE] > 0.0:
+        for i in range(ob.N_MISSILES):
+            if obs[ob.MISSILES + i * ob.PROJECTILE_SIZE + ob.PROJECTILE_SIZE - 1] > 0.5:
+                return False
+    return True
+
+
+@jitable
+def end_round_choice(obs: np.ndarray, world: bool) -> tuple[int, int, int]:
+    """The quickest end of a stalled round, never firing: at full speed into the shield, or, in the
+    world view (where the border's direction is known), into the border when it is nearer than the
+    shield (measured in docs/library.md)."""
+    x, y, _, _ = ship(obs, ob.SELF)
+    r = math.hypot(x, y)
+    r = r if r != 0.0 else 1.0
+    dx, dy, gap = -x / r, -y / r, r - SHIELD_RADIUS
+    if world:
+        for wall, wx, wy in (
+            (ARENA_X - x, 1.0, 0.0),
+            (ARENA_X + x, -1.0, 0.0),
+            (ARENA_Y - y, 0.0, 1.0),
+            (ARENA_Y + y, 0.0, -1.0),
+        ):
+            if wall < gap:
+                dx, dy, gap = wx, wy, wall
+    needed, turn, thrust = seek(obs, DIVE_SPEED * dx, DIVE_SPEED * dy)
+    return (turn, thrust, 0) if needed else (0, 1, 0)
+
+
+def end_round_batch(observations: np.ndarray, view: str) -> tuple[np.ndarray, np.ndarray]:
+    """stalled() and end_round_choice() of every row of one view: a (rows,) mask and (rows, 3)
+    choices (rows that are not stalled hold zeros)."""
+    mask = np.zeros(len(observations), np.bool_)
+    choices = np.zeros((len(observations), 3), np.int64)
+    _end_round_rows(observations, view == "world", mask, choices)
+    return mask, choices
+
+
+def end_stalled_rounds(observations: np.ndarray, view: str, probs: np.ndarray, epsilon: float) -> np.ndarray:
+    """`probs` (rows, 12) with every stalled row replaced by the end-round rule's distribution."""
+    mask, choices = end_round_batch(observations, view)
+    if mask.any():
+        probs = probs.copy()
+        probs[mask] = rule_probs(choices[mask], epsilon)
+    return probs
+
+
+@compiled
+def _end_round_rows(observations, world, mask, choices):
+    for i in range(observations.shape[0]):
+        if stalled(observations[i]):
+            mask[i] = True
+            choices[i] = end_round_choice(observations[i], world)

@@ -18,39 +18,12 @@ import math
 
 import numpy as np
 
-from services.agent.policy import RulePolicy, UniformPolicy, turn_toward
+from services.agent.policy import RulePolicy, UniformPolicy, seek, ship, turn_toward
 from services.sim import observation as ob
 from services.sim.jit import compiled, jitable
 from shared.game import GameConfig
 
 _DEFAULTS = GameConfig()
-
-
-@jitable
-def _ship(obs: np.ndarray, block: int) -> tuple[float, float, float, float]:
-    """Position (px) and velocity (px/frame) of the ship block starting at `block`."""
-    p, v = ob.POSITION_SCALE, ob.VELOCITY_SCALE
-    return (
-        float(obs[block + ob.X]) * p,
-        float(obs[block + ob.Y]) * p,
-        float(obs[block + ob.VX]) * v,
-        float(obs[block + ob.VY]) * v,
-    )
-
-
-@jitable
-def seek(obs: np.ndarray, dvx: float, dvy: float, tolerance: float = 0.3) -> tuple[bool, int, int]:
-    """(needed, turn, thrust): the turn and thrust that bring the own velocity toward (dvx, dvy);
-    not needed when it is already there."""
-    _, _, vx, vy = _ship(obs, ob.SELF)
-    ex, ey = dvx - vx, dvy - vy
-    if math.hypot(ex, ey) < tolerance:
-        return False, 0, 0
-    cos_h, sin_h = float(obs[ob.SELF + ob.COS]), float(obs[ob.SELF + ob.SIN])
-    want = math.atan2(ey, ex)
-    turn = turn_toward(cos_h, sin_h, want)
-    aligned = cos_h * math.cos(want) + sin_h * math.sin(want) > math.cos(math.radians(40))
-    return True, turn, int(aligned)
 
 
 @jitable
@@ -67,9 +40,10 @@ def orbit_velocity(
 
 
 class Idle(RulePolicy):
-    """Does nothing, in either seat."""
+    """Does nothing, in either seat, even in a stalled round: the lone-ship baseline."""
 
     key = "idle"
+    ends_stalled_rounds = False
 
     def __init__(self, role: str = "bait", epsilon: float = RulePolicy.EPSILON) -> None:
         super().__init__(epsilon)
@@ -110,7 +84,7 @@ class CircleBait(RulePolicy):
 @jitable
 def circle_choice(obs: np.ndarray, radius: float, speed: float, outside: float) -> tuple[int, int, int]:
     """CircleBait's rule: orbit at `radius` while the fortress is up, else leave past `outside`."""
-    x, y, _, _ = _ship(obs, ob.SELF)
+    x, y, _, _ = ship(obs, ob.SELF)
     if obs[ob.FORTRESS + ob.F_ALIVE] > 0.5:
         dvx, dvy = orbit_velocity(x, y, radius, speed)
     else:  # leave the region so the fortress can respawn
@@ -126,7 +100,7 @@ def evade(obs: np.ndarray, x: float, y: float) -> tuple[float, float]:
     base = ob.SHELLS
     if obs[base + 4] < 0.5:
         return 0.0, 0.0
-    sx, sy, svx, svy = _ship(obs, base)
+    sx, sy, svx, svy = ship(obs, base)
     rx, ry = x - sx, y - sy
     speed2 = svx * svx + svy * svy
     speed2 = speed2 if speed2 != 0.0 else 1.0
@@ -207,8 +181,8 @@ def mirror_choice(
 ) -> tuple[int, int, int]:
     """MirrorShooter's rule. A negative `placed_distance` means placed on its circle (within 20
     degrees and 25 px), else within that distance of the mirror point."""
-    x, y, _, _ = _ship(obs, ob.SELF)
-    bx, by, bvx, bvy = _ship(obs, ob.PARTNER)
+    x, y, _, _ = ship(obs, ob.SELF)
+    bx, by, bvx, bvy = ship(obs, ob.PARTNER)
     me = math.atan2(y, x)
     mirror = math.atan2(-by, -bx)
     gap = (mirror - me + math.pi) % (2 * math.pi) - math.pi
@@ -216,7 +190,7 @@ def mirror_choice(
     tangential = (bait_turn_rate + 0.05 * gap) * radius
     tangential = max(-max_speed, min(max_speed, tangential))
     dvx, dvy = orbit_velocity(x, y, radius, tangential, 0.08)
-    _, _, vx, vy = _ship(obs, ob.SELF)
+    _, _, vx, vy = ship(obs, ob.SELF)
     if abs(x + 12 * vx) > arena_x - 25 or abs(y + 12 * vy) > arena_y - 25:
         dvx, dvy = -0.02 * x, -0.02 * y  # heading for the border: pull back toward the centre
     needed, turn, thrust = seek(obs, dvx, dvy, 0.6)
@@ -269,7 +243,7 @@ def good_shot_at(
     rear_tolerance: float,
 ) -> bool:
     """good_shot() with the rules' numbers spelled out."""
-    x, y, _, _ = _ship(obs, ob.SELF)
+    x, y, _, _ = ship(obs, ob.SELF)
     cos_h, sin_h = float(obs[ob.SELF + ob.COS]), float(obs[ob.SELF + ob.SIN])
     to_fortress = math.atan2(-y, -x)
     aim = math.degrees(

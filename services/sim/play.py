@@ -27,6 +27,12 @@ def policy_seed(game_seed: int, role: str) -> int:
     return 2 * game_seed + 1 + ROLES.index(role)
 
 
+def game_seed(policy_seed: int, role: str) -> int:
+    """The game seed whose `policy_seed` this is (a switch's second partner, reset with one more,
+    belongs to the same game)."""
+    return (policy_seed - 1 - ROLES.index(role)) // 2
+
+
 def switch_seed(game_seed: int, role: str, frame: int) -> int:
     """The seed a seat's policy is reset with when it is switched to from `frame` on."""
     return policy_seed(game_seed, role) * 1_000_003 + frame

@@ -1,0 +1,88 @@
+"""The guard: it counts the team's kills from states and trips only when the promise fails."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from services.adapter.core import AdapterConfig
+from services.adapter.evaluate import play_partner
+from services.adapter.guard import GUARD_FRAMES, Guard, poisson_cdf
+from services.adapter.partners import make_partner
+from services.sim import observation as ob
+
+
+@pytest.mark.parametrize(("k", "mean"), [(0, 0.5), (3, 4.0), (10, 2.5)])
+def test_poisson_cdf(k, mean):
+    assert poisson_cdf(k, mean) == pytest.approx(stats.poisson.cdf(k, mean), rel=1e-12)
+
+
+def frames(kill_every: int, n: int) -> list[list[float]]:
+    """World-view values where the fortress goes down once every `kill_every` frames."""
+    out = []
+    for t in range(n):
+        values = np.zeros(ob.TIME + 1)
+        values[ob.FORTRESS + ob.F_ALIVE] = 0.0 if t % kill_every == kill_every - 1 else 1.0
+        values[ob.SELF + ob.ALIVE] = values[ob.PARTNER + ob.ALIVE] = 1.0
+        out.append(values.tolist())
+    return out
+
+
+def test_the_guard_trips_when_kills_fall_short_of_the_promise_and_not_before():
+    kept, broken, best = Guard("S5"), Guard("S5"), Guard("S5")
+    for guard in (kept, broken, best):
+        guard.start("S7" if guard is not best else "S5", 8.0)
+    for v in frames(225, GUARD_FRAMES * 2):  # 8 kills/min
+        kept.watch(v)
+    for v in frames(10**6, GUARD_FRAMES * 2):  # none
+        broken.watch(v)
+        best.watch(v)
+        assert not (broken.breached() and broken.frames < GUARD_FRAMES)
+    assert kept.kills == 4 and not kept.breached()  # 8 kills/min for 30 s
+    assert broken.breached() and broken.kills == 0
+    assert not best.breached()  # the best static policy itself is never left
+
+
+def test_a_guarded_game_switches_at_most_once_more_and_reports_it():
+    config = AdapterConfig("shooter", 400, "bayes-dwell-ood-guard")
+    outcome = play_partner(make_partner("human(B3)", "bait"), config, 1, "shooter")
+    plain = play_partner(
+        make_partner("human(B3)", "bait"), AdapterConfig("shooter", 400, "bayes-dwell-ood"), 1, "shooter"
+    )
+    assert outcome.switches <= plain.switches + 1
+    if outcome.guarded:
+        assert outcome.timeline[-1][2] == "S5"
+
+
+def test_memory_carries_the_adapter_into_the_next_trial():
+    scores = np.log(np.full(9, 1 / 12))
+    scores[2] = np.log(0.9)  # the partner plays like B3
+    remembering = AdapterConfig("shooter", 150, "bayes-dwell-ood-guard-memory").build()
+    forgetting = AdapterConfig("shooter", 150, "bayes-dwell-ood-guard").build()
+    for adapter in (remembering, forgetting):
+        for v in frames(10**6, 200):
+            adapter.update(scores, v)
+    assert remembering.partner == forgetting.partner == "B3" and remembering.policy != "S5"
+    carried, fresh = remembering.next_trial(), forgetting.next_trial()
+    assert carried is remembering and carried.guard.last is None and carried.guard.frames > 0
+    assert fresh.partner == "" and fresh.policy == "S5" and fresh.frames == 0
+
+
+def flipping_switches(strategy: str) -> list[int]:
+    """The frames an adapter switches at with a partner that flips between B3 and B9 every 2 s."""
+    adapter, switched = AdapterConfig("shooter", 150, strategy, warmup=1).build(), []
+    for t in range(1800):
+        scores = np.log(np.full(9, 1 / 12))
+        scores[2 if (t // 60) % 2 else 8] = np.log(0.95)
+        if adapter.update(scores):
+            switched.append(t)
+    return switched
+
+
+def test_under_the_guard_every_switch_doubles_the_dwell():
+    assert len(flipping_switches("bayes-dwell-ood")) > 10
+    switched = flipping_switches("bayes-dwell-ood-guard")
+    assert 1 <= len(switched) <= 7
+    gaps = np.diff(switched)
+    assert all(gap >= 15 * 2 ** (i + 1) for i, gap in enumerate(gaps))

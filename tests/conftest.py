@@ -3,6 +3,7 @@ always closed or killed at teardown, a poll helper, and a tap that records what 
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 import threading
 import time
@@ -17,6 +18,20 @@ from services.launch import service_command
 from shared import keys
 from shared.bus import BusConfig, free_endpoint, session
 from shared.messages import Message, MessageError, decode_any
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")  # Debian's, never a download
+
+
+@pytest.fixture(scope="module")
+def browser():  # noqa: ANN201 - a Playwright browser
+    """Debian's Chromium, headless, for the tests of the web pages."""
+    sync_api = pytest.importorskip("playwright.sync_api")
+    with sync_api.sync_playwright() as playwright:
+        launched = playwright.chromium.launch(
+            executable_path=CHROMIUM, args=["--no-sandbox", "--disable-background-networking"]
+        )
+        yield launched
+        launched.close()
 
 
 def wait_until(predicate: Callable[[], object], timeout: float = 5.0, interval: float = 0.005) -> bool:

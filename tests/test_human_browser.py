@@ -5,12 +5,11 @@ Skipped, with the reason, where Chromium is not installed (.ci/run installs it).
 from __future__ import annotations
 
 import io
-import shutil
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 
 import pytest
-from conftest import wait_in_page
+from conftest import CHROMIUM, wait_in_page
 
 from services.human.core import SeatBook
 from services.human.gateway import Gateway, Web, seat_handler
@@ -21,22 +20,10 @@ from services.recorder.replay import republish
 from shared.game import GameConfig
 from shared.messages import Action
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is not installed")
 FRAMES = 300  # 10 s of real time
 BACKGROUND = (12, 14, 28)
 BAIT_COLOUR = (255, 150, 40)
-
-
-@pytest.fixture(scope="module")
-def browser():
-    sync_api = pytest.importorskip("playwright.sync_api")
-    with sync_api.sync_playwright() as playwright:
-        launched = playwright.chromium.launch(
-            executable_path=CHROMIUM, args=["--no-sandbox", "--disable-background-networking"]
-        )
-        yield launched
-        launched.close()
 
 
 @pytest.fixture

@@ -14,27 +14,16 @@ from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 import websockets
+from conftest import CHROMIUM
 
 from services.human.gateway import Web
 from services.study.core import StudyConfig, Variant
 from services.study.runner import TAKEN, Serving
 
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 pytestmark = pytest.mark.skipif(
     CHROMIUM is None or shutil.which("openssl") is None,
     reason="Debian's chromium or openssl is not installed",
 )
-
-
-@pytest.fixture(scope="module")
-def browser():
-    sync_api = pytest.importorskip("playwright.sync_api")
-    with sync_api.sync_playwright() as playwright:
-        launched = playwright.chromium.launch(
-            executable_path=CHROMIUM, args=["--no-sandbox", "--disable-background-networking"]
-        )
-        yield launched
-        launched.close()
 
 
 @pytest.fixture

@@ -10,7 +10,7 @@ tsf/<match>/alive/<service>[/<role>]  liveliness tokens, one per running service
 
 tsf/sweep/<sweep>/coordinator       liveliness token of a sweep's coordinator
 tsf/sweep/<sweep>/worker/<worker>   liveliness token of a sweep worker
-tsf/sweep/<sweep>/job/<worker>      coordinator -> one worker: a SweepJob
+tsf/sweep/<sweep>/job/<worker>      coordinator -> one worker: a SweepJob (any kind of job)
 tsf/sweep/<sweep>/result            workers -> coordinator: SweepResults
 """
 

@@ -23,7 +23,8 @@ from shared.game import DEATH_CAUSES, EVENT_KINDS, N_ACTIONS, OBS_SIZE, ROLES, S
 SCHEMA_VERSION = 1
 MAX_BYTES = 64 * 1024
 MAX_FRAME = 10**9
-JOB_SEEDS = Range(1, 1000)  # games of one sweep job (tsf sweep --chunk)
+JOB_SEEDS = Range(1, 1000)  # games of one job (tsf sweep --chunk)
+JOB_VALUES = 10_000  # values in one job's result
 
 
 class MessageError(ValueError):
@@ -293,51 +294,80 @@ class AdapterStatus(Message):
     out_of_library: bool = False
 
 
-_POLICY_KEY = _text(r"[A-Z][0-9]{1,2}")
 _HASH = _text(r"[0-9a-f]{16}")
+
+
+JOB_KINDS = ("table", "team", "session", "identify")  # what a job computes (services/jobs/kinds.py)
+_JOB_ID = _text(r"[A-Za-z0-9_.-]{1,64}")
+_PLUGIN = _text(r"[A-Za-z_][A-Za-z0-9_.]{0,100}:[A-Za-z_][A-Za-z0-9_.]{0,60}")
+
+
+def _plain(depth: int = 4) -> Check:
+    """Plain data (text, finite numbers, booleans, lists, maps with text keys), nested at most
+    `depth` deep: a job's arguments and results, which its kind checks further."""
+
+    def check(v: Any, left: int = depth) -> bool:
+        if isinstance(v, (str, bool)) or v is None:
+            return True
+        if isinstance(v, (int, float)):
+            return math.isfinite(v)
+        if left == 0:
+            return False
+        if isinstance(v, list):
+            return all(check(x, left - 1) for x in v)
+        return isinstance(v, dict) and all(isinstance(k, str) and check(x, left - 1) for k, x in v.items())
+
+    return check
 
 
 @dataclass(frozen=True, kw_only=True)
 class SweepJob(Message):
-    """A sweep coordinator's job for one worker: play a pair over some seeds. `match` carries the
-    sweep id; `library` and `config` are the hashes the worker's own copies must have."""
+    """A coordinator's job for one worker slot: one piece of a bulk computation (a table cell's
+    games, a batch of evaluation games, sessions, identification runs), its `kind` saying which.
+    `match` carries the sweep id; `args` are the kind's arguments; `plugins` the `module:attr`
+    partners or policies it needs imported; `library` and `config` the hashes the worker's own copies
+    must have."""
 
     TYPE: ClassVar[str] = "sweep_job"
     CHECKS: ClassVar[dict[str, Check]] = {
-        "job": _text(r"[A-Za-z0-9_-]{1,64}"),
-        "bait": _POLICY_KEY,
-        "shooter": _POLICY_KEY,
-        "seeds": lambda v: isinstance(v, list) and len(v) in JOB_SEEDS and all(_SEED(x) for x in v),
+        "job": _JOB_ID,
+        "kind": _one_of(JOB_KINDS),
+        "args": lambda v: isinstance(v, dict) and _plain()(v),
+        "plugins": lambda v: isinstance(v, list) and len(v) <= 16 and all(_PLUGIN(x) for x in v),
         "library": _HASH,
         "config": _HASH,
     }
 
     job: str = ""
-    bait: str = "B1"
-    shooter: str = "S1"
-    seeds: list[int] = field(default_factory=list)
+    kind: str = "table"
+    args: dict[str, Any] = field(default_factory=dict)
+    plugins: list[str] = field(default_factory=list)
     library: str = "0" * 16
     config: str = "0" * 16
 
 
 @dataclass(frozen=True, kw_only=True)
 class SweepResult(Message):
-    """A worker's answer to a job: kills/min per seed, in the job's seed order, or why it could not."""
+    """A worker's answer to a job: the kind's values, or why it could not run it (then no more jobs
+    of the sweep go to it); `library` and `config` are the hashes it computed with, checked on
+    arrival as on every journal line."""
 
     TYPE: ClassVar[str] = "sweep_result"
     CHECKS: ClassVar[dict[str, Check]] = {
-        "job": _text(r"[A-Za-z0-9_-]{1,64}"),
-        "kills_per_minute": lambda v: (
-            isinstance(v, list) and len(v) <= JOB_SEEDS.high and all(_number(0.0)(x) for x in v)
-        ),
+        "job": _JOB_ID,
+        "values": lambda v: isinstance(v, list) and len(v) <= JOB_VALUES and _plain()(v),
         "error": _text(r"[ -~]{0,300}"),
         "seconds": _number(0.0),
+        "library": _HASH,
+        "config": _HASH,
     }
 
     job: str = ""
-    kills_per_minute: list[float] = field(default_factory=list)
+    values: list[Any] = field(default_factory=list)
     error: str = ""
     seconds: float = 0.0
+    library: str = "0" * 16
+    config: str = "0" * 16
 
 
 TYPES: dict[str, type[Message]] = {

@@ -15,7 +15,8 @@ import uuid
 import pytest
 
 from services.launch import service_command
-from services.table.sweep import journal_path, run_sweep
+from services.jobs.core import Hashes, journal_line
+from services.table.sweep import cell_spec, journal_path, run_sweep
 from services.table.table import Table, assemble, jobs, run_job
 from shared.bus import BusConfig, free_endpoint
 
@@ -73,6 +74,20 @@ def test_stopped_sweep_resumes_from_its_journal(bus, spawn, wait_until, tmp_path
     )
     assert counts[0] >= collected  # picked up where it stopped
     assert table is not None and table.results == reference.results
+
+
+def test_a_journal_line_of_another_library_never_enters_the_table(bus, spawn, tmp_path, reference):
+    """The issue's finding: a line planted by hand with the wrong library hash and 99 kills/min."""
+    from services.jobs.bus import hashes
+
+    sweep, out = f"s{uuid.uuid4().hex[:8]}", tmp_path / "table.json"
+    first = jobs(BAITS, SHOOTERS, GAMES, CHUNK)[0]
+    planted = Hashes("0badc0ffee000000", hashes().config)
+    journal_path(out).write_text(journal_line(cell_spec(first).id, [99.0] * len(first.seeds), planted))
+    spawn("worker", bus.config(), *worker_args(sweep, "w1"))
+    table = run_sweep(bus.config(listen=True), sweep, out, BAITS, SHOOTERS, GAMES, CHUNK)
+    assert table is not None and table.results == reference.results
+    assert 99.0 not in table.results[first.bait][first.shooter]
 
 
 def netns_available() -> str:

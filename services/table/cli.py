@@ -1,9 +1,8 @@
-"""`tsf` commands for the self-play table: sweep, worker, table."""
+"""`tsf` commands for the self-play table: sweep, table."""
 
 from __future__ import annotations
 
 import dataclasses
-import logging
 from pathlib import Path
 
 import typer
@@ -51,7 +50,8 @@ def sweep(
     """Coordinate a self-play sweep: measure the table with local and remote workers; resumable."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
 
-    from services.table.sweep import journal_path, local_workers, run_sweep
+    from services.jobs.bus import local_workers
+    from services.table.sweep import journal_path, run_sweep
     from shared.bus import free_endpoint
 
     bait_keys, shooter_keys = _keys(bait, "bait"), _keys(shooter, "shooter")
@@ -61,7 +61,7 @@ def sweep(
     stop = stop_on_signals()
     columns = (BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
     with local_workers(sweep_id, endpoint, workers), Progress(*columns, console=console) as bar:
-        task = bar.add_task("jobs", total=None)
+        task = bar.add_task("games", total=None)
         table = run_sweep(
             bus, sweep_id, out, bait_keys, shooter_keys, games, chunk,
             lambda done, total: bar.update(task, completed=done, total=total), stop, lanes=lanes,
@@ -74,25 +74,6 @@ def sweep(
         from services.table.plot import heatmap
 
         console.print(f"heatmap written to {heatmap(table, plot)}")
-
-
-@commands.command()
-@bus_options
-def worker(
-    sweep_id: str = typer.Option("table", "--sweep", help="The sweep to work for."),
-    worker_id: str = typer.Option("", "--id", help="This worker's name (default: host and pid)."),
-    *,
-    bus: BusConfig,
-) -> None:
-    """Run a sweep worker: plays the jobs a coordinator hands it, until the coordinator is gone."""
-    import os
-    import socket
-
-    from services.table.sweep import run_worker
-
-    name = worker_id or f"{socket.gethostname()}-{os.getpid()}".replace(".", "-")
-    done = run_worker(bus, sweep_id, name, stop_on_signals())
-    logging.getLogger("tsf.worker").info("worker %s did %d jobs", name, done)
 
 
 def _print_table(table) -> None:  # noqa: ANN001 - a services.table.table.Table

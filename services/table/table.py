@@ -16,7 +16,7 @@ from pathlib import Path
 
 from services.agent import library
 from services.provenance import provenance
-from shared.game import GameConfig
+from shared.game import SEEDS, GameConfig
 
 TABLE_VERSION = 1
 DEFAULT_TABLE = library.table_path()  # with TSF_LIBRARY: the table in your library directory
@@ -77,6 +77,20 @@ def run_jobs(todo: list[Job], config: GameConfig | None = None) -> list[list[flo
         out.append([result.kills_per_minute for result in played[start : start + len(job.seeds)]])
         start += len(job.seeds)
     return out
+
+
+def run_cells(args: list[dict]) -> list[list[float]]:
+    """The job system's runner for `table` jobs ({bait, shooter, seeds}): `run_jobs`, checked."""
+    todo = []
+    for a in args:
+        seeds = tuple(a["seeds"])
+        if not seeds or not all(isinstance(s, int) and s in SEEDS for s in seeds):
+            raise ValueError(f"seeds must be 1 or more of {SEEDS}: {list(seeds)[:5]}")
+        for role in ("bait", "shooter"):
+            if a[role] not in library.keys(role):
+                raise ValueError(f"{a[role]!r} is not a {role} of the library")
+        todo.append(Job(a["bait"], a["shooter"], seeds))
+    return run_jobs(todo)
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,6 @@ import pytest
 from services.agent import library
 from services.sim.batch_play import play_batch
 from services.sim.play import play, summarize
-from services.table.sweep import Coordinator, read_journal
 from services.table.table import StaleTable, Table, assemble, jobs, run_job, run_jobs
 from shared.game import GameConfig
 
@@ -79,66 +78,3 @@ def test_saved_table_loads_and_stale_tables_are_refused(tmp_path, small_table):
     small_table.save(path)
     with pytest.raises(StaleTable):
         Table.load(path, config=GameConfig(fortress_turn=5.0))
-
-
-def make_coordinator(n: int = 4) -> Coordinator:
-    return Coordinator(jobs(["B4"], ["S4"], games=n, chunk=1), {})
-
-
-def test_a_dead_workers_job_goes_to_another():
-    c = make_coordinator()
-    c.worker_up("a")
-    c.worker_up("b")
-    sent = dict(c.assignments(0.0, 60))
-    assert set(sent) == {"a", "b"}
-    c.worker_down("a")
-    c.worker_up("c")
-    resent = dict(c.assignments(1.0, 60))
-    assert resent["c"].id == sent["a"].id
-
-
-def test_each_job_counts_once():
-    c = make_coordinator(1)
-    c.worker_up("a")
-    c.worker_up("b")
-    ((worker, job),) = c.assignments(0.0, 60)
-    c.worker_down(worker)  # presumed dead, yet its result arrives
-    ((other, again),) = c.assignments(1.0, 60)
-    assert again == job and other != worker
-    assert c.result(worker, job.id, [1.0]) is True
-    assert c.result(other, job.id, [2.0]) is False
-    assert c.done == {job.id: [1.0]} and c.duplicates == 1 and c.finished
-
-
-def test_a_slow_job_is_sent_again_and_a_failing_worker_gets_nothing_more():
-    c = make_coordinator(2)
-    c.worker_up("a")
-    ((_, job),) = c.assignments(0.0, timeout=10)
-    c.worker_up("b")
-    resent = dict(c.assignments(11.0, timeout=10))
-    assert resent == {"b": job}
-    assert c.result("a", job.id, [3.0]) and "a" in c.idle  # the slow worker answers after all
-    c.failed("b", job.id)
-    assert "b" not in c.idle and all(w != "b" for w, _ in c.assignments(12.0, 10))
-
-
-def test_idle_workers_share_the_waiting_jobs_in_batches():
-    c = Coordinator(jobs(["B4"], ["S4"], games=7, chunk=1), {}, per_worker=3)
-    c.worker_up("a")
-    c.worker_up("b")
-    sent = c.assignments(0.0, 60)
-    assert [w for w, _ in sent] == ["a"] * 3 + ["b"] * 3  # 3 each, not 4 and 3: the cap holds
-    c.worker_down("a")
-    c.worker_up("c")
-    resent = c.assignments(1.0, 60)
-    assert [j for w, j in resent if w == "c"] == [j for w, j in sent if w == "a"]  # a's batch, whole
-    for worker, job in sent[3:]:
-        c.result(worker, job.id, [1.0])
-    assert "b" in c.idle and [j.id for _, j in c.assignments(2.0, 60)] == ["B4-S4-6-1"]
-
-
-def test_journal_resumes_and_skips_a_torn_line(tmp_path):
-    path = tmp_path / "t.journal"
-    path.write_text('{"job": "B4-S4-0-1", "kills_per_minute": [2.0]}\n{"job": "B4-S4-1-1", "kil')
-    c = Coordinator(jobs(["B4"], ["S4"], 2, 1), read_journal(path))
-    assert c.done == {"B4-S4-0-1": [2.0]} and [j.id for j in c.waiting] == ["B4-S4-1-1"]

@@ -1,0 +1,215 @@
+"""The job system over zenoh: one coordinator hands jobs to live workers, workers run them.
+
+Workers announce themselves with liveliness tokens under tsf/sweep/<sweep>/worker/; the coordinator
+(its bookkeeping is services/jobs/core.py) sends each idle worker its share on
+tsf/sweep/<sweep>/job/<worker>, takes results on tsf/sweep/<sweep>/result, counts each job's first
+result that passes `core.check`, appends it to the journal, and hands a dead, failed or late worker's
+jobs to another. A worker exits when the coordinator it has seen goes away. Results depend on the
+jobs only, never on which worker, or how many, computed them.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import zenoh
+
+from services.jobs import kinds
+from services.jobs.core import Coordinator, Hashes, Spec, check, journal_line, read_journal
+from services.processes import Processes
+from shared import keys
+from shared.bus import BusConfig, Drops, session, subscribe
+from shared.messages import MessageError, SweepJob, SweepResult
+
+log = logging.getLogger("tsf.jobs")
+Progress = Callable[[int, int], None]  # (values done, values in all)
+
+
+def hashes() -> Hashes:
+    """The library and rules of this process."""
+    from services.agent import library
+    from shared.game import GameConfig
+
+    return Hashes(library.manifest_hash(), GameConfig().hash())
+
+
+def coordinate(
+    bus: BusConfig,
+    sweep: str,
+    todo: list[Spec],
+    journal: Path,
+    progress: Progress | None = None,
+    stop: threading.Event | None = None,
+    job_timeout: float = 900.0,
+    per_worker: int = 1,
+) -> dict[str, list] | None:
+    """Hand out `todo` until every job has a result: the values by job id (None if stopped first;
+    the journal keeps what was collected, and a run of the same jobs resumes from it)."""
+    stop = stop or threading.Event()
+    ours = hashes()
+    jobs = {job.id: job for job in todo}
+    earlier = read_journal(journal, jobs, ours)
+    for why in earlier.refused:
+        log.warning("journal line refused: %s", why)
+    state = Coordinator(todo, earlier.done, per_worker)
+    total = sum(job.size for job in todo)
+    drops = Drops(f"coordinator/{sweep}")
+    journal_lock = threading.Lock()
+    journal.parent.mkdir(parents=True, exist_ok=True)
+
+    def report() -> None:
+        if progress is not None:
+            with state.changed:
+                progress(sum(jobs[j].size for j in state.done), total)
+
+    with session(bus) as z, open(journal, "a") as journal_file:
+
+        def on_worker(sample: zenoh.Sample) -> None:
+            worker = keys.parse(sample.key_expr).worker
+            if sample.kind == zenoh.SampleKind.PUT:
+                log.info("worker %s is up", worker)
+                state.worker_up(worker)
+            else:
+                state.worker_down(worker)
+
+        def on_result(result: SweepResult) -> None:
+            worker = result.sender.rsplit("/", 1)[-1]
+            if result.job not in jobs:
+                raise MessageError("unknown_job", f"no job {result.job!r} in this run")
+            if result.error:
+                log.error("worker %s cannot run %s: %s; no more jobs", worker, result.job, result.error)
+                state.failed(worker, result.job)
+                return
+            why = check(jobs[result.job], result.values, result.library, result.config, ours)
+            if why:
+                state.failed(worker, result.job)
+                raise MessageError("mismatch", f"{worker}, job {result.job}: {why}")
+            if state.result(worker, result.job, result.values):
+                with journal_lock:
+                    journal_file.write(journal_line(result.job, result.values, ours))
+                    journal_file.flush()
+
+        with (
+            subscribe(z, keys.sweep_result(sweep), SweepResult, on_result, drops),
+            z.liveliness().declare_subscriber(keys.sweep_worker(sweep), on_worker, history=True),
+            z.liveliness().declare_token(keys.sweep_coordinator(sweep)),
+        ):
+            while not state.finished and not stop.is_set():
+                for worker, job in state.assignments(time.monotonic(), job_timeout):
+                    message = SweepJob(
+                        match=sweep, frame=0, sender="coordinator", job=job.id, kind=job.kind,
+                        args=job.args, plugins=list(job.plugins), library=ours.library, config=ours.config,
+                    )  # fmt: skip
+                    z.put(keys.sweep_job(sweep, worker), message.encode())
+                report()
+                with state.changed:
+                    state.changed.wait(0.5)
+    report()
+    return dict(state.done) if state.finished else None
+
+
+@contextmanager
+def local_workers(sweep: str, endpoint: str, n: int) -> Iterator[list[subprocess.Popen]]:
+    """`n` worker processes on this machine, connected to a coordinator listening on `endpoint`;
+    ended on exit."""
+    bus = BusConfig("peer", ("tcp/127.0.0.1:0",), (endpoint,))
+    command = [sys.executable, "-m", "services.cli", "worker", *bus.to_args(), "--sweep", sweep]
+    with Processes() as processes:
+        yield [processes.start(f"worker{i}", [*command, "--id", f"{sweep}-local{i}"]) for i in range(n)]
+
+
+def run_worker(bus: BusConfig, sweep: str, worker: str, stop: threading.Event | None = None) -> int:
+    """Run the jobs a sweep's coordinator sends this worker until it goes away (or `stop`); returns
+    the number of jobs done. A job it cannot run (other library or rules, a plug-in that does not
+    import) is answered with the reason, and the coordinator sends it no more."""
+    stop = stop or threading.Event()
+    inbox: queue.Queue[SweepJob] = queue.Queue()
+    drops = Drops(f"worker/{worker}")
+    coordinator_seen = threading.Event()
+    ours = hashes()
+    done = 0
+    with session(bus) as z:
+
+        def on_coordinator(sample: zenoh.Sample) -> None:
+            if sample.kind == zenoh.SampleKind.PUT:
+                coordinator_seen.set()
+            elif coordinator_seen.is_set():
+                log.info("the coordinator of sweep %s is gone; worker %s stops", sweep, worker)
+                stop.set()
+
+        sender = f"worker/{worker}"
+        publisher = z.declare_publisher(keys.sweep_result(sweep))
+
+        def answer(job: SweepJob, values: list, error: str, seconds: float) -> None:
+            error = "".join(c if " " <= c <= "~" else "?" for c in error)[:300]
+            result = SweepResult(
+                match=sweep, frame=0, sender=sender, job=job.job, values=values, error=error,
+                seconds=seconds, library=ours.library, config=ours.config,
+            )  # fmt: skip
+            publisher.put(result.encode())
+
+        with (
+            subscribe(z, keys.sweep_job(sweep, worker), SweepJob, inbox.put, drops),
+            z.liveliness().declare_subscriber(keys.sweep_coordinator(sweep), on_coordinator, history=True),
+            z.liveliness().declare_token(keys.sweep_worker(sweep, worker)),
+        ):
+            while not stop.is_set():
+                try:
+                    batch = [inbox.get(timeout=0.2)]
+                except queue.Empty:
+                    continue
+                batch += _drain(inbox)
+                started = time.monotonic()
+                fits = []
+                for job in batch:
+                    why = _cannot(job, ours)
+                    if why:
+                        answer(job, [], why, 0.0)
+                    else:
+                        fits.append(job)
+                for kind in dict.fromkeys(job.kind for job in fits):
+                    mine = [job for job in fits if job.kind == kind]
+                    played, why = _run(kind, mine)
+                    seconds = time.monotonic() - started
+                    for job, values in zip(mine, played or [[]] * len(mine), strict=True):
+                        answer(job, values, why, seconds)
+                    done += len(mine) if played else 0
+    return done
+
+
+def _run(kind: str, jobs: list[SweepJob]) -> tuple[list[list] | None, str]:
+    """The jobs' values, or None and why they failed (bad arguments end the jobs, not the worker)."""
+    try:
+        return kinds.run(kind, [job.args for job in jobs]), ""
+    except Exception as error:  # noqa: BLE001 - reported to the coordinator, which bars this worker
+        log.exception("%s jobs %s failed", kind, [job.job for job in jobs])
+        return None, f"{kind} job failed: {type(error).__name__}: {error}"
+
+
+def _cannot(job: SweepJob, ours: Hashes) -> str:
+    """Why this worker cannot run `job` ("" when it can)."""
+    if (job.library, job.config) != (ours.library, ours.config):
+        return (
+            f"library/rules {ours.library}/{ours.config} here, {job.library}/{job.config} in the sweep: "
+            "update this worker's checkout or image"
+        )
+    return kinds.import_plugins(job.plugins)
+
+
+def _drain(inbox: queue.Queue[SweepJob], quiet: float = 0.05) -> list[SweepJob]:
+    """The rest of a batch: the coordinator sends a worker's jobs back to back, so whatever
+    arrives until the inbox has been quiet for `quiet` seconds."""
+    more = []
+    while True:
+        try:
+            more.append(inbox.get(timeout=quiet))
+        except queue.Empty:
+            return more

@@ -1,0 +1,51 @@
+"""What each kind of job runs, and the plug-ins a job names: the worker's side of the contract.
+
+A kind's runner takes the arguments of several jobs of that kind and returns each job's values (a
+runner may play them together, as the table's plays cells as lanes of one batch, since a game
+depends on its pair and seed only). Runners are imported when first asked for, so a coordinator
+that only hands out jobs never loads the engine.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Iterable
+from typing import Any
+
+RUNNERS = {
+    "table": "services.table.table:run_cells",
+    "team": "services.adapter.team:run_team_jobs",
+    "session": "services.adapter.team:run_session_jobs",
+    "identify": "services.adapter.identification:run_identify_jobs",
+}
+
+
+def run(kind: str, args: list[dict[str, Any]]) -> list[list]:
+    """Each job's values, in order."""
+    module, attr = RUNNERS[kind].split(":")
+    return getattr(importlib.import_module(module), attr)(args)
+
+
+def plugins_in(names: Iterable[str]) -> tuple[str, ...]:
+    """The `module:attr` plug-ins among partner or policy names (inside wrappers too:
+    noisy(my_lab.partners:Alice))."""
+    found = []
+    for name in names:
+        for part in name.replace("(", ",").replace(")", ",").split(","):
+            part = part.strip()
+            if ":" in part and not part.endswith(".zip"):
+                found.append(part)
+    return tuple(dict.fromkeys(found))
+
+
+def import_plugins(names: Iterable[str]) -> str:
+    """Import every plug-in; why one cannot be ("" when all can)."""
+    for name in names:
+        module, _, attr = name.partition(":")
+        try:
+            target: Any = importlib.import_module(module)
+            for part in attr.split("."):
+                target = getattr(target, part)
+        except Exception as error:  # noqa: BLE001 - any failure of a user's module is reported, not raised
+            return f"cannot import plug-in {name}: {type(error).__name__}: {error}"[:300]
+    return ""

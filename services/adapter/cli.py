@@ -3,6 +3,7 @@ calibrate-adapter."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Annotated
 
@@ -11,7 +12,8 @@ from rich.table import Table
 
 from services.adapter.core import WINDOWS, AdapterConfig
 from services.agent.library import policy_for
-from services.options import GAMES, WORKERS, Seat, Strategies, console, number, output
+from services.options import GAMES, WORKERS, Seat, Strategies, bus_options, console, number, output
+from shared.bus import BusConfig, stop_on_signals
 from shared.errors import UsageError
 from shared.game import FPS, ROLES, other
 
@@ -53,6 +55,7 @@ def diversity(
 
 
 @commands.command("eval")
+@bus_options
 def eval_command(
     role: Seat = typer.Option("shooter", help="The adaptive agent's seat; the partners play the other."),
     seeds: int = number(5, GAMES, "Seeded one-minute games per partner and agent."),
@@ -75,44 +78,60 @@ def eval_command(
     sessions: bool = typer.Option(
         False, help="Play team games as sessions of three trials with the same partner (--seeds: people)."
     ),
-    workers: int = number(0, WORKERS, "Processes (default: one per core)."),
+    workers: int = number(
+        os.cpu_count() or 1,
+        WORKERS,
+        "Worker processes to start here (0: only workers reached with --connect).",
+    ),
     out: Path = output(
         Path("tsf-eval"),
-        "Directory for the numbers, figures and summary (the shipped results: --out docs/eval).",
+        "Directory for the numbers, figures and summary, and the journal a stopped run resumes from "
+        "(the shipped results: --out docs/eval).",
         directory=True,
     ),
+    sweep_id: str = typer.Option(
+        "eval", "--sweep", help="Sweep id of the jobs: tsf worker --sweep ID joins."
+    ),
+    *,
+    bus: BusConfig,
 ) -> None:
-    """Evaluate the adaptive agent in-process: identification, team performance, the test against
-    the best static policy, and the figures."""
-    import os
-
+    """Evaluate the adaptive agent on the job system's workers (here, and any `tsf worker --sweep
+    eval` reached with --connect): identification, team performance, the test against the best
+    static policy, and the figures. Resumable; the numbers do not depend on the workers."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
 
     from services.adapter import figures, identification, results, team
     from services.adapter.partners import SWITCH_AT, population
     from services.agent import library
+    from services.jobs.bus import Coordination, on_workers, with_local_workers
 
     if role not in ROLES:
         raise UsageError("--role", role, "not a seat", ROLES)
-    workers = workers or os.cpu_count() or 1
     window_list = window or [150, 400, 800]
     partners = partner or [p for group in population(other(role)).values() for p in group]
     strategies = [s.value for s in strategy or Strategies]
     agents = library.keys(role) + team.variants(window_list, strategies, strategy_window)
     columns = (BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
     ident, rows, comparison = None, [], None
-    with Progress(*columns, console=console) as bar:
+    out.mkdir(parents=True, exist_ok=True)
+    stop = stop_on_signals()
+    with (
+        with_local_workers(bus, sweep_id, workers) as coordinator_bus,
+        Coordination(coordinator_bus, sweep_id, out / "eval.journal", stop) as coordination,
+        Progress(*columns, console=console) as bar,
+    ):
+        run = on_workers(coordination)
         if identify:
             task = bar.add_task("identification", total=None)
             ident = identification.identification(
-                role, window_list, list(range(identify_seeds)), workers,
+                role, window_list, list(range(identify_seeds)), run,
                 lambda done, total: bar.update(task, completed=done, total=total),
             )  # fmt: skip
         if performance:
             task = bar.add_task("team games", total=None)
             play = team.sessions if sessions else team.team
             rows = play(
-                role, partners, agents, list(range(seeds)), workers,
+                role, partners, agents, list(range(seeds)), run,
                 lambda done, total: bar.update(task, completed=done, total=total),
             )  # fmt: skip
             comparison = team.compare(rows)
@@ -140,7 +159,6 @@ def calibrate_adapter(
     ),
 ) -> None:
     """Measure the adapter's out-of-library thresholds."""
-    import os
 
     from services.adapter.thresholds import calibrate, write_calibration
 

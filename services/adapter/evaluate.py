@@ -10,8 +10,9 @@ switches as the agent service does: from the frame after the adapter's choice. D
 batched game's come from `lane_uniforms` keyed by its seed (batch_play.py), a scalar game's from
 the policies' own generators, so the two agree in distribution, not game for game.
 
-Work is spread over processes (`run_parallel`), each with its own loaded library, in batches of
-consecutive games (`batches`). The measurements built on it: identification.py (is the partner
+Bulk work runs as jobs of the job system (services/jobs: here, or on workers across machines), each
+a batch of consecutive games (`batches`); the thresholds' scalar games still use a local pool
+(`run_parallel`). The measurements built on it: identification.py (is the partner
 identified), team.py (does adapting help), thresholds.py (the out-of-library thresholds) and
 results.py (the numbers and summary written out).
 """
@@ -220,12 +221,6 @@ def run_parallel(
             if progress:
                 progress(len(results), len(tasks))
     return results
-
-
-def games_done(parts: list[list], progress: Callable[[int, int], None]) -> Callable[[int, int], None]:
-    """`progress` in games, for run_parallel over `parts` (which reports batches done, in order)."""
-    total = sum(map(len, parts))
-    return lambda done, _: progress(sum(map(len, parts[:done])), total)
 
 
 def _star(job: tuple[Callable, tuple]) -> object:

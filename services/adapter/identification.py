@@ -10,8 +10,12 @@ from collections.abc import Callable
 import numpy as np
 
 from services.adapter.core import AdapterConfig, Payoff, forward
-from services.adapter.evaluate import batches, games_done, play_games, run_parallel, setup
+from services.adapter.evaluate import Setup, batches, play_games, setup
 from services.adapter.partners import SWITCH_AT
+from services.adapter.team import JOB_GAMES
+from services.jobs.core import spec
+from services.jobs.kinds import Runner, in_process
+from shared.game import check_role
 
 FOLLOW_HOLD = 30  # frames the estimate must stay on the new type to count as following it
 
@@ -62,45 +66,76 @@ def follow_lag(estimates: np.ndarray, target: int, start: int, hold: int = FOLLO
     return None
 
 
+def _game_counts(stream: np.ndarray, windows: list[int], truth: int, target: int, s: Setup) -> list[list]:
+    """What identification keeps of one game's scores, per window: [confusion row counts of the CEM
+    estimate, the filter's right estimates, its estimates] for a library partner of type `truth`,
+    and [lag of the CEM estimate, lag of the filter] for a partner that switched to type `target`
+    (-1 where it does not apply)."""
+    out = []
+    for window in windows:
+        config = AdapterConfig(s.role, window, "bayes")
+        bayes = bayes_estimates(stream[None], config, s.payoff)[0]
+        if target >= 0:
+            estimates = np.concatenate([np.full(window - 1, -1), windowed(stream, window).argmax(axis=1)])
+            lags = [follow_lag(estimates, target, SWITCH_AT), follow_lag(bayes, target, SWITCH_AT)]
+            out.append([[], 0, 0, *lags])
+        else:
+            counts = np.bincount(windowed(stream, window).argmax(axis=1), minlength=len(s.payoff.partners))
+            right = int((bayes[window - 1 :] == truth).sum())
+            out.append([counts.tolist(), right, len(bayes) - window + 1, None, None])
+    return out
+
+
+def run_identify_jobs(args: list[dict]) -> list[list]:
+    """The job system's runner for `identify` jobs ({role, windows, games: [[partner, our policy,
+    seed, true type, switched to]...]})."""
+    out = []
+    for job in args:
+        s, windows = setup(check_role(job["role"])), [int(w) for w in job["windows"]]
+        games = [(partner, ours, int(seed)) for partner, ours, seed, *_ in job["games"]]
+        streams = _scores(games, s.role)
+        out.append(
+            [
+                _game_counts(stream, windows, t, to, s)
+                for stream, (*_, t, to) in zip(streams, job["games"], strict=True)
+            ]
+        )
+    return out
+
+
 def identification(
     role: str,
     windows: list[int],
     seeds: list[int],
-    workers: int = 1,
+    run: Runner = in_process,
     progress: Callable[[int, int], None] | None = None,
 ) -> dict:
-    """Identification of library partners (10 % action noise) by the CEM window and by the filter."""
+    """Identification of library partners (10 % action noise) by the CEM window and by the filter;
+    the games are jobs of at most JOB_GAMES games, run by `run` (here, or on workers)."""
     s = setup(role)
     keys = list(s.payoff.partners)
     teammate = {k: s.payoff.ours[s.payoff.best_response(i)] for i, k in enumerate(keys)}
-    pairs = [(a, b) for a in keys for b in keys if a != b]
-    tasks = [(k, seed) for k in keys for seed in seeds]
-    switch_tasks = [(a, b) for a, b in pairs for _ in seeds[:1]]
-    games = [(f"noisy({k})", teammate[k], seed) for k, seed in tasks]
-    games += [_switch_game(a, b, seeds[0], role) for a, b in switch_tasks]
-    parts = batches(games, workers)
-    played = run_parallel(
-        _scores, [(part, role) for part in parts], workers, progress and games_done(parts, progress)
-    )
-    scores = np.stack([stream for part in played for stream in part])
-    streams, switched = scores[: len(tasks)], scores[len(tasks) :]
+    games = [[f"noisy({k})", teammate[k], seed, keys.index(k), -1] for k in keys for seed in seeds]
+    games += [[*_switch_game(a, b, seeds[0], role), -1, keys.index(b)] for a in keys for b in keys if a != b]
+    args = {"role": role, "windows": windows}
+    todo = [
+        spec(f"identify-{i}", "identify", args | {"games": part}, len(part))
+        for i, part in enumerate(batches(games, 1, JOB_GAMES))
+    ]
+    counted = [game for values in run(todo, progress) for game in values]
     out: dict = {"partners": keys, "seeds": seeds, "noise": 0.1, "windows": {}}
-    for window in windows:
+    for w, window in enumerate(windows):
         confusion = np.zeros((len(keys), len(keys)), dtype=int)
-        config = AdapterConfig(role, window, "bayes")
-        for (key, _), stream in zip(tasks, streams, strict=True):
-            estimates = windowed(stream, window).argmax(axis=1)
-            np.add.at(confusion[keys.index(key)], estimates, 1)
-        truth = np.array([keys.index(key) for key, _ in tasks])
-        bayes = bayes_estimates(streams, config, s.payoff)[:, window - 1 :]
-        bayes_right, bayes_total = int((bayes == truth[:, None]).sum()), bayes.size
+        bayes_right = bayes_total = 0
         lags, bayes_lags = [], []
-        bayes_switched = bayes_estimates(switched, config, s.payoff)
-        for (_, second), stream, filtered in zip(switch_tasks, switched, bayes_switched, strict=True):
-            target = keys.index(second)
-            estimates = np.concatenate([np.full(window - 1, -1), windowed(stream, window).argmax(axis=1)])
-            lags.append(follow_lag(estimates, target, SWITCH_AT))
-            bayes_lags.append(follow_lag(filtered, target, SWITCH_AT))
+        for (*_, truth, target), by_window in zip(games, counted, strict=True):
+            counts, right, total, lag, bayes_lag = by_window[w]
+            if target >= 0:
+                lags.append(lag)
+                bayes_lags.append(bayes_lag)
+            else:
+                confusion[truth] += counts
+                bayes_right, bayes_total = bayes_right + right, bayes_total + total
         out["windows"][window] = {
             "accuracy": float(np.trace(confusion) / confusion.sum()),
             "bayes_accuracy": bayes_right / bayes_total,

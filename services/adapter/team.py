@@ -12,35 +12,52 @@ import numpy as np
 from services.adapter.core import (
     AdapterConfig,
 )
-from services.adapter.evaluate import (
-    Outcome,
-    batches,
-    games_done,
-    play_games,
-    play_partner,
-    play_session,
-    run_parallel,
-)
+from services.adapter.evaluate import batches, play_games, play_partner, play_session
 from services.adapter.human_like import SESSION_TRIALS
 from services.adapter.partners import group_of, make_partner
-from shared.game import other
+from services.jobs.core import Spec, spec
+from services.jobs.kinds import Runner, in_process, plugins_in
+from shared.game import check_role, other
 
 
-def _row(partner: str, agent: str, seed: int, outcome: Outcome) -> dict:
+def _row(partner: str, agent: str, seed: int, kills_per_minute: float, switches: int, guarded: int) -> dict:
     return {
         "partner": partner,
         "agent": agent,
         "seed": seed,
-        "kills_per_minute": outcome.kills_per_minute,
-        "switches": outcome.switches,
-        "guarded": int(outcome.guarded),
+        "kills_per_minute": kills_per_minute,
+        "switches": switches,
+        "guarded": guarded,
     }
 
 
-def _team_batch(games: list[tuple[str, str, int]], role: str) -> list[dict]:
+JOB_GAMES = 128  # games of one team or identification job, played as the lanes of one batch
+
+
+def _team_batch(games: list[tuple[str, str, int]], role: str) -> list[list]:
+    """Each game's [kills/min, switches, guarded]."""
     agents = [AdapterConfig.parse(agent, role=role) or agent for _, agent, _ in games]
     played = play_games([(p, a, seed) for (p, _, seed), a in zip(games, agents, strict=True)], role)
-    return [_row(*game, outcome) for game, outcome in zip(games, played, strict=True)]
+    return [[o.kills_per_minute, o.switches, int(o.guarded)] for o in played]
+
+
+def run_team_jobs(args: list[dict]) -> list[list]:
+    """The job system's runner for `team` jobs ({role, games: [[partner, agent, seed]...]})."""
+    return [
+        _team_batch([(p, a, int(seed)) for p, a, seed in job["games"]], check_role(job["role"]))
+        for job in args
+    ]
+
+
+def team_jobs(role: str, partners: list[str], agents: list[str], seeds: list[int]) -> list[Spec]:
+    """Every (partner, agent, seed) game, partner by partner, as jobs of at most JOB_GAMES games."""
+    games = [[p, a, s] for p in partners for a in agents for s in seeds]
+    plugins = plugins_in(partners)
+    parts = batches(games, 1, JOB_GAMES)
+    return [
+        spec(f"team-{i}", "team", {"role": role, "games": part}, len(part), plugins)
+        for i, part in enumerate(parts)
+    ]
 
 
 def team(
@@ -48,17 +65,18 @@ def team(
     partners: list[str],
     agents: list[str],
     seeds: list[int],
-    workers: int = 1,
+    run: Runner = in_process,
     progress: Callable[[int, int], None] | None = None,
 ) -> list[dict]:
     """Kills/min of every (partner, agent, seed); agents are static keys or adaptive variant names.
-    Games are played in batches (evaluate.batches), partner by partner."""
-    games = [(p, a, s) for p in partners for a in agents for s in seeds]
-    parts = batches(games, workers)
-    rows = run_parallel(
-        _team_batch, [(part, role) for part in parts], workers, progress and games_done(parts, progress)
-    )
-    return [row for part in rows for row in part]
+    The games are jobs (`team_jobs`), run by `run`: here, or on the job system's workers."""
+    todo = team_jobs(role, partners, agents, seeds)
+    played = run(todo, progress)
+    return [
+        _row(partner, agent, seed, kpm, switches, guarded)
+        for job, values in zip(todo, played, strict=True)
+        for (partner, agent, seed), (kpm, switches, guarded) in zip(job.args["games"], values, strict=True)
+    ]
 
 
 MARGIN = 0.1  # kills/min: the non-inferiority margin against the best static policy
@@ -94,7 +112,8 @@ def paired_tests(diff: np.ndarray, margin: float = MARGIN) -> dict:
     }
 
 
-def _session_games(partner: str, agent: str, person: int, role: str) -> list[dict]:
+def _session_games(partner: str, agent: str, person: int, role: str) -> list[list]:
+    """Each trial's [seed, kills/min, switches, guarded]."""
     config = AdapterConfig.parse(agent, role=role)
     seeds = [person * SESSION_TRIALS + trial for trial in range(SESSION_TRIALS)]
     if config is None:
@@ -102,9 +121,14 @@ def _session_games(partner: str, agent: str, person: int, role: str) -> list[dic
     else:
         outcomes = play_session(partner, config, person, role)
     return [
-        _row(partner, agent, seed, o) | {"trial": trial}
-        for trial, (seed, o) in enumerate(zip(seeds, outcomes, strict=True))
+        [seed, o.kills_per_minute, o.switches, int(o.guarded)]
+        for seed, o in zip(seeds, outcomes, strict=True)
     ]
+
+
+def run_session_jobs(args: list[dict]) -> list[list]:
+    """The job system's runner for `session` jobs ({role, partner, agent, person})."""
+    return [_session_games(a["partner"], a["agent"], int(a["person"]), check_role(a["role"])) for a in args]
 
 
 def sessions(
@@ -112,14 +136,28 @@ def sessions(
     partners: list[str],
     agents: list[str],
     people: list[int],
-    workers: int = 1,
+    run: Runner = in_process,
     progress: Callable[[int, int], None] | None = None,
 ) -> list[dict]:
     """`team`, played as sessions: SESSION_TRIALS one-minute trials of each person (seeds
     person * SESSION_TRIALS + trial) with the same partner, an adaptive agent carrying over from
-    trial to trial where its strategy has `-memory`. One row per trial."""
-    tasks = [(p, a, person, role) for p in partners for a in agents for person in people]
-    return [row for rows in run_parallel(_session_games, tasks, workers, progress) for row in rows]
+    trial to trial where its strategy has `-memory`. One row per trial; one job per session."""
+    plugins = plugins_in(partners)
+    todo = [
+        spec(
+            f"session-{i}",
+            "session",
+            {"role": role, "partner": p, "agent": a, "person": person},
+            SESSION_TRIALS,
+            plugins,
+        )  # fmt: skip
+        for i, (p, a, person) in enumerate((p, a, n) for p in partners for a in agents for n in people)
+    ]
+    return [
+        _row(job.args["partner"], job.args["agent"], seed, kpm, switches, guarded) | {"trial": trial}
+        for job, values in zip(todo, run(todo, progress), strict=True)
+        for trial, (seed, kpm, switches, guarded) in enumerate(values)
+    ]
 
 
 def _stderr(values: np.ndarray) -> float:

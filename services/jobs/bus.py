@@ -10,6 +10,7 @@ jobs only, never on which worker, or how many, computed them.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import queue
 import subprocess
@@ -17,7 +18,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
 import zenoh
@@ -26,7 +27,8 @@ from services.jobs import kinds
 from services.jobs.core import Coordinator, Hashes, Spec, check, journal_line, read_journal
 from services.processes import Processes
 from shared import keys
-from shared.bus import BusConfig, Drops, session, subscribe
+from shared.bus import BusConfig, Drops, free_endpoint, session, subscribe
+from shared.errors import Failure
 from shared.messages import MessageError, SweepJob, SweepResult
 
 log = logging.getLogger("tsf.jobs")
@@ -41,6 +43,113 @@ def hashes() -> Hashes:
     return Hashes(library.manifest_hash(), GameConfig().hash())
 
 
+class Coordination:
+    """The coordinator of a sweep, for as long as the `with` block lasts: its token keeps the
+    sweep's workers (which leave when it goes) through several runs of jobs (`run`), such as an
+    evaluation's identification and team games. A worker barred for a job it could not run stays
+    barred for the sweep."""
+
+    def __init__(
+        self, bus: BusConfig, sweep: str, journal: Path, stop: threading.Event | None = None,
+        job_timeout: float = 900.0, per_worker: int = 1,
+    ) -> None:  # fmt: skip
+        self.bus, self.sweep, self.journal = bus, sweep, journal
+        self.stop, self.job_timeout, self.per_worker = stop or threading.Event(), job_timeout, per_worker
+        self.ours = hashes()
+        self.state = Coordinator([], {})  # the run under way
+        self.live: set[str] = set()
+        self.barred: set[str] = set()
+        self.lock = threading.Lock()
+        self.drops = Drops(f"coordinator/{sweep}")
+
+    def __enter__(self) -> Coordination:
+        self.journal.parent.mkdir(parents=True, exist_ok=True)
+        self._stack = ExitStack()
+        self.z = self._stack.enter_context(session(self.bus))
+        self.journal_file = self._stack.enter_context(open(self.journal, "a"))
+        sweep = self.sweep
+        self._stack.enter_context(
+            subscribe(self.z, keys.sweep_result(sweep), SweepResult, self._result, self.drops)
+        )
+        self._stack.enter_context(
+            self.z.liveliness().declare_subscriber(keys.sweep_worker(sweep), self._worker, history=True)
+        )
+        self._stack.enter_context(self.z.liveliness().declare_token(keys.sweep_coordinator(sweep)))
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stack.close()
+
+    def _worker(self, sample: zenoh.Sample) -> None:
+        worker = keys.parse(sample.key_expr).worker
+        with self.lock:
+            up = sample.kind == zenoh.SampleKind.PUT
+            (self.live.add if up else self.live.discard)(worker)
+            state = self.state
+        if up:
+            log.info("worker %s is up", worker)
+            state.worker_up(worker)
+        else:
+            state.worker_down(worker)
+
+    def _result(self, result: SweepResult) -> None:
+        worker = result.sender.rsplit("/", 1)[-1]
+        with self.lock:
+            state = self.state
+        if result.job not in state.jobs:
+            raise MessageError("unknown_job", f"no job {result.job!r} in this run")
+        if result.error:
+            log.error("worker %s cannot run %s: %s; no more jobs", worker, result.job, result.error)
+            self._bar(worker, result.job)
+            return
+        why = check(state.jobs[result.job], result.values, result.library, result.config, self.ours)
+        if why:
+            self._bar(worker, result.job)
+            raise MessageError("mismatch", f"{worker}, job {result.job}: {why}")
+        if state.result(worker, result.job, result.values):
+            with self.lock:
+                self.journal_file.write(journal_line(result.job, result.values, self.ours))
+                self.journal_file.flush()
+
+    def _bar(self, worker: str, job: str) -> None:
+        with self.lock:
+            self.barred.add(worker)
+        self.state.failed(worker, job)
+
+    def run(self, todo: list[Spec], progress: Progress | None = None) -> dict[str, list] | None:
+        """Hand out `todo` until every job has a result: the values by job id (None if stopped
+        first; the journal keeps what was collected, and a run of the same jobs resumes from it)."""
+        jobs = {job.id: job for job in todo}
+        earlier = read_journal(self.journal, jobs, self.ours)
+        if earlier.refused:
+            log.warning("%d journal lines refused, the first: %s", len(earlier.refused), earlier.refused[0])
+        state = Coordinator(todo, earlier.done, self.per_worker)
+        with self.lock:
+            self.state, state.barred = state, set(self.barred)
+            live = set(self.live)
+        for worker in live:
+            state.worker_up(worker)
+        total = sum(job.size for job in todo)
+
+        def report() -> None:
+            if progress is not None:
+                with state.changed:
+                    progress(sum(jobs[j].size for j in state.done), total)
+
+        while not state.finished and not self.stop.is_set():
+            for worker, job in state.assignments(time.monotonic(), self.job_timeout):
+                message = SweepJob(
+                    match=self.sweep, frame=0, sender="coordinator", job=job.id, kind=job.kind, args=job.args,
+                    plugins=list(job.plugins), library=self.ours.library, config=self.ours.config,
+                )  # fmt: skip
+                self.z.put(keys.sweep_job(self.sweep, worker), message.encode())
+            report()
+            with state.changed:
+                state.changed.wait(0.5)
+        report()
+        return dict(state.done) if state.finished else None
+
+
 def coordinate(
     bus: BusConfig,
     sweep: str,
@@ -51,76 +160,42 @@ def coordinate(
     job_timeout: float = 900.0,
     per_worker: int = 1,
 ) -> dict[str, list] | None:
-    """Hand out `todo` until every job has a result: the values by job id (None if stopped first;
-    the journal keeps what was collected, and a run of the same jobs resumes from it)."""
-    stop = stop or threading.Event()
-    ours = hashes()
-    jobs = {job.id: job for job in todo}
-    earlier = read_journal(journal, jobs, ours)
-    for why in earlier.refused:
-        log.warning("journal line refused: %s", why)
-    state = Coordinator(todo, earlier.done, per_worker)
-    total = sum(job.size for job in todo)
-    drops = Drops(f"coordinator/{sweep}")
-    journal_lock = threading.Lock()
-    journal.parent.mkdir(parents=True, exist_ok=True)
+    """One run of jobs by a coordinator of its own (Coordination.run)."""
+    with Coordination(bus, sweep, journal, stop, job_timeout, per_worker) as coordination:
+        return coordination.run(todo, progress)
 
-    def report() -> None:
-        if progress is not None:
-            with state.changed:
-                progress(sum(jobs[j].size for j in state.done), total)
 
-    with session(bus) as z, open(journal, "a") as journal_file:
+def on_workers(coordination: Coordination) -> kinds.Runner:
+    """A runner (services/jobs/kinds.py) that hands its jobs to the sweep's workers; a stopped run
+    is a Failure (the journal keeps what was collected)."""
 
-        def on_worker(sample: zenoh.Sample) -> None:
-            worker = keys.parse(sample.key_expr).worker
-            if sample.kind == zenoh.SampleKind.PUT:
-                log.info("worker %s is up", worker)
-                state.worker_up(worker)
-            else:
-                state.worker_down(worker)
+    def run(todo: list[Spec], progress: Progress | None = None) -> list[list]:
+        done = coordination.run(todo, progress)
+        if done is None:
+            raise Failure(f"stopped; run the same command again to resume from {coordination.journal}")
+        return [done[job.id] for job in todo]
 
-        def on_result(result: SweepResult) -> None:
-            worker = result.sender.rsplit("/", 1)[-1]
-            if result.job not in jobs:
-                raise MessageError("unknown_job", f"no job {result.job!r} in this run")
-            if result.error:
-                log.error("worker %s cannot run %s: %s; no more jobs", worker, result.job, result.error)
-                state.failed(worker, result.job)
-                return
-            why = check(jobs[result.job], result.values, result.library, result.config, ours)
-            if why:
-                state.failed(worker, result.job)
-                raise MessageError("mismatch", f"{worker}, job {result.job}: {why}")
-            if state.result(worker, result.job, result.values):
-                with journal_lock:
-                    journal_file.write(journal_line(result.job, result.values, ours))
-                    journal_file.flush()
-
-        with (
-            subscribe(z, keys.sweep_result(sweep), SweepResult, on_result, drops),
-            z.liveliness().declare_subscriber(keys.sweep_worker(sweep), on_worker, history=True),
-            z.liveliness().declare_token(keys.sweep_coordinator(sweep)),
-        ):
-            while not state.finished and not stop.is_set():
-                for worker, job in state.assignments(time.monotonic(), job_timeout):
-                    message = SweepJob(
-                        match=sweep, frame=0, sender="coordinator", job=job.id, kind=job.kind,
-                        args=job.args, plugins=list(job.plugins), library=ours.library, config=ours.config,
-                    )  # fmt: skip
-                    z.put(keys.sweep_job(sweep, worker), message.encode())
-                report()
-                with state.changed:
-                    state.changed.wait(0.5)
-    report()
-    return dict(state.done) if state.finished else None
+    return run
 
 
 @contextmanager
-def local_workers(sweep: str, endpoint: str, n: int) -> Iterator[list[subprocess.Popen]]:
-    """`n` worker processes on this machine, connected to a coordinator listening on `endpoint`;
+def with_local_workers(bus: BusConfig, sweep: str, local: int) -> Iterator[BusConfig]:
+    """The coordinator's bus, with `local` worker processes started here for it (ended on exit),
+    beside any worker reached through `bus` (a router given with --connect)."""
+    if bus.mode == "client":  # the coordinator listens nowhere: local workers meet it at the router
+        endpoints = bus.connect
+    else:
+        endpoints = (free_endpoint(),)
+        bus = dataclasses.replace(bus, listen=(*bus.listen, *endpoints))
+    with local_workers(sweep, endpoints, local):
+        yield bus
+
+
+@contextmanager
+def local_workers(sweep: str, endpoints: tuple[str, ...], n: int) -> Iterator[list[subprocess.Popen]]:
+    """`n` worker processes on this machine, connected to a coordinator (or router) at `endpoints`;
     ended on exit."""
-    bus = BusConfig("peer", ("tcp/127.0.0.1:0",), (endpoint,))
+    bus = BusConfig("peer", ("tcp/127.0.0.1:0",), endpoints)
     command = [sys.executable, "-m", "services.cli", "worker", *bus.to_args(), "--sweep", sweep]
     with Processes() as processes:
         yield [processes.start(f"worker{i}", [*command, "--id", f"{sweep}-local{i}"]) for i in range(n)]

@@ -78,7 +78,8 @@ class Journal:
 
 def read_journal(path: Path, jobs: dict[str, Spec], ours: Hashes) -> Journal:
     """The results an earlier run of the same jobs collected, each checked as a worker's result
-    is; a torn last line, a line of another job, library or rules is refused (and said why)."""
+    is; a torn line, or one of another library or rules, is refused (and said why); lines of jobs
+    not in `jobs` (another run sharing the journal) are passed over."""
     out = Journal()
     if not path.exists():
         return out
@@ -86,6 +87,8 @@ def read_journal(path: Path, jobs: dict[str, Spec], ours: Hashes) -> Journal:
         try:
             record = json.loads(line)
             job, values = record["job"], record["values"]
+            if job not in jobs:
+                continue
             why = check(jobs.get(job), values, record["library"], record["config"], ours)
         except (json.JSONDecodeError, KeyError, TypeError) as error:
             why = f"unreadable ({type(error).__name__})"
@@ -109,7 +112,7 @@ class Coordinator:
         self.flying: dict[str, dict[str, float]] = {}  # worker -> {job id: since}
         self.idle: set[str] = set()
         self.live: set[str] = set()
-        self.barred: set[str] = set()  # workers that could not run a job: none of this run's again
+        self.barred: set[str] = set()  # workers that could not run a job: none of the sweep's again
         self.duplicates = 0
         self.changed = threading.Condition()
 

@@ -9,8 +9,12 @@ that only hands out jobs never loads the engine.
 from __future__ import annotations
 
 import importlib
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import Any
+
+from services.jobs.core import Spec
+
+Runner = Callable[[list[Spec], Callable[[int, int], None] | None], list[list]]  # (jobs, progress) -> values
 
 RUNNERS = {
     "table": "services.table.table:run_cells",
@@ -24,6 +28,19 @@ def run(kind: str, args: list[dict[str, Any]]) -> list[list]:
     """Each job's values, in order."""
     module, attr = RUNNERS[kind].split(":")
     return getattr(importlib.import_module(module), attr)(args)
+
+
+def in_process(todo: list[Spec], progress: Callable[[int, int], None] | None = None) -> list[list]:
+    """Each job's values, computed here one job at a time (the reference a run on workers equals);
+    `progress` counts values (games)."""
+    out: list[list] = []
+    total, done = sum(job.size for job in todo), 0
+    for job in todo:
+        out += run(job.kind, [job.args])
+        done += job.size
+        if progress is not None:
+            progress(done, total)
+    return out
 
 
 def plugins_in(names: Iterable[str]) -> tuple[str, ...]:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import typer
@@ -50,20 +49,19 @@ def sweep(
     """Coordinate a self-play sweep: measure the table with local and remote workers; resumable."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
 
-    from services.jobs.bus import local_workers
+    from services.jobs.bus import with_local_workers
     from services.table.sweep import journal_path, run_sweep
-    from shared.bus import free_endpoint
 
     bait_keys, shooter_keys = _keys(bait, "bait"), _keys(shooter, "shooter")
-    endpoint = free_endpoint()
-    if bus.mode != "client":
-        bus = dataclasses.replace(bus, listen=(*bus.listen, endpoint))
     stop = stop_on_signals()
     columns = (BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
-    with local_workers(sweep_id, endpoint, workers), Progress(*columns, console=console) as bar:
+    with (
+        with_local_workers(bus, sweep_id, workers) as coordinator_bus,
+        Progress(*columns, console=console) as bar,
+    ):
         task = bar.add_task("games", total=None)
         table = run_sweep(
-            bus, sweep_id, out, bait_keys, shooter_keys, games, chunk,
+            coordinator_bus, sweep_id, out, bait_keys, shooter_keys, games, chunk,
             lambda done, total: bar.update(task, completed=done, total=total), stop, lanes=lanes,
         )  # fmt: skip
     if table is None:

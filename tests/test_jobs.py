@@ -1,0 +1,74 @@
+"""The job system with real worker processes over real zenoh: evaluation games (team games,
+sessions, identification runs) on workers equal the same jobs run in-process, bit for bit; a
+worker that cannot import a job's plug-in says so and gets no more of the run's jobs."""
+
+from __future__ import annotations
+
+import logging
+import sys
+import uuid
+
+import pytest
+
+from services.adapter import team
+from services.jobs.bus import Coordination, on_workers
+from services.jobs.core import spec
+from services.jobs.kinds import in_process
+
+PARTNERS = ["noisy(B4)", "switch(B1,B5)"]
+AGENTS = ["S4", "adaptive-T150-cem", "adaptive-T150-bayes-dwell-ood-guard-memory"]
+
+
+def test_evaluation_on_workers_equals_in_process(bus, spawn, tmp_path):
+    sweep = f"e{uuid.uuid4().hex[:8]}"
+    for i in range(2):
+        spawn("worker", bus.config(), "--sweep", sweep, "--id", f"w{i}")
+    with Coordination(bus.config(listen=True), sweep, tmp_path / "eval.journal") as coordination:
+        evaluate_both_ways(on_workers(coordination))
+
+
+def evaluate_both_ways(run) -> None:  # noqa: ANN001 - a Runner
+    progress: list[tuple[int, int]] = []
+    here = team.team("shooter", PARTNERS, AGENTS, [0, 1])
+    there = team.team("shooter", PARTNERS, AGENTS, [0, 1], run, lambda d, t: progress.append((d, t)))
+    assert there == here and len(here) == 12
+    assert progress[-1] == (12, 12)
+    assert team.sessions("shooter", PARTNERS[:1], AGENTS[1:], [0], run) == team.sessions(
+        "shooter", PARTNERS[:1], AGENTS[1:], [0]
+    )
+    games = [["noisy(B4)", "S5", 0, 3, -1], ["noisy(switch(B1,B5))", "S4", 0, -1, 4]]
+    job = [spec("identify", "identify", {"role": "shooter", "windows": [150, 400], "games": games}, 2)]
+    assert run(job, None) == in_process(job)
+
+
+def test_a_worker_without_the_plugin_gets_no_more_jobs(bus, spawn, tmp_path, monkeypatch, caplog):
+    (tmp_path / "lab_partners.py").write_text(
+        "from services.adapter.partners_test import Constant\n\nclass Alice(Constant):\n    key = 'alice'\n"
+    )
+    partners, sweep = ["lab_partners:Alice", "noisy(lab_partners:Alice)"], f"p{uuid.uuid4().hex[:8]}"
+    spawn("worker", bus.config(), "--sweep", sweep, "--id", "without")
+    monkeypatch.setenv("PYTHONPATH", str(tmp_path))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    spawn("worker", bus.config(), "--sweep", sweep, "--id", "with")
+    with (
+        Coordination(bus.config(listen=True), sweep, tmp_path / "eval.journal") as coordination,
+        caplog.at_level(logging.ERROR, "tsf.jobs"),
+    ):
+        there = team.team(
+            "shooter", partners, ["S4", "adaptive-T150-cem"], [0, 1, 2], on_workers(coordination)
+        )
+    assert there == team.team("shooter", partners, ["S4", "adaptive-T150-cem"], [0, 1, 2])
+    refusals = [
+        r.getMessage() for r in caplog.records if "cannot import plug-in lab_partners:Alice" in r.getMessage()
+    ]
+    assert len(refusals) <= 1 and all("without" in r for r in refusals)
+
+
+@pytest.mark.parametrize("name", ["no_such_module:Alice"])
+def test_in_process_run_names_the_missing_plugin(name):
+    from services.jobs.kinds import import_plugins, plugins_in
+
+    assert plugins_in([f"noisy({name})", "B1", "my.zip"]) == (name,)
+    assert import_plugins([name]).startswith(f"cannot import plug-in {name}: ModuleNotFoundError")
+    assert import_plugins(["services.adapter.partners_test:Constant"]) == ""
+    assert sys.modules.get("no_such_module") is None

@@ -129,15 +129,15 @@ def test_a_signal_ends_the_match_and_every_process_it_started(tsf_match, tmp_pat
     assert wait_until(lambda: not any(alive(pid) for pid in started), timeout=20)
 
 
-# Launchers of worker processes, as they are started for a long run: a sweep's workers are `tsf
-# worker` processes, eval's a pool's.
+# Launchers of worker processes, as they are started for a long run: `tsf worker` processes of the
+# job system, for a sweep and for eval.
 LAUNCHERS = {
     "sweep": ("sweep", "--workers", "2", "--games", "10000", "--out", "{tmp}/table.json"),
     "eval": ("eval", "--workers", "2", "--out", "{tmp}/eval"),
 }
 STOPPED = {
     "sweep": "tsf sweep: stopped; run the same command again to resume from {tmp}/table.json.journal",
-    "eval": "tsf eval: stopped by {sig}",
+    "eval": "tsf eval: stopped; run the same command again to resume from {tmp}/eval/eval.journal",
 }
 
 

@@ -256,6 +256,63 @@ def test_compose_run_starts_sweep_workers_for_a_coordinator_on_the_host(inputs: 
 @pytest.mark.docker
 @pytest.mark.slow
 @pytest.mark.timeout(1800)
+def test_workers_started_through_the_sdk_compute_the_table_and_down_removes_them(
+    inputs: dict, tmp_path: Path
+) -> None:
+    """`tsf workers up` (the Docker SDK) starts two worker containers from the image built from this
+    checkout; a `tsf sweep` on the host with no local workers reaches them through a router; the
+    table equals the one computed in-process, and `tsf workers down` leaves no container behind."""
+    from services.table.table import Table, assemble, jobs, run_job
+
+    env = _compose_env()
+    built = _run(["docker-compose", "build", "sim"], 900, env)
+    assert built.returncode == 0, _tail(built.stdout + built.stderr)
+    endpoint, sweep, tsf = (
+        free_endpoint(),
+        f"sdk{uuid.uuid4().hex[:6]}",
+        [sys.executable, "-m", "services.cli"],
+    )
+    router = subprocess.Popen([*tsf, "router", "--listen", endpoint])
+    table, listed = tmp_path / "table.json", ""
+    try:
+        up = _run(
+            [
+                *tsf,
+                "workers",
+                "up",
+                "--count",
+                "2",
+                "--sweep",
+                sweep,
+                "--image",
+                IMAGE,
+                "--connect",
+                endpoint,
+            ],
+            120,
+        )
+        assert up.returncode == 0, _tail(up.stdout + up.stderr)
+        listed = _run([*tsf, "workers", "ls", "--sweep", sweep], 60).stdout
+        sweep_command = [*tsf, "sweep", "--sweep", sweep, "--workers", "0", "--games", "4", "--chunk", "1"]
+        sweep_command += ["--bait", "B5", "--shooter", "S5", "--out", str(table)]
+        swept = _run([*sweep_command, "--mode", "client", "--connect", endpoint], 300)
+        assert swept.returncode == 0, _tail(swept.stdout + swept.stderr)
+    finally:
+        down = _run([*tsf, "workers", "down", "--sweep", sweep], 120)
+        router.terminate()
+        router.wait(30)
+    assert listed.count(sweep) >= 2, listed
+    assert down.returncode == 0 and "removed 2 worker" in down.stdout, down.stdout + down.stderr
+    assert _run(["docker", "ps", "-aq", "--filter", f"label=tsf.sweep={sweep}"], 60).stdout.strip() == ""
+    reference = {job.id: run_job(job) for job in jobs(["B5"], ["S5"], 4, 1)}
+    assert Table.load(table).results == assemble(["B5"], ["S5"], 4, reference, 1).results
+    missing = _run([*tsf, "workers", "up", "--connect", endpoint, "--image", "tsf:absent"], 60)
+    assert missing.returncode == 1 and "docker build -t tsf:absent" in missing.stderr.splitlines()[-1]
+
+
+@pytest.mark.docker
+@pytest.mark.slow
+@pytest.mark.timeout(1800)
 def test_the_human_profile_seats_a_person_from_the_browser(inputs: dict, tmp_path: Path) -> None:
     """`docker compose --profile human up --scale agent-bait=0`: a person plays the bait from Debian's
     Chromium through the published port, with the adaptive shooter; the recording says so."""

@@ -44,3 +44,74 @@ def worker(
             processes.start(f"slot{i}", [*command, "--id", f"{name}-{i}"])
         while not stop.is_set() and any(c.poll() is None for c in processes.children.values()):
             stop.wait(0.5)
+
+
+workers_commands = typer.Typer(
+    no_args_is_help=True, help="Worker containers on Docker engines (the Docker SDK)."
+)
+commands.add_typer(workers_commands, name="workers")
+
+
+@workers_commands.callback()
+def workers_group() -> None:
+    """Worker containers on Docker engines (the Docker SDK): up, down, ls."""
+
+
+HOSTS = typer.Option(
+    None,
+    "--host",
+    help="A Docker engine by URL (tcp://..., ssh://user@host), repeatable (default: this machine's).",
+)
+
+
+@workers_commands.command("up")
+def workers_up(
+    connect: str = typer.Option(
+        ..., help="The router the workers and the coordinator meet at (tcp/HOST:PORT)."
+    ),
+    count: int = number(1, Range(1, 1024), "Worker containers to start, spread over the hosts."),
+    host: list[str] | None = HOSTS,
+    sweep_id: str = typer.Option(
+        "table", "--sweep", help="The sweep they work for (tsf sweep/eval --sweep)."
+    ),
+    slots: int = number(1, SLOTS, "Slots of each worker (jobs at once, one process each)."),
+    image: str = typer.Option("tsf:local", help="The project's image (built locally; see Dockerfile)."),
+    pull: bool = typer.Option(False, help="Pull the image where an engine lacks it (default: refuse)."),
+) -> None:
+    """Start worker containers from the project's image, labelled with their sweep."""
+    from services.jobs import deploy
+    from services.options import console
+
+    started = deploy.up(count, connect, sweep_id, host or ["local"], image, slots, pull)
+    for w in started:
+        console.print(f"{w.host}: {w.name} (sweep {w.sweep})")
+
+
+@workers_commands.command("down")
+def workers_down(
+    host: list[str] | None = HOSTS,
+    sweep_id: str | None = typer.Option(
+        None, "--sweep", help="Only this sweep's workers (default: every one)."
+    ),
+) -> None:
+    """Stop and remove worker containers."""
+    from services.jobs import deploy
+    from services.options import console
+
+    gone = deploy.down(host or ["local"], sweep_id)
+    console.print(f"removed {len(gone)} worker container(s)")
+
+
+@workers_commands.command("ls")
+def workers_ls(
+    host: list[str] | None = HOSTS,
+    sweep_id: str | None = typer.Option(
+        None, "--sweep", help="Only this sweep's workers (default: every one)."
+    ),
+) -> None:
+    """List worker containers: engine, name, sweep, status."""
+    from services.jobs import deploy
+    from services.options import console
+
+    for w in deploy.ls(host or ["local"], sweep_id):
+        console.print(f"{w.host}\t{w.name}\t{w.sweep}\t{w.status}")

@@ -14,7 +14,8 @@ import time
 from pathlib import Path
 
 from services.agent import library
-from services.table.sweep import local_workers, run_sweep
+from services.jobs.bus import local_workers
+from services.table.sweep import run_sweep
 from services.table.table import LANES, jobs, run_jobs
 from shared.bus import BusConfig, free_endpoint
 
@@ -33,7 +34,7 @@ def full_table(workers: int, games: int, out: Path, lanes: int) -> float:
     sweep = f"bench{workers}"
     bus = BusConfig("peer", (endpoint,), ())
     start = time.perf_counter()
-    with local_workers(sweep, endpoint, workers):
+    with local_workers(sweep, (endpoint,), workers):
         table = run_sweep(bus, sweep, out, library.keys("bait"), library.keys("shooter"), games, lanes=lanes)
     assert table is not None
     return time.perf_counter() - start

@@ -1,11 +1,16 @@
 """The job system with real worker processes over real zenoh: evaluation games (team games,
 sessions, identification runs) on workers equal the same jobs run in-process, bit for bit; a
-worker that cannot import a job's plug-in says so and gets no more of the run's jobs."""
+worker that cannot import a job's plug-in says so and gets no more of the run's jobs; a killed
+worker, or a killed coordinator run again, loses no result and counts none twice."""
 
 from __future__ import annotations
 
+import json
 import logging
+import signal
+import subprocess
 import sys
+import threading
 import uuid
 
 import pytest
@@ -72,3 +77,49 @@ def test_in_process_run_names_the_missing_plugin(name):
     assert import_plugins([name]).startswith(f"cannot import plug-in {name}: ModuleNotFoundError")
     assert import_plugins(["services.adapter.partners_test:Constant"]) == ""
     assert sys.modules.get("no_such_module") is None
+
+
+def journal_ids(path) -> list[str]:  # noqa: ANN001 - a Path
+    return [json.loads(line)["job"] for line in path.read_text().splitlines() if line.endswith("}")]
+
+
+def test_evaluation_survives_a_killed_worker(bus, spawn, background, wait_until, tmp_path, monkeypatch):
+    monkeypatch.setattr(team, "JOB_GAMES", 2)  # six jobs of two games: the victim has one in flight
+    sweep, journal = f"k{uuid.uuid4().hex[:8]}", tmp_path / "eval.journal"
+    victim = spawn("worker", bus.config(), "--sweep", sweep, "--id", "victim")
+
+    def evaluate(stop: threading.Event) -> list[dict]:
+        with Coordination(bus.config(listen=True), sweep, journal, stop) as coordination:
+            return team.team("shooter", PARTNERS, AGENTS, [0, 1], on_workers(coordination))
+
+    result = background(evaluate)
+    assert wait_until(lambda: journal.exists() and len(journal_ids(journal)) >= 1, 120)
+    spawn("worker", bus.config(), "--sweep", sweep, "--id", "survivor")
+    victim.send_signal(signal.SIGKILL)
+    assert result.result(timeout=300) == team.team("shooter", PARTNERS, AGENTS, [0, 1])
+    ids = journal_ids(journal)
+    assert len(ids) == len(set(ids)) == 6  # every job once
+
+
+def test_a_killed_coordinator_resumes_and_counts_each_job_once(tmp_path, wait_until):
+    """`tsf sweep` killed with SIGKILL mid-run (its local workers die with it), then run again."""
+    from services.table.table import Table, assemble, jobs, run_job
+
+    out = tmp_path / "table.json"
+    command = [sys.executable, "-m", "services.cli", "sweep", "--sweep", f"c{uuid.uuid4().hex[:8]}"]
+    command += ["--workers", "1", "--games", "3", "--chunk", "1", "--lanes", "1", "--out", str(out)]
+    command += ["--bait", "B4", "--bait", "B7", "--shooter", "S4", "--shooter", "S5"]
+    journal = tmp_path / "table.json.journal"
+    first = subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL)
+    try:
+        assert wait_until(lambda: journal.exists() and len(journal_ids(journal)) >= 3, 180)
+    finally:
+        first.kill()
+        first.wait()
+    collected = journal_ids(journal)
+    assert len(collected) < 12 and not out.exists()
+    assert subprocess.run(command, stdin=subprocess.DEVNULL, capture_output=True, timeout=300).returncode == 0
+    ids = journal_ids(journal)
+    assert len(ids) == len(set(ids)) == 12 and ids[: len(collected)] == collected  # resumed, none again
+    reference = {job.id: run_job(job) for job in jobs(["B4", "B7"], ["S4", "S5"], 3, 1)}
+    assert Table.load(out).results == assemble(["B4", "B7"], ["S4", "S5"], 3, reference, 1).results

@@ -21,6 +21,7 @@ PURE_CORES = (
     "services/human/core.py",
     "services/study/core.py",
     "services/table/table.py",
+    "services/jobs/core.py",
 )
 BUS = ("zenoh", "shared.bus")
 

@@ -15,7 +15,7 @@ from services.agent.library import policy_for
 from services.options import GAMES, WORKERS, Seat, Strategies, bus_options, console, number, output
 from shared.bus import BusConfig, stop_on_signals
 from shared.errors import UsageError
-from shared.game import FPS, ROLES, other
+from shared.game import FPS, ROLES, Range, other
 
 commands = typer.Typer()
 
@@ -89,6 +89,11 @@ def eval_command(
         "(the shipped results: --out docs/eval).",
         directory=True,
     ),
+    job_games: int | None = number(
+        None,
+        Range(1, 10_000),
+        "Games of one job, played as one batch (default 256): smaller jobs spread wider.",
+    ),
     sweep_id: str = typer.Option(
         "eval", "--sweep", help="Sweep id of the jobs: tsf worker --sweep ID joins."
     ),
@@ -125,15 +130,15 @@ def eval_command(
             task = bar.add_task("identification", total=None)
             ident = identification.identification(
                 role, window_list, list(range(identify_seeds)), run,
-                lambda done, total: bar.update(task, completed=done, total=total),
+                lambda done, total: bar.update(task, completed=done, total=total), job_games,
             )  # fmt: skip
         if performance:
             task = bar.add_task("team games", total=None)
-            play = team.sessions if sessions else team.team
-            rows = play(
-                role, partners, agents, list(range(seeds)), run,
-                lambda done, total: bar.update(task, completed=done, total=total),
-            )  # fmt: skip
+            shown = lambda done, total: bar.update(task, completed=done, total=total)  # noqa: E731
+            if sessions:
+                rows = team.sessions(role, partners, agents, list(range(seeds)), run, shown)
+            else:
+                rows = team.team(role, partners, agents, list(range(seeds)), run, shown, job_games)
             comparison = team.compare(rows)
     summary = results.write_results(out, ident, rows, comparison)
     if ident:

@@ -109,9 +109,10 @@ def identification(
     seeds: list[int],
     run: Runner = in_process,
     progress: Callable[[int, int], None] | None = None,
+    job_games: int | None = None,
 ) -> dict:
     """Identification of library partners (10 % action noise) by the CEM window and by the filter;
-    the games are jobs of at most JOB_GAMES games, run by `run` (here, or on workers)."""
+    the games are jobs of at most `job_games` games, run by `run` (here, or on workers)."""
     s = setup(role)
     keys = list(s.payoff.partners)
     teammate = {k: s.payoff.ours[s.payoff.best_response(i)] for i, k in enumerate(keys)}
@@ -120,7 +121,7 @@ def identification(
     args = {"role": role, "windows": windows}
     todo = [
         spec(f"identify-{i}", "identify", args | {"games": part}, len(part))
-        for i, part in enumerate(batches(games, 1, JOB_GAMES))
+        for i, part in enumerate(batches(games, 1, job_games or JOB_GAMES))
     ]
     counted = [game for values in run(todo, progress) for game in values]
     out: dict = {"partners": keys, "seeds": seeds, "noise": 0.1, "windows": {}}

@@ -31,7 +31,7 @@ def _row(partner: str, agent: str, seed: int, kills_per_minute: float, switches:
     }
 
 
-JOB_GAMES = 128  # games of one team or identification job, played as the lanes of one batch
+JOB_GAMES = 256  # games of a team or identification job (the lanes of one batch): tsf eval --job-games
 
 
 def _team_batch(games: list[tuple[str, str, int]], role: str) -> list[list]:
@@ -49,11 +49,13 @@ def run_team_jobs(args: list[dict]) -> list[list]:
     ]
 
 
-def team_jobs(role: str, partners: list[str], agents: list[str], seeds: list[int]) -> list[Spec]:
-    """Every (partner, agent, seed) game, partner by partner, as jobs of at most JOB_GAMES games."""
+def team_jobs(
+    role: str, partners: list[str], agents: list[str], seeds: list[int], job_games: int = JOB_GAMES
+) -> list[Spec]:
+    """Every (partner, agent, seed) game, partner by partner, as jobs of at most `job_games` games."""
     games = [[p, a, s] for p in partners for a in agents for s in seeds]
     plugins = plugins_in(partners)
-    parts = batches(games, 1, JOB_GAMES)
+    parts = batches(games, 1, job_games)
     return [
         spec(f"team-{i}", "team", {"role": role, "games": part}, len(part), plugins)
         for i, part in enumerate(parts)
@@ -67,10 +69,11 @@ def team(
     seeds: list[int],
     run: Runner = in_process,
     progress: Callable[[int, int], None] | None = None,
+    job_games: int | None = None,
 ) -> list[dict]:
     """Kills/min of every (partner, agent, seed); agents are static keys or adaptive variant names.
     The games are jobs (`team_jobs`), run by `run`: here, or on the job system's workers."""
-    todo = team_jobs(role, partners, agents, seeds)
+    todo = team_jobs(role, partners, agents, seeds, job_games or JOB_GAMES)
     played = run(todo, progress)
     return [
         _row(partner, agent, seed, kpm, switches, guarded)

@@ -66,7 +66,10 @@ class Coordination:
         self.journal.parent.mkdir(parents=True, exist_ok=True)
         self._stack = ExitStack()
         self.z = self._stack.enter_context(session(self.bus))
-        self.journal_file = self._stack.enter_context(open(self.journal, "a"))
+        self.journal_file = self._stack.enter_context(open(self.journal, "a+"))
+        self.journal_file.seek(max(self.journal_file.tell() - 1, 0))
+        if self.journal_file.read(1) not in ("", "\n"):  # a line torn by a killed run: end it
+            self.journal_file.write("\n")
         sweep = self.sweep
         self._stack.enter_context(
             subscribe(self.z, keys.sweep_result(sweep), SweepResult, self._result, self.drops)

@@ -19,6 +19,7 @@ from services.adapter import team
 from services.jobs.bus import Coordination, on_workers
 from services.jobs.core import spec
 from services.jobs.kinds import in_process
+from shared import keys
 
 PARTNERS = ["noisy(B4)", "switch(B1,B5)"]
 AGENTS = ["S4", "adaptive-T150-cem", "adaptive-T150-bayes-dwell-ood-guard-memory"]
@@ -123,3 +124,15 @@ def test_a_killed_coordinator_resumes_and_counts_each_job_once(tmp_path, wait_un
     assert len(ids) == len(set(ids)) == 12 and ids[: len(collected)] == collected  # resumed, none again
     reference = {job.id: run_job(job) for job in jobs(["B4", "B7"], ["S4", "S5"], 3, 1)}
     assert Table.load(out).results == assemble(["B4", "B7"], ["S4", "S5"], 3, reference, 1).results
+
+
+def test_a_worker_with_slots_is_one_live_worker_per_slot(bus, spawn, wait_until):
+    sweep = f"w{uuid.uuid4().hex[:8]}"
+    z = bus.open(listen=True)
+    spawn("worker", bus.config(), "--sweep", sweep, "--id", "pair", "--slots", "2")
+
+    def live() -> set[str]:
+        return {str(reply.ok.key_expr) for reply in z.liveliness().get(keys.sweep_worker(sweep), timeout=2)}
+
+    expected = {keys.sweep_worker(sweep, "pair-0"), keys.sweep_worker(sweep, "pair-1")}
+    assert wait_until(lambda: live() == expected, 60)

@@ -92,7 +92,7 @@ def eval_command(
     job_games: int | None = number(
         None,
         Range(1, 10_000),
-        "Games of one job, played as one batch (default 256): smaller jobs spread wider.",
+        "Games of one job, played as one batch (default: 256 team, 32 identification games).",
     ),
     sweep_id: str = typer.Option(
         "eval", "--sweep", help="Sweep id of the jobs: tsf worker --sweep ID joins."

@@ -12,12 +12,12 @@ import numpy as np
 from services.adapter.core import AdapterConfig, Payoff, forward
 from services.adapter.evaluate import Setup, batches, play_games, setup
 from services.adapter.partners import SWITCH_AT
-from services.adapter.team import JOB_GAMES
 from services.jobs.core import spec
 from services.jobs.kinds import Runner, in_process
 from shared.game import check_role
 
 FOLLOW_HOLD = 30  # frames the estimate must stay on the new type to count as following it
+JOB_GAMES = 32  # games of an identification job: the default's 99 games spread over 4 workers
 
 
 def windowed(scores: np.ndarray, window: int) -> np.ndarray:

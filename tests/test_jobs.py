@@ -136,3 +136,40 @@ def test_a_worker_with_slots_is_one_live_worker_per_slot(bus, spawn, wait_until)
 
     expected = {keys.sweep_worker(sweep, "pair-0"), keys.sweep_worker(sweep, "pair-1")}
     assert wait_until(lambda: live() == expected, 60)
+
+
+@pytest.mark.slow
+def test_tsf_eval_across_a_router_equals_a_local_run(spawn, tmp_path):
+    """`tsf eval --workers 0 --mode client --connect ROUTER` with a `tsf worker` across the router
+    writes the same numbers as `tsf eval` on a local worker."""
+    from shared.bus import BusConfig, free_endpoint
+
+    tsf = [
+        sys.executable,
+        "-m",
+        "services.cli",
+        "eval",
+        "--role",
+        "shooter",
+        "--seeds",
+        "2",
+        "--window",
+        "150",
+    ]
+    tsf += ["--strategy", "cem", "--partner", "noisy(B4)", "--partner", "B1", "--identify-seeds", "1"]
+    local = subprocess.run(
+        [*tsf, "--workers", "1", "--out", str(tmp_path / "local")], capture_output=True, timeout=600
+    )
+    assert local.returncode == 0, local.stderr[-2000:]
+    endpoint = free_endpoint()
+    router = subprocess.Popen([sys.executable, "-m", "services.cli", "router", "--listen", endpoint])
+    try:
+        spawn("worker", BusConfig("client", (), (endpoint,)), "--sweep", "far-eval", "--id", "far")
+        remote = [*tsf, "--workers", "0", "--sweep", "far-eval", "--mode", "client", "--connect", endpoint]
+        far = subprocess.run([*remote, "--out", str(tmp_path / "far")], capture_output=True, timeout=600)
+        assert far.returncode == 0, far.stderr[-2000:]
+    finally:
+        router.kill()
+        router.wait()
+    for name in ("identification.json", "team.csv", "comparison.json", "per_partner.csv"):
+        assert (tmp_path / "far" / name).read_bytes() == (tmp_path / "local" / name).read_bytes(), name

@@ -91,7 +91,7 @@ def eval_command(
     ),
     job_games: int | None = number(
         None,
-        Range(1, 10_000),
+        Range(1, 1000),  # 1,000 team games of the population are about 32 KiB: a message has 64
         "Games of one job, played as one batch (default: 256 team, 32 identification games).",
     ),
     sweep_id: str = typer.Option(

@@ -29,7 +29,7 @@ from services.processes import Processes
 from shared import keys
 from shared.bus import BusConfig, Drops, free_endpoint, session, subscribe
 from shared.errors import Failure
-from shared.messages import MessageError, SweepJob, SweepResult
+from shared.messages import MAX_BYTES, MessageError, SweepJob, SweepResult
 
 log = logging.getLogger("tsf.jobs")
 Progress = Callable[[int, int], None]  # (values done, values in all)
@@ -145,7 +145,12 @@ class Coordination:
                     match=self.sweep, frame=0, sender="coordinator", job=job.id, kind=job.kind, args=job.args,
                     plugins=list(job.plugins), library=self.ours.library, config=self.ours.config,
                 )  # fmt: skip
-                self.z.put(keys.sweep_job(self.sweep, worker), message.encode())
+                data = message.encode()
+                if len(data) > MAX_BYTES:  # a worker would drop it: refuse here, once, with the reason
+                    raise Failure(
+                        f"job {job.id} is {len(data)} bytes, over {MAX_BYTES}: make the jobs smaller"
+                    )
+                self.z.put(keys.sweep_job(self.sweep, worker), data)
             report()
             with state.changed:
                 state.changed.wait(0.5)

@@ -92,6 +92,14 @@ MISTAKES = [
         "tsf worker: " + refused("--mode", "banana", MODES, "TSF_MODE"),
     ),
     ("worker --connect nowhere", 2, "--connect nowhere: not a zenoh endpoint such as tcp/127.0.0.1:7447"),
+    ("worker --slots 0", 2, "--slots"),
+    (
+        "sweep --workers 0 --out {tmp}/t.json",
+        2,
+        "tsf sweep: --workers 0: no worker could reach this coordinator",
+    ),
+    ("eval --workers 0 --out {tmp}/e", 2, "tsf eval: --workers 0: no worker could reach this coordinator"),
+    ("eval --job-games 1001", 2, "--job-games"),
     (
         "table {tmp}/none.json",
         2,

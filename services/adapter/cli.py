@@ -118,7 +118,6 @@ def eval_command(
     agents = library.keys(role) + team.variants(window_list, strategies, strategy_window)
     columns = (BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
     ident, rows, comparison = None, [], None
-    out.mkdir(parents=True, exist_ok=True)
     stop = stop_on_signals()
     with (
         with_local_workers(bus, sweep_id, workers) as coordinator_bus,

@@ -28,7 +28,7 @@ from services.jobs.core import Coordinator, Hashes, Spec, check, journal_line, r
 from services.processes import Processes
 from shared import keys
 from shared.bus import BusConfig, Drops, free_endpoint, session, subscribe
-from shared.errors import Failure
+from shared.errors import Failure, UsageError
 from shared.messages import MAX_BYTES, MessageError, SweepJob, SweepResult
 
 log = logging.getLogger("tsf.jobs")
@@ -189,7 +189,13 @@ def on_workers(coordination: Coordination) -> kinds.Runner:
 @contextmanager
 def with_local_workers(bus: BusConfig, sweep: str, local: int) -> Iterator[BusConfig]:
     """The coordinator's bus, with `local` worker processes started here for it (ended on exit),
-    beside any worker reached through `bus` (a router given with --connect)."""
+    beside any worker reached through `bus` (a router given with --connect). With no local worker,
+    a coordinator that neither connects nor listens at a port of its choosing could never be found:
+    a UsageError."""
+    if not local and not bus.connect and all(endpoint.endswith(":0") for endpoint in bus.listen):
+        raise UsageError(
+            "--workers", 0, "no worker could reach this coordinator: add --connect ROUTER or --listen"
+        )
     if bus.mode == "client":  # the coordinator listens nowhere: local workers meet it at the router
         endpoints = bus.connect
     else:

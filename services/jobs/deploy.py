@@ -33,7 +33,10 @@ def _client(host: str):  # noqa: ANN202 - a docker.DockerClient (imported here: 
     import docker
 
     try:
-        client = docker.from_env() if host == "local" else docker.DockerClient(base_url=host)
+        if host == "local":
+            client = docker.from_env()
+        else:  # ssh:// through the system's ssh client (no paramiko), tcp:// directly
+            client = docker.DockerClient(base_url=host, use_ssh_client=host.startswith("ssh://"))
         client.ping()
     except docker.errors.DockerException as error:
         raise Failure(f"cannot reach the Docker engine {host}: {error}") from None

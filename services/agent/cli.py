@@ -149,7 +149,10 @@ def library_command(context: typer.Context) -> None:
 @library_commands.command("add")
 def library_add(
     key: str = typer.Argument(..., help="The new policy's key (a letter, then letters, digits, - and _)."),
-    model: Path = typer.Argument(..., help="A Stable-Baselines3 model (.zip) trained on tsf/Role-v0."),
+    model: Path = typer.Argument(
+        ...,
+        help="A Stable-Baselines3 model (.zip) trained on tsf/Role-v0, or a proxy (tsf proxy train).",
+    ),
     role: Role = typer.Option(..., help="The seat it plays."),
     library_dir: Path = output(
         ..., "Your library directory (created if need be).", directory=True, names=("--library",)

@@ -49,6 +49,7 @@ from shared.game import N_FIRE, N_THRUST, N_TURN, OBS_SIZE, ROLES, GameConfig, P
 
 LIBRARY = Path(__file__).parent / "library"
 OUTSIDE = "outside"  # the family of a policy added from outside (a network over all 12 actions)
+PROXY_FAMILY = "proxy"  # the family of a proxy added from recorded people (services/proxy)
 FLOOR = 1e-3  # weight of the uniform mixed into a network head's softmax
 HEADS = ("turn", "thrust", "fire")
 HEAD_SIZES = {"turn": N_TURN, "thrust": N_THRUST, "fire": N_FIRE}
@@ -385,7 +386,7 @@ def load(key: str, config: GameConfig | None = None, root: Path | None = None) -
     if key not in recipes:
         raise KeyError(f"unknown library policy {key!r}; expected one of {list(recipes)}")
     recipe = recipes[key]
-    if recipe.algorithm is None and recipe.family != OUTSIDE:
+    if recipe.algorithm is None and recipe.family not in (OUTSIDE, PROXY_FAMILY):
         return MirrorVariant(recipe)
     entry = manifest(recipe.root).get(key)
     path = recipe.root / entry["file"] if entry else None
@@ -398,6 +399,10 @@ def load(key: str, config: GameConfig | None = None, root: Path | None = None) -
     network, _ = Network.load(path)
     if recipe.family == OUTSIDE:
         return JointPolicy(key, recipe.role, recipe.view, network)
+    if recipe.family == PROXY_FAMILY:
+        from services.proxy.policy import ProxyPolicy
+
+        return ProxyPolicy(key, recipe.role, network, recipe.view)
     return LearnedPolicy(recipe, network, config)
 
 

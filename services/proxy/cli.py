@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from services.options import Seat, console, number, output
-from shared.errors import Failure
+from services.proxy import trainer
 from shared.game import SEEDS, Range
 
 commands = typer.Typer()
@@ -21,16 +21,6 @@ WIDTH = Range(1, 4096)
 @proxy_commands.callback()
 def proxy_command() -> None:
     """Human proxies: policies cloned from recorded play (docs/proxies.md)."""
-
-
-def trainer():  # noqa: ANN201 - the train module, loaded only here (torch)
-    try:
-        from services.proxy import train
-    except ModuleNotFoundError as error:
-        raise Failure(
-            f"{error}: training a proxy needs the `train` extra, pip install -e '.[train]'"
-        ) from None
-    return train
 
 
 @proxy_commands.command("train")

@@ -103,8 +103,10 @@ def pairs(recording: Recording, role: str) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(obs, np.float32).reshape(-1, ob.TIME + 1), np.asarray(actions, np.int64)
 
 
-def extract(paths: list[Path], role: str) -> Dataset:
-    """The person's pairs of `role` from every recording (refusals and exclusions: module docstring)."""
+def extract(paths: list[Path], role: str, by: str = "participant") -> Dataset:
+    """The person's pairs of `role` from every recording (refusals and exclusions: module docstring).
+    `by`: what the split draws, "participant" or, for one person's own proxy, "recording" (each
+    recording is then a group of its own)."""
     if role not in ROLES:
         raise UsageError("--role", role, "not a seat", ROLES)
     if not paths:
@@ -138,6 +140,7 @@ def extract(paths: list[Path], role: str) -> Dataset:
             data.excluded.append(f"{path}: {other(role)} seat, agent {policies.get(other(role)) or '?'}")
         obs, actions = pairs(recording, role)
         participant = str(record.get("participant") or path.name.removesuffix(".tsflog"))
+        participant = participant if by == "participant" else path.name.removesuffix(".tsflog")
         chunks.append((obs, actions, participant))
         digest = hashlib.sha256(path.read_bytes()).hexdigest()
         data.sources.append(Source(str(path), digest, participant, len(actions)))

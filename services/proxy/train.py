@@ -142,10 +142,16 @@ def write_curve(fitted: Fitted, directory: Path) -> tuple[Path, Path]:
 
 
 def train(
-    paths: list[Path], role: str, out: Path, settings: Settings | None = None, held_out: float = 0.25
+    paths: list[Path],
+    role: str,
+    out: Path,
+    settings: Settings | None = None,
+    held_out: float = 0.25,
+    by: str = "participant",
 ) -> dict:
-    """`tsf proxy train`: extract, split by participant, fit, and write the proxy into `out`
-    (proxy.npz, manifest.json, curve.csv, curve.png). Returns the manifest."""
+    """`tsf proxy train`: extract, split by participant (or, `by` "recording", by recording: one
+    person's proxy), fit, and write the proxy into `out` (proxy.npz, manifest.json, curve.csv,
+    curve.png). Returns the manifest."""
     from dataclasses import asdict
 
     from services.provenance import provenance
@@ -153,7 +159,7 @@ def train(
     from services.proxy.policy import save
 
     s = settings or Settings()
-    data = extract(paths, role)
+    data = extract(paths, role, by)
     parts = split(data, held_out, s.seed)
     fitted = fit(data, parts, s)
     epoch, train_ll, held_ll = fitted.best
@@ -163,7 +169,7 @@ def train(
         "recordings": [asdict(source) for source in data.sources],
         "excluded": data.excluded,
         "participants": data.participants,
-        "split": {"train": parts.train, "held_out": parts.held_out, "by": "participant"},
+        "split": {"train": parts.train, "held_out": parts.held_out, "by": by},
         "frames": {"train": len(data.rows(parts.train)), "held_out": len(data.rows(parts.held_out))},
         "metrics": {
             "held_out_loglik": held_ll,

@@ -22,6 +22,7 @@ from services.proxy import train  # noqa: E402
 from services.proxy.data import extract  # noqa: E402
 from services.proxy.data_test import trials  # noqa: E402
 from services.proxy.policy import ProxyPolicy  # noqa: E402
+from services.proxy.synthetic import record_trial  # noqa: E402
 from services.sim.play import play  # noqa: E402
 from shared.errors import UsageError  # noqa: E402
 from shared.game import GameConfig  # noqa: E402
@@ -124,3 +125,30 @@ def test_bad_input_is_one_line_and_nothing_is_written(proxy, tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and message in err[0] and err[0].startswith("tsf proxy")
         assert not (out / "proxy.npz").exists()
+
+
+@pytest.mark.slow  # a minute: two proxies trained, then team games with every shooter
+def test_eval_partners_from_a_study_trains_one_proxy_per_participant(tmp_path, capsys):
+    study = tmp_path / "study"
+    config = GameConfig(frames=700)
+    for p in range(2):
+        for t in range(2):
+            name = f"s-p{p}-t{t}"
+            record_trial(study / f"{name}.tsflog", "human(B5)", "bait", "S5", 10 * p + t, f"p{p}", config)
+    record_trial(study / "s-q-t0.tsflog", "human(S5)", "shooter", "B5", 99, "q", config)  # the other seat
+    out = tmp_path / "eval"
+    args = ["eval", "--partners-from", str(study), "--no-identify", "--seeds", "1", "--window", "150"]
+    args += ["--strategy", "cem", "--workers", "1", "--out", str(out)]
+    assert run(app, args) == 0
+    printed = capsys.readouterr().out
+    assert "participant q played the shooter" in printed
+    manifests = {p: out / "proxies" / p / "manifest.json" for p in ("p0", "p1")}
+    assert all(json.loads(m.read_text())["split"]["by"] == "recording" for m in manifests.values())
+    per_partner = (out / "per_partner.csv").read_text()
+    for p in ("p0", "p1"):
+        assert f"proxy:{out / 'proxies' / p},proxy," in per_partner
+    assert "Team performance (2 partners" in (out / "summary.md").read_text()
+    made = {p: m.stat().st_mtime_ns for p, m in manifests.items()}
+    assert run(app, [*args, "--performance", "--no-performance"]) == 0  # loaded, not retrained
+    assert {p: m.stat().st_mtime_ns for p, m in manifests.items()} == made
+    assert run(app, [*args, "--partner", "B5"]) == 2

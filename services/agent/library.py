@@ -396,13 +396,13 @@ def load(key: str, config: GameConfig | None = None, root: Path | None = None) -
         )
     if file_hash(path) != entry["sha256"]:
         raise ValueError(f"{path} does not match its manifest hash; retrain {key} or restore the file")
-    network, _ = Network.load(path)
+    network, meta = Network.load(path)
     if recipe.family == OUTSIDE:
         return JointPolicy(key, recipe.role, recipe.view, network)
     if recipe.family == PROXY_FAMILY:
         from services.proxy.policy import ProxyPolicy
 
-        return ProxyPolicy(key, recipe.role, network, recipe.view)
+        return ProxyPolicy(key, recipe.role, network, recipe.view, meta.get("history", 0))
     return LearnedPolicy(recipe, network, config)
 
 

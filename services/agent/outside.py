@@ -138,6 +138,13 @@ def proxy_arrays(directory: Path, key: str, role: str) -> tuple[dict[str, np.nda
     meta = json.loads(bytes(arrays["meta"]).decode())
     if meta["role"] != role:
         raise UsageError("MODEL", directory, f"is a proxy of the {meta['role']} seat, not the {role}", [role])
+    if meta.get("history"):
+        raise UsageError(
+            "MODEL",
+            directory,
+            "reads its own last actions (--history), which the adapter cannot score; "
+            "train one without --history for a library",
+        )
     meta |= {"key": key, "policy_class": "proxy"}
     arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), np.uint8)
     return arrays, PROXY_FAMILY, meta["view"]

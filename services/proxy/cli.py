@@ -8,6 +8,7 @@ import typer
 
 from services.options import Seat, console, number, output
 from services.proxy import trainer
+from services.proxy.data import HISTORY
 from shared.game import SEEDS, Range
 
 commands = typer.Typer()
@@ -35,6 +36,7 @@ def train_command(
     epochs: int = number(200, EPOCHS, "Epochs at most."),
     patience: int = number(10, EPOCHS, "Epochs without a better held-out log-likelihood before stopping."),
     hidden: list[int] = typer.Option([64, 64], help="Hidden layer widths, repeatable."),
+    history: int = number(0, Range(0, HISTORY), "The proxy's own last actions it reads (keys held down)."),
 ) -> None:
     """Clone the person's seat of the recordings: behaviour cloning with a held-out split by
     participant, early stopping on held-out log-likelihood; writes the numpy proxy, its manifest and
@@ -43,7 +45,7 @@ def train_command(
         if width not in WIDTH:
             raise typer.BadParameter(f"{width} is not in {WIDTH}", param_hint="--hidden")
     train = trainer()
-    settings = train.Settings(tuple(hidden), epochs, patience, seed=seed)
+    settings = train.Settings(tuple(hidden), epochs, patience, seed=seed, history=history)
     record = train.train(recordings, role, out, settings, held_out)
     for line in record["excluded"]:
         console.print(f"excluded {line}")

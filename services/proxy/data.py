@@ -11,7 +11,9 @@ other seat (roles mixed), too few people or frames.
 
 Pairs: the world-view observation of frame f (what the sim published, docs/observation.md) and the
 action the sim applied to step from f to f + 1 (frame f + 1's `applied`), for frames in which the
-person's ship is alive (a dead ship's keys do nothing). The participant is the sidecar's, else the
+person's ship is alive (a dead ship's keys do nothing); beside each, the person's HISTORY actions
+before it, latest first (0, no keys, before the game began), for a proxy that reads its own last
+actions (keys held down). The participant is the sidecar's, else the
 recording's own name (each recording then counts as a person of its own).
 """
 
@@ -33,6 +35,7 @@ from shared.game import ROLES, other
 PERSON = ("", "human")  # what a start record names a person's seat
 HELD_OUT = 0.25  # the share of participants held out
 MIN_FRAMES = 300  # frames (10 s) that each side of the split needs at least
+HISTORY = 4  # previous actions kept beside each pair
 
 
 @dataclass(frozen=True)
@@ -52,6 +55,7 @@ class Dataset:
     role: str
     obs: np.ndarray  # (n, 64) float32, world view
     actions: np.ndarray  # (n,) int64, 0-11
+    previous: np.ndarray  # (n, HISTORY) int64: the actions before, latest first
     people: np.ndarray  # (n,) int64 index into participants
     participants: list[str]
     sources: list[Source] = field(default_factory=list)
@@ -88,11 +92,12 @@ def person_seats(recording: Recording, record: dict) -> list[str]:
     return [r for r in ROLES if policies.get(r, "") in PERSON]
 
 
-def pairs(recording: Recording, role: str) -> tuple[np.ndarray, np.ndarray]:
-    """(observations, actions) of `role`'s seat while its ship is alive (module docstring)."""
+def pairs(recording: Recording, role: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(observations, actions, previous actions) of `role`'s seat while its ship is alive (module
+    docstring)."""
     states = {s.frame: s for s in recording.states}
     index = ROLES.index(role)
-    obs, actions = [], []
+    obs, actions, previous = [], [], []
     for frame in sorted(states):
         after = states.get(frame + 1)
         values = states[frame].obs[role]
@@ -100,7 +105,13 @@ def pairs(recording: Recording, role: str) -> tuple[np.ndarray, np.ndarray]:
             continue
         obs.append(values)
         actions.append(after.applied[index])
-    return np.asarray(obs, np.float32).reshape(-1, ob.TIME + 1), np.asarray(actions, np.int64)
+        before = (states.get(frame - k) for k in range(HISTORY))  # frame f's applied: the action at f - 1
+        previous.append([s.applied[index] if s is not None and s.frame > 0 else 0 for s in before])
+    return (
+        np.asarray(obs, np.float32).reshape(-1, ob.TIME + 1),
+        np.asarray(actions, np.int64),
+        np.asarray(previous, np.int64).reshape(-1, HISTORY),
+    )
 
 
 def extract(paths: list[Path], role: str, by: str = "participant") -> Dataset:
@@ -111,8 +122,9 @@ def extract(paths: list[Path], role: str, by: str = "participant") -> Dataset:
         raise UsageError("--role", role, "not a seat", ROLES)
     if not paths:
         raise UsageError("RECORDINGS", "(none)", "give at least one recording")
-    chunks: list[tuple[np.ndarray, np.ndarray, str]] = []
-    data = Dataset(role, np.zeros((0, 64), np.float32), np.zeros(0, np.int64), np.zeros(0, np.int64), [])
+    chunks: list[tuple[np.ndarray, np.ndarray, np.ndarray, str]] = []
+    empty = np.zeros(0, np.int64)
+    data = Dataset(role, np.zeros((0, 64), np.float32), empty, np.zeros((0, HISTORY), np.int64), empty, [])
     for path in paths:
         path = Path(path)
         try:
@@ -138,17 +150,18 @@ def extract(paths: list[Path], role: str, by: str = "participant") -> Dataset:
             )
         if other(role) not in seats:
             data.excluded.append(f"{path}: {other(role)} seat, agent {policies.get(other(role)) or '?'}")
-        obs, actions = pairs(recording, role)
+        obs, actions, previous = pairs(recording, role)
         participant = str(record.get("participant") or path.name.removesuffix(".tsflog"))
         participant = participant if by == "participant" else path.name.removesuffix(".tsflog")
-        chunks.append((obs, actions, participant))
+        chunks.append((obs, actions, previous, participant))
         digest = hashlib.sha256(path.read_bytes()).hexdigest()
         data.sources.append(Source(str(path), digest, participant, len(actions)))
     data.participants = sorted({p for *_, p in chunks})
     if chunks:
         data.obs = np.concatenate([c[0] for c in chunks])
         data.actions = np.concatenate([c[1] for c in chunks])
-        data.people = np.concatenate([np.full(len(c[1]), data.participants.index(c[2])) for c in chunks])
+        data.previous = np.concatenate([c[2] for c in chunks])
+        data.people = np.concatenate([np.full(len(c[1]), data.participants.index(c[3])) for c in chunks])
     return data
 
 

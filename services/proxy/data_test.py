@@ -51,6 +51,9 @@ def test_pairs_are_the_persons_observations_and_the_applied_actions(recorded):
     assert len(first) == len(alive) == data.sources[0].frames
     np.testing.assert_array_equal(data.actions[first], [states[f + 1].applied[0] for f in alive])
     np.testing.assert_array_equal(data.obs[first], np.float32([states[f].obs["bait"] for f in alive]))
+    before = [[states[f - k].applied[0] if f - k > 0 else 0 for k in range(4)] for f in alive]
+    np.testing.assert_array_equal(data.previous[first], before)
+    assert data.previous[first][0].tolist() == [0, 0, 0, 0] and alive[0] == 0
     assert all("shooter seat, agent S5" in line for line in data.excluded) and len(data.excluded) == 3
 
 

@@ -18,8 +18,9 @@ import numpy as np
 import torch as th
 
 from services.agent.library import FLOOR, HEAD_SIZES, HEADS
-from services.proxy.data import Dataset, Split
-from shared.game import N_FIRE, N_THRUST
+from services.proxy.data import HISTORY, Dataset, Split
+from services.proxy.policy import inputs
+from shared.game import N_ACTIONS, N_FIRE, N_THRUST, OBS_SIZE
 
 SIZES = [HEAD_SIZES[h] for h in HEADS]
 CURVE = ("epoch", "train_loglik", "held_out_loglik")
@@ -33,6 +34,7 @@ class Settings:
     batch: int = 256
     lr: float = 1e-3
     seed: int = 0
+    history: int = 0  # the proxy's own last actions it reads (policy.py)
 
 
 @dataclass
@@ -46,7 +48,8 @@ class Fitted:
         return next(row for row in self.curve if row[0] == self.best_epoch)
 
 
-def network(hidden: tuple[int, ...], inputs: int = 64) -> th.nn.Sequential:
+def network(hidden: tuple[int, ...], history: int = 0) -> th.nn.Sequential:
+    inputs = OBS_SIZE + N_ACTIONS * history
     layers: list[th.nn.Module] = []
     for width in hidden:
         layers += [th.nn.Linear(inputs, width), th.nn.Tanh()]
@@ -76,12 +79,15 @@ def fit(data: Dataset, split: Split, settings: Settings | None = None) -> Fitted
     s = settings or Settings()
     th.manual_seed(s.seed)
     generator = th.Generator().manual_seed(s.seed)
-    model = network(s.hidden)
+    if not 0 <= s.history <= HISTORY:
+        raise ValueError(f"history must be 0 to {HISTORY}, got {s.history}")
+    model = network(s.hidden, s.history)
     optimiser = th.optim.Adam(model.parameters(), lr=s.lr)
     sets = {}
     for name, people in (("train", split.train), ("held_out", split.held_out)):
         rows = data.rows(people)
-        sets[name] = (th.as_tensor(data.obs[rows]), th.as_tensor(data.actions[rows]))
+        x = inputs(data.obs[rows], data.previous[rows], s.history).astype(np.float32)
+        sets[name] = (th.as_tensor(x), th.as_tensor(data.actions[rows]))
     fitted, best, waited = Fitted({}), -math.inf, 0
     for epoch in range(1, s.epochs + 1):
         obs, actions = sets["train"]
@@ -185,6 +191,7 @@ def train(
         "activation": "tanh",
         "role": role,
         "view": "world",
+        "history": s.history,
         "heads": dict(zip(HEADS, SIZES, strict=True)),
     }
     record = save(out, fitted.arrays, meta, record)

@@ -14,14 +14,14 @@ pytest.importorskip("torch", reason="the `train` extra is not installed")
 import torch as th  # noqa: E402
 
 from services.adapter.partners import make_partner  # noqa: E402
-from services.agent import library  # noqa: E402
+from services.agent import library, outside  # noqa: E402
 from services.agent.library import policy_for  # noqa: E402
 from services.cli import app  # noqa: E402
 from services.entry import run  # noqa: E402
 from services.proxy import train  # noqa: E402
 from services.proxy.data import extract  # noqa: E402
 from services.proxy.data_test import trials  # noqa: E402
-from services.proxy.policy import ProxyPolicy  # noqa: E402
+from services.proxy.policy import ProxyPolicy, inputs  # noqa: E402
 from services.proxy.synthetic import record_trial  # noqa: E402
 from services.sim.play import play  # noqa: E402
 from shared.errors import UsageError  # noqa: E402
@@ -55,23 +55,44 @@ def test_the_manifest_names_data_split_metrics_and_command(proxy):
     assert (out / "curve.png").stat().st_size > 0
 
 
-def test_numpy_probs_are_the_torch_softmax(proxy):
-    out, paths = proxy
-    policy = policy_for(f"proxy:{out}", "bait")
-    assert isinstance(policy, ProxyPolicy) and policy.key == f"proxy:{out.name}"
-    obs = extract(paths, "bait").obs[:200]
-    with np.load(out / "proxy.npz", allow_pickle=False) as data:
+def torch_probs(directory, hidden: int, history: int, obs: np.ndarray, previous: np.ndarray) -> np.ndarray:
+    """The torch network with the exported weights, in float64: every action's probability."""
+    with np.load(directory / "proxy.npz", allow_pickle=False) as data:
         layers = [(data[f"w{i}"], data[f"b{i}"]) for i in range(2)]
-    model = train.network((16,)).double()
+    model = train.network((hidden,), history).double()
     for linear, (w, b) in zip([m for m in model if isinstance(m, th.nn.Linear)], layers, strict=True):
         linear.weight.data, linear.bias.data = th.as_tensor(w).double(), th.as_tensor(b).double()
     with th.no_grad():
+        rows = th.as_tensor(inputs(obs, previous, history)).repeat_interleave(12, dim=0)
         actions = th.arange(12).repeat(len(obs))
-        rows = th.as_tensor(obs).double().repeat_interleave(12, dim=0)
-        expected = th.exp(train.log_likelihood(model, rows, actions)).reshape(-1, 12).numpy()
+        return th.exp(train.log_likelihood(model, rows, actions)).reshape(-1, 12).numpy()
+
+
+def test_numpy_probs_are_the_torch_softmax(proxy, tmp_path):
+    out, paths = proxy
+    policy = policy_for(f"proxy:{out}", "bait")
+    assert isinstance(policy, ProxyPolicy) and policy.key == f"proxy:{out.name}"
+    data = extract(paths, "bait")
+    obs, previous = data.obs[:200], data.previous[:200]
+    expected = torch_probs(out, 16, 0, obs, previous)
     np.testing.assert_allclose(policy.probs_batch(obs), expected, rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(policy.probs(obs[0]), expected[0], rtol=1e-12)
     assert np.allclose(expected.sum(axis=1), 1.0)
+    held = tmp_path / "held"  # a proxy that reads its last two actions
+    train.train(paths, "bait", held, train.Settings((16,), 2, 1, history=2))
+    remembering = policy_for(f"proxy:{held}", "bait")
+    expected = torch_probs(held, 16, 2, obs, previous)
+    np.testing.assert_allclose(remembering.probs_given(obs, previous), expected, rtol=1e-12, atol=1e-15)
+    one = obs[:1]
+    assert not np.allclose(remembering.probs_given(one, [[0, 0]]), remembering.probs_given(one, [[5, 0]]))
+    remembering.reset(3)
+    first = remembering.act(obs[0])
+    assert remembering.played.tolist() == [first, 0]
+    np.testing.assert_allclose(
+        remembering.probs(obs[1]), remembering.probs_given(obs[1:2], np.array([[first, 0]]))[0]
+    )
+    with pytest.raises(UsageError, match="reads its own last actions"):
+        outside.add("HELD", held, "bait", tmp_path / "lib", games=0)
 
 
 def test_a_proxy_plays_as_a_key_and_as_a_partner(proxy, capsys):

@@ -45,7 +45,8 @@ def record_trial(
     status: str = "done",
 ) -> Path:
     """Play one trial of `person` (a partner name) in `role`'s seat with `agent` in the other and
-    write its recording at `path` and the study sidecar beside it. Returns the path."""
+    write its recording at `path` (replacing one there) and the study sidecar beside it. Returns
+    the path."""
     match = path.name.removesuffix(".tsflog")
     game = Game(config or GameConfig(), seed)
     players = {
@@ -54,6 +55,7 @@ def record_trial(
     }
     applied = (0, 0)
     path.parent.mkdir(parents=True, exist_ok=True)
+    path.unlink(missing_ok=True)  # the log appends to what it finds
     with LogWriter(path) as log:
         announced = {role: HUMAN, other(role): agent}
         log.write(keys.start(match), start_message(game, match, "sim", "lockstep", announced).encode())

@@ -92,6 +92,37 @@ def team(partner_name: str, games: int) -> dict[str, tuple[float, float]]:
     return out
 
 
+def table(results: dict) -> list[str]:
+    """The figures of one run as Markdown rows (docs/proxies.md): per source, (a), (b) and (c), with
+    each shooter's difference proxy - generator in standard errors of the difference."""
+    lines = [
+        "| source | (a) proxy | (a) Bk | (a) difference | (b) proxy identified as (windows as Bk) | "
+        "(b) generator identified as (windows as Bk) | (c) proxy - generator, kills/min (z) |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for source, r in results.items():
+        cells = [
+            source,
+            f"{r['proxy_ll']:.3f}",
+            f"{r['source_ll']:.3f}",
+            f"{r['proxy_ll'] - r['source_ll']:+.3f}",
+        ]
+        for label in ("proxy", "generator"):
+            found = r.get(f"{label}_identified")
+            cells.append(f"{found} ({r[f'{label}_window_share']:.0%})" if found else "-")
+        if "proxy_team" in r:
+            diffs = []
+            for shooter, (mean, se) in r["proxy_team"].items():
+                other_mean, other_se = r["generator_team"][shooter]
+                z = (mean - other_mean) / math.hypot(se, other_se) if se or other_se else 0.0
+                diffs.append(f"{shooter} {mean - other_mean:+.2f} ({z:+.1f})")
+            cells.append(", ".join(diffs))
+        else:
+            cells.append("-")
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sources", nargs="+", default=["B1", "B5", "B8"])
@@ -101,7 +132,12 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("bench-proxies"))
     parser.add_argument("--skip", nargs="*", default=[], choices=["identify", "team"])
     parser.add_argument("--history", type=int, default=0, help="the proxies' own last actions read")
+    parser.add_argument("--table", nargs="*", type=Path, help="print earlier runs' results files as Markdown")
     args = parser.parse_args()
+    if args.table:
+        for path in args.table:
+            print(f"{path.name}:", *table(json.loads(path.read_text())), sep="\n")
+        return
     results = {}
     for i, source in enumerate(args.sources):
         started = time.monotonic()
@@ -138,7 +174,7 @@ def main() -> None:
         results[source] = row
     path = args.out / f"results-{args.trials}-h{args.history}.json"
     path.write_text(json.dumps(results, indent=1) + "\n")
-    print(f"written to {path}")
+    print(*table(results), f"written to {path}", sep="\n")
 
 
 if __name__ == "__main__":

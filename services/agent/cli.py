@@ -195,6 +195,7 @@ def keys_command(role: Seat | None = typer.Option(None, help="Only the keys of t
     seats = role or "either"
     table.add_row("PATH.zip", seats, "yours", "an SB3 model trained on tsf/Role-v0 (docs/library.md)")
     table.add_row("package.module:attr", "its own", "yours", "a policy object of yours (docs/library.md)")
+    table.add_row("proxy:DIR", "its own", "yours", "a proxy cloned from recorded people (docs/proxies.md)")
     strategies = ", ".join(STRATEGIES)
     table.add_row(
         "adaptive-T<window>-<strategy>", seats, "agents", f"the adaptive agent; strategies: {strategies}"

@@ -27,7 +27,7 @@ def proxy_command() -> None:
 @proxy_commands.command("train")
 def train_command(
     recordings: list[Path] = typer.Argument(
-        ..., help="Recordings (.tsflog) of people; study sidecars beside them."
+        ..., help="Recordings (.tsflog) of people; study sidecars beside them.", exists=True, dir_okay=False
     ),
     role: Seat = typer.Option(..., help="The person's seat to clone."),
     out: Path = output(..., "Directory the proxy is written into.", directory=True),

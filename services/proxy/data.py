@@ -146,7 +146,8 @@ def extract(paths: list[Path], role: str, by: str = "participant") -> Dataset:
             raise UsageError(
                 "--role",
                 role,
-                f"{path}: the person played the {seats[0]} seat (roles mixed); nothing trained",
+                f"{path}: the person played the {seats[0]} seat, not the {role} (one seat at a time); "
+                "nothing trained",
             )
         if other(role) not in seats:
             data.excluded.append(f"{path}: {other(role)} seat, agent {policies.get(other(role)) or '?'}")

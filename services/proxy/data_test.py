@@ -90,7 +90,7 @@ def test_a_recording_without_a_person_is_refused(recorded, tmp_path):
 
 def test_mixed_roles_are_refused(recorded, tmp_path):
     shooter = trials(tmp_path, 1, role="shooter", person="human(S5)")
-    with pytest.raises(UsageError, match="roles mixed"):
+    with pytest.raises(UsageError, match="one seat at a time"):
         extract([*recorded, *shooter], "bait")
 
 

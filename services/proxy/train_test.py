@@ -132,7 +132,7 @@ def test_bad_input_is_one_line_and_nothing_is_written(proxy, tmp_path, capsys):
     data[len(data) // 2 : len(data) // 2 + 64] = bytes(64)
     damaged.write_bytes(bytes(data))
     cases = {
-        "roles mixed": ([*paths, *shooter], 2),
+        "one seat at a time": ([*paths, *shooter], 2),
         "damaged recording": ([*paths, damaged], 1),
         "1 participant": (paths[:1], 1),
     }

@@ -123,6 +123,29 @@ def table(results: dict) -> list[str]:
     return lines
 
 
+def curve(paths: list[Path]) -> list[str]:
+    """The data-size curve from results files of several --trials: per source and size, (a), (b)
+    and how many of the shooters' differences in (c) are within two standard errors."""
+    lines = [
+        "| source | trials per participant | (a) proxy | (a) proxy - Bk | (b) proxy identified as "
+        "(windows as Bk) | (c) shooters within 2 s.e. |",
+        "| --- | --- | --- | --- | --- | --- |",
+    ]
+    runs = {int(path.stem.split("-")[1]): json.loads(path.read_text()) for path in paths}
+    for source in next(iter(runs.values())):
+        for trials, results in sorted(runs.items()):
+            r = results[source]
+            within = sum(
+                abs(m - r["generator_team"][s][0]) <= 2 * math.hypot(e, r["generator_team"][s][1])
+                for s, (m, e) in r["proxy_team"].items()
+            )
+            lines.append(
+                f"| {source} | {trials} | {r['proxy_ll']:.3f} | {r['proxy_ll'] - r['source_ll']:+.3f} | "
+                f"{r['proxy_identified']} ({r['proxy_window_share']:.0%}) | {within} of {len(SHOOTERS)} |"
+            )
+    return lines
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sources", nargs="+", default=["B1", "B5", "B8"])
@@ -133,7 +156,13 @@ def main() -> None:
     parser.add_argument("--skip", nargs="*", default=[], choices=["identify", "team"])
     parser.add_argument("--history", type=int, default=0, help="the proxies' own last actions read")
     parser.add_argument("--table", nargs="*", type=Path, help="print earlier runs' results files as Markdown")
+    parser.add_argument(
+        "--curve", nargs="*", type=Path, help="print results files of several --trials as a curve"
+    )
     args = parser.parse_args()
+    if args.curve:
+        print(*curve(args.curve), sep="\n")
+        return
     if args.table:
         for path in args.table:
             print(f"{path.name}:", *table(json.loads(path.read_text())), sep="\n")

@@ -400,7 +400,7 @@ def load(key: str, config: GameConfig | None = None, root: Path | None = None) -
     if recipe.family == OUTSIDE:
         return JointPolicy(key, recipe.role, recipe.view, network)
     if recipe.family == PROXY_FAMILY:
-        from services.proxy.policy import ProxyPolicy
+        from services.agent.proxy import ProxyPolicy
 
         return ProxyPolicy(key, recipe.role, network, recipe.view, meta.get("history", 0))
     return LearnedPolicy(recipe, network, config)

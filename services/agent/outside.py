@@ -35,7 +35,7 @@ if TYPE_CHECKING:
 
 ACTIVATIONS = {"Tanh": "tanh", "ReLU": "relu"}  # torch module name: library.Network's name
 KEY = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
-PROXY = "proxy:"  # a proxy's key: proxy:DIR (services/proxy/policy.py)
+PROXY = "proxy:"  # a proxy's key: proxy:DIR (services/agent/proxy.py)
 NAME = re.compile(r"^[A-Za-z0-9_.:-]{1,32}$")  # a policy's name in messages (shared/messages.py)
 
 
@@ -64,7 +64,7 @@ def load(key: str, role: str, option: str = "--policy", view: str = "world") -> 
     if key.endswith(".zip"):
         return zip_policy(Path(key), role, view, option)
     if key.startswith(PROXY):
-        from services.proxy import policy as proxy
+        from services.agent import proxy
 
         return proxy.load(Path(key.removeprefix(PROXY)), role, record_name(key), option)
     policy = _object(key, option)
@@ -129,8 +129,8 @@ def network_arrays(path: Path, meta: dict, option: str = "MODEL") -> dict[str, n
 def proxy_arrays(directory: Path, key: str, role: str) -> tuple[dict[str, np.ndarray], str, str]:
     """A proxy's arrays for a library (with `key` and its policy class in the metadata), its family
     and view; refused (UsageError) unless it is a proxy of `role`."""
+    from services.agent import proxy
     from services.agent.library import PROXY_FAMILY
-    from services.proxy import policy as proxy
 
     proxy.manifest(directory, "MODEL")
     with np.load(directory / proxy.WEIGHTS, allow_pickle=False) as data:

@@ -2,7 +2,7 @@
 
 The network maps the world-view observation (docs/observation.md) through tanh hidden layers to
 the logits of the three heads (turn, thrust, fire); the loss is the negative log-likelihood of the
-recorded actions under the floored factored distribution that ProxyPolicy plays (policy.py), so
+recorded actions under the floored factored distribution that ProxyPolicy plays (services/agent/proxy.py), so
 the exported numpy policy is the trained one exactly. Training stops when the held-out
 participants' log-likelihood has not improved for `patience` epochs, and the best epoch is kept.
 """
@@ -18,8 +18,8 @@ import numpy as np
 import torch as th
 
 from services.agent.library import FLOOR, HEAD_SIZES, HEADS
+from services.agent.proxy import inputs
 from services.proxy.data import HISTORY, Dataset, Split
-from services.proxy.policy import inputs
 from shared.game import N_ACTIONS, N_FIRE, N_THRUST, OBS_SIZE
 
 SIZES = [HEAD_SIZES[h] for h in HEADS]
@@ -34,7 +34,7 @@ class Settings:
     batch: int = 256
     lr: float = 1e-3
     seed: int = 0
-    history: int = 0  # the proxy's own last actions it reads (policy.py)
+    history: int = 0  # the proxy's own last actions it reads (services/agent/proxy.py)
 
 
 @dataclass
@@ -160,9 +160,9 @@ def train(
     curve.png). Returns the manifest."""
     from dataclasses import asdict
 
+    from services.agent.proxy import save
     from services.provenance import provenance
     from services.proxy.data import extract, split
-    from services.proxy.policy import save
 
     s = settings or Settings()
     data = extract(paths, role, by)

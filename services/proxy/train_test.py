@@ -16,12 +16,12 @@ import torch as th  # noqa: E402
 from services.adapter.partners import make_partner  # noqa: E402
 from services.agent import library, outside  # noqa: E402
 from services.agent.library import policy_for  # noqa: E402
+from services.agent.proxy import ProxyPolicy, inputs  # noqa: E402
 from services.cli import app  # noqa: E402
 from services.entry import run  # noqa: E402
 from services.proxy import train  # noqa: E402
 from services.proxy.data import extract  # noqa: E402
 from services.proxy.data_test import trials  # noqa: E402
-from services.proxy.policy import ProxyPolicy, inputs  # noqa: E402
 from services.proxy.synthetic import record_trial  # noqa: E402
 from services.sim.play import play  # noqa: E402
 from shared.errors import UsageError  # noqa: E402

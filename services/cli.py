@@ -10,11 +10,12 @@ from services.adapter import cli as adapter_cli
 from services.agent import cli as agent_cli
 from services.jobs import cli as jobs_cli
 from services.options import log_options
+from services.proxy import cli as proxy_cli
 from services.report import cli as report_cli
 from services.table import cli as table_cli
 
 app = typer.Typer(no_args_is_help=True, add_completion=False, help="Team Space Fortress.")
-for group in (agent_cli, table_cli, jobs_cli, services_cli, matches_cli, adapter_cli, report_cli):
+for group in (agent_cli, table_cli, jobs_cli, services_cli, matches_cli, adapter_cli, report_cli, proxy_cli):
     app.registered_commands += group.commands.registered_commands
     app.registered_groups += group.commands.registered_groups
 for command in [

@@ -132,7 +132,7 @@ def keys_help(role: str | None, what: str) -> str:
 
     roles = [role] if role else list(ROLES)
     listed = "; ".join(f"{r}: {', '.join(seat_keys(r))}" for r in roles)
-    return f"{what} ({listed}; or a .zip or module:attr: `tsf keys`)."
+    return f"{what} ({listed}; or a .zip, module:attr or proxy:DIR: `tsf keys`)."
 
 
 def setup_logging(log_level: str | None = None, verbose: bool = False, quiet: bool = False) -> None:

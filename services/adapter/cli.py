@@ -72,6 +72,11 @@ def eval_command(
     partner: list[str] | None = typer.Option(
         None, help="A partner by name, repeatable (default: the population; see docs/adapter.md)."
     ),
+    partners_from: Path | None = typer.Option(
+        None,
+        help="A study's recordings: one proxy per participant of the partners' seat (trained into "
+        "OUT/proxies, or loaded from there) as the partners, reported per participant and pooled.",
+    ),
     identify_seeds: int = number(3, GAMES, "Games per library partner for identification."),
     identify: bool = typer.Option(True, help="Measure identification accuracy."),
     performance: bool = typer.Option(True, help="Measure team performance."),
@@ -114,6 +119,16 @@ def eval_command(
         raise UsageError("--role", role, "not a seat", ROLES)
     window_list = window or [150, 400, 800]
     partners = partner or [p for group in population(other(role)).values() for p in group]
+    if partners_from is not None:
+        if partner:
+            raise UsageError("--partners-from", partners_from, "give --partner or --partners-from, not both")
+        from services.proxy.study import study_partners
+
+        people, excluded = study_partners(partners_from, other(role), out / "proxies")
+        for line in excluded:
+            console.print(f"excluded {line}")
+        console.print(f"partners: proxies of {', '.join(people)}")
+        partners = list(people.values())
     strategies = [s.value for s in strategy or Strategies]
     agents = library.keys(role) + team.variants(window_list, strategies, strategy_window)
     columns = (BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())

@@ -13,6 +13,7 @@ any worker process:
     package.module:attr  your own partner: an object with the policy protocol's key, role, view,
                          reset(seed) and act(obs), or a callable that returns a new one
     my_bait.zip          a model trained with Stable-Baselines3 (services/agent/outside.py)
+    proxy:DIR            a proxy cloned from recorded people (`tsf proxy train`, services/proxy)
 
 Wrappers nest: `noisy(switch(B5,B7))`.
 """
@@ -29,6 +30,7 @@ import numpy as np
 from services.adapter.human_like import HumanLike
 from services.agent import library
 from services.agent.library import policy_for
+from services.agent.outside import PROXY
 from shared.game import N_ACTIONS
 
 NOISE = 0.1
@@ -152,7 +154,9 @@ def _split_arguments(text: str, fewest: int = 2) -> tuple[str, ...]:
 
 
 def group_of(name: str) -> str:
-    """A partner's group in the population: its outer wrapper, library, or outside."""
+    """A partner's group in the population: its outer wrapper, library, a proxy, or outside."""
+    if name.startswith(PROXY):
+        return "proxy"
     call = _CALL.match(name)
     if call:
         return {

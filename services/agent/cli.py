@@ -149,7 +149,10 @@ def library_command(context: typer.Context) -> None:
 @library_commands.command("add")
 def library_add(
     key: str = typer.Argument(..., help="The new policy's key (a letter, then letters, digits, - and _)."),
-    model: Path = typer.Argument(..., help="A Stable-Baselines3 model (.zip) trained on tsf/Role-v0."),
+    model: Path = typer.Argument(
+        ...,
+        help="A Stable-Baselines3 model (.zip) trained on tsf/Role-v0, or a proxy (tsf proxy train).",
+    ),
     role: Role = typer.Option(..., help="The seat it plays."),
     library_dir: Path = output(
         ..., "Your library directory (created if need be).", directory=True, names=("--library",)
@@ -192,6 +195,7 @@ def keys_command(role: Seat | None = typer.Option(None, help="Only the keys of t
     seats = role or "either"
     table.add_row("PATH.zip", seats, "yours", "an SB3 model trained on tsf/Role-v0 (docs/library.md)")
     table.add_row("package.module:attr", "its own", "yours", "a policy object of yours (docs/library.md)")
+    table.add_row("proxy:DIR", "its own", "yours", "a proxy cloned from recorded people (docs/proxies.md)")
     strategies = ", ".join(STRATEGIES)
     table.add_row(
         "adaptive-T<window>-<strategy>", seats, "agents", f"the adaptive agent; strategies: {strategies}"

@@ -49,6 +49,7 @@ from shared.game import N_FIRE, N_THRUST, N_TURN, OBS_SIZE, ROLES, GameConfig, P
 
 LIBRARY = Path(__file__).parent / "library"
 OUTSIDE = "outside"  # the family of a policy added from outside (a network over all 12 actions)
+PROXY_FAMILY = "proxy"  # the family of a proxy added from recorded people (services/proxy)
 FLOOR = 1e-3  # weight of the uniform mixed into a network head's softmax
 HEADS = ("turn", "thrust", "fire")
 HEAD_SIZES = {"turn": N_TURN, "thrust": N_THRUST, "fire": N_FIRE}
@@ -385,7 +386,7 @@ def load(key: str, config: GameConfig | None = None, root: Path | None = None) -
     if key not in recipes:
         raise KeyError(f"unknown library policy {key!r}; expected one of {list(recipes)}")
     recipe = recipes[key]
-    if recipe.algorithm is None and recipe.family != OUTSIDE:
+    if recipe.algorithm is None and recipe.family not in (OUTSIDE, PROXY_FAMILY):
         return MirrorVariant(recipe)
     entry = manifest(recipe.root).get(key)
     path = recipe.root / entry["file"] if entry else None
@@ -395,9 +396,13 @@ def load(key: str, config: GameConfig | None = None, root: Path | None = None) -
         )
     if file_hash(path) != entry["sha256"]:
         raise ValueError(f"{path} does not match its manifest hash; retrain {key} or restore the file")
-    network, _ = Network.load(path)
+    network, meta = Network.load(path)
     if recipe.family == OUTSIDE:
         return JointPolicy(key, recipe.role, recipe.view, network)
+    if recipe.family == PROXY_FAMILY:
+        from services.agent.proxy import ProxyPolicy
+
+        return ProxyPolicy(key, recipe.role, network, recipe.view, meta.get("history", 0))
     return LearnedPolicy(recipe, network, config)
 
 

@@ -5,6 +5,7 @@
     package.module:attr    an object with the policy protocol's key, role, view, reset(seed) and
                            act(obs) (and probs(obs) where the adapter scores it), or a callable
                            that returns a new one
+    proxy:DIR              a proxy cloned from recorded people by `tsf proxy train` (services/proxy)
 
 A `.zip` is read with SB3 (the `train` extra) and played as numpy arrays (library.JointPolicy): the
 network's distribution over the 12 actions with library.FLOOR mixed in is what `probs` reports and
@@ -34,21 +35,26 @@ if TYPE_CHECKING:
 
 ACTIVATIONS = {"Tanh": "tanh", "ReLU": "relu"}  # torch module name: library.Network's name
 KEY = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
+PROXY = "proxy:"  # a proxy's key: proxy:DIR (services/agent/proxy.py)
 NAME = re.compile(r"^[A-Za-z0-9_.:-]{1,32}$")  # a policy's name in messages (shared/messages.py)
 
 
 def record_name(key: str) -> str:
     """How a policy key is named in messages and recordings, which take 1-32 of [A-Za-z0-9_.:-]: a
-    library or scripted key as it is, a `.zip` by its file name, a `module:attr` as it is where it
-    fits, else by its attr."""
+    library or scripted key as it is, a `.zip` by its file name, a `proxy:DIR` by its directory's
+    name, a `module:attr` as it is where it fits, else by its attr."""
     if not is_outside(key) or NAME.match(key):
         return key
-    name = Path(key).name if key.endswith(".zip") else key.rpartition(":")[2]
+    if key.startswith(PROXY):
+        name = PROXY + Path(key.removeprefix(PROXY)).name
+    else:
+        name = Path(key).name if key.endswith(".zip") else key.rpartition(":")[2]
     return re.sub(r"[^A-Za-z0-9_.:-]", "_", name)[-32:] or "outside"
 
 
 def is_outside(key: str) -> bool:
-    """Whether a policy key names a policy from outside the library (a `.zip` or `module:attr`)."""
+    """Whether a policy key names a policy from outside the library (a `.zip`, `module:attr` or
+    `proxy:DIR`)."""
     return key.endswith(".zip") or ":" in key
 
 
@@ -57,6 +63,10 @@ def load(key: str, role: str, option: str = "--policy", view: str = "world") -> 
     a `.zip` plays whichever seat it is given."""
     if key.endswith(".zip"):
         return zip_policy(Path(key), role, view, option)
+    if key.startswith(PROXY):
+        from services.agent import proxy
+
+        return proxy.load(Path(key.removeprefix(PROXY)), role, record_name(key), option)
     policy = _object(key, option)
     if policy.role != role:
         raise UsageError(option, key, f"plays {policy.role}, not {role}", [role])
@@ -116,6 +126,30 @@ def network_arrays(path: Path, meta: dict, option: str = "MODEL") -> dict[str, n
     return linear_arrays([*policy.mlp_extractor.policy_net, policy.action_net], meta)
 
 
+def proxy_arrays(directory: Path, key: str, role: str) -> tuple[dict[str, np.ndarray], str, str]:
+    """A proxy's arrays for a library (with `key` and its policy class in the metadata), its family
+    and view; refused (UsageError) unless it is a proxy of `role`."""
+    from services.agent import proxy
+    from services.agent.library import PROXY_FAMILY
+
+    proxy.manifest(directory, "MODEL")
+    with np.load(directory / proxy.WEIGHTS, allow_pickle=False) as data:
+        arrays = {name: data[name] for name in data.files}
+    meta = json.loads(bytes(arrays["meta"]).decode())
+    if meta["role"] != role:
+        raise UsageError("MODEL", directory, f"is a proxy of the {meta['role']} seat, not the {role}", [role])
+    if meta.get("history"):
+        raise UsageError(
+            "MODEL",
+            directory,
+            "reads its own last actions (--history), which the adapter cannot score; "
+            "train one without --history for a library",
+        )
+    meta |= {"key": key, "policy_class": "proxy"}
+    arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), np.uint8)
+    return arrays, PROXY_FAMILY, meta["view"]
+
+
 def zip_policy(path: Path, role: str, view: str = "world", option: str = "--policy") -> JointPolicy:
     """An SB3 `.zip` as a numpy policy of `role` reading the `view` observation."""
     from services.agent.library import JointPolicy, Network
@@ -136,9 +170,10 @@ def _check(role: str, view: str) -> None:
 def add(
     key: str, model: Path, role: str, directory: Path, view: str = "world", partner: str = "", games: int = 10
 ) -> dict:
-    """Export an SB3 model into the library at `directory` (created if need be, never the shipped
-    one): weights/KEY.npz, a registry entry and a manifest entry with hashes and provenance, scored
-    with `partner` (default: envs.DEFAULT_PARTNER) over `games` games. Returns the manifest entry."""
+    """Export an SB3 model, or a proxy directory (services/proxy), into the library at `directory`
+    (created if need be, never the shipped one): weights/KEY.npz, a registry entry and a manifest
+    entry with hashes and provenance, scored with `partner` (default: envs.DEFAULT_PARTNER) over
+    `games` games. Returns the manifest entry."""
     from services import envs
     from services.agent import library
     from services.agent.scripted import scripted_keys
@@ -156,7 +191,15 @@ def add(
         taken += list(library.registry(directory))
     if key in taken:
         raise UsageError("KEY", key, "is a policy key already")
-    arrays = network_arrays(Path(model), {"key": key, "role": role, "view": view})
+    source = Path(model)
+    if source.is_dir():  # a proxy (services/proxy): its network as it is, its own view
+        arrays, family, view = proxy_arrays(source, key, role)
+        source = source / "proxy.npz"
+    else:
+        arrays, family = (
+            network_arrays(Path(model), {"key": key, "role": role, "view": view}),
+            library.OUTSIDE,
+        )
     meta = json.loads(bytes(arrays["meta"]).decode())
     path = directory / "weights" / f"{key}.npz"
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -164,7 +207,7 @@ def add(
     description = f"{meta['policy_class']} from {Path(model).name}"
     fields = {
         "role": role,
-        "family": library.OUTSIDE,
+        "family": family,
         "view": view,
         "features": "all",
         "description": description,
@@ -176,7 +219,7 @@ def add(
         "file": str(path.relative_to(directory)),
         "sha256": library.file_hash(path),
         "algorithm": meta["policy_class"],
-        "source": {"file": str(Path(model).resolve()), "sha256": library.file_hash(Path(model))},
+        "source": {"file": str(Path(model).resolve()), "sha256": library.file_hash(source)},
         "provenance": provenance(),
     }
     record_entry(directory, key, entry)

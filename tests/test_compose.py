@@ -216,7 +216,7 @@ def test_compose_up_plays_a_full_adaptive_match(inputs: dict[str, float], tmp_pa
     assert recording.adapter, "no AdapterStatus in the recording: the adapter did not run"
     assert {(s.role, s.window) for s in recording.adapter} == {("shooter", 400)}
     assert recording.adapter[-1].filled == 400
-    # The adaptive loop through the containers: B6's best response (S5) is not the initial policy
+    # The adaptive loop through the containers: B5's best response (S5) is not the initial policy
     # (the table's best on average, S4), so the adapter switched the shooter, and the shooter agent
     # plays what the adapter chose last.
     assert recording.switches and {s.sender for s in recording.switches} == {"adapter"}

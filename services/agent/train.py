@@ -214,8 +214,8 @@ class DoubleDQN(DQN):
 
 ALGORITHMS = {"A2C": A2C, "PPO": PPO, "TRPO": TRPO, "DQN": DoubleDQN}
 NET = [64, 64]
-# Per-algorithm settings (n_envs: lanes of the batched engine), chosen by `search` for every
-# recipe of the algorithm (docs/library.md has the search) and recorded in each manifest entry.
+# Per-algorithm settings (n_envs: lanes of the batched engine), one set for every recipe of the
+# algorithm, chosen by the small search in docs/library.md and recorded in each manifest entry.
 HYPERPARAMETERS: dict[str, dict] = {
     "A2C": {"n_envs": 64, "n_steps": 8, "learning_rate": 7e-4, "ent_coef": 0.01, "gamma": 0.99},
     "PPO": {
@@ -227,7 +227,14 @@ HYPERPARAMETERS: dict[str, dict] = {
         "ent_coef": 0.01,
         "gamma": 0.99,
     },
-    "TRPO": {"n_envs": 64, "n_steps": 128, "batch_size": 2048, "learning_rate": 1e-3, "gamma": 0.99},
+    "TRPO": {
+        "n_envs": 64,
+        "n_steps": 32,
+        "batch_size": 512,
+        "learning_rate": 1e-3,
+        "gamma": 0.99,
+        "target_kl": 0.03,
+    },
     "DQN": {
         "n_envs": 64,
         "learning_starts": 20_000,

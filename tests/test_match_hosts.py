@@ -1,0 +1,130 @@
+"""Studies across machines: the study server is the router, `tsf match-host` processes connect to
+it over loopback and run the trials' matches, and every recording comes back into the study's
+directory with its hash checked; a host killed mid-trial leaves no recording marked done, and the
+trial is played again on another host."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import hashlib
+import json
+import signal
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+from conftest import STAND_IN_TOKEN, wait_until
+
+from services.recorder.recording import load
+from services.study.core import StudyConfig, Variant
+from services.study.runner import Serving
+from services.study.standin import stand_in
+from shared.bus import BusConfig, free_endpoint
+
+TEST = STAND_IN_TOKEN
+
+
+@pytest.fixture
+def match_host(tmp_path):  # noqa: ANN201
+    """Start `tsf match-host` processes: host(name, endpoint) -> Popen; all are killed at teardown."""
+    started: list[subprocess.Popen] = []
+
+    def start(name: str, endpoint: str, slots: int = 1) -> subprocess.Popen:
+        command = [
+            sys.executable, "-m", "services.cli", "match-host", "--connect", endpoint,
+            "--slots", str(slots), "--id", name, "--out", str(tmp_path / name),
+        ]  # fmt: skip
+        started.append(subprocess.Popen(command, start_new_session=True))
+        return started[-1]
+
+    yield start
+    for host in started:
+        with contextlib.suppress(ProcessLookupError):
+            host.kill()
+        host.wait()
+
+
+def hosted(endpoint: str) -> Serving:
+    """A study server that runs no match itself: every trial goes to a match host."""
+    return Serving(max_matches=0, test_token=TEST, hosts=BusConfig("router", (endpoint,)))
+
+
+def test_a_trial_runs_on_a_match_host_and_its_recording_comes_back_whole(tmp_path, study_server, match_host):
+    endpoint = free_endpoint()
+    config = StudyConfig("remote", (Variant("strong", "B5", "S5"),), trials=1, trial_seconds=2.0, seed=4)
+    stop, url, server = study_server(config, tmp_path / "study", hosted(endpoint))
+    match_host("lab-1", endpoint)
+    report = asyncio.run(asyncio.wait_for(stand_in(url, test=TEST), 180))
+    stop.set()
+    study = server.result(timeout=60)
+
+    assert report.done and len(report.kills) == 1, report.refused
+    [attempt] = study.participants["P001"].attempts
+    assert attempt["status"] == "done"
+    here = tmp_path / "study" / "recordings" / f"{attempt['match']}.tsflog"
+    there = tmp_path / "lab-1" / here.name
+    assert here.read_bytes() == there.read_bytes()
+    assert hashlib.sha256(here.read_bytes()).hexdigest() == hashlib.sha256(there.read_bytes()).hexdigest()
+    recording = load(here)
+    assert recording.problems() == [] and len(recording.states) == config.frames + 1
+    assert recording.summary.kills == attempt["kills"] == report.kills[0]
+    human = [a for _, a in recording.actions if a.role == report.role]
+    assert human and all(a.sender == f"human/{report.role}" for a in human), (
+        "the seat was played over the router"
+    )
+    sidecar = json.loads(here.with_suffix(".study.json").read_text())
+    assert sidecar["status"] == "done" and sidecar["participant"] == "P001"
+    assert not list((tmp_path / "study" / "recordings").glob("*.part"))
+
+
+def test_a_host_killed_mid_trial_leaves_the_trial_to_be_played_again(tmp_path, study_server, match_host):
+    endpoint = free_endpoint()
+    config = StudyConfig("killed", (Variant("strong", "B5", "S5"),), trials=1, trial_seconds=8.0)
+    stop, url, server = study_server(config, tmp_path / "study", hosted(endpoint))
+    first = match_host("lab-1", endpoint)
+    reports = []
+    player = threading.Thread(target=lambda: reports.append(asyncio.run(stand_in(url, test=TEST))))
+    player.start()
+    try:
+        playing = tmp_path / "lab-1" / "killed-P001-s1t1.tsflog"
+        assert wait_until(lambda: playing.exists() and playing.stat().st_size > 50_000, timeout=120)
+        first.send_signal(signal.SIGKILL)  # its matches' processes die with it (PR_SET_PDEATHSIG)
+        first.wait()
+        match_host("lab-2", endpoint)
+        player.join(240)
+    finally:
+        stop.set()
+    study = server.result(timeout=60)
+
+    assert reports and reports[0].done and reports[0].again == 1, reports
+    attempts = study.participants["P001"].attempts
+    assert [(a["attempt"], a["status"]) for a in attempts] == [(1, "failed"), (2, "done")]
+    recordings = tmp_path / "study" / "recordings"
+    assert not (recordings / "killed-P001-s1t1.tsflog").exists(), "no half recording comes back"
+    assert not list(recordings.glob("*.part"))
+    assert json.loads((recordings / "killed-P001-s1t1.study.json").read_text())["status"] == "failed"
+    again = recordings / "killed-P001-s1t1-a2.tsflog"
+    assert load(again).problems() == []
+    assert again.read_bytes() == (tmp_path / "lab-2" / again.name).read_bytes()
+
+
+def test_match_host_mistakes_are_one_line(tmp_path: Path) -> None:
+    def tsf(*args: str) -> subprocess.CompletedProcess:
+        return subprocess.run(
+            [sys.executable, "-m", "services.cli", *args], capture_output=True, text=True, timeout=60
+        )
+
+    nothing = tsf("match-host", "--slots", "1")
+    assert nothing.returncode == 2 and "needs the router's endpoint" in nothing.stderr
+    unreachable = tsf(
+        "match-host", "--mode", "client", "--connect", "tcp/127.0.0.1:1", "--wait-router", "0.5"
+    )
+    assert unreachable.returncode == 1 and "cannot reach the router at tcp/127.0.0.1:1" in unreachable.stderr
+    assert "Traceback" not in unreachable.stderr and ".rs:" not in unreachable.stderr
+    config = tmp_path / "s.toml"
+    config.write_text('name = "s"\n[[variants]]\nname = "v"\nbait = "B5"\nshooter = "S5"\n')
+    alone = tsf("study", str(config), "--max-matches", "0", "--out", str(tmp_path))
+    assert alone.returncode == 2 and "--max-matches 0" in alone.stderr

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import hashlib
 import json
 import signal
@@ -16,13 +17,19 @@ import threading
 from pathlib import Path
 
 import pytest
+import zenoh
 from conftest import STAND_IN_TOKEN, wait_until
 
 from services.recorder.recording import load
 from services.study.core import StudyConfig, Variant
+from services.study.host import Host, sha256
+from services.study.remote import Remote
 from services.study.runner import Serving
 from services.study.standin import stand_in
-from shared.bus import BusConfig, free_endpoint
+from shared import keys
+from shared.bus import BusConfig, free_endpoint, session
+from shared.errors import Failure
+from shared.messages import MatchDone
 
 TEST = STAND_IN_TOKEN
 
@@ -128,3 +135,41 @@ def test_match_host_mistakes_are_one_line(tmp_path: Path) -> None:
     config.write_text('name = "s"\n[[variants]]\nname = "v"\nbait = "B5"\nshooter = "S5"\n')
     alone = tsf("study", str(config), "--max-matches", "0", "--out", str(tmp_path))
     assert alone.returncode == 2 and "--max-matches 0" in alone.stderr
+
+
+def test_a_recording_whose_hash_differs_never_lands_in_the_study(tmp_path: Path) -> None:
+    endpoint = free_endpoint()
+    source = tmp_path / "host" / "m.tsflog"
+    source.parent.mkdir()
+    source.write_bytes(bytes(range(256)) * 1000)  # several chunks
+    host = Host("lab-1", 1, source.parent)
+    host.finished["m"] = source
+
+    def serve(query: zenoh.Query) -> None:
+        chunk = host.chunk(keys.parse(query.key_expr).match, int(query.parameters.get("offset", "0")))
+        query.reply(query.key_expr, chunk.encode())
+
+    remote = Remote(BusConfig("router", (endpoint,)))
+    try:
+        with (
+            session(BusConfig("client", (), (endpoint,))) as z,
+            z.declare_queryable(keys.host_recording("lab-1"), serve),
+        ):
+            asked = f"{keys.host_recording('lab-1', 'm')}?offset=0"
+            assert wait_until(lambda: any(r.ok for r in remote.z.get(asked, timeout=1)), timeout=10)
+            done = MatchDone(
+                match="m", frame=0, sender="host/lab-1", size=source.stat().st_size, sha256=sha256(source)
+            )
+            remote.fetch("lab-1", "m", done, tmp_path / "study" / "m.tsflog")
+            assert (tmp_path / "study" / "m.tsflog").read_bytes() == source.read_bytes()
+            with pytest.raises(Failure, match="does not match its sha256"):
+                remote.fetch(
+                    "lab-1", "m", dataclasses.replace(done, sha256="0" * 64), tmp_path / "study" / "n.tsflog"
+                )
+            with pytest.raises(Failure, match="did not serve"):
+                remote.fetch("lab-1", "x", done, tmp_path / "study" / "x.tsflog")
+    finally:
+        remote.close()
+    assert sorted(p.name for p in (tmp_path / "study").iterdir()) == ["m.tsflog"], (
+        "nothing else, nothing half"
+    )

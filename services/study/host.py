@@ -64,8 +64,10 @@ def plan_of(offer: MatchOffer, directory: Path, router: BusConfig) -> MatchPlan:
     adapter = None
     if offer.adapter:
         empty = [role for role in ROLES if not seats[role]]
-        adapter = AdapterConfig.parse(offer.adapter, role=empty[0] if empty else "", seed=offer.seed)
-        if adapter is None or len(empty) != 1:
+        adapter = (
+            AdapterConfig.parse(offer.adapter, role=empty[0], seed=offer.seed) if len(empty) == 1 else None
+        )
+        if not adapter:
             raise UsageError("adapter", offer.adapter, "not an adaptive agent for the one empty seat")
         seats[adapter.role] = MatchPlan.bait if adapter.role == "bait" else MatchPlan.shooter
     return MatchPlan(

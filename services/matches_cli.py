@@ -9,6 +9,7 @@ from rich.live import Live
 
 from services.options import (
     SECONDS,
+    SLOTS,
     AdapterFactory,
     Duration,
     Frames,
@@ -190,6 +191,13 @@ def study(
     from services.study.core import StudyConfig
     from services.study.runner import Serving, run_study
 
+    hosts = None
+    if listen or connect:
+        hosts = BusConfig("router" if listen else "client", tuple(listen or ()), tuple(connect or ()))
+    elif max_matches == 0:
+        raise UsageError(
+            "--max-matches", 0, "no match could run: give match hosts with --listen or --connect"
+        )
     protocol = StudyConfig.load(config)
     directory = out / protocol.name
 
@@ -203,13 +211,6 @@ def study(
     if (cert is None) != (key is None):
         raise UsageError("--cert/--key", str(cert or key), "give both, or neither")
     web = Web(host, port, cert, key, tuple(origin or ()), per_address)
-    hosts = None
-    if listen or connect:
-        hosts = BusConfig("router" if listen else "client", tuple(listen or ()), tuple(connect or ()))
-    elif max_matches == 0:
-        raise UsageError(
-            "--max-matches", 0, "no match could run: give match hosts with --listen or --connect"
-        )
     serving = Serving(max_matches, trial_timeout, test_token=test_token, hosts=hosts)
     done = run_study(protocol, directory, web, stop_on_signals(), show, serving)
     finished = sum(done.next_trial(p) is None for p in done.participants.values())
@@ -219,7 +220,7 @@ def study(
 @commands.command("match-host")
 @bus_options
 def match_host_command(
-    slots: int = typer.Option(2, min=1, max=1024, help="Matches this host runs at once."),
+    slots: int = number(2, SLOTS, "Matches this host runs at once."),
     host_id: str = typer.Option("", "--id", help="This host's name (default: host name and pid)."),
     out: Path = output(Path("recordings"), "Directory of the recordings made here.", directory=True),
     *,

@@ -118,25 +118,6 @@ def test_a_host_killed_mid_trial_leaves_the_trial_to_be_played_again(tmp_path, s
     assert again.read_bytes() == (tmp_path / "lab-2" / again.name).read_bytes()
 
 
-def test_match_host_mistakes_are_one_line(tmp_path: Path) -> None:
-    def tsf(*args: str) -> subprocess.CompletedProcess:
-        return subprocess.run(
-            [sys.executable, "-m", "services.cli", *args], capture_output=True, text=True, timeout=60
-        )
-
-    nothing = tsf("match-host", "--slots", "1")
-    assert nothing.returncode == 2 and "needs the router's endpoint" in nothing.stderr
-    unreachable = tsf(
-        "match-host", "--mode", "client", "--connect", "tcp/127.0.0.1:1", "--wait-router", "0.5"
-    )
-    assert unreachable.returncode == 1 and "cannot reach the router at tcp/127.0.0.1:1" in unreachable.stderr
-    assert "Traceback" not in unreachable.stderr and ".rs:" not in unreachable.stderr
-    config = tmp_path / "s.toml"
-    config.write_text('name = "s"\n[[variants]]\nname = "v"\nbait = "B5"\nshooter = "S5"\n')
-    alone = tsf("study", str(config), "--max-matches", "0", "--out", str(tmp_path))
-    assert alone.returncode == 2 and "--max-matches 0" in alone.stderr
-
-
 def test_a_recording_whose_hash_differs_never_lands_in_the_study(tmp_path: Path) -> None:
     endpoint = free_endpoint()
     source = tmp_path / "host" / "m.tsflog"

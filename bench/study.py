@@ -43,6 +43,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections import Counter
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -194,7 +195,8 @@ def arrival_test(
     n: int, over: float, seconds: float, cap: int, seed: int, hosts: BusConfig | None = None
 ) -> None:
     config = StudyConfig("arrive", (Variant("s", "B5", "S5"),), trials=1, trial_seconds=seconds)
-    arrivals = sorted(random.Random(seed).uniform(0, over) for _ in range(n))
+    rng = random.Random(seed)  # one generator: a new one per arrival gave them all the same time
+    arrivals = sorted(rng.uniform(0, over) for _ in range(n))
     where = f"{cap} matches here" + (
         f" + a match host with {cap} slots at {hosts.listen[0]}" if hosts else ""
     )
@@ -212,6 +214,8 @@ def arrival_test(
         f"p99 {quantile(first, 99):.3f} s; load average {load:.1f} at the start, "
         f"{os.getloadavg()[0]:.1f} at the end"
     )
+    if lost := Counter(r.refused or "the socket closed" for r in reports if not r.done):
+        print("  lost: " + "; ".join(f"{count} {why!r}" for why, count in lost.items()))
 
 
 def main() -> None:

@@ -36,6 +36,7 @@ import json
 import logging
 import threading
 from collections.abc import Awaitable, Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -59,6 +60,7 @@ PROBLEM = "The game could not be started. Please tell the experimenter."
 RETRIES = 3  # failed attempts in a row before the participant is told of a problem
 READ_TIMEOUT = 900.0  # seconds a participant may take to read the consent text or the instructions
 START_UP = 20.0  # seconds a match takes to start, for the estimated wait
+THREADS = 512  # threads for blocking work off the event loop: two per running match, and more
 DRAIN = 60.0  # seconds the stopping server waits for its matches to end and be written down
 WARM_UP = 60.0  # seconds to wait for a match's processes before offering its trial anyway
 ARRIVAL_BURST = 20  # participant ids issued at once, beyond the rate
@@ -466,6 +468,9 @@ def run_study(
     remote = Remote(serving.hosts) if serving.hosts else None
     try:
         gateway = Gateway(None, study_handler(study, serving, matches, remote), web)
+        # A running match holds a thread (run_trial) for its length, its start-up another: asyncio's
+        # default pool (cores + 4 threads) would cap the matches at a handful, whatever hosts add.
+        gateway.loop.set_default_executor(ThreadPoolExecutor(THREADS, thread_name_prefix="study"))
         if remote is not None:  # a host that comes or goes changes the room in the queue
             remote.on_change = lambda: gateway.loop.call_soon_threadsafe(matches.notify)
         with gateway:

@@ -59,31 +59,33 @@ def hosted(endpoint: str) -> Serving:
     return Serving(max_matches=0, test_token=TEST, hosts=BusConfig("router", (endpoint,)))
 
 
-def test_a_trial_runs_on_a_match_host_and_its_recording_comes_back_whole(tmp_path, study_server, match_host):
+def test_trials_run_on_a_match_host_and_their_recordings_come_back_whole(tmp_path, study_server, match_host):
+    """A static and an adaptive agent, each in a match on the host; the participant's seat is played
+    over the router, and each recording is the host's, byte for byte, complete."""
     endpoint = free_endpoint()
-    config = StudyConfig("remote", (Variant("strong", "B5", "S5"),), trials=1, trial_seconds=2.0, seed=4)
+    variants = (Variant("strong", "B5", "S5"), Variant("adaptive", adapter="adaptive-T30-cem"))
+    config = StudyConfig("remote", variants, trials=1, trial_seconds=2.0, seed=4)
     stop, url, server = study_server(config, tmp_path / "study", hosted(endpoint))
     match_host("lab-1", endpoint)
-    report = asyncio.run(asyncio.wait_for(stand_in(url, test=TEST), 180))
+    report = asyncio.run(asyncio.wait_for(stand_in(url, test=TEST), 240))
     stop.set()
     study = server.result(timeout=60)
 
-    assert report.done and len(report.kills) == 1, report.refused
-    [attempt] = study.participants["P001"].attempts
-    assert attempt["status"] == "done"
-    here = tmp_path / "study" / "recordings" / f"{attempt['match']}.tsflog"
-    there = tmp_path / "lab-1" / here.name
-    assert here.read_bytes() == there.read_bytes()
-    assert hashlib.sha256(here.read_bytes()).hexdigest() == hashlib.sha256(there.read_bytes()).hexdigest()
-    recording = load(here)
-    assert recording.problems() == [] and len(recording.states) == config.frames + 1
-    assert recording.summary.kills == attempt["kills"] == report.kills[0]
-    human = [a for _, a in recording.actions if a.role == report.role]
-    assert human and all(a.sender == f"human/{report.role}" for a in human), (
-        "the seat was played over the router"
-    )
-    sidecar = json.loads(here.with_suffix(".study.json").read_text())
-    assert sidecar["status"] == "done" and sidecar["participant"] == "P001"
+    assert report.done and len(report.kills) == 2, report.refused
+    attempts = study.participants["P001"].attempts
+    assert [a["status"] for a in attempts] == ["done", "done"]
+    for attempt, kills in zip(attempts, report.kills, strict=True):
+        here = tmp_path / "study" / "recordings" / f"{attempt['match']}.tsflog"
+        there = tmp_path / "lab-1" / here.name
+        assert hashlib.sha256(here.read_bytes()).hexdigest() == hashlib.sha256(there.read_bytes()).hexdigest()
+        recording = load(here)
+        assert recording.problems() == [] and len(recording.states) == config.frames + 1
+        assert recording.summary.kills == attempt["kills"] == kills
+        human = [a for _, a in recording.actions if a.role == report.role]
+        assert human and all(a.sender == f"human/{report.role}" for a in human), "played over the router"
+        sidecar = json.loads(here.with_suffix(".study.json").read_text())
+        assert sidecar["status"] == "done" and sidecar["participant"] == "P001"
+        assert bool(recording.adapter) == (sidecar["variant"] == "adaptive"), "the host ran the adapter"
     assert not list((tmp_path / "study" / "recordings").glob("*.part"))
 
 

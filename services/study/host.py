@@ -26,7 +26,7 @@ from services.agent import library
 from services.launch import MatchPlan, run_match
 from services.recorder.service import recording_path
 from shared import keys
-from shared.bus import BusConfig, Drops, subscribe
+from shared.bus import BusConfig, Drops, subscribe, why
 from shared.errors import Failure, UsageError
 from shared.game import ROLES, GameConfig
 from shared.messages import (
@@ -93,7 +93,7 @@ class Host:
         self.sender = f"host/{name}"
         self.running: dict[str, tuple[threading.Event, threading.Thread]] = {}
         self.finished: dict[str, Path] = {}  # match -> its recording, served in chunks
-        self.lock = threading.Lock()
+        self.lock = threading.RLock()
         self.hashes = (library.manifest_hash(), GameConfig().hash())
 
     def status(self) -> HostStatus:
@@ -136,9 +136,7 @@ def run_match_host(bus: BusConfig, name: str, slots: int, out: Path, stop: threa
     try:
         z = zenoh.open(bus.to_zenoh())
     except zenoh.ZError as error:
-        raise Failure(
-            f"cannot reach the router at {', '.join(bus.connect)}: {str(error).split(' at /')[0]}"
-        ) from None
+        raise Failure(f"cannot reach the router at {', '.join(bus.connect)}: {why(error)}") from None
     played = 0
 
     def put_status() -> None:
@@ -165,19 +163,22 @@ def run_match_host(bus: BusConfig, name: str, slots: int, out: Path, stop: threa
         nonlocal played
         try:
             offer = decode(query.payload.to_bytes() if query.payload else b"", MatchOffer)
-            reason = host.refusal(offer)
-            plan = None if reason else plan_of(offer, out, bus)
         except MessageError as error:
             drops.drop(keys.host_offer(name), error)
             return
-        except (UsageError, ValueError) as error:
-            reason = str(error)[:300]
-        if plan is not None:
-            ended = threading.Event()
-            thread = threading.Thread(target=play, args=(plan, ended), name=f"match-{offer.match}")
-            with host.lock:
+        plan, thread = None, None
+        with host.lock:  # checked and taken at once: two offers never share the last slot
+            try:
+                reason = host.refusal(offer)
+                plan = None if reason else plan_of(offer, out, bus)
+            except ValueError as error:  # a seat this host cannot fill (UsageError)
+                reason = str(error)[:300]
+            if plan is not None:
+                ended = threading.Event()
+                thread = threading.Thread(target=play, args=(plan, ended), name=f"match-{offer.match}")
                 host.running[offer.match] = (ended, thread)
-            played += 1
+                played += 1
+        if thread is not None:
             thread.start()
             log.info("runs match %s", offer.match)
         answer = MatchAnswer(

@@ -24,7 +24,7 @@ from services.launch import MatchPlan
 from services.recorder.service import recording_path
 from services.study.host import offer_of
 from shared import keys
-from shared.bus import BusConfig, Drops, subscribe
+from shared.bus import BusConfig, Drops, subscribe, why
 from shared.errors import Failure
 from shared.messages import (
     HostStatus,
@@ -50,7 +50,7 @@ class Remote:
             self.z = zenoh.open(bus.to_zenoh())
         except zenoh.ZError as error:
             where = ", ".join(bus.connect or bus.listen)
-            raise Failure(f"no session for match hosts at {where}: {str(error).split(' at /')[0]}") from None
+            raise Failure(f"no session for match hosts at {where}: {why(error)}") from None
         self.alive: set[str] = set()
         self.slots: dict[str, int] = {}  # live hosts that have said their slots
         self.offered: set[str] = set()

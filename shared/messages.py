@@ -18,7 +18,17 @@ from typing import Any, ClassVar, TypeVar
 import msgpack
 
 from shared import keys
-from shared.game import DEATH_CAUSES, EVENT_KINDS, N_ACTIONS, OBS_SIZE, ROLES, SEEDS, GameConfig, Range
+from shared.game import (
+    DEATH_CAUSES,
+    EVENT_KINDS,
+    FRAMES,
+    N_ACTIONS,
+    OBS_SIZE,
+    ROLES,
+    SEEDS,
+    GameConfig,
+    Range,
+)
 
 SCHEMA_VERSION = 1
 MAX_BYTES = 64 * 1024
@@ -366,7 +376,7 @@ class MatchOffer(Message):
     TYPE: ClassVar[str] = "match_offer"
     CHECKS: ClassVar[dict[str, Check]] = {
         "seed": _SEED,
-        "frames": _int(1, 108_000),
+        "frames": _int(FRAMES.low, FRAMES.high),
         "bait": _KEY_OR_NONE,
         "shooter": _KEY_OR_NONE,
         "adapter": _text(r"[A-Za-z0-9_.:-]{0,64}"),

@@ -15,21 +15,36 @@ Arrivals (`--arrivals N --over S`): N participants arrive at random times over S
 most `--max-matches` matches at once: completed (goal N), lost (goal 0) and the queue wait
 p50/p99 of the trials that waited.
 
+Across machines (`--second-host netns`, as root): the same arrivals twice, first on this machine's
+`--max-matches` slots alone, then with a second match host (`tsf match-host`, as many slots) in a
+Linux network namespace of its own, reached over a veth pair: the study server is the router, at
+10.199.0.1, and the host connects to it from 10.199.0.2 (its matches' processes talk over the
+namespace's own loopback). `--second-host process` runs it as a plain process on loopback (no
+root needed). Both hosts share this machine's CPUs: the figure shows the slots adding up and the
+protocol's cost, not a second machine's CPU.
+
     nice .venv/bin/python bench/study.py [--counts 1 2 4 8] [--trial-seconds 10]
     nice .venv/bin/python bench/study.py --arrivals 20 --over 120 --trial-seconds 5 --max-matches 4
+    nice .venv/bin/python bench/study.py --arrivals 16 --over 60 --trial-seconds 5 --max-matches 2 \
+        --second-host netns
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import os
 import random
 import resource
 import statistics
+import subprocess
+import sys
 import tempfile
 import threading
 import time
+from collections import Counter
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -38,6 +53,7 @@ from services.recorder.recording import load
 from services.study.core import StudyConfig, Variant
 from services.study.runner import Serving, run_study
 from services.study.standin import StandInReport, stand_in
+from shared.bus import BusConfig, free_endpoint
 
 TOKEN = "bench"
 JITTER_MS = 5.0
@@ -137,13 +153,57 @@ def load_test(counts: list[int], trials: int, seconds: float) -> None:
     print(f"most participants served with every trial done and tick jitter p99 <= {JITTER_MS:g} ms: {served}")
 
 
-def arrival_test(n: int, over: float, seconds: float, cap: int, seed: int) -> None:
+NETNS, VETH, ROUTER_IP, HOST_IP = "tsf-bench", "tsf-bench0", "10.199.0.1", "10.199.0.2"
+
+
+def ip(*args: str) -> None:
+    subprocess.run(["ip", *args], check=True)
+
+
+@contextlib.contextmanager
+def second_host(how: str, slots: int, out: Path) -> Iterator[BusConfig]:
+    """A match host of `slots` slots, in a network namespace (`netns`) or as a plain process;
+    yields the study server's router config that it connects to. Everything is removed on exit."""
+    command = [sys.executable, "-m", "services.cli", "match-host", "--mode", "client", "--slots", str(slots)]
+    command += ["--id", f"{how}-host", "--out", str(out), "-q"]
+    with contextlib.ExitStack() as undo:
+        if how == "netns":
+            ip("netns", "add", NETNS)
+            undo.callback(ip, "netns", "del", NETNS)
+            ip("link", "add", VETH, "type", "veth", "peer", "name", "tsf-bench1")
+            undo.callback(subprocess.run, ["ip", "link", "del", VETH], check=False)
+            ip("link", "set", "tsf-bench1", "netns", NETNS)
+            ip("addr", "add", f"{ROUTER_IP}/24", "dev", VETH)
+            ip("link", "set", VETH, "up")
+            for args in (
+                ("addr", "add", f"{HOST_IP}/24", "dev", "tsf-bench1"),
+                ("link", "set", "tsf-bench1", "up"),
+            ):
+                ip("netns", "exec", NETNS, "ip", *args)
+            ip("netns", "exec", NETNS, "ip", "link", "set", "lo", "up")
+            endpoint = free_endpoint(ROUTER_IP)
+            command = ["ip", "netns", "exec", NETNS, *command]
+        else:
+            endpoint = free_endpoint()
+        host = subprocess.Popen([*command, "--connect", endpoint])
+        undo.callback(host.wait, 30)
+        undo.callback(host.terminate)
+        yield BusConfig("router", (endpoint,))
+
+
+def arrival_test(
+    n: int, over: float, seconds: float, cap: int, seed: int, hosts: BusConfig | None = None
+) -> None:
     config = StudyConfig("arrive", (Variant("s", "B5", "S5"),), trials=1, trial_seconds=seconds)
-    arrivals = sorted(random.Random(seed).uniform(0, over) for _ in range(n))
-    print(
-        f"arrivals: {n} participants at random over {over:g} s, one {seconds:g} s trial each, {cap} matches"
+    rng = random.Random(seed)  # one generator: a new one per arrival gave them all the same time
+    arrivals = sorted(rng.uniform(0, over) for _ in range(n))
+    where = f"{cap} matches here" + (
+        f" + a match host with {cap} slots at {hosts.listen[0]}" if hosts else ""
     )
-    reports, attempts, _ = serve(config, Serving(max_matches=cap, test_token=TOKEN), arrivals)
+    print(f"arrivals: {n} participants at random over {over:g} s, one {seconds:g} s trial each, {where}")
+    load = os.getloadavg()[0]
+    serving = Serving(max_matches=cap, test_token=TOKEN, hosts=hosts)
+    reports, attempts, _ = serve(config, serving, arrivals)
     completed = sum(r.done for r in reports)
     waits = [w for r in reports for w in r.waits] or [0.0]
     first = [f for r in reports for f in r.first_frames]
@@ -151,8 +211,11 @@ def arrival_test(n: int, over: float, seconds: float, cap: int, seed: int) -> No
         f"  completed {completed} (goal {n}), lost {n - completed} (goal 0); {len(attempts)} attempts; "
         f"{sum(bool(r.waits) for r in reports)} waited in the queue: p50 {quantile(waits, 50):.1f} s, "
         f"p99 {quantile(waits, 99):.1f} s; Ready-to-first-frame p50 {quantile(first, 50):.3f} s, "
-        f"p99 {quantile(first, 99):.3f} s"
+        f"p99 {quantile(first, 99):.3f} s; load average {load:.1f} at the start, "
+        f"{os.getloadavg()[0]:.1f} at the end"
     )
+    if lost := Counter(r.refused or "the socket closed" for r in reports if not r.done):
+        print("  lost: " + "; ".join(f"{count} {why!r}" for why, count in lost.items()))
 
 
 def main() -> None:
@@ -167,9 +230,22 @@ def main() -> None:
         "--over", type=float, default=600.0, help="arrival test: seconds over which they arrive"
     )
     parser.add_argument("--max-matches", type=int, default=4, help="arrival test: matches at once")
+    parser.add_argument(
+        "--second-host",
+        choices=("netns", "process"),
+        help="arrival test: again with a second match host, in a network namespace (root) or a process",
+    )
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
-    if args.arrivals:
+    if args.second_host:
+        arrival_test(args.arrivals, args.over, args.trial_seconds, args.max_matches, args.seed)
+        with (
+            tempfile.TemporaryDirectory() as out,
+            second_host(args.second_host, args.max_matches, Path(out)) as bus,
+        ):
+            arrival_test(args.arrivals, args.over, args.trial_seconds, args.max_matches, args.seed, bus)
+            print(f"  of which {len(list(Path(out).glob('*.tsflog')))} ran on the second host")
+    elif args.arrivals:
         arrival_test(args.arrivals, args.over, args.trial_seconds, args.max_matches, args.seed)
     else:
         load_test(args.counts, args.trials, args.trial_seconds)

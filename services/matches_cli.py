@@ -1,4 +1,4 @@
-"""`tsf` commands for whole matches and the people in them: match, play, study, replay."""
+"""`tsf` commands for whole matches and the people in them: match, play, study, match-host, replay."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ from rich.live import Live
 
 from services.options import (
     SECONDS,
+    SLOTS,
     AdapterFactory,
     Duration,
     Frames,
@@ -154,7 +155,9 @@ def study(
     out: Path = output(Path("studies"), "Studies go to OUT/<name>: progress and recordings.", directory=True),
     host: Host = "127.0.0.1",
     port: Port = 8000,
-    max_matches: int = typer.Option(4, min=1, help="Matches at once; more participants wait in a queue."),
+    max_matches: int = typer.Option(
+        4, min=0, help="Matches at once on this machine (0: only on match hosts); more wait in a queue."
+    ),
     trial_timeout: float = typer.Option(
         120.0,
         min=1.0,
@@ -172,12 +175,29 @@ def study(
     test_token: str = typer.Option(
         "", envvar="TSF_TEST_TOKEN", help="Stand-ins that show this token get the observation values."
     ),
+    listen: list[str] | None = typer.Option(
+        None,
+        help="Be the router that match hosts (`tsf match-host`) connect to, at this zenoh endpoint, "
+        "e.g. tcp/0.0.0.0:7447 (repeatable).",
+    ),
+    connect: list[str] | None = typer.Option(
+        None,
+        help="Meet match hosts at this zenoh router (`tsf router`), e.g. tcp/10.0.0.1:7447 (repeatable).",
+    ),
 ) -> None:
-    """Serve a study: participants open the link, consent, get a role and play every agent variant."""
+    """Serve a study: participants open the link, consent, get a role and play every agent variant.
+    With --listen or --connect, match hosts on other machines add capacity beyond --max-matches."""
     from services.human.gateway import Web
     from services.study.core import StudyConfig
     from services.study.runner import Serving, run_study
 
+    hosts = None
+    if listen or connect:
+        hosts = BusConfig("router" if listen else "client", tuple(listen or ()), tuple(connect or ()))
+    elif max_matches == 0:
+        raise UsageError(
+            "--max-matches", 0, "no match could run: give match hosts with --listen or --connect"
+        )
     protocol = StudyConfig.load(config)
     directory = out / protocol.name
 
@@ -191,10 +211,31 @@ def study(
     if (cert is None) != (key is None):
         raise UsageError("--cert/--key", str(cert or key), "give both, or neither")
     web = Web(host, port, cert, key, tuple(origin or ()), per_address)
-    serving = Serving(max_matches, trial_timeout, test_token=test_token)
+    serving = Serving(max_matches, trial_timeout, test_token=test_token, hosts=hosts)
     done = run_study(protocol, directory, web, stop_on_signals(), show, serving)
     finished = sum(done.next_trial(p) is None for p in done.participants.values())
     console.print(f"{len(done.participants)} participants, {finished} finished")
+
+
+@commands.command("match-host")
+@bus_options
+def match_host_command(
+    slots: int = number(2, SLOTS, "Matches this host runs at once."),
+    host_id: str = typer.Option("", "--id", help="This host's name (default: host name and pid)."),
+    out: Path = output(Path("recordings"), "Directory of the recordings made here.", directory=True),
+    *,
+    bus: BusConfig,
+) -> None:
+    """Run the matches a study server offers over the router (`--connect` the study's router), up to
+    --slots at once; their recordings go back to the server, hash checked."""
+    import os
+    import socket
+
+    from services.study.host import run_match_host
+
+    name = host_id or f"{socket.gethostname()}-{os.getpid()}".replace(".", "-")
+    played = run_match_host(bus, name, slots, out, stop_on_signals())
+    console.print(f"match host {name} ran {played} matches")
 
 
 @commands.command("replay")

@@ -31,6 +31,7 @@ console = Console()
 # shared/ (game.SEEDS, FRAMES, DURATION, messages.JOB_SEEDS) and the adapter's in AdapterConfig.
 GAMES = Range(1, 10_000)  # games per pair, policy or partner
 WORKERS = Range(0, 256)  # processes started on this machine (0: the command's default)
+SLOTS = Range(1, 1024)  # matches a match host runs at once (shared.messages.HostStatus)
 SECONDS = Range(0.0, 24 * 3600.0)  # a wait: at most a day
 PORTS = Range(0, 65535)
 

@@ -99,6 +99,11 @@ def free_endpoint(host: str = "127.0.0.1") -> str:
         return f"tcp/{host}:{sock.getsockname()[1]}"
 
 
+def why(error: zenoh.ZError) -> str:
+    """zenoh's error text without the source location it ends with (for a user's one line)."""
+    return str(error).split(" at /", 1)[0]
+
+
 @contextmanager
 def session(config: BusConfig) -> Iterator[zenoh.Session]:
     """An open zenoh session, closed on exit (an unclosed session keeps the process alive)."""

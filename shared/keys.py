@@ -12,6 +12,13 @@ tsf/sweep/<sweep>/coordinator       liveliness token of a sweep's coordinator
 tsf/sweep/<sweep>/worker/<worker>   liveliness token of a sweep worker
 tsf/sweep/<sweep>/job/<worker>      coordinator -> one worker: a SweepJob (any kind of job)
 tsf/sweep/<sweep>/result            workers -> coordinator: SweepResults
+
+tsf/host/<host>/alive               liveliness token of a match host
+tsf/host/<host>/status              host -> study servers: HostStatus (its slots), every second
+tsf/host/<host>/offer               study server -> host, a query: MatchOffer, answered MatchAnswer
+tsf/host/<host>/stop                study server -> host: MatchStop (end a match early)
+tsf/host/<host>/done                host -> study server: MatchDone (the match ended; its hash)
+tsf/host/<host>/recording/<match>   study server -> host, a query (?offset=N): RecordingChunk
 """
 
 from __future__ import annotations
@@ -110,6 +117,32 @@ def sweep_result(sweep: str) -> str:
     return f"{PREFIX}/sweep/{check_match(sweep)}/result"
 
 
+def host_alive(host: str = "*") -> str:
+    """A match host's liveliness token (the default `*` matches every host)."""
+    return f"{PREFIX}/host/{_worker(host)}/alive"
+
+
+def host_status(host: str = "*") -> str:
+    return f"{PREFIX}/host/{_worker(host)}/status"
+
+
+def host_offer(host: str) -> str:
+    return f"{PREFIX}/host/{check_match(host)}/offer"
+
+
+def host_stop(host: str) -> str:
+    return f"{PREFIX}/host/{check_match(host)}/stop"
+
+
+def host_done(host: str = "*") -> str:
+    return f"{PREFIX}/host/{_worker(host)}/done"
+
+
+def host_recording(host: str, match: str = "*") -> str:
+    """A recording a host serves, chunk by chunk (the default `*`: every one, the host's queryable)."""
+    return f"{PREFIX}/host/{check_match(host)}/recording/{_worker(match)}"
+
+
 def _worker(worker: str) -> str:
     return worker if worker == "*" else check_match(worker)
 
@@ -121,10 +154,11 @@ class Key(NamedTuple):
     kind: str  # state, start, event, summary, adapter, action, policy, alive; or a sweep's kinds
     role: str = ""  # the seat an action, policy or seat's alive key names
     service: str = ""  # the service an alive key names
-    worker: str = ""  # the worker a sweep's worker or job key names
+    worker: str = ""  # the worker a sweep's worker or job key names, or the match host a host key names
 
 
 _PLAIN = ("state", "start", "event", "summary", "adapter")  # tsf/<match>/<kind>
+_HOST = ("alive", "status", "offer", "stop", "done")  # tsf/host/<host>/<kind>
 _SEAT = ("action", "policy")  # tsf/<match>/<kind>/<role>
 
 
@@ -137,6 +171,12 @@ def parse(key: object) -> Key:
             return Key(check_match(sweep), kind)
         if kind in ("worker", "job") and len(rest) == 1:
             return Key(check_match(sweep), kind, worker=check_match(rest[0]))
+    if len(chunks) >= 4 and chunks[:2] == [PREFIX, "host"]:
+        _, _, host, kind, *rest = chunks
+        if kind in _HOST and not rest:
+            return Key("", kind, worker=check_match(host))
+        if kind == "recording" and len(rest) == 1:
+            return Key(check_match(rest[0]), kind, worker=check_match(host))
     if len(chunks) >= 3 and chunks[0] == PREFIX:
         _, match, kind, *rest = chunks
         if kind in _PLAIN and not rest:

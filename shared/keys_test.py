@@ -91,6 +91,13 @@ def test_unknown_service(service: str) -> None:
         (keys.sweep_job("s1", "w-2"), keys.Key("s1", "job", worker="w-2")),
         (keys.sweep_result("s1"), keys.Key("s1", "result")),
         ("tsf/sweep/state", keys.Key("sweep", "state")),  # a match may be called sweep
+        (keys.host_alive("lab-2"), keys.Key("", "alive", worker="lab-2")),
+        (keys.host_status("lab-2"), keys.Key("", "status", worker="lab-2")),
+        (keys.host_offer("lab-2"), keys.Key("", "offer", worker="lab-2")),
+        (keys.host_stop("lab-2"), keys.Key("", "stop", worker="lab-2")),
+        (keys.host_done("lab-2"), keys.Key("", "done", worker="lab-2")),
+        (keys.host_recording("lab-2", M), keys.Key(M, "recording", worker="lab-2")),
+        ("tsf/host/state", keys.Key("host", "state")),  # a match may be called host
     ],
 )
 def test_parse_inverts_every_builder(key: str, parts: keys.Key) -> None:
@@ -107,6 +114,10 @@ def test_parse_inverts_every_builder(key: str, parts: keys.Key) -> None:
         "tsf/m/action/pilot",
         "tsf/m/alive/ghost",
         "tsf/m/alive/agent/bait/x",
+        keys.host_alive(),
+        keys.host_recording("lab-2"),
+        "tsf/host/lab-2/offer/x",
+        "tsf/host/lab-2/recording",
         "other/m/state",
         "bait",
         "",

@@ -18,7 +18,17 @@ from typing import Any, ClassVar, TypeVar
 import msgpack
 
 from shared import keys
-from shared.game import DEATH_CAUSES, EVENT_KINDS, N_ACTIONS, OBS_SIZE, ROLES, SEEDS, GameConfig, Range
+from shared.game import (
+    DEATH_CAUSES,
+    EVENT_KINDS,
+    FRAMES,
+    N_ACTIONS,
+    OBS_SIZE,
+    ROLES,
+    SEEDS,
+    GameConfig,
+    Range,
+)
 
 SCHEMA_VERSION = 1
 MAX_BYTES = 64 * 1024
@@ -370,10 +380,111 @@ class SweepResult(Message):
     config: str = "0" * 16
 
 
+CHUNK = 48 * 1024  # bytes of a recording in one RecordingChunk (a message stays under MAX_BYTES)
+_WAIT = _number(0.0, 24 * 3600.0)
+_SHA256 = _text(r"[0-9a-f]{64}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class HostStatus(Message):
+    """A match host's capacity, put every second while it runs. `match` carries the host's name."""
+
+    TYPE: ClassVar[str] = "host_status"
+    CHECKS: ClassVar[dict[str, Check]] = {"slots": _int(0, 1024), "free": _int(0, 1024)}
+
+    slots: int = 1
+    free: int = 1
+
+
+@dataclass(frozen=True, kw_only=True)
+class MatchOffer(Message):
+    """A study server asks a match host to run a match: its seats (a policy key, `human` for a seat
+    the server plays over the router, "" for the adaptive seat), the adaptive agent's name if any,
+    how long the sim waits for the players and how long the whole match may take. `library` and
+    `config` are the hashes the host's own copies must have (as a sweep job's)."""
+
+    TYPE: ClassVar[str] = "match_offer"
+    CHECKS: ClassVar[dict[str, Check]] = {
+        "seed": _SEED,
+        "frames": _int(FRAMES.low, FRAMES.high),
+        "bait": _KEY_OR_NONE,
+        "shooter": _KEY_OR_NONE,
+        "adapter": _text(r"[A-Za-z0-9_.:-]{0,64}"),
+        "wait_players": _WAIT,
+        "timeout": _WAIT,
+        "library": _HASH,
+        "config": _HASH,
+    }
+
+    seed: int = 0
+    frames: int = 1800
+    bait: str = ""
+    shooter: str = ""
+    adapter: str = ""
+    wait_players: float = 10.0
+    timeout: float = 0.0
+    library: str = "0" * 16
+    config: str = "0" * 16
+
+
+@dataclass(frozen=True, kw_only=True)
+class MatchAnswer(Message):
+    """A match host's reply to an offer: accepted, or why not (full, other library, ...)."""
+
+    TYPE: ClassVar[str] = "match_answer"
+    CHECKS: ClassVar[dict[str, Check]] = {"accepted": _bool, "reason": _text(r"[ -~]{0,300}")}
+
+    accepted: bool = False
+    reason: str = ""
+
+
+@dataclass(frozen=True, kw_only=True)
+class MatchStop(Message):
+    """A study server asks the match host to end `match` now (the participant left, or it ran late)."""
+
+    TYPE: ClassVar[str] = "match_stop"
+
+
+@dataclass(frozen=True, kw_only=True)
+class MatchDone(Message):
+    """A match host's match has ended: `error` says why it failed ("" if it did not), and `size` and
+    `sha256` describe its recording (size 0: none), which the server then fetches in chunks."""
+
+    TYPE: ClassVar[str] = "match_done"
+    CHECKS: ClassVar[dict[str, Check]] = {
+        "error": _text(r"[ -~]{0,300}"),
+        "size": _int(0, 2**40),
+        "sha256": lambda v: v == "" or _SHA256(v),
+    }
+
+    error: str = ""
+    size: int = 0
+    sha256: str = ""
+
+
+@dataclass(frozen=True, kw_only=True)
+class RecordingChunk(Message):
+    """A host's reply to a recording query: up to CHUNK bytes from `offset` of a `size`-byte file."""
+
+    TYPE: ClassVar[str] = "recording_chunk"
+    CHECKS: ClassVar[dict[str, Check]] = {
+        "offset": _int(0, 2**40),
+        "size": _int(0, 2**40),
+        "data": lambda v: isinstance(v, bytes) and len(v) <= CHUNK,
+    }
+
+    offset: int = 0
+    size: int = 0
+    data: bytes = b""
+
+
 TYPES: dict[str, type[Message]] = {
     t.TYPE: t
-    for t in (Start, State, Action, PolicySwitch, GameEvent, Summary, AdapterStatus, SweepJob, SweepResult)
-}
+    for t in (
+        Start, State, Action, PolicySwitch, GameEvent, Summary, AdapterStatus, SweepJob, SweepResult,
+        HostStatus, MatchOffer, MatchAnswer, MatchStop, MatchDone, RecordingChunk,
+    )
+}  # fmt: skip
 _ENVELOPE: dict[str, Check] = {"match": _MATCH, "frame": _int(0, MAX_FRAME), "sender": _SENDER}
 M = TypeVar("M", bound=Message)
 

@@ -16,15 +16,22 @@ from services.sim.engine import Game
 from services.sim.match import start_message, state_message, summary_message
 from shared.game import OBS_SIZE, GameConfig
 from shared.messages import (
+    CHUNK,
     MAX_BYTES,
     SCHEMA_VERSION,
     TYPES,
     Action,
     AdapterStatus,
     GameEvent,
+    HostStatus,
+    MatchAnswer,
+    MatchDone,
+    MatchOffer,
+    MatchStop,
     Message,
     MessageError,
     PolicySwitch,
+    RecordingChunk,
     Start,
     State,
     Summary,
@@ -101,6 +108,29 @@ def examples() -> dict[str, Message]:
             seconds=1.25,
             library="0123456789abcdef",
             config=GameConfig().hash(),
+        ),
+        "host_status": HostStatus(match="lab-2", frame=0, sender="host/lab-2", slots=4, free=3),
+        "match_offer": MatchOffer(
+            match=M,
+            frame=0,
+            sender="study",
+            seed=7,
+            frames=300,
+            bait="human",
+            shooter="",
+            adapter="adaptive-T30-cem",
+            wait_players=915.0,
+            timeout=1035.0,
+            library="0123456789abcdef",
+            config=GameConfig().hash(),
+        ),  # fmt: skip
+        "match_answer": MatchAnswer(
+            match=M, frame=0, sender="host/lab-2", accepted=False, reason="no free slot"
+        ),
+        "match_stop": MatchStop(match=M, frame=0, sender="study"),
+        "match_done": MatchDone(match=M, frame=0, sender="host/lab-2", error="", size=5, sha256="ab" * 32),
+        "recording_chunk": RecordingChunk(
+            match=M, frame=0, sender="host/lab-2", offset=0, size=5, data=b"TSF\x00\x01"
         ),
     }
 
@@ -219,6 +249,15 @@ BAD: list[tuple[str, Callable[[], bytes], type[Message] | None, str]] = [
     ("job NaN arg", lambda: pack(record("sweep_job", args={"x": [math.nan]})), SweepJob, "range"),
     ("job plugin path", lambda: pack(record("sweep_job", plugins=["/etc/passwd"])), SweepJob, "range"),
     ("result of bytes", lambda: pack(record("sweep_result", values=[b"x"])), SweepResult, "range"),
+    (
+        "chunk over CHUNK",
+        lambda: pack(record("recording_chunk", data=bytes(CHUNK + 1))),
+        RecordingChunk,
+        "range",
+    ),
+    ("chunk as text", lambda: pack(record("recording_chunk", data="TSF")), RecordingChunk, "range"),
+    ("short hash", lambda: pack(record("match_done", sha256="ab" * 31)), MatchDone, "range"),
+    ("offer of a seat 'x y'", lambda: pack(record("match_offer", bait="x y")), MatchOffer, "range"),
     (
         "config spawn",
         lambda: pack(record("start", config=config_with(bait_spawn=["a", None, []]))),

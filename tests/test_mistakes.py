@@ -256,6 +256,19 @@ MISTAKES = [
     ),
     ("study {garbage}", 2, "tsf study: CONFIG {garbage}: not a study: Expected '=' after a key"),
     ("study {tmp}/empty.toml", 2, "tsf study: CONFIG {tmp}/empty.toml: not a study: "),
+    ("study {tmp}/long.toml --max-matches 0", 2, "tsf study: --max-matches 0: no match could run"),
+    ("study {tmp}/long.toml --listen nowhere", 2, "tsf study: --listen nowhere: not a zenoh endpoint"),
+    ("match-host", 2, "tsf match-host: --connect (none): a match host needs the router's endpoint"),
+    (
+        "match-host --slots 0 --connect tcp/127.0.0.1:1",
+        2,
+        "'--slots': 0 is outside the range 1 to 1024",
+    ),
+    (
+        "match-host --mode client --connect tcp/127.0.0.1:1 --wait-router 0.2",
+        1,
+        "tsf match-host: cannot reach the router at tcp/127.0.0.1:1: Unable to connect",
+    ),
     # Values outside their limits (shared/game.py, shared/messages.py, services/options.py,
     # AdapterConfig): refused before anything starts, naming the accepted range.
     ("game --seed -1", 2, f"tsf game: Invalid value for '--seed': -1 is outside the range {SEED_RANGE}"),

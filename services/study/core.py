@@ -308,35 +308,54 @@ class Study:
 
 
 class Admission:
-    """At most `cap` matches at once; the trials that must wait are served in arrival order.
+    """Where and when trials' matches run: at most `cap` at once on this machine (LOCAL), plus as
+    many as each live match host has slots (`hosts`, name -> slots, kept up to date by the shell);
+    the trials that must wait are served in arrival order.
 
-    A trial asks with `start(match)`: True if it may start now (it then holds a slot until `end`),
-    else it joins the queue, and `place(match)` says how many wait before it, itself included."""
+    A trial asks with `start(match)`: True if it may start now (it then holds a slot, `running[match]`
+    says where, until `end`), else it joins the queue, and `place(match)` says how many wait before
+    it, itself included. Local slots are filled first; remote hosts add capacity, the one with the
+    most free slots first. A host that goes away keeps its running matches counted until they end."""
+
+    LOCAL = ""
 
     def __init__(self, cap: int) -> None:
         self.cap = cap
-        self.running: set[str] = set()
+        self.hosts: dict[str, int] = {}
+        self.running: dict[str, str] = {}  # match -> where it runs: LOCAL or a host's name
         self.waiting: list[str] = []
+
+    def free(self) -> dict[str, int]:
+        """Free slots by place, local first, then hosts by most free (ties by name)."""
+        used: dict[str, int] = {}
+        for where in self.running.values():
+            used[where] = used.get(where, 0) + 1
+        slots = {self.LOCAL: self.cap, **self.hosts}
+        free = {where: n - used.get(where, 0) for where, n in slots.items() if n > used.get(where, 0)}
+        hosts = sorted((w for w in free if w != self.LOCAL), key=lambda w: (-free[w], w))
+        return {w: free[w] for w in ([self.LOCAL] if self.LOCAL in free else []) + hosts}
 
     def start(self, match: str) -> bool:
         if match not in self.waiting:
             self.waiting.append(match)
-        if self.waiting.index(match) < self.cap - len(self.running):
+        free = self.free()
+        if self.waiting.index(match) < sum(free.values()):
             self.waiting.remove(match)
-            self.running.add(match)
+            self.running[match] = next(iter(free))
             return True
         return False
 
     def place(self, match: str) -> int:
-        return self.waiting.index(match) + 1 - max(0, self.cap - len(self.running))
+        return self.waiting.index(match) + 1 - sum(self.free().values())
 
     def end(self, match: str) -> None:
         """The match has ended, or the trial gave up waiting."""
-        self.running.discard(match)
+        self.running.pop(match, None)
         if match in self.waiting:
             self.waiting.remove(match)
 
     def wait(self, place: int, match_seconds: float) -> float:
-        """About how long the trial at `place` waits: every `cap` matches that end free a slot
-        for the next `cap` in the queue (a running match is half over, on average)."""
-        return (math.ceil(place / self.cap) - 0.5) * match_seconds
+        """About how long the trial at `place` waits: every `slots` matches that end free a slot
+        for the next `slots` in the queue (a running match is half over, on average)."""
+        slots = max(1, self.cap + sum(self.hosts.values()))
+        return (math.ceil(place / slots) - 0.5) * match_seconds

@@ -140,7 +140,24 @@ def test_admission_serves_waiting_trials_in_order() -> None:
     assert not slots.start("d"), "c came first"
     assert slots.start("c") and not slots.start("d") and slots.place("d") == 1
     slots.end("d")  # gave up waiting
-    assert slots.waiting == [] and slots.running == {"b", "c"}
+    assert slots.waiting == [] and set(slots.running) == {"b", "c"}
+
+
+def test_admission_fills_local_slots_first_then_the_freest_host() -> None:
+    slots = Admission(1)
+    slots.hosts = {"lab-a": 1, "lab-b": 2}
+    for match in "abcd":
+        assert slots.start(match)
+    assert slots.running == {"a": "", "b": "lab-b", "c": "lab-a", "d": "lab-b"}
+    assert not slots.start("e") and slots.place("e") == 1 and slots.wait(4, 60) == 30
+    slots.hosts = {"lab-a": 1}  # lab-b went away: its two matches still count until they end
+    slots.end("c")
+    assert slots.start("e") and slots.running["e"] == "lab-a"
+    slots.end("b")
+    slots.end("d")
+    assert not slots.start("f"), "lab-b's slots are gone"
+    slots.end("a")
+    assert slots.start("f") and slots.running["f"] == ""
 
 
 def test_a_changed_study_does_not_reuse_another_versions_file(tmp_path: Path) -> None:

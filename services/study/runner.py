@@ -10,6 +10,11 @@ participant sees. A trial is done only if its recording is complete (read back a
 trial whose match fails to start, runs past its time or leaves an incomplete recording is marked
 `failed` and offered again as a new attempt.
 
+Match hosts on other machines add capacity (`Serving.hosts`: the study's router): once this
+machine's `max_matches` are taken, a trial's match is offered to a live host with a free slot
+(services/study/remote.py), the participant's seat is bridged over the router, and the host's
+recording is fetched into the study directory with its hash checked before the trial is judged.
+
 Study messages (down): `consent` (text), `participant` (id and resume key, kept by the browser),
 `trial` (session, trial, role, the agent's label; what to read first), `queue` (place, seconds
 to wait, while the trial waits for a free match), then the gateway's `state`/`end` frames, and at
@@ -31,6 +36,7 @@ import json
 import logging
 import threading
 from collections.abc import Awaitable, Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -44,8 +50,9 @@ from services.launch import HUMAN, MatchPlan, match_buses, run_match
 from services.recorder.recording import load
 from services.recorder.service import recording_path
 from services.study.core import Admission, Participant, Study, StudyConfig, Trial
+from services.study.remote import Remote
 from shared import keys
-from shared.bus import free_endpoint
+from shared.bus import BusConfig, free_endpoint
 from shared.game import other
 
 log = logging.getLogger("tsf.study")
@@ -53,6 +60,7 @@ PROBLEM = "The game could not be started. Please tell the experimenter."
 RETRIES = 3  # failed attempts in a row before the participant is told of a problem
 READ_TIMEOUT = 900.0  # seconds a participant may take to read the consent text or the instructions
 START_UP = 20.0  # seconds a match takes to start, for the estimated wait
+THREADS = 512  # threads for blocking work off the event loop: two per running match, and more
 DRAIN = 60.0  # seconds the stopping server waits for its matches to end and be written down
 WARM_UP = 60.0  # seconds to wait for a match's processes before offering its trial anyway
 ARRIVAL_BURST = 20  # participant ids issued at once, beyond the rate
@@ -70,6 +78,7 @@ class Serving:
     test_token: str = ""  # a hello with this `test` token may ask for the observation values (stand-ins)
     arrivals: float = 1.0  # new participant ids a second, on average (bursts of ARRIVAL_BURST)
     starting: int = 2  # matches starting up at once (until their sim listens)
+    hosts: BusConfig | None = None  # the router where match hosts offer their slots; None: local only
 
 
 SERVING, WEB = Serving(), Web()
@@ -146,13 +155,19 @@ async def first(*waits: Awaitable) -> None:
                 future.cancel()
 
 
-def run_trial(plan: MatchPlan, role: str, stop: threading.Event) -> tuple[int | None, list[str]]:
-    """Run a trial's match and read its recording back: (kills, problems), no problems for a
-    complete recording with the participant's seat played from this server. The kills are the
-    recording's, when it has a summary (a stopped match's sim still sends one)."""
+def run_trial(
+    plan: MatchPlan, role: str, stop: threading.Event, remote: Remote | None = None, host: str = ""
+) -> tuple[int | None, list[str]]:
+    """Run a trial's match (here, or on match `host`, whose recording `remote` fetches) and read
+    its recording back: (kills, problems), no problems for a complete recording with the
+    participant's seat played from this server. The kills are the recording's, when it has a
+    summary (a stopped match's sim still sends one)."""
     problems = []
     try:
-        run_match(plan, stop=stop)
+        if host and remote is not None:
+            remote.run(host, plan, stop)
+        else:
+            run_match(plan, stop=stop)
     except Exception as error:  # noqa: BLE001 - any failure fails the trial, never the server
         problems.append(str(error) or type(error).__name__)
     try:
@@ -240,8 +255,9 @@ class Matches:
                 stop.set()
 
 
-def study_handler(study: Study, serving: Serving, matches: Matches) -> Handler:
-    """Serve participants: consent or resume, then their trials one by one, each in a free match."""
+def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remote | None = None) -> Handler:
+    """Serve participants: consent or resume, then their trials one by one, each in a free match
+    (here, or on a match host of `remote`)."""
     config = study.config
     recordings = study.directory / "recordings"
     playing: set[str] = set()
@@ -278,7 +294,10 @@ def study_handler(study: Study, serving: Serving, matches: Matches) -> Handler:
     async def slot(socket: Socket, match: str) -> bool:
         """Wait for a free match, telling the participant their place; False if they leave."""
         told = None
-        while not matches.admission.start(match):
+        while True:
+            matches.admission.hosts = remote.hosts() if remote else {}
+            if matches.admission.start(match):
+                break
             place = matches.admission.place(match)
             if place != told:
                 wait = round(matches.admission.wait(place, match_seconds))
@@ -292,11 +311,14 @@ def study_handler(study: Study, serving: Serving, matches: Matches) -> Handler:
         return True
 
     async def bridge(socket: Socket, trial: Trial, endpoint: str, obs: bool) -> Bridge | None:
-        """The participant's seat in the trial's match, from a session of its own (opened when the
-        sim listens, closed by `leave`), once every process of the match is up (then a Ready
-        starts the game at once); None if the sim never listened."""
+        """The participant's seat in the trial's match, once every process of the match is up (then
+        a Ready starts the game at once): for a local match from a session of its own (opened when
+        the sim listens, closed by `leave`; None if the sim never listened), for a hosted one
+        (no `endpoint`) from the router's session."""
         try:
-            z = await asyncio.to_thread(zenoh.open, match_buses(endpoint, serving.low_latency)[1].to_zenoh())
+            z = remote.z if not endpoint and remote else await asyncio.to_thread(
+                zenoh.open, match_buses(endpoint, serving.low_latency)[1].to_zenoh()
+            )  # fmt: skip
         except zenoh.ZError as error:
             log.error("trial %s: no session to its sim: %s", trial.match, error)
             return None
@@ -311,7 +333,8 @@ def study_handler(study: Study, serving: Serving, matches: Matches) -> Handler:
     def leave(seat: Bridge | None) -> None:
         if seat is not None:
             seat.close()
-            threading.Thread(target=seat.z.close, daemon=True).start()  # never on the loop nor a callback
+            if remote is None or seat.z is not remote.z:  # a local match's session of its own
+                threading.Thread(target=seat.z.close, daemon=True).start()  # never on the loop nor a callback
 
     async def play(socket: Socket, trial: Trial, obs: bool, offer: dict) -> dict | None:
         """Run one trial: wait for a free match, start it (its processes start while the participant
@@ -323,7 +346,8 @@ def study_handler(study: Study, serving: Serving, matches: Matches) -> Handler:
         if not await slot(socket, trial.match):
             return None
         seats = {trial.role: HUMAN, **trial.variant.plan(other(trial.role), trial.seed)}
-        endpoint = free_endpoint()
+        host = matches.admission.running[trial.match]  # Admission.LOCAL: this machine
+        endpoint = "" if host else free_endpoint()
         limit = config.trial_seconds + serving.trial_timeout
         plan = MatchPlan(
             trial.match, trial.seed, config.frames, directory=recordings, endpoint=endpoint,
@@ -332,8 +356,13 @@ def study_handler(study: Study, serving: Serving, matches: Matches) -> Handler:
         )  # fmt: skip
         study.record(trial, "running")
         stop = threading.Event()
-        async with starting:  # start-up is CPU-bound: a burst of arrivals starts a few at a time
-            running = asyncio.ensure_future(asyncio.to_thread(run_trial, plan, trial.role, stop))
+        if host:
+            log.info("trial %s runs on match host %s", trial.match, host)
+        # start-up is CPU-bound: a burst of arrivals starts a few at a time here (a host's, there)
+        async with contextlib.nullcontext() if host else starting:
+            running = asyncio.ensure_future(
+                asyncio.to_thread(run_trial, plan, trial.role, stop, remote, host)
+            )
             matches.add(trial, running, stop)
             seat = await bridge(socket, trial, endpoint, obs)
         ready = False
@@ -436,13 +465,22 @@ def run_study(
     stop = stop or threading.Event()
     study = Study(config, directory)
     matches = Matches(serving.max_matches)
+    remote = Remote(serving.hosts) if serving.hosts else None
     try:
-        with Gateway(None, study_handler(study, serving, matches), web) as gateway:
+        gateway = Gateway(None, study_handler(study, serving, matches, remote), web)
+        # A running match holds a thread (run_trial) for its length, its start-up another: asyncio's
+        # default pool (cores + 4 threads) would cap the matches at a handful, whatever hosts add.
+        gateway.loop.set_default_executor(ThreadPoolExecutor(THREADS, thread_name_prefix="study"))
+        if remote is not None:  # a host that comes or goes changes the room in the queue
+            remote.on_change = lambda: gateway.loop.call_soon_threadsafe(matches.notify)
+        with gateway:
             on_ready(gateway)
             stop.wait()
             matches.stop_all()
             with contextlib.suppress(TimeoutError):  # a match's thread that hangs: leave it to exit
                 asyncio.run_coroutine_threadsafe(matches.drained(), gateway.loop).result(DRAIN)
     finally:
+        if remote is not None:
+            remote.close()
         study.close()
     return study

@@ -1,0 +1,226 @@
+"""`tsf match-host`: runs the matches that study servers on other machines offer it over the router.
+
+A match host is a `tsf` process on a machine of its own, connected to the study's zenoh router. It
+holds a liveliness token (`tsf/host/<host>/alive`) and puts its slots every second; a study server
+offers it a match (MatchOffer, a query), which it accepts while it has a free slot, the same
+library and the same rules. Each accepted match is started here as any match is
+(services/launch.run_match: sim, agent, adapter, recorder as processes), with one difference: its
+sim, the match's router, also connects to the study's router, so the participant's seat, bridged
+by the study server, reaches it over the router under the match's own keys. When the match ends
+the host puts MatchDone with its recording's size and sha256, and serves the recording in chunks
+(a queryable); the study server fetches it and checks the hash. A `stop` from the server ends a
+match early. Killed, the host's token goes and the server offers the trial again.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import threading
+from pathlib import Path
+
+import zenoh
+
+from services.adapter.core import AdapterConfig
+from services.agent import library
+from services.launch import MatchPlan, run_match
+from services.recorder.service import recording_path
+from shared import keys
+from shared.bus import BusConfig, Drops, subscribe, why
+from shared.errors import Failure, UsageError
+from shared.game import ROLES, GameConfig
+from shared.messages import (
+    CHUNK,
+    HostStatus,
+    MatchAnswer,
+    MatchDone,
+    MatchOffer,
+    MatchStop,
+    MessageError,
+    RecordingChunk,
+    decode,
+)
+
+log = logging.getLogger("tsf.host")
+WAIT_SERVICES = 30.0  # seconds a hosted match's sim waits for its recorder and adapter
+
+
+def offer_of(plan: MatchPlan, sender: str) -> MatchOffer:
+    """The offer that asks a host to run `plan` (the adaptive seat's key is sent empty)."""
+    seats = {role: getattr(plan, role) for role in ROLES}
+    if plan.adapter is not None:
+        seats[plan.adapter.role] = ""
+    return MatchOffer(
+        match=plan.match, frame=0, sender=sender, seed=plan.seed, frames=plan.frames, **seats,
+        adapter=plan.adapter.name if plan.adapter else "", wait_players=plan.wait_players,
+        timeout=plan.timeout, library=library.manifest_hash(), config=GameConfig().hash(),
+    )  # fmt: skip
+
+
+def plan_of(offer: MatchOffer, directory: Path, router: BusConfig) -> MatchPlan:
+    """The match an offer asks for, run here: its sim also connects to the router (so a seat the
+    server plays reaches it). A seat the host cannot fill is a UsageError (MatchPlan's checks)."""
+    seats = {role: getattr(offer, role) for role in ROLES}
+    adapter = None
+    if offer.adapter:
+        empty = [role for role in ROLES if not seats[role]]
+        adapter = (
+            AdapterConfig.parse(offer.adapter, role=empty[0], seed=offer.seed) if len(empty) == 1 else None
+        )
+        if not adapter:
+            raise UsageError("adapter", offer.adapter, "not an adaptive agent for the one empty seat")
+        seats[adapter.role] = MatchPlan.bait if adapter.role == "bait" else MatchPlan.shooter
+    return MatchPlan(
+        offer.match, offer.seed, offer.frames, directory=directory, low_latency=router.low_latency,
+        peers=router.connect, wait_players=offer.wait_players, wait_services=WAIT_SERVICES,
+        timeout=offer.timeout, adapter=adapter, **seats,
+    )  # fmt: skip
+
+
+def sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as data:
+        while block := data.read(1 << 20):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+class Host:
+    """The bookkeeping of one match host, apart from the bus: its matches and their recordings."""
+
+    def __init__(self, name: str, slots: int, out: Path) -> None:
+        self.name, self.slots, self.out = name, slots, out
+        self.sender = f"host/{name}"
+        self.running: dict[str, tuple[threading.Event, threading.Thread]] = {}
+        self.finished: dict[str, Path] = {}  # match -> its recording, served in chunks
+        self.lock = threading.RLock()
+        self.hashes = (library.manifest_hash(), GameConfig().hash())
+
+    def status(self) -> HostStatus:
+        with self.lock:
+            free = max(0, self.slots - len(self.running))
+        return HostStatus(match=self.name, frame=0, sender=self.sender, slots=self.slots, free=free)
+
+    def refusal(self, offer: MatchOffer) -> str:
+        """Why this host cannot run `offer` now; "" if it can."""
+        if (offer.library, offer.config) != self.hashes:
+            return f"library/rules {'/'.join(self.hashes)} on host {self.name}: update its checkout"
+        with self.lock:
+            if offer.match in self.running or offer.match in self.finished:
+                return f"match {offer.match} was offered before"
+            if len(self.running) >= self.slots:
+                return f"host {self.name} has no free slot"
+        return ""
+
+    def chunk(self, match: str, offset: int) -> RecordingChunk:
+        """Up to CHUNK bytes of a finished match's recording from `offset`; ValueError if there is none."""
+        with self.lock:
+            path = self.finished.get(match)
+        if path is None or not path.exists():
+            raise ValueError(f"no recording of {match} on host {self.name}")
+        with path.open("rb") as data:
+            size = data.seek(0, 2)
+            data.seek(min(offset, size))
+            block = data.read(CHUNK)
+        return RecordingChunk(match=match, frame=0, sender=self.sender, offset=offset, size=size, data=block)
+
+
+def run_match_host(bus: BusConfig, name: str, slots: int, out: Path, stop: threading.Event) -> int:
+    """Serve matches until `stop`; then end the running ones. Returns the number of matches run."""
+    if not bus.connect:
+        raise UsageError(
+            "--connect", "(none)", "a match host needs the router's endpoint, e.g. tcp/10.0.0.1:7447"
+        )
+    host = Host(keys.check_match(name), slots, out)
+    drops = Drops(host.sender)
+    try:
+        z = zenoh.open(bus.to_zenoh())
+    except zenoh.ZError as error:
+        raise Failure(f"cannot reach the router at {', '.join(bus.connect)}: {why(error)}") from None
+    played = 0
+
+    def put_status() -> None:
+        z.put(keys.host_status(name), host.status().encode())
+
+    def play(plan: MatchPlan, ended: threading.Event) -> None:
+        error = ""
+        try:
+            run_match(plan, stop=ended)
+        except Exception as failure:  # noqa: BLE001 - a match that fails is reported, never fatal
+            error = (str(failure) or type(failure).__name__)[:300]
+        path = recording_path(plan.directory, plan.match)
+        size, digest = (path.stat().st_size, sha256(path)) if path.exists() else (0, "")
+        with host.lock:
+            del host.running[plan.match]
+            host.finished[plan.match] = path
+        log.info("match %s ended%s; recording %d bytes", plan.match, f": {error}" if error else "", size)
+        done = MatchDone(match=plan.match, frame=0, sender=host.sender, error=error, size=size, sha256=digest)
+        if not z.is_closed():
+            z.put(keys.host_done(name), done.encode())
+            put_status()
+
+    def on_offer(query: zenoh.Query) -> None:
+        nonlocal played
+        try:
+            offer = decode(query.payload.to_bytes() if query.payload else b"", MatchOffer)
+        except MessageError as error:
+            drops.drop(keys.host_offer(name), error)
+            return
+        plan, thread = None, None
+        with host.lock:  # checked and taken at once: two offers never share the last slot
+            try:
+                reason = host.refusal(offer)
+                plan = None if reason else plan_of(offer, out, bus)
+            except ValueError as error:  # a seat this host cannot fill (UsageError)
+                reason = str(error)[:300]
+            if plan is not None:
+                ended = threading.Event()
+                thread = threading.Thread(target=play, args=(plan, ended), name=f"match-{offer.match}")
+                host.running[offer.match] = (ended, thread)
+                played += 1
+        if thread is not None:
+            thread.start()
+            log.info("runs match %s", offer.match)
+        answer = MatchAnswer(
+            match=offer.match, frame=0, sender=host.sender, accepted=plan is not None, reason=reason
+        )
+        query.reply(keys.host_offer(name), answer.encode())
+        put_status()
+
+    def on_stop(message: MatchStop) -> None:
+        with host.lock:
+            ended = host.running.get(message.match, (None,))[0]
+        if ended is not None:
+            log.info("the study server ends match %s", message.match)
+            ended.set()
+
+    def on_recording(query: zenoh.Query) -> None:
+        try:
+            match = keys.parse(query.key_expr).match
+            chunk = host.chunk(match, int(query.parameters.get("offset", "0")))
+        except ValueError as error:
+            drops.drop(str(query.key_expr), error)
+            query.reply_err(str(error)[:300].encode())
+            return
+        query.reply(query.key_expr, chunk.encode())
+
+    try:
+        with (
+            z.declare_queryable(keys.host_offer(name), on_offer),
+            z.declare_queryable(keys.host_recording(name), on_recording),
+            subscribe(z, keys.host_stop(name), MatchStop, on_stop, drops),
+            z.liveliness().declare_token(keys.host_alive(name)),
+        ):
+            log.info("match host %s serves %d slots through %s", name, slots, ", ".join(bus.connect))
+            put_status()
+            while not stop.wait(1.0):
+                put_status()
+            with host.lock:
+                running = list(host.running.values())
+            for ended, _ in running:
+                ended.set()
+            for _, thread in running:
+                thread.join()
+    finally:
+        z.close()
+    return played

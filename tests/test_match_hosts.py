@@ -1,0 +1,158 @@
+"""Studies across machines: the study server is the router, `tsf match-host` processes connect to
+it over loopback and run the trials' matches, and every recording comes back into the study's
+directory with its hash checked; a host killed mid-trial leaves no recording marked done, and the
+trial is played again on another host."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import dataclasses
+import hashlib
+import json
+import signal
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+import zenoh
+from conftest import STAND_IN_TOKEN, wait_until
+
+from services.recorder.recording import load
+from services.study.core import StudyConfig, Variant
+from services.study.host import Host, sha256
+from services.study.remote import Remote
+from services.study.runner import Serving
+from services.study.standin import stand_in
+from shared import keys
+from shared.bus import BusConfig, free_endpoint, session
+from shared.errors import Failure
+from shared.messages import MatchDone
+
+TEST = STAND_IN_TOKEN
+
+
+@pytest.fixture
+def match_host(tmp_path):  # noqa: ANN201
+    """Start `tsf match-host` processes: host(name, endpoint) -> Popen; all are killed at teardown."""
+    started: list[subprocess.Popen] = []
+
+    def start(name: str, endpoint: str, slots: int = 1) -> subprocess.Popen:
+        command = [
+            sys.executable, "-m", "services.cli", "match-host", "--connect", endpoint,
+            "--slots", str(slots), "--id", name, "--out", str(tmp_path / name),
+        ]  # fmt: skip
+        started.append(subprocess.Popen(command, start_new_session=True))
+        return started[-1]
+
+    yield start
+    for host in started:
+        with contextlib.suppress(ProcessLookupError):
+            host.kill()
+        host.wait()
+
+
+def hosted(endpoint: str) -> Serving:
+    """A study server that runs no match itself: every trial goes to a match host."""
+    return Serving(max_matches=0, test_token=TEST, hosts=BusConfig("router", (endpoint,)))
+
+
+def test_trials_run_on_a_match_host_and_their_recordings_come_back_whole(tmp_path, study_server, match_host):
+    """A static and an adaptive agent, each in a match on the host; the participant's seat is played
+    over the router, and each recording is the host's, byte for byte, complete."""
+    endpoint = free_endpoint()
+    variants = (Variant("strong", "B5", "S5"), Variant("adaptive", adapter="adaptive-T30-cem"))
+    config = StudyConfig("remote", variants, trials=1, trial_seconds=2.0, seed=4)
+    stop, url, server = study_server(config, tmp_path / "study", hosted(endpoint))
+    match_host("lab-1", endpoint)
+    report = asyncio.run(asyncio.wait_for(stand_in(url, test=TEST), 240))
+    stop.set()
+    study = server.result(timeout=60)
+
+    assert report.done and len(report.kills) == 2, report.refused
+    attempts = study.participants["P001"].attempts
+    assert [a["status"] for a in attempts] == ["done", "done"]
+    for attempt, kills in zip(attempts, report.kills, strict=True):
+        here = tmp_path / "study" / "recordings" / f"{attempt['match']}.tsflog"
+        there = tmp_path / "lab-1" / here.name
+        assert hashlib.sha256(here.read_bytes()).hexdigest() == hashlib.sha256(there.read_bytes()).hexdigest()
+        recording = load(here)
+        assert recording.problems() == [] and len(recording.states) == config.frames + 1
+        assert recording.summary.kills == attempt["kills"] == kills
+        human = [a for _, a in recording.actions if a.role == report.role]
+        assert human and all(a.sender == f"human/{report.role}" for a in human), "played over the router"
+        sidecar = json.loads(here.with_suffix(".study.json").read_text())
+        assert sidecar["status"] == "done" and sidecar["participant"] == "P001"
+        assert bool(recording.adapter) == (sidecar["variant"] == "adaptive"), "the host ran the adapter"
+    assert not list((tmp_path / "study" / "recordings").glob("*.part"))
+
+
+def test_a_host_killed_mid_trial_leaves_the_trial_to_be_played_again(tmp_path, study_server, match_host):
+    endpoint = free_endpoint()
+    config = StudyConfig("killed", (Variant("strong", "B5", "S5"),), trials=1, trial_seconds=8.0)
+    stop, url, server = study_server(config, tmp_path / "study", hosted(endpoint))
+    first = match_host("lab-1", endpoint)
+    reports = []
+    player = threading.Thread(target=lambda: reports.append(asyncio.run(stand_in(url, test=TEST))))
+    player.start()
+    try:
+        playing = tmp_path / "lab-1" / "killed-P001-s1t1.tsflog"
+        assert wait_until(lambda: playing.exists() and playing.stat().st_size > 50_000, timeout=120)
+        first.send_signal(signal.SIGKILL)  # its matches' processes die with it (PR_SET_PDEATHSIG)
+        first.wait()
+        match_host("lab-2", endpoint)
+        player.join(240)
+    finally:
+        stop.set()
+    study = server.result(timeout=60)
+
+    assert reports and reports[0].done and reports[0].again == 1, reports
+    attempts = study.participants["P001"].attempts
+    assert [(a["attempt"], a["status"]) for a in attempts] == [(1, "failed"), (2, "done")]
+    recordings = tmp_path / "study" / "recordings"
+    assert not (recordings / "killed-P001-s1t1.tsflog").exists(), "no half recording comes back"
+    assert not list(recordings.glob("*.part"))
+    assert json.loads((recordings / "killed-P001-s1t1.study.json").read_text())["status"] == "failed"
+    again = recordings / "killed-P001-s1t1-a2.tsflog"
+    assert load(again).problems() == []
+    assert again.read_bytes() == (tmp_path / "lab-2" / again.name).read_bytes()
+
+
+def test_a_recording_whose_hash_differs_never_lands_in_the_study(tmp_path: Path) -> None:
+    endpoint = free_endpoint()
+    source = tmp_path / "host" / "m.tsflog"
+    source.parent.mkdir()
+    source.write_bytes(bytes(range(256)) * 1000)  # several chunks
+    host = Host("lab-1", 1, source.parent)
+    host.finished["m"] = source
+
+    def serve(query: zenoh.Query) -> None:
+        chunk = host.chunk(keys.parse(query.key_expr).match, int(query.parameters.get("offset", "0")))
+        query.reply(query.key_expr, chunk.encode())
+
+    remote = Remote(BusConfig("router", (endpoint,)))
+    try:
+        with (
+            session(BusConfig("client", (), (endpoint,))) as z,
+            z.declare_queryable(keys.host_recording("lab-1"), serve),
+        ):
+            asked = f"{keys.host_recording('lab-1', 'm')}?offset=0"
+            assert wait_until(lambda: any(r.ok for r in remote.z.get(asked, timeout=1)), timeout=10)
+            done = MatchDone(
+                match="m", frame=0, sender="host/lab-1", size=source.stat().st_size, sha256=sha256(source)
+            )
+            remote.fetch("lab-1", "m", done, tmp_path / "study" / "m.tsflog")
+            assert (tmp_path / "study" / "m.tsflog").read_bytes() == source.read_bytes()
+            with pytest.raises(Failure, match="does not match its sha256"):
+                remote.fetch(
+                    "lab-1", "m", dataclasses.replace(done, sha256="0" * 64), tmp_path / "study" / "n.tsflog"
+                )
+            with pytest.raises(Failure, match="did not serve"):
+                remote.fetch("lab-1", "x", done, tmp_path / "study" / "x.tsflog")
+    finally:
+        remote.close()
+    assert sorted(p.name for p in (tmp_path / "study").iterdir()) == ["m.tsflog"], (
+        "nothing else, nothing half"
+    )

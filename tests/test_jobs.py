@@ -84,6 +84,7 @@ def journal_ids(path) -> list[str]:  # noqa: ANN001 - a Path
     return [json.loads(line)["job"] for line in path.read_text().splitlines() if line.endswith("}")]
 
 
+@pytest.mark.slow  # over 15 s of real processes; runs with -m slow
 def test_evaluation_survives_a_killed_worker(bus, spawn, background, wait_until, tmp_path, monkeypatch):
     monkeypatch.setattr(team, "JOB_GAMES", 2)  # six jobs of two games: the victim has one in flight
     sweep, journal = f"k{uuid.uuid4().hex[:8]}", tmp_path / "eval.journal"
@@ -102,6 +103,7 @@ def test_evaluation_survives_a_killed_worker(bus, spawn, background, wait_until,
     assert len(ids) == len(set(ids)) == 6  # every job once
 
 
+@pytest.mark.slow  # over 15 s of real processes; runs with -m slow
 def test_a_killed_coordinator_resumes_and_counts_each_job_once(tmp_path, wait_until):
     """`tsf sweep` killed with SIGKILL mid-run (its local workers die with it), then run again."""
     from services.table.table import Table, assemble, jobs, run_job

@@ -89,6 +89,7 @@ def test_trials_run_on_a_match_host_and_their_recordings_come_back_whole(tmp_pat
     assert not list((tmp_path / "study" / "recordings").glob("*.part"))
 
 
+@pytest.mark.slow  # over 15 s of real processes; runs with -m slow
 def test_a_host_killed_mid_trial_leaves_the_trial_to_be_played_again(tmp_path, study_server, match_host):
     endpoint = free_endpoint()
     config = StudyConfig("killed", (Variant("strong", "B5", "S5"),), trials=1, trial_seconds=8.0)

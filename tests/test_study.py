@@ -80,6 +80,7 @@ def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_unti
         assert sorted(set(met)) == sorted(v.name for v in VARIANTS)  # each variant met
 
 
+@pytest.mark.slow  # over 15 s of real processes; runs with -m slow
 def test_a_trial_past_its_time_is_ended_and_offered_again_then_a_problem_is_shown(tmp_path, study_server):
     config = StudyConfig("late", (VARIANTS[0],), trials=1, trial_seconds=2.0)
     # 10 ms beyond its length from Ready: no match ends that soon (its summary comes after its last frame)
@@ -95,6 +96,7 @@ def test_a_trial_past_its_time_is_ended_and_offered_again_then_a_problem_is_show
         assert sidecar["status"] == "failed"
 
 
+@pytest.mark.slow  # over 15 s of real processes; runs with -m slow
 def test_a_restarted_server_resumes_everyone(tmp_path, study_server):
     config = StudyConfig("again", (VARIANTS[0],), trials=2, trial_seconds=1.0)
     stop, url, server = study_server(config, tmp_path)

@@ -34,7 +34,7 @@ QUICK = ["--epochs", "3", "--patience", "2", "--hidden", "16"]
 def proxy(tmp_path_factory):
     """A bait proxy of three stand-in participants, trained by the command."""
     directory = tmp_path_factory.mktemp("proxy")
-    paths = trials(directory / "recordings", 4, config=GameConfig(frames=400))
+    paths = trials(directory / "recordings", 4, config=GameConfig(frames=600))
     out = directory / "bait-proxy"
     args = ["proxy", "train", *map(str, paths), "--role", "bait", "--out", str(out), *QUICK]
     assert run(app, args) == 0
@@ -151,7 +151,7 @@ def test_bad_input_is_one_line_and_nothing_is_written(proxy, tmp_path, capsys):
 @pytest.mark.slow  # a minute: two proxies trained, then team games with every shooter
 def test_eval_partners_from_a_study_trains_one_proxy_per_participant(tmp_path, capsys):
     study = tmp_path / "study"
-    config = GameConfig(frames=700)
+    config = GameConfig(frames=1200)
     for p in range(2):
         for t in range(2):
             name = f"s-p{p}-t{t}"

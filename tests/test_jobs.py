@@ -74,7 +74,7 @@ def test_a_worker_without_the_plugin_gets_no_more_jobs(bus, spawn, tmp_path, mon
 def test_in_process_run_names_the_missing_plugin(name):
     from services.jobs.kinds import import_plugins, plugins_in
 
-    assert plugins_in([f"noisy({name})", "B1", "my.zip"]) == (name,)
+    assert plugins_in([f"noisy({name})", "B1", "my.zip", "human(proxy:/study/proxies/p0)"]) == (name,)
     assert import_plugins([name]).startswith(f"cannot import plug-in {name}: ModuleNotFoundError")
     assert import_plugins(["services.adapter.partners_test:Constant"]) == ""
     assert sys.modules.get("no_such_module") is None

@@ -12,6 +12,7 @@ import importlib
 from collections.abc import Callable, Iterable
 from typing import Any
 
+from services.agent.outside import PROXY
 from services.jobs.core import Spec
 
 Runner = Callable[[list[Spec], Callable[[int, int], None] | None], list[list]]  # (jobs, progress) -> values
@@ -45,12 +46,12 @@ def in_process(todo: list[Spec], progress: Callable[[int, int], None] | None = N
 
 def plugins_in(names: Iterable[str]) -> tuple[str, ...]:
     """The `module:attr` plug-ins among partner or policy names (inside wrappers too:
-    noisy(my_lab.partners:Alice))."""
+    noisy(my_lab.partners:Alice)); a proxy (`proxy:DIR`) is a directory, not a plug-in."""
     found = []
     for name in names:
         for part in name.replace("(", ",").replace(")", ",").split(","):
             part = part.strip()
-            if ":" in part and not part.endswith(".zip"):
+            if ":" in part and not part.endswith(".zip") and not part.startswith(PROXY):
                 found.append(part)
     return tuple(dict.fromkeys(found))
 

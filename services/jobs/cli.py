@@ -62,6 +62,7 @@ HOSTS = typer.Option(
     "--host",
     help="A Docker engine by URL (tcp://..., ssh://user@host), repeatable (default: this machine's).",
 )
+ONE_SWEEP = typer.Option(None, "--sweep", help="Only this sweep's workers (default: every one).")
 
 
 @workers_commands.command("up")
@@ -90,9 +91,7 @@ def workers_up(
 @workers_commands.command("down")
 def workers_down(
     host: list[str] | None = HOSTS,
-    sweep_id: str | None = typer.Option(
-        None, "--sweep", help="Only this sweep's workers (default: every one)."
-    ),
+    sweep_id: str | None = ONE_SWEEP,
 ) -> None:
     """Stop and remove worker containers."""
     from services.jobs import deploy
@@ -105,9 +104,7 @@ def workers_down(
 @workers_commands.command("ls")
 def workers_ls(
     host: list[str] | None = HOSTS,
-    sweep_id: str | None = typer.Option(
-        None, "--sweep", help="Only this sweep's workers (default: every one)."
-    ),
+    sweep_id: str | None = ONE_SWEEP,
 ) -> None:
     """List worker containers: engine, name, sweep, status."""
     from services.jobs import deploy

@@ -12,7 +12,7 @@ import importlib
 from collections.abc import Callable, Iterable
 from typing import Any
 
-from services.agent.outside import PROXY
+from services.agent.outside import is_plugin
 from services.jobs.core import Spec
 
 Runner = Callable[[list[Spec], Callable[[int, int], None] | None], list[list]]  # (jobs, progress) -> values
@@ -51,7 +51,7 @@ def plugins_in(names: Iterable[str]) -> tuple[str, ...]:
     for name in names:
         for part in name.replace("(", ",").replace(")", ",").split(","):
             part = part.strip()
-            if ":" in part and not part.endswith(".zip") and not part.startswith(PROXY):
+            if is_plugin(part):
                 found.append(part)
     return tuple(dict.fromkeys(found))
 

@@ -102,8 +102,10 @@ def _named(value: Check) -> Check:
 
 _ROLE = _one_of(ROLES)
 _ROLE_OR_NONE = _one_of(("", *ROLES))
-_KEY = _text(r"[A-Za-z0-9_.:-]{1,32}")
-_KEY_OR_NONE = _text(r"[A-Za-z0-9_.:-]{0,32}")
+# A policy's name in messages: a key, an adaptive agent's name, a plug-in's (services/agent/outside.py).
+POLICY_NAME = r"[A-Za-z0-9_.:-]{1,64}"
+_KEY = _text(POLICY_NAME)
+_KEY_OR_NONE = _text(POLICY_NAME.replace("{1,", "{0,"))
 _ACTION = _int(0, N_ACTIONS - 1)
 _SENDER = _text(r"[A-Za-z0-9_.:/-]{1,64}")
 _MATCH = _text(r"[A-Za-z0-9_-]{1,64}")

@@ -31,7 +31,7 @@ BEST_FOR_B3 = Table.load(DEFAULT_TABLE).best_shooter("B3")
 def test_adapter_switches_the_agent_to_the_best_response(bus, tap, background, wait_until) -> None:
     match = "adapt"
     recorded = tap(bus.open(listen=True), match)
-    config = AdapterConfig("shooter", window=100)
+    config = AdapterConfig("shooter", window=100, strategy="cem")
     adapter = background(run_adapter, bus.config(), match, config)
     assert wait_until(lambda: recorded.is_alive("adapter"), timeout=10)
     agents = [
@@ -67,7 +67,8 @@ def test_malformed_partner_actions_are_dropped_and_never_averaged(bus, tap, back
     match = "adapt-bad"
     z = bus.open(listen=True)
     recorded = tap(z, match)
-    config = AdapterConfig("shooter", window=50, warmup=1000)  # no switching: only the window is watched
+    # no switching: only the window is watched
+    config = AdapterConfig("shooter", window=50, strategy="cem", warmup=1000)
     adapter = background(run_adapter, bus.config(), match, config)
     assert wait_until(lambda: recorded.is_alive("adapter"), timeout=10)
     game, partner = Game(GameConfig(frames=60), 2), library.load("B5")
@@ -124,7 +125,7 @@ def test_malformed_partner_actions_are_dropped_and_never_averaged(bus, tap, back
 def test_killing_the_adapter_leaves_the_match_and_the_agent_intact(bus, tap, spawn, wait_until) -> None:
     match = "adapt-kill"
     recorded = tap(bus.open(listen=True), match)
-    config = AdapterConfig("shooter", window=60)
+    config = AdapterConfig("shooter", window=60, strategy="cem")
     first = spawn("adapter", bus.config(), "--match", match, *config.to_args())
     assert wait_until(lambda: recorded.is_alive("adapter"), timeout=20)
     spawn("agent", bus.config(), "--match", match, "--role", "bait", "--policy", "B3")

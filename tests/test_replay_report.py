@@ -42,7 +42,7 @@ def matches(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Summary
         "B5",
         "S5",
         directory,
-        adapter=AdapterConfig("shooter", WINDOW, seed=3),
+        adapter=AdapterConfig("shooter", WINDOW, "cem", seed=3),
     )
     out[adaptive.match] = run_match(adaptive)
     return out

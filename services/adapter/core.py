@@ -73,7 +73,7 @@ class AdapterConfig:
 
     role: str = _option("shooter", "The adaptive agent's seat; the partner plays the other.")
     window: int = _option(400, "T: frames of partner play the similarity averages over.")
-    strategy: str = _option("cem", f"One of {', '.join(STRATEGIES)}.")
+    strategy: str = _option("bayes-dwell-ood-guard", f"One of {', '.join(STRATEGIES)}.")
     initial: str = _option("best-average", f"Policy before the first estimate: {' or '.join(INITIAL)}.")
     warmup: int = _option(0, "Frames before the first estimate (0: min(T, 150), 5 s).")
     dwell: int = _option(0, "-dwell strategies: frames a new choice must hold (0: max(15, T/10)).")

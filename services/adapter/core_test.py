@@ -64,7 +64,7 @@ def test_payoff_from_the_shipped_table_for_either_seat() -> None:
 
 
 def test_cem_plays_the_initial_policy_until_warmup_then_the_best_response() -> None:
-    adapter = Adapter(AdapterConfig(window=10, warmup=5), PAYOFF)
+    adapter = Adapter(AdapterConfig(window=10, strategy="cem", warmup=5), PAYOFF)
     assert adapter.policy == "c" and adapter.partner == ""  # best average
     changes = [adapter.update(frame(1)) for _ in range(5)]
     assert changes == [False] * 4 + [True]
@@ -72,7 +72,7 @@ def test_cem_plays_the_initial_policy_until_warmup_then_the_best_response() -> N
 
 
 def test_cem_follows_a_switch_once_the_window_majority_changes() -> None:
-    adapter = Adapter(AdapterConfig(window=9, warmup=9), PAYOFF)
+    adapter = Adapter(AdapterConfig(window=9, strategy="cem", warmup=9), PAYOFF)
     for _ in range(9):
         adapter.update(frame(0))
     assert adapter.policy == "a"
@@ -140,7 +140,7 @@ def test_config_is_validated() -> None:
         AdapterConfig(noise=1.0)
     assert AdapterConfig(window=800).warmup_frames == 150
     assert AdapterConfig(window=400, strategy="cem-dwell").dwell_frames == 40
-    assert AdapterConfig(window=400).dwell_frames == 0
+    assert AdapterConfig(window=400, strategy="cem").dwell_frames == 0
 
 
 def test_scorer_single_and_batched_agree_with_each_policy() -> None:

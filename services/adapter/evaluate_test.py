@@ -44,7 +44,7 @@ def test_variant_names_round_trip() -> None:
 
 
 def test_adaptive_game_switches_to_the_best_response_and_is_deterministic() -> None:
-    config = AdapterConfig("shooter", 150)
+    config = AdapterConfig("shooter", 150, "cem")
     first = play_partner(make_partner("B3", "bait"), config, 4, "shooter")
     again = play_partner(make_partner("B3", "bait"), config, 4, "shooter")
     assert first == again
@@ -88,7 +88,7 @@ def test_compare_pairs_by_partner_and_seed() -> None:
 
 GUARD = "bayes-dwell-ood-guard"
 GAMES = [
-    ("B3", AdapterConfig("shooter", 150), 4),
+    ("B3", AdapterConfig("shooter", 150, "cem"), 4),
     ("noisy(B6)", AdapterConfig("shooter", 150, "cem-dwell"), 1),
     ("circle", AdapterConfig("shooter", 400, "bayes-dwell-ood"), 2),
     ("sticky(switch(B1,B5))", AdapterConfig("shooter", 150, "bayes"), 3),
@@ -147,7 +147,7 @@ def test_batched_games_agree_with_scalar_games_in_distribution() -> None:
     """Batched draws are other streams than the scalar policies' own: kills/min of adaptive games
     with a noisy partner agree within three standard errors of the difference over 40 seeds, and
     so do the numbers of switches."""
-    agent, seeds = AdapterConfig("shooter", 150), range(40)
+    agent, seeds = AdapterConfig("shooter", 150, "cem"), range(40)
     batched = play_games([("noisy(B6)", agent, seed) for seed in seeds], "shooter")
     scalar = [play_partner(make_partner("noisy(B6)", "bait"), agent, seed, "shooter") for seed in seeds]
     for measure in ("kills_per_minute", "switches"):

@@ -10,6 +10,8 @@ any worker process:
     switch(B5,B7)      plays B5 until SWITCH_AT, then B7 (a partner who changes style mid-game)
     human(B5)          B5 played by a simulated hand: reaction delay, held keys, lapses, slips
     human(B1,B5)       the same, drifting from B1's style to B5's over a session (human_like.py)
+    circle(radius=150,speed=3)  a scripted rule with other settings (any of its constructor's
+                       numbers): a hand-written partner whose style no library policy has
     package.module:attr  your own partner: an object with the policy protocol's key, role, view,
                          reset(seed) and act(obs), or a callable that returns a new one
     my_bait.zip          a model trained with Stable-Baselines3 (services/agent/outside.py)
@@ -20,6 +22,7 @@ Wrappers nest: `noisy(switch(B5,B7))`.
 
 from __future__ import annotations
 
+import inspect
 import random
 import re
 from collections import deque
@@ -31,6 +34,8 @@ from services.adapter.human_like import HumanLike
 from services.agent import library
 from services.agent.library import policy_for
 from services.agent.outside import PROXY
+from services.agent.scripted import SCRIPTED
+from shared.errors import UsageError
 from shared.game import N_ACTIONS
 
 NOISE = 0.1
@@ -137,7 +142,30 @@ def make_partner(name: str, role: str) -> Partner:
     if call and call[1] == "switch":
         first, second = _split_arguments(call[2])
         return Switching(make_partner(first, role), make_partner(second, role))
+    if call and call[1] in SCRIPTED:
+        return _scripted(name, call[1], call[2], role)
     return policy_for(name, role, "--partner")  # also a .zip or module:attr (services/agent/outside.py)
+
+
+def _scripted(name: str, rule: str, arguments: str, role: str) -> Partner:
+    """A scripted rule with other settings, `rule(setting=number, ...)`, named by `name`."""
+    kind = SCRIPTED[rule]
+    settings = [s for s in inspect.signature(kind).parameters if s not in ("epsilon", "config")]
+    if kind.role != role:
+        raise UsageError("--partner", name, f"{rule} plays the {kind.role} seat, not the {role} seat")
+    values = {}
+    for item in filter(None, (a.strip() for a in arguments.split(","))):
+        setting, _, number = (part.strip() for part in item.partition("="))
+        try:
+            values[setting] = float(number)
+        except ValueError:
+            values[setting] = None
+        if setting not in settings or values[setting] is None:
+            problem = f"{item!r} is not SETTING=NUMBER for a setting of {rule}"
+            raise UsageError("--partner", name, problem, settings)
+    partner = kind(**values)
+    partner.key = name
+    return partner
 
 
 def _split_arguments(text: str, fewest: int = 2) -> tuple[str, ...]:
@@ -169,16 +197,24 @@ def group_of(name: str) -> str:
     return "library" if name in library.registry() else "outside"
 
 
+# Hand-written partners of each seat: its scripted rule, smaller and larger, slower and faster.
+OUTSIDE = {
+    "bait": ("circle", ("radius", (80, 150)), ("speed", (1.5, 3))),
+    "shooter": ("mirror", ("radius", (220, 280)), ("max_speed", (3, 5))),
+}
+
+
 def population(role: str) -> dict[str, list[str]]:
     """The default evaluation population of partners of `role`, by group: every library policy,
     its noisy, delayed and sticky stand-ins, switchers between library policies of different
     families, human-like partners (every library policy played by a simulated hand, and hands that
-    drift between the switchers' styles over a session), and two partners outside the library
-    (the scripted demonstrator and random)."""
+    drift between the switchers' styles over a session), and partners outside the library: random,
+    and the scripted rule of the seat at its defaults and at four other settings (`OUTSIDE`)."""
     keys = library.keys(role)
     half = len(keys) // 2
     switches = [f"switch({a},{b})" for a, b in zip(keys, keys[half:] + keys[:half], strict=True)]
-    outside = ["circle" if role == "bait" else "mirror", "random"]
+    rule, (size, sizes), (speed, speeds) = OUTSIDE[role]
+    outside = [rule, *(f"{rule}({size}={a},{speed}={b})" for a in sizes for b in speeds), "random"]
     return {
         "library": keys,
         "noisy": [f"noisy({k})" for k in keys],

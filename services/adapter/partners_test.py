@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -13,9 +15,11 @@ from services.adapter.partners import (
     Partner,
     Sticky,
     Switching,
+    group_of,
     make_partner,
     population,
 )
+from shared.errors import UsageError
 from shared.game import N_ACTIONS
 
 
@@ -96,7 +100,21 @@ def test_switching_changes_policy_at_its_frame() -> None:
 def test_population_covers_every_group() -> None:
     groups = population("bait")
     assert set(groups) == {"library", "noisy", "delayed", "sticky", "switching", "human-like", "outside"}
-    assert len(groups["library"]) == 9 and len(groups["switching"]) == 9
+    assert len(groups["library"]) == 9 and len(groups["switching"]) == 9 and len(groups["outside"]) == 6
     for names in groups.values():
         for name in names:
             assert make_partner(name, "bait").role == "bait"
+
+
+def test_a_scripted_rule_with_other_settings_plays_them_under_its_own_name() -> None:
+    name = "circle(radius=150,speed=3)"
+    partner = make_partner(name, "bait")
+    assert (partner.key, partner.radius, partner.speed, partner.outside) == (name, 150.0, 3.0, 235.0)
+    assert group_of(name) == "outside"
+    for bad, problem in (
+        ("circle(size=3)", "'size=3' is not SETTING=NUMBER for a setting of circle; valid: radius, speed"),
+        ("circle(radius=wide)", "'radius=wide' is not SETTING=NUMBER"),
+        ("mirror(radius=200)", "mirror plays the shooter seat, not the bait seat"),
+    ):
+        with pytest.raises(UsageError, match=re.escape(f"--partner {bad}: {problem}")):
+            make_partner(bad, "bait")

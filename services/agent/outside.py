@@ -28,6 +28,7 @@ import numpy as np
 from services.sim.observation import VIEWS
 from shared.errors import UsageError
 from shared.game import N_ACTIONS, OBS_SIZE, ROLES
+from shared.messages import POLICY_NAME
 
 if TYPE_CHECKING:
     from services.agent.library import JointPolicy
@@ -36,14 +37,14 @@ if TYPE_CHECKING:
 ACTIVATIONS = {"Tanh": "tanh", "ReLU": "relu"}  # torch module name: library.Network's name
 KEY = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
 PROXY = "proxy:"  # a proxy's key: proxy:DIR (services/agent/proxy.py)
-NAME = re.compile(r"^[A-Za-z0-9_.:-]{1,32}$")  # a policy's name in messages (shared/messages.py)
+NAME = re.compile(POLICY_NAME)
 
 
 def record_name(key: str) -> str:
-    """How a policy key is named in messages and recordings, which take 1-32 of [A-Za-z0-9_.:-]: a
+    """How a policy key is named in messages and recordings, which take 1-64 of [A-Za-z0-9_.:-]: a
     library or scripted key as it is, a `.zip` by its file name, a `proxy:DIR` by its directory's
     name, a `module:attr` as it is where it fits, else by its attr."""
-    if not is_outside(key) or NAME.match(key):
+    if not is_outside(key) or NAME.fullmatch(key):
         return key
     if key.startswith(PROXY):
         name = PROXY + Path(key.removeprefix(PROXY)).name
@@ -87,8 +88,8 @@ def _object(path: str, option: str) -> Policy:
     policy = found() if isinstance(found, type) or not _is_policy(found) else found
     if not _is_policy(policy):
         raise UsageError(option, path, "is not a policy (key, role, view, reset, act)")
-    if not NAME.match(str(policy.key)):
-        raise UsageError(option, path, f"its key {policy.key!r} is not 1-32 of letters, digits, _ . : -")
+    if not NAME.fullmatch(str(policy.key)):
+        raise UsageError(option, path, f"its key {policy.key!r} is not 1-64 of letters, digits, _ . : -")
     return policy
 
 

@@ -75,7 +75,8 @@ def test_a_zip_is_named_in_messages_by_its_file_name(model_zip):
     long = path.parent / ("x" * 40) / "my_bait.zip"
     assert outside.record_name(str(long)) == "my_bait.zip" == policy_for(str(path), "bait").key
     assert outside.record_name("S5") == "S5"
-    assert outside.record_name("services.agent.scripted:CircleBait") == "CircleBait"
+    assert outside.record_name("services.agent.scripted:CircleBait") == "services.agent.scripted:CircleBait"
+    assert outside.record_name("my_lab." + "deeply_nested." * 5 + "policies:CircleBait") == "CircleBait"
     player = Player("bait", str(path), seed=1)
     state = state_message(Game(seed=1), "m", "sim", (0, 0))
     assert decode_any(player.act(state, "agent/bait").encode()).policy == "my_bait.zip"

@@ -41,7 +41,8 @@ DEFAULT_END = "Thank you for taking part. You may close this window now."
 class Variant:
     """One agent the participants meet. `bait` is the agent's policy when the participant plays the
     shooter, `shooter` when the participant plays the bait; an adaptive variant names its adaptive
-    agent instead (`adapter = "adaptive-T400-cem"`, services/adapter/core.py AdapterConfig)."""
+    agent instead (`adapter = "adaptive-T400-bayes-dwell-ood-guard"`, services/adapter/core.py
+    AdapterConfig)."""
 
     name: str
     bait: str = ""

@@ -173,8 +173,8 @@ def calibrate_adapter(
     workers: int = number(0, WORKERS, "Processes (default: one per core)."),
     out: Path = output(
         Path("tsf-calibration.json"),
-        "Where the thresholds go (the adapter reads services/adapter/calibration.json; name it here to "
-        "replace it).",
+        "Where the thresholds go (the adapter reads calibration.json beside the table, in the library "
+        "directory in use; name it here to replace it).",
     ),
 ) -> None:
     """Measure the adapter's out-of-library thresholds."""

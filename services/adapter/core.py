@@ -18,8 +18,8 @@ turns those scores into an estimated partner type C and our policy D (`Adapter`)
   previous trial (`next_trial`): its belief, window, policy and the guard's record carry over, and
   the next trial needs no warm-up. Within one game it is the strategy without it.
 - `-ood`: when the best window score is far below what library policies score on their own play
-  (calibration.json, see `calibrate` in thresholds.py), the partner is out of library: we play the
-  policy with the best average table entry and say so.
+  (calibration.json beside the table, see `calibrate` in thresholds.py), the partner is out of
+  library: we play the policy with the best average table entry and say so.
 
 Until `warmup` frames are seen, no estimate is made and the agent plays its initial policy:
 `best-average` (the best average table entry) or `random` (drawn from our role's library with
@@ -40,6 +40,7 @@ import numpy as np
 
 from services.adapter.cem import log_probs, observed_log_probs
 from services.adapter.guard import Guard, GuardLanes
+from services.agent import library
 from services.agent.policy import end_round_batch, stalled
 from services.table.table import DEFAULT_TABLE, Table
 from shared.errors import UsageError
@@ -56,7 +57,6 @@ STRATEGIES = (
 )
 INITIAL = ("best-average", "random")
 WINDOWS = Range(1, FRAMES.high)  # T: a window longer than a game never fills
-CALIBRATION = Path(__file__).parent / "calibration.json"
 ADAPTIVE = "adaptive-"  # how every adaptive agent's name begins
 _NAME = re.compile(rf"^{ADAPTIVE}T(\d+)-([a-z-]+)$")
 
@@ -144,7 +144,12 @@ class AdapterConfig:
 
     def threshold(self) -> float | None:
         """The out-of-library threshold, for the strategies that have one."""
-        return ood_threshold(self.partner_role, self.window) if "ood" in self.strategy else None
+        if "ood" not in self.strategy:
+            return None
+        try:
+            return ood_threshold(self.partner_role, self.window)
+        except StaleCalibration as error:
+            raise UsageError("--strategy", self.strategy, str(error)) from None
 
 
 @dataclass(frozen=True)
@@ -232,11 +237,26 @@ class Scorer:
         return observed_log_probs(self.policies, observed, actions)
 
 
-def ood_threshold(partner_role: str, window: int, path: Path = CALIBRATION) -> float:
-    """The out-of-library threshold for a window of T frames (the nearest calibrated T)."""
-    thresholds = json.loads(path.read_text())["thresholds"][partner_role]
+def ood_threshold(partner_role: str, window: int, path: Path | None = None) -> float:
+    """The out-of-library threshold for a window of T frames (the nearest calibrated T), from the
+    calibration of the libraries in use; StaleCalibration if it is missing or of other libraries."""
+    path = path or library.calibration_path()
+    remedy = f"measure it with `tsf calibrate-adapter --out {path}`, or choose a strategy without -ood"
+    if not path.exists():
+        raise StaleCalibration(f"no out-of-library thresholds at {path}: {remedy}")
+    record = json.loads(path.read_text())
+    if record.get("library") != library.manifest_hash():
+        raise StaleCalibration(
+            f"{path} was measured with library {record.get('library')}, but the library is now "
+            f"{library.manifest_hash()}: {remedy}"
+        )
+    thresholds = record["thresholds"][partner_role]
     nearest = min(thresholds, key=lambda t: abs(int(t) - window))
     return float(thresholds[nearest])
+
+
+class StaleCalibration(ValueError):
+    """Out-of-library thresholds missing, or measured with other libraries than the ones loaded."""
 
 
 class Pairing:

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -162,6 +164,26 @@ def test_shipped_calibration_has_a_threshold_per_role() -> None:
     for role in ("bait", "shooter"):
         assert -12.0 < ood_threshold(role, 400) < 0.0
         assert ood_threshold(role, 150) <= ood_threshold(role, 800) + 1e-9
+
+
+def test_thresholds_of_other_libraries_or_none_are_refused_with_the_remedy(tmp_path, monkeypatch) -> None:
+    """A strategy with -ood in a library of yours needs thresholds measured on it, as the table does."""
+    mine = library.copy(tmp_path / "mine")
+    monkeypatch.setenv("TSF_LIBRARY", str(mine))
+    config = AdapterConfig("shooter", 400, "bayes-dwell-ood-guard")
+    with pytest.raises(
+        UsageError, match=re.escape(f"no out-of-library thresholds at {mine}/calibration.json")
+    ):
+        config.threshold()
+    record = json.loads((library.LIBRARY / "calibration.json").read_text())
+    (mine / "calibration.json").write_text(json.dumps(record | {"library": "0123456789abcdef"}))
+    with pytest.raises(
+        UsageError, match="was measured with library 0123456789abcdef, but the library is now"
+    ):
+        config.threshold()
+    (mine / "calibration.json").write_text(json.dumps(record | {"library": library.manifest_hash()}))
+    assert config.threshold() == record["thresholds"]["bait"]["400"]
+    assert AdapterConfig("shooter", 400, "cem-dwell").threshold() is None
 
 
 def test_frames_of_a_stalled_round_say_nothing_about_the_partner() -> None:

@@ -105,6 +105,11 @@ def table_path() -> Path:
     return roots()[-1] / "table.json"
 
 
+def calibration_path() -> Path:
+    """Where the adapter's out-of-library thresholds are: beside the table, bound like it."""
+    return roots()[-1] / "calibration.json"
+
+
 def registry(root: Path | None = None) -> dict[str, Recipe]:
     """The recipes of the library at `root`, or of every library (roots()), by key in file order."""
     if root is not None:
@@ -172,11 +177,17 @@ def recipe_hash(recipe: Recipe) -> str:
 
 
 def copy(to: Path) -> Path:
-    """A library at `to` that starts as the shipped one (registry, manifest, weights; not the table,
-    which a retrained policy would make stale): where `tsf train` writes unless it is told to write
-    the shipped library. A directory that already holds a registry is left as it is."""
+    """A library at `to` that starts as the shipped one (registry, manifest, weights; not the table
+    or the adapter's calibration, which a retrained policy would make stale): where `tsf train`
+    writes unless it is told to write the shipped library. A directory that already holds a registry
+    is left as it is."""
     if not (to / "registry.toml").exists():
-        shutil.copytree(LIBRARY, to, ignore=shutil.ignore_patterns("table.json*", ".*"), dirs_exist_ok=True)
+        shutil.copytree(
+            LIBRARY,
+            to,
+            ignore=shutil.ignore_patterns("table.json*", "calibration.json", ".*"),
+            dirs_exist_ok=True,
+        )
     return to
 
 

@@ -113,22 +113,14 @@ class RecipeVecEnv(VecEnv):
     """The learned heads of one recipe over lanes of the batched engine, as SB3's vectorised env:
     the observation is the recipe's feature set, the action the learned heads (Discrete for one,
     MultiDiscrete for two); the rule heads are the loaded policy's rules, in batch; the partner is
-    drawn per game from the recipe's partners. With `repeat` k, one step holds the learned heads for
-    k frames (the rule heads still decide every frame) and sums their rewards: the frame skip with
-    which DQN learns to control at 30 frames a second (one frame's turn changes Q too little to
-    tell actions apart). The policy still acts every frame when it plays."""
+    drawn per game from the recipe's partners."""
 
     render_mode = None
 
     def __init__(
-        self,
-        recipe: Recipe,
-        n_envs: int,
-        config: GameConfig | None = None,
-        root: Path = LIBRARY,
-        repeat: int = 1,
+        self, recipe: Recipe, n_envs: int, config: GameConfig | None = None, root: Path = LIBRARY
     ) -> None:
-        self.recipe, self.repeat = recipe, repeat
+        self.recipe = recipe
         self.config = config or GameConfig()
         partners = [library.load(k, self.config, root) for k in recipe.partners]
         weights, reward = dict(recipe.weights), REWARDS[recipe.reward]
@@ -162,29 +154,21 @@ class RecipeVecEnv(VecEnv):
         self.actions = np.asarray(actions).reshape(self.num_envs, -1)
 
     def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict]]:
-        """`repeat` frames; a lane whose game ends on one of them gets that game's rewards and end,
-        and plays the rest of the step in its next game unrewarded."""
+        heads = dict(zip(self.recipe.learned, self.actions.T, strict=True))
+        heads |= library.rule_heads_batch(self.recipe, self.obs, self.config)
+        action = join_action(*(heads[h] for h in HEADS))
+        self.obs, rewards, terminated, truncated, infos = self.env.step(action)
+        self.returns += rewards
+        self.lengths += 1
         out: list[dict] = [{} for _ in range(self.num_envs)]
-        summed, ended = np.zeros(self.num_envs), np.zeros(self.num_envs, bool)
-        for _ in range(self.repeat):
-            heads = dict(zip(self.recipe.learned, self.actions.T, strict=True))
-            heads |= library.rule_heads_batch(self.recipe, self.obs, self.config)
-            self.obs, rewards, terminated, truncated, infos = self.env.step(
-                join_action(*(heads[h] for h in HEADS))
-            )
-            live = ~ended
-            summed += np.where(live, rewards, 0.0)
-            self.returns += np.where(live, rewards, 0.0)
-            self.lengths += live
-            for lane in np.flatnonzero((terminated | truncated) & live):
-                out[lane] = {
-                    "terminal_observation": infos["final_obs"][lane, self.features],
-                    "TimeLimit.truncated": bool(truncated[lane]),
-                    "episode": {"r": float(self.returns[lane]), "l": int(self.lengths[lane]), "t": 0.0},
-                }
-                self.returns[lane], self.lengths[lane] = 0.0, 0
-            ended |= terminated | truncated
-        return self.obs[:, self.features], summed.astype(np.float32), ended, out
+        for lane in np.flatnonzero(terminated | truncated):
+            out[lane] = {
+                "terminal_observation": infos["final_obs"][lane, self.features],
+                "TimeLimit.truncated": bool(truncated[lane]),
+                "episode": {"r": float(self.returns[lane]), "l": int(self.lengths[lane]), "t": 0.0},
+            }
+            self.returns[lane], self.lengths[lane] = 0.0, 0
+        return self.obs[:, self.features], rewards.astype(np.float32), terminated | truncated, out
 
     def close(self) -> None:
         pass
@@ -276,7 +260,7 @@ def make_model(
 ):  # noqa: ANN201 - an SB3 model
     """The recipe's algorithm on its env, with the algorithm's settings (or `hyperparameters`)."""
     settings = dict(HYPERPARAMETERS[recipe.algorithm] if hyperparameters is None else hyperparameters)
-    env = RecipeVecEnv(recipe, settings.pop("n_envs"), config, root, settings.pop("repeat", 1))
+    env = RecipeVecEnv(recipe, settings.pop("n_envs"), config, root)
     kwargs = {"policy_kwargs": {"net_arch": NET}, **settings}
     return ALGORITHMS[recipe.algorithm]("MlpPolicy", env, seed=seed, device="cpu", verbose=0, **kwargs)
 
@@ -570,9 +554,7 @@ def _resume(run_dir: Path, recipe: Recipe, settings: dict, out: Path) -> tuple:
     if {k: state.get(k) for k in settings} != json.loads(json.dumps(settings)):
         return None, None, None
     hyperparameters = dict(settings["hyperparameters"])
-    env = RecipeVecEnv(
-        recipe, hyperparameters.pop("n_envs"), root=out, repeat=hyperparameters.pop("repeat", 1)
-    )
+    env = RecipeVecEnv(recipe, hyperparameters.pop("n_envs"), root=out)
     model = ALGORITHMS[recipe.algorithm].load(run_dir / "checkpoint.zip", env=env, device="cpu")
     if isinstance(model, DQN):
         model.load_replay_buffer(run_dir / "replay.pkl")

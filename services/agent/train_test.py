@@ -97,20 +97,3 @@ def test_drawing_fire_pays_the_frames_the_fortress_opens_to_the_shooter_and_kill
         paid += is_open.sum()
         kills += batch.event_counts("kill").sum()
     assert paid > 100 and kills > 10  # a competent pair opens the fortress and kills, and is paid
-
-
-def test_a_repeated_step_is_its_frames_played_with_the_learned_heads_held() -> None:
-    from services.agent.train import RecipeVecEnv
-
-    recipe = library.registry()["S1"]
-    held, single = RecipeVecEnv(recipe, 4, repeat=3), RecipeVecEnv(recipe, 4)
-    for env in (held, single):
-        env.seed(5)
-        env.reset()
-    for turn in np.random.default_rng(0).integers(0, 3, (40, 4)):
-        held_obs, reward, ended, _ = held.step(turn)
-        steps = [single.step(turn) for _ in range(3)]
-        assert not ended.any()
-        np.testing.assert_array_equal(held_obs, steps[-1][0])
-        np.testing.assert_allclose(reward, sum(step[1] for step in steps), rtol=1e-6)
-    assert held.env.batch.state.frame[0] == single.env.batch.state.frame[0] == 120

@@ -20,6 +20,7 @@ from services.jobs.bus import Coordination, on_workers
 from services.jobs.core import spec
 from services.jobs.kinds import in_process
 from shared import keys
+from shared.errors import Failure
 
 PARTNERS = ["noisy(B4)", "switch(B1,B5)"]
 AGENTS = ["S4", "adaptive-T150-cem", "adaptive-T150-bayes-dwell-ood-guard-memory"]
@@ -68,6 +69,20 @@ def test_a_worker_without_the_plugin_gets_no_more_jobs(bus, spawn, tmp_path, mon
         r.getMessage() for r in caplog.records if "cannot import plug-in lab_partners:Alice" in r.getMessage()
     ]
     assert len(refusals) <= 1 and all("without" in r for r in refusals)
+
+
+def test_a_job_that_breaks_the_contract_is_refused_at_once_not_left_to_time_out(bus, tmp_path):
+    """Workers drop a job message that breaks the contract; the coordinator checks the same, before
+    sending anything (a proxy directory taken for a plug-in once waited out the timeout)."""
+    broken = spec("team-0", "team", {"role": "shooter", "games": []}, 1, plugins=("proxy:/a/dir",))
+    fine = spec("team-1", "team", {"role": "shooter", "games": []}, 1)
+    refused = r"job team-0\.\w+ breaks the job contract, so no worker would run it: .*plugins"
+    with (
+        Coordination(bus.config(listen=True), "contract", tmp_path / "j.journal") as coordination,
+        pytest.raises(Failure, match=refused),
+    ):
+        coordination.run([fine, broken])
+    assert not (tmp_path / "j.journal").exists() or (tmp_path / "j.journal").read_text() == ""
 
 
 @pytest.mark.parametrize("name", ["no_such_module:Alice"])

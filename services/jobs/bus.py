@@ -29,7 +29,7 @@ from services.processes import Processes
 from shared import keys
 from shared.bus import BusConfig, Drops, free_endpoint, session, subscribe
 from shared.errors import Failure, UsageError
-from shared.messages import MAX_BYTES, MessageError, SweepJob, SweepResult
+from shared.messages import MAX_BYTES, MessageError, SweepJob, SweepResult, decode
 
 log = logging.getLogger("tsf.jobs")
 Progress = Callable[[int, int], None]  # (values done, values in all)
@@ -119,6 +119,24 @@ class Coordination:
             self.barred.add(worker)
         self.state.failed(worker, job)
 
+    def _message(self, job: Spec) -> bytes:
+        """The job as every worker receives it. One that no worker would take (over the size limit,
+        or breaking the job contract a worker checks) is a Failure here, before anything is sent,
+        rather than a job that waits for its timeout."""
+        data = SweepJob(
+            match=self.sweep, frame=0, sender="coordinator", job=job.id, kind=job.kind, args=job.args,
+            plugins=list(job.plugins), library=self.ours.library, config=self.ours.config,
+        ).encode()  # fmt: skip
+        if len(data) > MAX_BYTES:
+            raise Failure(f"job {job.id} is {len(data)} bytes, over {MAX_BYTES}: make the jobs smaller")
+        try:
+            decode(data, SweepJob)
+        except MessageError as error:
+            raise Failure(
+                f"job {job.id} breaks the job contract, so no worker would run it: {error}"
+            ) from None
+        return data
+
     def run(self, todo: list[Spec], progress: Progress | None = None) -> dict[str, list] | None:
         """Hand out `todo` until every job has a result: the values by job id (None if stopped
         first; the journal keeps what was collected, and a run of the same jobs resumes from it)."""
@@ -126,6 +144,7 @@ class Coordination:
         earlier = read_journal(self.journal, jobs, self.ours)
         if earlier.refused:
             log.warning("%d journal lines refused, the first: %s", len(earlier.refused), earlier.refused[0])
+        messages = {job.id: self._message(job) for job in todo if job.id not in earlier.done}
         state = Coordinator(todo, earlier.done, self.per_worker)
         with self.lock:
             self.state, state.barred = state, set(self.barred)
@@ -141,16 +160,7 @@ class Coordination:
 
         while not state.finished and not self.stop.is_set():
             for worker, job in state.assignments(time.monotonic(), self.job_timeout):
-                message = SweepJob(
-                    match=self.sweep, frame=0, sender="coordinator", job=job.id, kind=job.kind, args=job.args,
-                    plugins=list(job.plugins), library=self.ours.library, config=self.ours.config,
-                )  # fmt: skip
-                data = message.encode()
-                if len(data) > MAX_BYTES:  # a worker would drop it: refuse here, once, with the reason
-                    raise Failure(
-                        f"job {job.id} is {len(data)} bytes, over {MAX_BYTES}: make the jobs smaller"
-                    )
-                self.z.put(keys.sweep_job(self.sweep, worker), data)
+                self.z.put(keys.sweep_job(self.sweep, worker), messages[job.id])
             report()
             with state.changed:
                 state.changed.wait(0.5)

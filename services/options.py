@@ -132,7 +132,10 @@ def keys_help(role: str | None, what: str) -> str:
     from services.agent.library import seat_keys
 
     roles = [role] if role else list(ROLES)
-    listed = "; ".join(f"{r}: {', '.join(seat_keys(r))}" for r in roles)
+    try:
+        listed = "; ".join(f"{r}: {', '.join(seat_keys(r))}" for r in roles)
+    except UsageError:  # a bad TSF_LIBRARY: said in one line once a command reads the library
+        listed = "the keys `tsf keys` lists"
     return f"{what} ({listed}; or a .zip, module:attr or proxy:DIR: `tsf keys`)."
 
 

@@ -4,6 +4,7 @@ ends in one line that names the option, the value and what is accepted, exit sta
 
 from __future__ import annotations
 
+import os
 import shlex
 import shutil
 import signal
@@ -519,3 +520,16 @@ def test_the_installed_command_is_the_entry(tmp_path: Path) -> None:
     assert tsf_path is not None
     done = subprocess.run([tsf_path, "game", "--bait", "B99"], capture_output=True, text=True, timeout=60)
     assert done.returncode == 2 and done.stderr.startswith("tsf game: --bait B99") and not done.stdout
+
+
+def test_a_bad_library_path_is_one_line_even_before_the_command_starts(tmp_path: Path) -> None:
+    """The options' help lists the library's keys when the command line is built; a TSF_LIBRARY
+    that cannot be read is said by the command that reads it, not as a traceback at start-up."""
+    tsf_path = shutil.which("tsf", path=str(Path(sys.executable).parent))
+    assert tsf_path is not None
+    env = {**os.environ, "TSF_LIBRARY": str(tmp_path / "missing")}
+    done = subprocess.run([tsf_path, "keys"], capture_output=True, text=True, timeout=60, env=env)
+    assert done.returncode == 2 and not done.stdout
+    assert done.stderr.splitlines() == [
+        f"tsf keys: TSF_LIBRARY {tmp_path / 'missing'}: is not a policy library (no registry.toml)"
+    ]

@@ -53,11 +53,14 @@ class MatchPlan:
 
     def __post_init__(self) -> None:
         """Refuse (UsageError) a match whose seats cannot all be filled, before anything starts
-        (the AdapterConfig has checked the adaptive seat's options)."""
+        (the AdapterConfig has checked the adaptive seat's options; its out-of-library thresholds
+        are checked here, or the adapter would stop with them once the match had begun)."""
         keys.check_match(self.match)
         for role in ROLES:
             if getattr(self, role) != HUMAN and (self.adapter is None or role != self.adapter.role):
                 check_seat(getattr(self, role), role, f"--{role}")
+        if self.adapter is not None:
+            self.adapter.threshold()
 
     def policies(self) -> dict[str, str]:
         """Each seat's starting policy key; an adaptive seat starts with the adapter's initial policy."""

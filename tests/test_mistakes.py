@@ -533,3 +533,19 @@ def test_a_bad_library_path_is_one_line_even_before_the_command_starts(tmp_path:
     assert done.stderr.splitlines() == [
         f"tsf keys: TSF_LIBRARY {tmp_path / 'missing'}: is not a policy library (no registry.toml)"
     ]
+
+
+def test_an_adaptive_match_without_thresholds_for_the_library_stops_before_it_starts(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> None:
+    mine = tmp_path / "mine"  # a library of one's own, with no policies yet and no thresholds
+    mine.mkdir()
+    (mine / "registry.toml").write_text("")
+    (mine / "manifest.json").write_text("{}")
+    monkeypatch.setenv("TSF_LIBRARY", str(mine))
+    out = tmp_path / "recordings"
+    status, lines = tsf(["match", "--adaptive", "shooter", "--lockstep", "--out", str(out)], capsys)
+    assert status == 2 and len(lines) == 1 and not out.exists()
+    assert lines[0].startswith(
+        f"tsf match: --strategy bayes-dwell-ood-guard: no out-of-library thresholds at {mine}"
+    )

@@ -168,7 +168,10 @@ def test_shipped_calibration_has_a_threshold_per_role() -> None:
 
 def test_thresholds_of_other_libraries_or_none_are_refused_with_the_remedy(tmp_path, monkeypatch) -> None:
     """A strategy with -ood in a library of yours needs thresholds measured on it, as the table does."""
-    mine = library.copy(tmp_path / "mine")
+    mine = tmp_path / "mine"  # a library of one's own, with no policies yet
+    mine.mkdir()
+    (mine / "registry.toml").write_text("")
+    (mine / "manifest.json").write_text("{}")
     monkeypatch.setenv("TSF_LIBRARY", str(mine))
     config = AdapterConfig("shooter", 400, "bayes-dwell-ood-guard")
     with pytest.raises(

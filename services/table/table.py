@@ -140,6 +140,8 @@ class Table:
     @classmethod
     def load(cls, path: Path = DEFAULT_TABLE, check: bool = True, config: GameConfig | None = None) -> Table:
         """A saved table; with `check`, refused (StaleTable) unless it matches the library and rules."""
+        if not path.exists():
+            raise StaleTable(f"no table at {path}: measure it with `tsf sweep --out {path}`")
         record = json.loads(path.read_text())
         if record.get("version") != TABLE_VERSION:
             raise StaleTable(f"{path}: table format {record.get('version')}, expected {TABLE_VERSION}")

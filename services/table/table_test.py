@@ -78,3 +78,8 @@ def test_saved_table_loads_and_stale_tables_are_refused(tmp_path, small_table):
     small_table.save(path)
     with pytest.raises(StaleTable):
         Table.load(path, config=GameConfig(fortress_turn=5.0))
+    missing = tmp_path / "mine" / "table.json"
+    with pytest.raises(
+        StaleTable, match=f"no table at {missing}: measure it with `tsf sweep --out {missing}`"
+    ):
+        Table.load(missing)

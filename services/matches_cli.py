@@ -199,6 +199,10 @@ def study(
             "--max-matches", 0, "no match could run: give match hosts with --listen or --connect"
         )
     protocol = StudyConfig.load(config)
+    for variant in protocol.variants:  # adaptive agents' thresholds: refused now, not at a trial
+        for role in protocol.roles:
+            if (adapter := variant.adaptive(other(role), protocol.seed)) is not None:
+                adapter.threshold()
     directory = out / protocol.name
 
     def show(gateway) -> None:  # noqa: ANN001 - a Gateway

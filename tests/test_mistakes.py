@@ -535,7 +535,7 @@ def test_a_bad_library_path_is_one_line_even_before_the_command_starts(tmp_path:
     ]
 
 
-def test_an_adaptive_match_without_thresholds_for_the_library_stops_before_it_starts(
+def test_an_adaptive_match_or_study_without_thresholds_for_the_library_stops_before_it_starts(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
 ) -> None:
     mine = tmp_path / "mine"  # a library of one's own, with no policies yet and no thresholds
@@ -544,8 +544,9 @@ def test_an_adaptive_match_without_thresholds_for_the_library_stops_before_it_st
     (mine / "manifest.json").write_text("{}")
     monkeypatch.setenv("TSF_LIBRARY", str(mine))
     out = tmp_path / "recordings"
-    status, lines = tsf(["match", "--adaptive", "shooter", "--lockstep", "--out", str(out)], capsys)
-    assert status == 2 and len(lines) == 1 and not out.exists()
-    assert lines[0].startswith(
-        f"tsf match: --strategy bayes-dwell-ood-guard: no out-of-library thresholds at {mine}"
-    )
+    study = str(Path(library.__file__).parents[1] / "study" / "configs" / "adaptive.toml")
+    said = "--strategy bayes-dwell-ood-guard: no out-of-library thresholds at"
+    for command in (["match", "--adaptive", "shooter", "--lockstep"], ["study", study]):
+        status, lines = tsf([*command, "--out", str(out)], capsys)
+        assert status == 2 and len(lines) == 1 and not out.exists()
+        assert lines[0].startswith(f"tsf {command[0]}: {said} {mine}")

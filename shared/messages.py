@@ -105,7 +105,7 @@ _ROLE_OR_NONE = _one_of(("", *ROLES))
 # A policy's name in messages: a key, an adaptive agent's name, a plug-in's (services/agent/outside.py).
 POLICY_NAME = r"[A-Za-z0-9_.:-]{1,64}"
 _KEY = _text(POLICY_NAME)
-_KEY_OR_NONE = _text(POLICY_NAME.replace("{1,", "{0,"))
+_KEY_OR_NONE = _text(f"(?:{POLICY_NAME})?")
 _ACTION = _int(0, N_ACTIONS - 1)
 _SENDER = _text(r"[A-Za-z0-9_.:/-]{1,64}")
 _MATCH = _text(r"[A-Za-z0-9_-]{1,64}")

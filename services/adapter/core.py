@@ -244,11 +244,11 @@ def ood_threshold(partner_role: str, window: int, path: Path | None = None) -> f
     remedy = f"measure it with `tsf calibrate-adapter --out {path}`, or choose a strategy without -ood"
     if not path.exists():
         raise StaleCalibration(f"no out-of-library thresholds at {path}: {remedy}")
-    record = json.loads(path.read_text())
-    if record.get("library") != library.manifest_hash():
+    record, now = json.loads(path.read_text()), library.manifest_hash()
+    if record.get("library") != now:
         raise StaleCalibration(
             f"{path} was measured with library {record.get('library')}, but the library is now "
-            f"{library.manifest_hash()}: {remedy}"
+            f"{now}: {remedy}"
         )
     thresholds = record["thresholds"][partner_role]
     nearest = min(thresholds, key=lambda t: abs(int(t) - window))

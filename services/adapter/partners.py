@@ -157,12 +157,12 @@ def _scripted(name: str, rule: str, arguments: str, role: str) -> Partner:
     for item in filter(None, (a.strip() for a in arguments.split(","))):
         setting, _, number = (part.strip() for part in item.partition("="))
         try:
+            if setting not in settings:
+                raise ValueError(setting)
             values[setting] = float(number)
         except ValueError:
-            values[setting] = None
-        if setting not in settings or values[setting] is None:
             problem = f"{item!r} is not SETTING=NUMBER for a setting of {rule}"
-            raise UsageError("--partner", name, problem, settings)
+            raise UsageError("--partner", name, problem, settings) from None
     partner = kind(**values)
     partner.key = name
     return partner

@@ -97,3 +97,17 @@ def test_drawing_fire_pays_the_frames_the_fortress_opens_to_the_shooter_and_kill
         paid += is_open.sum()
         kills += batch.event_counts("kill").sum()
     assert paid > 100 and kills > 10  # a competent pair opens the fortress and kills, and is paid
+
+
+def test_the_shooter_is_paid_for_aiming_at_the_fortress_while_it_is_up() -> None:
+    from services.agent.train import shooter_position_reward
+    from services.sim.batch import BatchGame
+
+    batch = BatchGame(4, seeds=list(range(4)))
+    s = batch.state
+    s.x[:, 1], s.y[:, 1] = 300.0, 0.0  # on the +x axis, outside the region
+    s.heading[:, 1] = [180.0, 200.0, 0.0, 180.0]  # at the fortress, 20 degrees off, away, at it
+    s.fortress_alive[3] = False
+    study = shooter_position_reward(batch, 1, s.points, {"kill": 10.0})
+    paid = shooter_position_reward(batch, 1, s.points, {"kill": 10.0, "aim": 2.0}) - study
+    np.testing.assert_allclose(paid, [2.0, 2.0 * np.cos(np.radians(20.0)) ** 16, 0.0, 0.0])

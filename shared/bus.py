@@ -183,6 +183,14 @@ def stop_on_signals() -> threading.Event:
     terminal or a supervisor): services poll it and leave through their `finally`, launchers end
     their children."""
     stop = threading.Event()
+
+    def on_signal(*_: object) -> None:
+        # The handler runs in the main thread, which may hold the event's lock inside stop.wait():
+        # a launcher that dies sends SIGTERM just as the match's summary sets the event. Setting it
+        # here would wait for that lock forever (an agent was left running); a thread sets it.
+        if not stop.is_set():
+            threading.Thread(target=stop.set, daemon=True).start()
+
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-        signal.signal(sig, lambda *_: stop.set())
+        signal.signal(sig, on_signal)
     return stop

@@ -1,0 +1,28 @@
+"""The bus helpers that need no session."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).parent.parent
+
+# A launcher that dies sends SIGTERM to its services just as the sim's summary sets their stop
+# event: the handler then runs while the main thread holds the event's lock inside stop.wait().
+HOLDING_THE_LOCK = """
+import os, signal
+from shared.bus import stop_on_signals
+stop = stop_on_signals()
+with stop._cond:  # where Event.wait holds it
+    os.kill(os.getpid(), signal.SIGTERM)
+    sum(range(1000))  # the handler runs here
+print(stop.wait(10))
+"""
+
+
+def test_a_signal_sets_the_stop_event_even_while_the_main_thread_holds_its_lock() -> None:
+    done = subprocess.run(
+        [sys.executable, "-c", HOLDING_THE_LOCK], cwd=ROOT, capture_output=True, text=True, timeout=20
+    )
+    assert done.stdout.strip() == "True", done.stderr

@@ -18,6 +18,7 @@ import pytest
 import typer
 
 from services.agent import library
+from services.agent.library_test import empty_library
 from services.cli import app
 from services.entry import run
 from services.recorder.recording_test import M, record_match
@@ -538,10 +539,7 @@ def test_a_bad_library_path_is_one_line_even_before_the_command_starts(tmp_path:
 def test_an_adaptive_match_or_study_without_thresholds_for_the_library_stops_before_it_starts(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
 ) -> None:
-    mine = tmp_path / "mine"  # a library of one's own, with no policies yet and no thresholds
-    mine.mkdir()
-    (mine / "registry.toml").write_text("")
-    (mine / "manifest.json").write_text("{}")
+    mine = empty_library(tmp_path / "mine")  # no thresholds either
     monkeypatch.setenv("TSF_LIBRARY", str(mine))
     out = tmp_path / "recordings"
     study = str(Path(library.__file__).parents[1] / "study" / "configs" / "adaptive.toml")

@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from services.adapter.core import Adapter, AdapterConfig, AdapterLanes, Payoff, Scorer, Window, ood_threshold
 from services.agent import library
 from services.agent.library import policy_for
+from services.agent.library_test import empty_library
 from services.sim import observation as ob
 from services.sim.engine import Game
 from services.sim.observation import world_values
@@ -168,10 +169,7 @@ def test_shipped_calibration_has_a_threshold_per_role() -> None:
 
 def test_thresholds_of_other_libraries_or_none_are_refused_with_the_remedy(tmp_path, monkeypatch) -> None:
     """A strategy with -ood in a library of yours needs thresholds measured on it, as the table does."""
-    mine = tmp_path / "mine"  # a library of one's own, with no policies yet
-    mine.mkdir()
-    (mine / "registry.toml").write_text("")
-    (mine / "manifest.json").write_text("{}")
+    mine = empty_library(tmp_path / "mine")
     monkeypatch.setenv("TSF_LIBRARY", str(mine))
     config = AdapterConfig("shooter", 400, "bayes-dwell-ood-guard")
     with pytest.raises(

@@ -107,6 +107,14 @@ def copy_library(tmp_path: Path) -> Path:
     return library.copy(tmp_path / "library")
 
 
+def empty_library(path: Path) -> Path:
+    """A library of one's own with no policies yet (nor a table or thresholds), for TSF_LIBRARY."""
+    path.mkdir()
+    (path / "registry.toml").write_text("")
+    (path / "manifest.json").write_text("{}")
+    return path
+
+
 def test_a_copy_is_the_shipped_library_but_its_table_and_is_never_overwritten(tmp_path):
     root = copy_library(tmp_path)
     assert library.manifest_hash(root) == library.manifest_hash()

@@ -13,6 +13,7 @@ import dataclasses
 import hashlib
 import json
 import math
+import numbers
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol, TypeVar, runtime_checkable
 
@@ -90,6 +91,14 @@ def split_action(action: int) -> tuple[int, int, int]:
 
 def join_action(turn: int, thrust: int, fire: int) -> int:
     return turn * 4 + thrust * 2 + fire
+
+
+def checked_action(action: object) -> int:
+    """A policy's answer as an action index; ValueError naming it unless it is an integer
+    0..N_ACTIONS-1 (a bool or a float is not), wherever a policy from outside is asked."""
+    if isinstance(action, bool) or not isinstance(action, numbers.Integral) or not 0 <= action < N_ACTIONS:
+        raise ValueError(f"returned {action!r:.40}, not an action (an integer 0..{N_ACTIONS - 1})")
+    return int(action)
 
 
 @runtime_checkable

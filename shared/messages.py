@@ -358,17 +358,23 @@ class SweepJob(Message):
     config: str = "0" * 16
 
 
+FAULTS = ("", "worker", "job")  # whose fault a failed job is ("" for a result)
+
+
 @dataclass(frozen=True, kw_only=True)
 class SweepResult(Message):
-    """A worker's answer to a job: the kind's values, or why it could not run it (then no more jobs
-    of the sweep go to it); `library` and `config` are the hashes it computed with, checked on
-    arrival as on every journal line."""
+    """A worker's answer to a job: the kind's values, or why it could not run it, with whose
+    `fault` that is: "worker" when this worker cannot (other library, rules or a plug-in missing:
+    no more jobs of the sweep go to it, others may run it), "job" when the job itself failed and
+    would fail anywhere (the run ends). `library` and `config` are the hashes it computed with,
+    checked on arrival as on every journal line."""
 
     TYPE: ClassVar[str] = "sweep_result"
     CHECKS: ClassVar[dict[str, Check]] = {
         "job": _JOB_ID,
         "values": lambda v: isinstance(v, list) and len(v) <= JOB_VALUES and _plain()(v),
         "error": _text(r"[ -~]{0,300}"),
+        "fault": _one_of(FAULTS),
         "seconds": _number(0.0),
         "library": _HASH,
         "config": _HASH,
@@ -377,6 +383,7 @@ class SweepResult(Message):
     job: str = ""
     values: list[Any] = field(default_factory=list)
     error: str = ""
+    fault: str = ""
     seconds: float = 0.0
     library: str = "0" * 16
     config: str = "0" * 16

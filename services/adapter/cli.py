@@ -111,7 +111,7 @@ def eval_command(
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
 
     from services.adapter import figures, identification, results, team
-    from services.adapter.partners import SWITCH_AT, population
+    from services.adapter.partners import SWITCH_AT, check_partner, population
     from services.agent import library
     from services.jobs.bus import Coordination, on_workers, with_local_workers
 
@@ -129,6 +129,8 @@ def eval_command(
             console.print(f"excluded {line}")
         console.print(f"partners: proxies of {', '.join(people)}")
         partners = list(people.values())
+    for name in dict.fromkeys(partners):  # every partner built and asked once, before any worker starts
+        check_partner(name, other(role))
     strategies = [s.value for s in strategy or Strategies]
     agents = library.keys(role) + team.variants(window_list, strategies, strategy_window)
     columns = (BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())

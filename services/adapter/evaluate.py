@@ -37,7 +37,7 @@ from services.adapter.core import (
     Scorer,
 )
 from services.adapter.human_like import SESSION_TRIALS
-from services.adapter.partners import Partner, make_partner
+from services.adapter.partners import Partner, PartnerError, ask, make_partner
 from services.agent import library
 from services.processes import pool_worker
 from services.sim.engine import Game
@@ -117,7 +117,12 @@ def play_games(
     while not batch.done[0]:
         frame = int(batch.state.frame[0])
         observed = cache(partial(observe_lanes, batch, partner_role))  # each view once a frame
-        partner_actions, our_actions = partners.act(observed, frame), seat.act(batch)
+        try:
+            partner_actions = partners.act(observed, frame)
+        except PartnerError as error:
+            name, _, seed = games[error.lane]
+            raise PartnerError(f"partner {name}, seed {seed}: {error.problem}") from None
+        our_actions = seat.act(batch)
         if len(scored):
             now = s.scorer.observed({v: observed(v)[scored] for v in s.scorer.views}, partner_actions[scored])
             states = observed("world")[scored]  # what Adapter.update reads: stalls, the guard's kills
@@ -173,7 +178,10 @@ def play_partner(
     ours.reset(policy_seed(seed, role))
     outcome = Outcome(0.0)
     while not game.done:
-        partner_action = partner.act(observe(game, partner_role, partner.view))
+        try:
+            partner_action = ask(partner, observe(game, partner_role, partner.view), game.frame)
+        except PartnerError as error:
+            raise PartnerError(f"partner {partner.key}, seed {seed}: {error.problem}") from None
         our_action = ours.act(observe(game, role, ours.view))
         if adapter is not None or record:
             values = world_values(game, partner_role)

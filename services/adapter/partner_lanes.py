@@ -28,7 +28,16 @@ from typing import Protocol
 import numpy as np
 
 from services.adapter.human_like import HumanLike
-from services.adapter.partners import Delayed, Noisy, Partner, Sticky, Switching, make_partner
+from services.adapter.partners import (
+    Delayed,
+    Noisy,
+    Partner,
+    PartnerError,
+    Sticky,
+    Switching,
+    ask,
+    make_partner,
+)
 from services.agent.library import LearnedPolicy
 from services.agent.policy import RulePolicy, UniformPolicy
 from services.sim.batch_play import act_lanes
@@ -165,7 +174,10 @@ class EachLane:
             partner.reset(policy_seed(key, partner.role) + self.offset)
 
     def act(self, obs: np.ndarray, frame: int) -> np.ndarray:
-        return np.array([p.act(row) for p, row in zip(self.copies, obs, strict=True)], np.int64)
+        return np.array(
+            [ask(p, row, frame, lane) for lane, (p, row) in enumerate(zip(self.copies, obs, strict=True))],
+            np.int64,
+        )
 
 
 # A policy whose act() draws from its probs() is played from its distributions.
@@ -229,5 +241,8 @@ class Partners:
         """Every lane's action; `observed(view)`: every lane's observation of the partner's seat."""
         out = np.empty(sum(len(rows) for rows, _ in self.groups), np.int64)
         for rows, partner in self.groups:
-            out[rows] = partner.act(observed(partner.view)[rows], frame)
+            try:
+                out[rows] = partner.act(observed(partner.view)[rows], frame)
+            except PartnerError as error:  # its lane in this batch, not in its group
+                raise PartnerError(error.problem, int(rows[error.lane])) from None
         return out

@@ -35,8 +35,10 @@ from services.agent import library
 from services.agent.library import policy_for
 from services.agent.outside import PROXY
 from services.agent.scripted import SCRIPTED
-from shared.errors import UsageError
-from shared.game import N_ACTIONS
+from services.sim.engine import Game
+from services.sim.observation import as_observation, world_values
+from shared.errors import Failure, UsageError
+from shared.game import N_ACTIONS, checked_action
 
 NOISE = 0.1
 DELAY = 6  # frames
@@ -126,6 +128,38 @@ class Switching(Wrapper):
     def act(self, obs: np.ndarray) -> int:
         self.t += 1
         return (self.inner if self.t <= self.at else self.second).act(obs)
+
+
+class PartnerError(Failure):
+    """A partner that raised, or answered no action, during a game: which, when and why. It would
+    fail again with the same inputs, so a job that meets it ends the run (services/jobs)."""
+
+    def __init__(self, problem: str, lane: int = 0) -> None:
+        super().__init__(problem)
+        self.problem, self.lane = problem, lane
+
+
+def ask(partner: Partner, obs: np.ndarray, frame: int, lane: int = 0) -> int:
+    """The partner's action for `obs`, checked; a PartnerError naming it if it raises or answers
+    something that is no action."""
+    try:
+        return checked_action(partner.act(obs))
+    except Exception as error:  # noqa: BLE001 - a partner from outside may raise anything
+        raise PartnerError(f"{partner.key} at frame {frame}: {type(error).__name__}: {error}"[:240], lane) from None
+
+
+def check_partner(name: str, role: str, option: str = "--partner") -> None:
+    """Build the partner `name` and ask it for one action on a fresh game's first state, as a run
+    does before handing out any job: a mistake in the name, a plug-in that does not import, is
+    no policy, plays the other seat or cannot answer is one UsageError here, not a failed job."""
+    try:
+        partner = make_partner(name, role)
+        partner.reset(0)
+        ask(partner, as_observation(world_values(Game(), role), partner.view), 0)
+    except UsageError:
+        raise
+    except Exception as error:  # noqa: BLE001 - a partner from outside may raise anything
+        raise UsageError(option, name, str(getattr(error, "problem", None) or f"{type(error).__name__}: {error}")) from None
 
 
 WRAPPERS = {"noisy": Noisy, "delayed": Delayed, "sticky": Sticky}

@@ -83,8 +83,8 @@ def _object(path: str, option: str) -> Policy:
     module, _, attr = path.partition(":")
     try:
         found = getattr(importlib.import_module(module), attr)
-    except (ImportError, AttributeError) as error:
-        raise UsageError(option, path, f"cannot be imported ({error})") from None
+    except Exception as error:  # noqa: BLE001 - a module of the user's may fail as it likes on import
+        raise UsageError(option, path, f"cannot be imported ({type(error).__name__}: {error})") from None
     policy = found() if isinstance(found, type) or not _is_policy(found) else found
     if not _is_policy(policy):
         raise UsageError(option, path, "is not a policy (key, role, view, reset, act)")

@@ -101,23 +101,27 @@ class Coordination:
             state = self.state
         if result.job not in state.jobs:
             raise MessageError("unknown_job", f"no job {result.job!r} in this run")
+        if result.error and result.fault == "job":
+            state.job_failed(worker, result.job, result.error)
+            return
         if result.error:
             log.error("worker %s cannot run %s: %s; no more jobs", worker, result.job, result.error)
-            self._bar(worker, result.job)
+            self._bar(worker, result.job, result.error)
             return
         why = check(state.jobs[result.job], result.values, result.library, result.config, self.ours)
         if why:
-            self._bar(worker, result.job)
+            self._bar(worker, result.job, why)
             raise MessageError("mismatch", f"{worker}, job {result.job}: {why}")
         if state.result(worker, result.job, result.values):
             with self.lock:
                 self.journal_file.write(journal_line(result.job, result.values, self.ours))
                 self.journal_file.flush()
 
-    def _bar(self, worker: str, job: str) -> None:
+    def _bar(self, worker: str, job: str, why: str) -> None:
         with self.lock:
             self.barred.add(worker)
-        self.state.failed(worker, job)
+            state = self.state
+        state.refused(worker, job, why)
 
     def _message(self, job: Spec) -> bytes:
         """The job as every worker receives it. One that no worker would take (over the size limit,
@@ -159,6 +163,8 @@ class Coordination:
                     progress(sum(jobs[j].size for j in state.done), total)
 
         while not state.finished and not self.stop.is_set():
+            if state.failure:
+                raise Failure(f"{state.failure} (the journal {self.journal} keeps the jobs done)")
             for worker, job in state.assignments(time.monotonic(), self.job_timeout):
                 self.z.put(keys.sweep_job(self.sweep, worker), messages[job.id])
             report()
@@ -247,11 +253,11 @@ def run_worker(bus: BusConfig, sweep: str, worker: str, stop: threading.Event | 
         sender = f"worker/{worker}"
         publisher = z.declare_publisher(keys.sweep_result(sweep))
 
-        def answer(job: SweepJob, values: list, error: str, seconds: float) -> None:
+        def answer(job: SweepJob, values: list, error: str, fault: str, seconds: float) -> None:
             error = "".join(c if " " <= c <= "~" else "?" for c in error)[:300]
             result = SweepResult(
                 match=sweep, frame=0, sender=sender, job=job.job, values=values, error=error,
-                seconds=seconds, library=ours.library, config=ours.config,
+                fault=fault if error else "", seconds=seconds, library=ours.library, config=ours.config,
             )  # fmt: skip
             publisher.put(result.encode())
 
@@ -271,7 +277,7 @@ def run_worker(bus: BusConfig, sweep: str, worker: str, stop: threading.Event | 
                 for job in batch:
                     why = _cannot(job, ours)
                     if why:
-                        answer(job, [], why, 0.0)
+                        answer(job, [], why, "worker", 0.0)
                     else:
                         fits.append(job)
                 for kind in dict.fromkeys(job.kind for job in fits):
@@ -279,18 +285,21 @@ def run_worker(bus: BusConfig, sweep: str, worker: str, stop: threading.Event | 
                     played, why = _run(kind, mine)
                     seconds = time.monotonic() - started
                     for job, values in zip(mine, played or [[]] * len(mine), strict=True):
-                        answer(job, values, why, seconds)
+                        answer(job, values, why, "job", seconds)
                     done += len(mine) if played else 0
     return done
 
 
 def _run(kind: str, jobs: list[SweepJob]) -> tuple[list[list] | None, str]:
-    """The jobs' values, or None and why they failed (bad arguments end the jobs, not the worker)."""
+    """The jobs' values, or None and why they failed: the same jobs would fail on any worker, so
+    the coordinator ends the run with that line (bad arguments end the run, not the worker)."""
     try:
         return kinds.run(kind, [job.args for job in jobs]), ""
-    except Exception as error:  # noqa: BLE001 - reported to the coordinator, which bars this worker
-        log.exception("%s jobs %s failed", kind, [job.job for job in jobs])
-        return None, f"{kind} job failed: {type(error).__name__}: {error}"
+    except Exception as error:  # noqa: BLE001 - reported to the coordinator, which ends the run
+        why = kinds.failure_line(error)
+        log.error("%s jobs %s failed: %s", kind, [job.job for job in jobs], why)
+        log.debug("the traceback", exc_info=True)
+        return None, why
 
 
 def _cannot(job: SweepJob, ours: Hashes) -> str:

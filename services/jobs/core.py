@@ -114,6 +114,7 @@ class Coordinator:
         self.live: set[str] = set()
         self.barred: set[str] = set()  # workers that could not run a job: none of the sweep's again
         self.duplicates = 0
+        self.failure = ""  # why the run cannot finish: a job that fails anywhere, or none will take it
         self.changed = threading.Condition()
 
     def worker_up(self, worker: str) -> None:
@@ -166,6 +167,22 @@ class Coordinator:
             self.barred.add(worker)
             ids = [*mine, *([] if job in mine else [job])]
             self._requeue([j for j in ids if j in self.jobs and j not in self.done])
+            self.changed.notify_all()
+
+    def job_failed(self, worker: str, job: str, why: str) -> None:
+        """A job failed for a reason that would fail again on any worker: the run ends with `why`."""
+        with self.changed:
+            self.flying.get(worker, {}).pop(job, None)
+            self.failure = self.failure or f"job {job} failed on worker {worker}: {why}"
+            self.changed.notify_all()
+
+    def refused(self, worker: str, job: str, why: str) -> None:
+        """A worker could not run a job (`failed`); if no live worker is left to take the waiting
+        jobs, the run ends with `why` rather than wait for one that may never come."""
+        self.failed(worker, job)
+        with self.changed:
+            if not self.live and not self.failure:
+                self.failure = f"no live worker will take job {job}: worker {worker} said: {why}"
             self.changed.notify_all()
 
     def assignments(self, now: float, timeout: float) -> list[tuple[str, Spec]]:

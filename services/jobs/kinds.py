@@ -14,6 +14,7 @@ from typing import Any
 
 from services.agent.outside import is_plugin
 from services.jobs.core import Spec
+from shared.errors import Failure, UsageError
 
 Runner = Callable[[list[Spec], Callable[[int, int], None] | None], list[list]]  # (jobs, progress) -> values
 
@@ -42,6 +43,12 @@ def in_process(todo: list[Spec], progress: Callable[[int, int], None] | None = N
         if progress is not None:
             progress(done, total)
     return out
+
+
+def failure_line(error: BaseException) -> str:
+    """A failed job's error as one line: a user's mistake or a failure as it reads (it names the
+    partner, seed and frame where a partner failed), anything else with its type."""
+    return str(error) if isinstance(error, UsageError | Failure) else f"{type(error).__name__}: {error}"
 
 
 def plugins_in(names: Iterable[str]) -> tuple[str, ...]:

@@ -14,8 +14,9 @@ import time
 from contextlib import ExitStack
 from pathlib import Path
 
-from services.jobs.bus import Coordination, hashes
+from services.jobs.bus import Coordination
 from services.jobs.core import spec
+from services.jobs.kinds import hashes
 from shared import keys
 from shared.bus import BusConfig, free_endpoint, session, subscribe
 from shared.messages import SweepJob, SweepResult

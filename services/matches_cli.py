@@ -94,6 +94,10 @@ def match_command(
     if summary.timing:
         console.print("  timing (ms): " + ", ".join(f"{k} {v:.2f}" for k, v in summary.timing.items()))
     console.print(f"  recording: {path}  (Parquet tables: {tables['states'].parent})")
+    if summary.failures:  # the match ran to its end; its result is not what the policies would play
+        seats = ", ".join(f"the {role}'s on {n} frames" for role, n in summary.failures.items())
+        where = f"policy_failure events in {path}"
+        raise Failure(f"match {plan.match}: a policy failed and played no-op: {seats} ({where})")
 
 
 @commands.command("play")

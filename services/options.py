@@ -238,6 +238,15 @@ BUS_OPTIONS = {  # parameter name: (annotation, default)
 }
 
 
+RAY = typer.Option(
+    None,
+    "--ray",
+    metavar="ADDRESS",
+    help="Run the jobs as tasks on the Ray cluster at ADDRESS (auto, HOST:PORT, ray://HOST:10001; "
+    "local: a private one here) instead of on zenoh workers; needs the `ray` extra (docs/jobs.md).",
+)
+
+
 def bus_options(command: Callable[..., None]) -> Callable[..., None]:
     """Give a service's command the bus options every service shares; the command receives them as
     one `bus: BusConfig`."""

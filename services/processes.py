@@ -40,15 +40,6 @@ def adopt() -> None:
         die_with_parent(int(parent))
 
 
-def pool_worker(parent: int) -> None:
-    """A pool's initializer (multiprocessing, fork): Ctrl-C is the parent's to handle (it ends the
-    pool), SIGTERM and SIGHUP end the worker as they would any program, and it dies with `parent`."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    for sig in (signal.SIGTERM, signal.SIGHUP):
-        signal.signal(sig, signal.SIG_DFL)
-    die_with_parent(parent)
-
-
 class Processes:
     """Child `tsf` processes; all are ended (SIGTERM, then SIGKILL) on exit, and each dies with
     this process if it is killed first (adopt)."""

@@ -24,6 +24,7 @@ ROLES: tuple[str, str] = ("bait", "shooter")  # also the seat order: the bait fi
 FPS = 30  # frames per second of game time
 N_TURN, N_THRUST, N_FIRE = 3, 2, 2  # choices of each action head; turn 0 none, 1 left (ccw), 2 right
 N_ACTIONS = N_TURN * N_THRUST * N_FIRE
+NOOP = 0  # the action of no turn, no thrust, no fire: what an empty or failed seat plays
 DEATH_CAUSES = ("shell", "border", "shield")
 # What the engine reports in a frame (services/sim/engine.py Event), then the sim's match markers.
 EVENT_KINDS = (
@@ -38,6 +39,7 @@ EVENT_KINDS = (
     "respawn",
     "match_start",
     "match_end",
+    "policy_failure",  # a seat's policy raised or answered no action; it played no-op (the sim's)
 )
 OBS_SIZE = 64  # float values per observation; the layout is services/sim/observation.py
 

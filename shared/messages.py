@@ -168,18 +168,24 @@ class State(Message):
 
 @dataclass(frozen=True, kw_only=True)
 class Action(Message):
-    """A player's action for the state of `frame`, from an agent (`policy` = its key) or a human."""
+    """A player's action for the state of `frame`, from an agent (`policy` = its key) or a human.
+    `failures` counts the frames of this match on which the seat's policy raised or answered no
+    action (it played no-op then); `failure` says why, on the frame it happened, else ""."""
 
     TYPE: ClassVar[str] = "action"
     CHECKS: ClassVar[dict[str, Check]] = {
         "role": _ROLE,
         "action": _ACTION,
         "policy": _KEY_OR_NONE,
+        "failures": _int(0, MAX_FRAME),
+        "failure": _text(r"[ -~]{0,200}"),
     }
 
     role: str = "bait"
     action: int = 0
     policy: str = ""
+    failures: int = 0
+    failure: str = ""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -263,6 +269,7 @@ class Summary(Message):
         "counters": _map(ROLES, _counters),
         "timing": _named(_number()),
         "drops": _named(_int(0, 2**63)),
+        "failures": lambda v: isinstance(v, dict) and set(v) <= set(ROLES) and all(map(_COUNT, v.values())),
     }
 
     kills: int = 0
@@ -271,6 +278,7 @@ class Summary(Message):
     counters: dict = field(default_factory=dict)
     drops: dict[str, int] = field(default_factory=dict)  # bad input the sim dropped, by reason
     timing: dict[str, float] = field(default_factory=dict)  # round trip and tick jitter, ms
+    failures: dict[str, int] = field(default_factory=dict)  # frames a seat's policy failed, by seat
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -309,7 +317,13 @@ class AdapterStatus(Message):
 _HASH = _text(r"[0-9a-f]{16}")
 
 
-JOB_KINDS = ("table", "team", "session", "identify")  # what a job computes (services/jobs/kinds.py)
+JOB_KINDS = (
+    "table",
+    "team",
+    "session",
+    "identify",
+    "calibrate",
+)  # what a job computes (services/jobs/kinds.py)
 _JOB_ID = _text(r"[A-Za-z0-9_.-]{1,64}")
 _PLUGIN = _text(r"[A-Za-z_][A-Za-z0-9_.]{0,100}:[A-Za-z_][A-Za-z0-9_.]{0,60}")
 

@@ -16,8 +16,9 @@ import uuid
 import pytest
 
 from services.adapter import team
-from services.jobs.bus import Coordination, on_workers
+from services.jobs.bus import Coordination
 from services.jobs.core import spec
+from services.jobs.engine import on_workers
 from services.jobs.kinds import in_process
 from shared import keys
 from shared.errors import Failure
@@ -48,7 +49,7 @@ def evaluate_both_ways(run) -> None:  # noqa: ANN001 - a Runner
     assert run(job, None) == in_process(job)
 
 
-def test_a_worker_without_the_plugin_gets_no_more_jobs(bus, spawn, tmp_path, monkeypatch, caplog):
+def test_a_worker_without_the_plugin_gets_no_more_jobs(bus, spawn, tmp_path, monkeypatch, caplog, wait_until):
     (tmp_path / "lab_partners.py").write_text(
         "from services.adapter.partners_test import Constant\n\nclass Alice(Constant):\n    key = 'alice'\n"
     )
@@ -61,6 +62,8 @@ def test_a_worker_without_the_plugin_gets_no_more_jobs(bus, spawn, tmp_path, mon
         Coordination(bus.config(listen=True), sweep, tmp_path / "eval.journal") as coordination,
         caplog.at_level(logging.ERROR, "tsf.jobs"),
     ):
+        # both up first: with no live worker left to take a job, a run ends
+        assert wait_until(lambda: {"without", "with"} <= coordination.live, 60)
         there = team.team(
             "shooter", partners, ["S4", "adaptive-T150-cem"], [0, 1, 2], on_workers(coordination)
         )

@@ -160,3 +160,28 @@ def test_a_service_that_fails_fails_the_match(tsf_match, tmp_path, wait_until):
     os.kill(recorder, signal.SIGKILL)
     assert match.wait(30) == 1
     assert last_line(match) == "tsf match: match failing: recorder exited with status -9"
+
+
+def test_a_policy_that_fails_mid_match_plays_no_op_and_the_match_exits_1(tsf, tmp_path, monkeypatch):
+    """The match runs to its end on the sim's clock; the agent says it once; the recording has a
+    policy_failure event per failed frame with its count; the summary names it; exit status 1."""
+    (tmp_path / "lab_live.py").write_text(
+        "class Raises:\n    key, role, view = 'raises', 'bait', 'world'\n"
+        "    def reset(self, seed=None):\n        self.t = 0\n"
+        "    def act(self, obs):\n        self.t += 1\n"
+        "        if self.t > 30:\n            raise RuntimeError('boom')\n        return 2\n"
+    )
+    monkeypatch.setenv("PYTHONPATH", str(tmp_path))
+    match = tsf("match", "--out", str(tmp_path), "--duration", "2", "--match", "failing-policy",
+                "--bait", "lab_live:Raises", "--lockstep")  # fmt: skip
+    assert match.wait(60) == 1
+    recording = load(tmp_path / "failing-policy.tsflog")
+    failed = recording.summary.failures["bait"]  # frames 30..59, and the last state's if answered in time
+    assert set(recording.summary.failures) == {"bait"} and failed in (30, 31)
+    assert recording.summary.frame == 60
+    said = f"a policy failed and played no-op: the bait's on {failed} frames (policy_failure events in"
+    assert last_line(match).startswith(f"tsf match: match failing-policy: {said}")
+    assert match.err.read_text().count("the policy failed and plays no-op") == 1  # type: ignore[attr-defined]
+    events = [e for e in recording.events if e.kind == "policy_failure"]
+    assert [e.detail.split(":")[0] for e in events] == [str(n) for n in range(1, failed + 1)]
+    assert events[0].role == "bait" and "raises at frame 30: RuntimeError: boom" in events[0].detail

@@ -78,7 +78,7 @@ def test_stopped_sweep_resumes_from_its_journal(bus, spawn, wait_until, tmp_path
 
 def test_a_journal_line_of_another_library_never_enters_the_table(bus, spawn, tmp_path, reference):
     """The issue's finding: a line planted by hand with the wrong library hash and 99 kills/min."""
-    from services.jobs.bus import hashes
+    from services.jobs.kinds import hashes
 
     sweep, out = f"s{uuid.uuid4().hex[:8]}", tmp_path / "table.json"
     first = jobs(BAITS, SHOOTERS, GAMES, CHUNK)[0]

@@ -12,7 +12,7 @@ from rich.table import Table
 
 from services.adapter.core import WINDOWS, AdapterConfig
 from services.agent.library import policy_for
-from services.options import GAMES, WORKERS, Seat, Strategies, bus_options, console, number, output
+from services.options import GAMES, RAY, WORKERS, Seat, Strategies, bus_options, console, number, output
 from shared.bus import BusConfig, stop_on_signals
 from shared.errors import UsageError
 from shared.game import FPS, ROLES, Range, other
@@ -102,6 +102,7 @@ def eval_command(
     sweep_id: str = typer.Option(
         "eval", "--sweep", help="Sweep id of the jobs: tsf worker --sweep ID joins."
     ),
+    ray: str | None = RAY,
     *,
     bus: BusConfig,
 ) -> None:
@@ -113,7 +114,7 @@ def eval_command(
     from services.adapter import figures, identification, results, team
     from services.adapter.partners import SWITCH_AT, check_partner, population
     from services.agent import library
-    from services.jobs.bus import Coordination, on_workers, with_local_workers
+    from services.jobs.engine import on_workers, open_engine
 
     if role not in ROLES:
         raise UsageError("--role", role, "not a seat", ROLES)
@@ -137,11 +138,10 @@ def eval_command(
     ident, rows, comparison = None, [], None
     stop = stop_on_signals()
     with (
-        with_local_workers(bus, sweep_id, workers) as coordinator_bus,
-        Coordination(coordinator_bus, sweep_id, out / "eval.journal", stop) as coordination,
+        open_engine(bus, sweep_id, out / "eval.journal", workers, ray, stop) as engine,
         Progress(*columns, console=console) as bar,
     ):
-        run = on_workers(coordination)
+        run = on_workers(engine)
         if identify:
             task = bar.add_task("identification", total=None)
             ident = identification.identification(
@@ -171,19 +171,33 @@ def eval_command(
 
 
 @commands.command("calibrate-adapter")
+@bus_options
 def calibrate_adapter(
-    workers: int = number(0, WORKERS, "Processes (default: one per core)."),
+    workers: int = number(
+        os.cpu_count() or 1,
+        WORKERS,
+        "Worker processes to start here (0: only workers reached with --connect).",
+    ),
     out: Path = output(
         Path("tsf-calibration.json"),
         "Where the thresholds go (the adapter reads calibration.json beside the table, in the library "
-        "directory in use; name it here to replace it).",
+        "directory in use; name it here to replace it), and its journal (OUT.journal).",
     ),
+    sweep_id: str = typer.Option(
+        "calibrate", "--sweep", help="Sweep id of the jobs: tsf worker --sweep ID joins."
+    ),
+    ray: str | None = RAY,
+    *,
+    bus: BusConfig,
 ) -> None:
-    """Measure the adapter's out-of-library thresholds."""
-
+    """Measure the adapter's out-of-library thresholds: one game of each library policy with each
+    of the other seat's, per seed, as jobs on the job system's workers or on Ray. Resumable."""
     from services.adapter.thresholds import calibrate, write_calibration
+    from services.jobs.engine import on_workers, open_engine
 
-    result = calibrate(workers=workers or os.cpu_count() or 1)
+    journal = out.with_name(out.name + ".journal")
+    with open_engine(bus, sweep_id, journal, workers, ray, stop_on_signals()) as engine:
+        result = calibrate(run=on_workers(engine))
     for role, thresholds in result["thresholds"].items():
         console.print(f"{role}: " + ", ".join(f"T={t}: {v:.2f}" for t, v in thresholds.items()))
     console.print(f"written to {write_calibration(result, out)}")

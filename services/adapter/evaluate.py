@@ -11,8 +11,8 @@ batched game's come from `lane_uniforms` keyed by its seed (batch_play.py), a sc
 the policies' own generators, so the two agree in distribution, not game for game.
 
 Bulk work runs as jobs of the job system (services/jobs: here, or on workers across machines), each
-a batch of consecutive games (`batches`); the thresholds' scalar games still use a local pool
-(`run_parallel`). The measurements built on it: identification.py (is the partner
+a batch of consecutive games (`batches`), or one game (the thresholds' scalar games). The
+measurements built on it: identification.py (is the partner
 identified), team.py (does adapting help), thresholds.py (the out-of-library thresholds) and
 results.py (the numbers and summary written out).
 """
@@ -21,11 +21,8 @@ from __future__ import annotations
 
 import itertools
 import math
-import os
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cache, partial
-from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
@@ -39,7 +36,6 @@ from services.adapter.core import (
 from services.adapter.human_like import SESSION_TRIALS
 from services.adapter.partners import Partner, PartnerError, ask, make_partner
 from services.agent import library
-from services.processes import pool_worker
 from services.sim.engine import Game
 from services.sim.observation import observe, world_values
 from services.sim.play import policy_seed, switch_seed
@@ -210,27 +206,3 @@ def play_session(partner: str, agent: AdapterConfig, person: int, role: str) -> 
         seed = person * SESSION_TRIALS + trial
         outcomes.append(play_partner(make_partner(partner, other(role)), agent, seed, role, adapter=previous))
     return outcomes
-
-
-def run_parallel(
-    fn: Callable, tasks: list[tuple], workers: int, progress: Callable[[int, int], None] | None = None
-) -> list:
-    """fn(*task) for every task, over `workers` processes (in this process when workers <= 1)."""
-    results = []
-    if workers <= 1:
-        for task in tasks:
-            results.append(fn(*task))
-            if progress:
-                progress(len(results), len(tasks))
-        return results
-    with get_context("fork").Pool(workers, initializer=pool_worker, initargs=(os.getpid(),)) as pool:
-        for result in pool.imap(_star, [(fn, task) for task in tasks], chunksize=1):
-            results.append(result)
-            if progress:
-                progress(len(results), len(tasks))
-    return results
-
-
-def _star(job: tuple[Callable, tuple]) -> object:
-    fn, task = job
-    return fn(*task)

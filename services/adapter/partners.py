@@ -145,7 +145,8 @@ def ask(partner: Partner, obs: np.ndarray, frame: int, lane: int = 0) -> int:
     try:
         return checked_action(partner.act(obs))
     except Exception as error:  # noqa: BLE001 - a partner from outside may raise anything
-        raise PartnerError(f"{partner.key} at frame {frame}: {type(error).__name__}: {error}"[:240], lane) from None
+        problem = f"{partner.key} at frame {frame}: {type(error).__name__}: {error}"
+        raise PartnerError(problem[:240], lane) from None
 
 
 def check_partner(name: str, role: str, option: str = "--partner") -> None:
@@ -159,7 +160,8 @@ def check_partner(name: str, role: str, option: str = "--partner") -> None:
     except UsageError:
         raise
     except Exception as error:  # noqa: BLE001 - a partner from outside may raise anything
-        raise UsageError(option, name, str(getattr(error, "problem", None) or f"{type(error).__name__}: {error}")) from None
+        problem = getattr(error, "problem", None) or f"{type(error).__name__}: {error}"
+        raise UsageError(option, name, problem) from None
 
 
 WRAPPERS = {"noisy": Noisy, "delayed": Delayed, "sticky": Sticky}

@@ -10,11 +10,13 @@ from pathlib import Path
 import numpy as np
 
 from services.adapter.cem import log_probs
-from services.adapter.evaluate import play_partner, run_parallel
+from services.adapter.evaluate import play_partner
 from services.adapter.identification import windowed
 from services.adapter.partners import make_partner
 from services.agent import library
-from shared.game import ROLES, other
+from services.jobs.core import spec
+from services.jobs.kinds import Progress, Runner, in_process
+from shared.game import ROLES, GameConfig, other
 
 
 def _self_scores(key: str, teammate: str, seed: int) -> np.ndarray:
@@ -25,12 +27,18 @@ def _self_scores(key: str, teammate: str, seed: int) -> np.ndarray:
     return log_probs([policy], outcome.values, outcome.actions)[:, 0]
 
 
+def run_calibrate_jobs(args: list[dict]) -> list[list]:
+    """The job system's runner for `calibrate` jobs ({policy, teammate, seed}): each game's stream."""
+    return [_self_scores(a["policy"], a["teammate"], int(a["seed"])).tolist() for a in args]
+
+
 def calibrate(
     windows: Iterable[int] = (100, 150, 200, 300, 400, 600, 800, 1000),
     seeds: list[int] | None = None,
     quantile: float = 0.01,
     margin: float = 2.0,
-    workers: int = 1,
+    run: Runner = in_process,
+    progress: Progress | None = None,
 ) -> dict:
     """Out-of-library thresholds: for each role and window T, the lowest (over library policies)
     `quantile` of a policy's own mean log-probability over T-frame windows of its play with every
@@ -43,7 +51,14 @@ def calibrate(
         for mate in library.keys(other(_role(k)))
         for seed in seeds
     ]
-    streams = run_parallel(_self_scores, tasks, workers)
+    frames = GameConfig().frames
+    todo = [
+        spec(
+            f"calibrate-{k}-{mate}-{seed}", "calibrate", {"policy": k, "teammate": mate, "seed": seed}, frames
+        )
+        for k, mate, seed in tasks
+    ]
+    streams = [np.array(values) for values in run(todo, progress)]
     thresholds: dict[str, dict[str, float]] = {role: {} for role in ROLES}
     lowest: dict[str, dict[str, dict[str, float]]] = {role: {} for role in ROLES}
     for window in windows:

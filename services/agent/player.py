@@ -8,7 +8,7 @@ from collections.abc import Callable
 from services.agent.library import policy_for
 from services.sim.observation import as_observation
 from services.sim.play import policy_seed, switch_seed
-from shared.game import Policy
+from shared.game import NOOP, Policy, checked_action
 from shared.messages import Action, State
 
 PolicyLoader = Callable[[str, str], Policy]
@@ -17,13 +17,15 @@ PolicyLoader = Callable[[str, str], Policy]
 class Player:
     """Plays one role with a policy chosen by key. A switch takes effect at the next state, so no
     frame goes unanswered; the new policy is reset with a seed derived from the game's seed and the
-    frame, so a match stays a function of its inputs."""
+    frame, so a match stays a function of its inputs. A policy that raises or answers no action
+    plays no-op for that frame, and the action says so (`failures`, `failure`)."""
 
     def __init__(self, role: str, key: str, seed: int = 0, load: PolicyLoader = policy_for) -> None:
         self.role, self.seed, self.load = role, seed, load
         self.policy = load(key, role)
         self.policy.reset(policy_seed(seed, role))
         self.pending: str | None = None
+        self.failures = 0  # frames on which the policy raised or answered no action (played no-op)
         self._lock = threading.Lock()
 
     @property
@@ -43,7 +45,12 @@ class Player:
                 self.policy, self.pending = self._next, None
                 self.policy.reset(switch_seed(self.seed, self.role, state.frame))
             policy = self.policy
-        action = policy.act(as_observation(state.obs[self.role], policy.view))
+        obs = as_observation(state.obs[self.role], policy.view)
+        try:
+            action, failure = checked_action(policy.act(obs)), ""
+        except Exception as error:  # noqa: BLE001 - a policy from outside may raise anything; the match goes on
+            self.failures += 1
+            action, failure = NOOP, f"{policy.key} at frame {state.frame}: {type(error).__name__}: {error}"
         return Action(
             match=state.match,
             frame=state.frame,
@@ -51,4 +58,6 @@ class Player:
             role=self.role,
             action=action,
             policy=policy.key,
+            failures=self.failures,
+            failure="".join(c if " " <= c <= "~" else "?" for c in failure)[:200],
         )

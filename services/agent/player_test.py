@@ -127,3 +127,33 @@ def test_seed_matters() -> None:
 
 def test_default_loader_is_scripted() -> None:
     assert Player("bait", "circle").load is policy_for
+
+
+class FailsLate:
+    """Answers thrust for 5 frames, then `bad` (an exception is raised, anything else returned)."""
+
+    key, role, view = "fails_late", "bait", "world"
+
+    def __init__(self, bad: object) -> None:
+        self.bad, self.t = bad, 0
+
+    def reset(self, seed: int | None = None) -> None:
+        self.t = 0
+
+    def act(self, obs: np.ndarray) -> int:
+        self.t += 1
+        if self.t <= 5:
+            return 2
+        if isinstance(self.bad, Exception):
+            raise self.bad
+        return self.bad  # type: ignore[return-value]
+
+
+@pytest.mark.parametrize("bad", [RuntimeError("boom"), 12, -1, "left", 2.0, None])
+def test_a_policy_that_fails_plays_no_op_and_the_actions_count_it(bad):
+    player = Player("bait", "fails_late", load=lambda key, role: FailsLate(bad))
+    actions = [decode(player.act(state, "agent/bait").encode(), Action) for state in states(frames=9)]
+    assert [a.action for a in actions] == [2] * 5 + [0] * 5  # every answer valid on the wire
+    assert [a.failures for a in actions] == [0] * 5 + [1, 2, 3, 4, 5]
+    assert actions[4].failure == "" and actions[5].failure.startswith("fails_late at frame 5: ")
+    assert ("RuntimeError: boom" if isinstance(bad, Exception) else "not an action") in actions[5].failure

@@ -30,7 +30,10 @@ def run_agent(
         )
 
         def on_state(state: State) -> None:
-            publisher.put(player.act(state, sender).encode())
+            action = player.act(state, sender)
+            if action.failure and action.failures == 1:  # one line a match; the sim counts the rest
+                log.error("%s: the policy failed and plays no-op on such frames: %s", sender, action.failure)
+            publisher.put(action.encode())
 
         def on_switch(message: PolicySwitch) -> None:
             if message.role != role:

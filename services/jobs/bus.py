@@ -17,14 +17,15 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
 import zenoh
 
 from services.jobs import kinds
-from services.jobs.core import Coordinator, Hashes, Spec, check, journal_line, read_journal
+from services.jobs.core import Coordinator, Spec, check, journal_line, open_journal, read_journal
+from services.jobs.kinds import Progress
 from services.processes import Processes
 from shared import keys
 from shared.bus import BusConfig, Drops, free_endpoint, session, subscribe
@@ -32,15 +33,6 @@ from shared.errors import Failure, UsageError
 from shared.messages import MAX_BYTES, MessageError, SweepJob, SweepResult, decode
 
 log = logging.getLogger("tsf.jobs")
-Progress = Callable[[int, int], None]  # (values done, values in all)
-
-
-def hashes() -> Hashes:
-    """The library and rules of this process."""
-    from services.agent import library
-    from shared.game import GameConfig
-
-    return Hashes(library.manifest_hash(), GameConfig().hash())
 
 
 class Coordination:
@@ -55,7 +47,7 @@ class Coordination:
     ) -> None:  # fmt: skip
         self.bus, self.sweep, self.journal = bus, sweep, journal
         self.stop, self.job_timeout, self.per_worker = stop or threading.Event(), job_timeout, per_worker
-        self.ours = hashes()
+        self.ours = kinds.hashes()
         self.state = Coordinator([], {})  # the run under way
         self.live: set[str] = set()
         self.barred: set[str] = set()
@@ -63,13 +55,9 @@ class Coordination:
         self.drops = Drops(f"coordinator/{sweep}")
 
     def __enter__(self) -> Coordination:
-        self.journal.parent.mkdir(parents=True, exist_ok=True)
         self._stack = ExitStack()
         self.z = self._stack.enter_context(session(self.bus))
-        self.journal_file = self._stack.enter_context(open(self.journal, "a+"))
-        self.journal_file.seek(max(self.journal_file.tell() - 1, 0))
-        if self.journal_file.read(1) not in ("", "\n"):  # a line torn by a killed run: end it
-            self.journal_file.write("\n")
+        self.journal_file = self._stack.enter_context(open_journal(self.journal))
         sweep = self.sweep
         self._stack.enter_context(
             subscribe(self.z, keys.sweep_result(sweep), SweepResult, self._result, self.drops)
@@ -174,34 +162,6 @@ class Coordination:
         return dict(state.done) if state.finished else None
 
 
-def coordinate(
-    bus: BusConfig,
-    sweep: str,
-    todo: list[Spec],
-    journal: Path,
-    progress: Progress | None = None,
-    stop: threading.Event | None = None,
-    job_timeout: float = 900.0,
-    per_worker: int = 1,
-) -> dict[str, list] | None:
-    """One run of jobs by a coordinator of its own (Coordination.run)."""
-    with Coordination(bus, sweep, journal, stop, job_timeout, per_worker) as coordination:
-        return coordination.run(todo, progress)
-
-
-def on_workers(coordination: Coordination) -> kinds.Runner:
-    """A runner (services/jobs/kinds.py) that hands its jobs to the sweep's workers; a stopped run
-    is a Failure (the journal keeps what was collected)."""
-
-    def run(todo: list[Spec], progress: Progress | None = None) -> list[list]:
-        done = coordination.run(todo, progress)
-        if done is None:
-            raise Failure(f"stopped; run the same command again to resume from {coordination.journal}")
-        return [done[job.id] for job in todo]
-
-    return run
-
-
 @contextmanager
 def with_local_workers(bus: BusConfig, sweep: str, local: int) -> Iterator[BusConfig]:
     """The coordinator's bus, with `local` worker processes started here for it (ended on exit),
@@ -239,7 +199,7 @@ def run_worker(bus: BusConfig, sweep: str, worker: str, stop: threading.Event | 
     inbox: queue.Queue[SweepJob] = queue.Queue()
     drops = Drops(f"worker/{worker}")
     coordinator_seen = threading.Event()
-    ours = hashes()
+    ours = kinds.hashes()
     done = 0
     with session(bus) as z:
 
@@ -275,7 +235,7 @@ def run_worker(bus: BusConfig, sweep: str, worker: str, stop: threading.Event | 
                 started = time.monotonic()
                 fits = []
                 for job in batch:
-                    why = _cannot(job, ours)
+                    why = kinds.cannot_run(job.library, job.config, job.plugins, ours)
                     if why:
                         answer(job, [], why, "worker", 0.0)
                     else:
@@ -300,16 +260,6 @@ def _run(kind: str, jobs: list[SweepJob]) -> tuple[list[list] | None, str]:
         log.error("%s jobs %s failed: %s", kind, [job.job for job in jobs], why)
         log.debug("the traceback", exc_info=True)
         return None, why
-
-
-def _cannot(job: SweepJob, ours: Hashes) -> str:
-    """Why this worker cannot run `job` ("" when it can)."""
-    if (job.library, job.config) != (ours.library, ours.config):
-        return (
-            f"library/rules {ours.library}/{ours.config} here, {job.library}/{job.config} in the sweep: "
-            "update this worker's checkout or image"
-        )
-    return kinds.import_plugins(job.plugins)
 
 
 def _drain(inbox: queue.Queue[SweepJob], quiet: float = 0.05) -> list[SweepJob]:

@@ -18,7 +18,7 @@ import math
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 log = logging.getLogger("tsf.jobs")
 
@@ -97,6 +97,16 @@ def read_journal(path: Path, jobs: dict[str, Spec], ours: Hashes) -> Journal:
         else:
             out.done.setdefault(job, values)
     return out
+
+
+def open_journal(path: Path) -> TextIO:
+    """The journal, open for appending results; a line torn by a killed run is ended first."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    journal = open(path, "a+")  # noqa: SIM115 - the caller's ExitStack closes it
+    journal.seek(max(journal.tell() - 1, 0))
+    if journal.read(1) not in ("", "\n"):
+        journal.write("\n")
+    return journal
 
 
 class Coordinator:

@@ -13,16 +13,18 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 from services.agent.outside import is_plugin
-from services.jobs.core import Spec
+from services.jobs.core import Hashes, Spec
 from shared.errors import Failure, UsageError
 
-Runner = Callable[[list[Spec], Callable[[int, int], None] | None], list[list]]  # (jobs, progress) -> values
+Progress = Callable[[int, int], None]  # (values done, values in all)
+Runner = Callable[[list[Spec], Progress | None], list[list]]  # (jobs, progress) -> values
 
 RUNNERS = {
     "table": "services.table.table:run_cells",
     "team": "services.adapter.team:run_team_jobs",
     "session": "services.adapter.team:run_session_jobs",
     "identify": "services.adapter.identification:run_identify_jobs",
+    "calibrate": "services.adapter.thresholds:run_calibrate_jobs",
 }
 
 
@@ -43,6 +45,25 @@ def in_process(todo: list[Spec], progress: Callable[[int, int], None] | None = N
         if progress is not None:
             progress(done, total)
     return out
+
+
+def hashes() -> Hashes:
+    """The library and rules of this process."""
+    from services.agent import library
+    from shared.game import GameConfig
+
+    return Hashes(library.manifest_hash(), GameConfig().hash())
+
+
+def cannot_run(library: str, config: str, plugins: Iterable[str], ours: Hashes) -> str:
+    """Why this process cannot run a job of the run's `library` and `config` hashes that needs
+    `plugins` ("" when it can): the worker's fault, not the job's."""
+    if (library, config) != (ours.library, ours.config):
+        return (
+            f"library/rules {ours.library}/{ours.config} here, {library}/{config} in the run: "
+            "update this worker's checkout or image"
+        )
+    return import_plugins(plugins)
 
 
 def failure_line(error: BaseException) -> str:

@@ -6,10 +6,8 @@ import time
 
 from services.sim.engine import Game
 from services.sim.observation import world_values
-from shared.game import ROLES
+from shared.game import NOOP, ROLES
 from shared.messages import Action, GameEvent, Start, State, Summary
-
-NOOP = 0
 
 
 class Seats:
@@ -20,14 +18,34 @@ class Seats:
         self.latest = dict.fromkeys(ROLES, NOOP)
         self.frame = dict.fromkeys(ROLES, -1)  # the state frame the latest action answered
         self.players = dict.fromkeys(ROLES, 0)  # live services holding each seat
+        self.failures = dict.fromkeys(ROLES, 0)  # frames each seat's policy failed on (its count)
+        self.failed: list[Action] = []  # actions that report a new failure, for the recording
 
     def offer(self, action: Action) -> bool:
         """Take an action unless an answer to a later frame is already in; returns whether taken."""
+        if action.failure and action.failures > self.failures[action.role]:
+            self.failures[action.role] = action.failures
+            self.failed.append(action)
         if action.frame < self.frame[action.role]:
             return False
         self.latest[action.role] = action.action
         self.frame[action.role] = action.frame
         return True
+
+    def failure_events(self, match: str, sender: str) -> list[GameEvent]:
+        """The failures reported since the last call, as `policy_failure` events (count: why)."""
+        failed, self.failed = self.failed, []
+        return [
+            GameEvent(
+                match=match,
+                frame=a.frame,
+                sender=sender,
+                kind="policy_failure",
+                role=a.role,
+                detail=f"{a.failures}: {a.failure}"[:200],
+            )  # fmt: skip
+            for a in failed
+        ]
 
     def arrive(self, role: str) -> None:
         self.players[role] += 1
@@ -87,7 +105,12 @@ def event_messages(game: Game, match: str, sender: str) -> list[GameEvent]:
 
 
 def summary_message(
-    game: Game, match: str, sender: str, drops: dict[str, int], timing: dict[str, float]
+    game: Game,
+    match: str,
+    sender: str,
+    drops: dict[str, int],
+    timing: dict[str, float],
+    failures: dict[str, int] | None = None,
 ) -> Summary:
     return Summary(
         match=match,
@@ -99,4 +122,5 @@ def summary_message(
         counters=game.counters(),
         drops=dict(drops),
         timing=timing,
+        failures={role: n for role, n in (failures or {}).items() if n},
     )

@@ -112,7 +112,9 @@ def run_sim(
             while True:
                 sent[game.frame] = time.perf_counter_ns()
                 state_pub.put(state_message(game, match, "sim", applied).encode())
-                for event in event_messages(game, match, "sim"):
+                with changed:
+                    failed = seats.failure_events(match, "sim")
+                for event in [*event_messages(game, match, "sim"), *failed]:
                     event_pub.put(event.encode())
                 if game.done or stop.is_set():
                     break
@@ -130,7 +132,8 @@ def run_sim(
                 game.step(*applied)
             with changed:
                 trips = [(t - sent[f]) / 1e6 for (_, f), t in answered_at.items() if f in sent]
-            summary = summary_message(game, match, "sim", drops.counts, _timing(trips, ticks, period))
+            timing = _timing(trips, ticks, period)
+            summary = summary_message(game, match, "sim", drops.counts, timing, seats.failures)
             z.put(keys.summary(match), summary.encode())
             time.sleep(0.2)  # let the last puts leave before the session closes
             return summary

@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from services.options import GAMES, WORKERS, bus_options, console, number, output
+from services.options import GAMES, RAY, WORKERS, bus_options, console, number, output
 from services.table.table import LANES
 from shared.bus import BusConfig, stop_on_signals
 from shared.errors import Failure
@@ -43,26 +43,24 @@ def sweep(
     ),
     plot: Path | None = output(None, "Also draw the heatmap into this PNG."),
     sweep_id: str = typer.Option("table", "--sweep", help="Sweep id: the key namespace tsf/sweep/<id>/..."),
+    ray: str | None = RAY,
     *,
     bus: BusConfig,
 ) -> None:
     """Coordinate a self-play sweep: measure the table with local and remote workers; resumable."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
 
-    from services.jobs.bus import with_local_workers
     from services.table.sweep import journal_path, run_sweep
 
     bait_keys, shooter_keys = _keys(bait, "bait"), _keys(shooter, "shooter")
     stop = stop_on_signals()
     columns = (BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
-    with (
-        with_local_workers(bus, sweep_id, workers) as coordinator_bus,
-        Progress(*columns, console=console) as bar,
-    ):
+    with Progress(*columns, console=console) as bar:
         task = bar.add_task("games", total=None)
         table = run_sweep(
-            coordinator_bus, sweep_id, out, bait_keys, shooter_keys, games, chunk,
+            bus, sweep_id, out, bait_keys, shooter_keys, games, chunk,
             lambda done, total: bar.update(task, completed=done, total=total), stop, lanes=lanes,
+            workers=workers, ray=ray,
         )  # fmt: skip
     if table is None:
         raise Failure(f"stopped; run the same command again to resume from {journal_path(out)}")

@@ -11,8 +11,9 @@ from __future__ import annotations
 import threading
 from pathlib import Path
 
-from services.jobs.bus import Progress, coordinate
 from services.jobs.core import Spec, spec
+from services.jobs.engine import open_engine
+from services.jobs.kinds import Progress
 from services.table.table import CHUNK, LANES, Job, Table, assemble, jobs
 from shared.bus import BusConfig
 
@@ -39,12 +40,17 @@ def run_sweep(
     stop: threading.Event | None = None,
     job_timeout: float = 900.0,
     lanes: int = LANES,
+    workers: int = 0,
+    ray: str | None = None,
 ) -> Table | None:
-    """Coordinate a sweep until every job has a result, then write the table to `out` (None if
-    stopped first; the journal keeps what was collected). `progress` counts games."""
+    """Run a sweep until every job has a result, on the zenoh workers of `bus` (`workers` of them
+    started here) or on the Ray cluster `ray`, then write the table to `out` (None if stopped
+    first; the journal keeps what was collected). `progress` counts games."""
     cells = {cell_spec(job).id: job for job in jobs(baits, shooters, games, chunk)}
     todo = [cell_spec(job) for job in cells.values()]
-    done = coordinate(bus, sweep, todo, journal_path(out), progress, stop, job_timeout, lanes // chunk)
+    journal = journal_path(out)
+    with open_engine(bus, sweep, journal, workers, ray, stop, lanes // chunk, job_timeout) as engine:
+        done = engine.run(todo, progress)
     if done is None:
         return None
     table = assemble(baits, shooters, games, {cells[k].id: v for k, v in done.items()}, chunk)

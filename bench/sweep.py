@@ -66,9 +66,9 @@ def full_table(engine: str, workers: int, games: int, out: Path, lanes: int) -> 
     return time.perf_counter() - start
 
 
-def per_job(engine: str, out: Path, n: int = 40) -> float:
-    """Seconds an engine adds to each job: n one-game jobs on one worker, less the same in-process
-    (the worker warm, its imports and caches loaded by a first run)."""
+def per_job(engine: str, out: Path, n: int = 40) -> tuple[float, float]:
+    """Seconds per job of n one-game jobs on one worker of `engine` and in-process (the worker
+    warm, its imports and caches loaded by a first run): the difference is the engine's overhead."""
     todo = [cell_spec(job) for job in jobs(["B4", "B7"], ["S4", "S5"], n // 4, 1)]
     in_process(todo[:4])
     start = time.perf_counter()
@@ -85,7 +85,7 @@ def per_job(engine: str, out: Path, n: int = 40) -> float:
         engine_run.run(warm)
         start = time.perf_counter()
         engine_run.run(todo)
-        return (time.perf_counter() - start - alone) / n
+        return (time.perf_counter() - start) / n, alone / n
 
 
 def main() -> None:
@@ -109,7 +109,11 @@ def main() -> None:
                 print(f"{engine}: full table, {n} worker(s): {walls[n]:.1f} s ({rate:,.0f} frames/s)")
             if 1 in walls and 2 in walls:
                 print(f"{engine}: speed-up of 2 workers over 1: {walls[1] / walls[2]:.2f}x")
-            print(f"{engine}: overhead per job: {per_job(engine, out) * 1e3:.1f} ms")
+            there, here = per_job(engine, out)
+            print(
+                f"{engine}: one-game jobs on one worker {there * 1e3:.1f} ms each, in-process "
+                f"{here * 1e3:.1f} ms: overhead per job {(there - here) * 1e3:.1f} ms"
+            )
 
 
 if __name__ == "__main__":

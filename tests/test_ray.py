@@ -6,7 +6,6 @@ one line. Marked `ray` (CI runs them as their own step) and `slow`."""
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 import time
@@ -30,7 +29,7 @@ EVAL += ["--partner", "noisy(B4)", "--partner", "B1", "-q"]
 
 
 @pytest.fixture
-def cluster(tmp_path):  # noqa: ANN201 - a ray Cluster
+def cluster(tmp_path, monkeypatch):  # noqa: ANN201 - a ray Cluster
     """A head and a second node of one CPU each; the plug-ins of `lab.py` importable on both."""
     (tmp_path / "lab.py").write_text(
         "from services.adapter.partners_test import Constant\n\n"
@@ -39,15 +38,12 @@ def cluster(tmp_path):  # noqa: ANN201 - a ray Cluster
         "    def act(self, obs):\n        self.t += 1\n"
         "        if self.t > 100:\n            raise RuntimeError('boom')\n        return 5\n"
     )
-    os.environ["PYTHONPATH"] = str(tmp_path)  # the nodes' processes inherit it
-    try:
-        cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1})
-        cluster.second = cluster.add_node(num_cpus=1)
-        cluster.wait_for_nodes()
-        yield cluster
-        cluster.shutdown()
-    finally:
-        del os.environ["PYTHONPATH"]
+    monkeypatch.setenv("PYTHONPATH", str(tmp_path))  # the nodes' processes inherit it
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1})
+    cluster.second = cluster.add_node(num_cpus=1)
+    cluster.wait_for_nodes()
+    yield cluster
+    cluster.shutdown()
 
 
 def tsf(*args: str, **kwargs: object) -> subprocess.Popen:
@@ -86,6 +82,13 @@ def test_a_sweep_on_ray_survives_a_killed_node_and_equals_a_local_run(cluster, t
     assert killed_at < 32  # the node went mid-run
     ids = journal_ids(journal)
     assert len(ids) == len(set(ids)) == 32  # every job once
+    assert Table.load(out).results == reference_table(8, 1)
+    lines = journal.read_text().splitlines(keepends=True)  # a run stopped after 10 jobs, resumed
+    journal.write_text("".join(lines[:10]))
+    out.unlink()
+    again = tsf("sweep", "--ray", cluster.address, "--games", "8", "--chunk", "1", *TABLE, "--out", str(out))
+    assert finish(again)[0] == 0
+    assert journal_ids(journal)[:10] == ids[:10] and sorted(journal_ids(journal)) == sorted(ids)
     assert Table.load(out).results == reference_table(8, 1)
     zenoh = tmp_path / "zenoh.json"
     assert (

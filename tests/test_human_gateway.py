@@ -198,3 +198,25 @@ def test_two_people_play_one_match(tmp_path, wait_until):
     assert ends[0] == ends[1] and summary.frame == 60
     played = {(a.role, a.sender, a.action) for _, a in load(path).actions}
     assert played == {("bait", "human/bait", 2), ("shooter", "human/shooter", 1)}
+
+
+def raw_request(gateway: Gateway, *headers: str) -> bytes:
+    """The status line a raw HTTP upgrade request with exactly `headers` gets."""
+    import socket
+
+    lines = ["GET /ws HTTP/1.1", *headers, "Upgrade: websocket", "Connection: Upgrade"]
+    lines += ["Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==", "Sec-WebSocket-Version: 13", "", ""]
+    with socket.create_connection((gateway.web.host, gateway.port), timeout=5) as s:
+        s.sendall("\r\n".join(lines).encode())
+        return s.recv(4096).split(b"\r\n", 1)[0]
+
+
+def test_two_host_or_origin_headers_are_refused_with_400_and_the_scheme_must_match(gateway):
+    host = f"Host: {gateway.web.host}:{gateway.port}"
+    own = f"Origin: http://{gateway.web.host}:{gateway.port}"
+    assert raw_request(gateway, host, own) == b"HTTP/1.1 101 Switching Protocols"
+    assert raw_request(gateway, host, host, own) == b"HTTP/1.1 400 Bad Request"
+    assert raw_request(gateway, host, own, "Origin: http://evil.example") == b"HTTP/1.1 400 Bad Request"
+    https = f"Origin: https://{gateway.web.host}:{gateway.port}"  # a page over TLS of the same host
+    assert raw_request(gateway, host, https) == b"HTTP/1.1 403 Forbidden"
+    assert raw_request(gateway, host, "Origin: http://evil.example") == b"HTTP/1.1 403 Forbidden"

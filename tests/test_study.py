@@ -52,7 +52,7 @@ def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_unti
     attempts = {p.id: [(a["session"], a["trial"], a["attempt"], a["status"]) for a in p.attempts]
                 for p in study.participants.values()}  # fmt: skip
     assert attempts == {
-        "P001": [(1, 1, 1, "dropped"), (1, 1, 2, "done"), (2, 1, 1, "done")],
+        "P001": [(1, 1, 1, "failed"), (1, 1, 2, "done"), (2, 1, 1, "done")],  # the cut one: a fragment
         "P002": [(1, 1, 1, "done"), (2, 1, 1, "done")],
     }
     for participant in study.participants.values():
@@ -167,3 +167,39 @@ def _processes() -> list[str]:
         with contextlib.suppress(OSError):
             found.append(cmdline.read_bytes().replace(b"\0", b" ").decode(errors="replace"))
     return found
+
+
+def test_attempts_an_earlier_server_left_are_settled_by_their_recordings(tmp_path):
+    """A server killed just after a trial ended (its attempt `running`, the recording complete), a
+    page closed mid-trial (`dropped`, a fragment), a server killed during set-up (no recording):
+    the next server makes the first `done`, never played again, the others `failed`, offered
+    again; each gets its sidecar."""
+    from services.recorder.recording_test import Script, record_match
+    from services.study.core import Study
+    from services.study.runner import reconcile
+
+    study = Study(StudyConfig("settle", VARIANTS, trials=2), tmp_path)
+    people = [study.arrive() for _ in range(3)]
+    trials = [study.next_trial(p) for p in people]
+    recordings = tmp_path / "recordings"
+    recordings.mkdir()
+    complete, cut = (recordings / f"{t.match}.tsflog" for t in trials[:2])
+    record_match(complete, script=Script(match=trials[0].match, frames=60, human=trials[0].role))
+    record_match(cut, script=Script(match=trials[1].match, frames=60, human=trials[1].role), summary=False)
+    for trial, status in zip(trials, ("running", "dropped", "running"), strict=True):
+        study.record(trial, status)
+    study.close()
+
+    again = Study(StudyConfig("settle", VARIANTS, trials=2), tmp_path)
+    sidecars = reconcile(again)
+    assert [(s["participant"], s["status"]) for s in sidecars] == [
+        ("P001", "done"),
+        ("P002", "failed"),
+        ("P003", "failed"),
+    ]
+    assert all((recordings / f"{t.match}.study.json").exists() for t in trials)
+    first, second, third = (again.next_trial(again.participants[p.id]) for p in people)
+    assert (first.trial, first.attempt) == (2, 1)  # the complete trial is not played again
+    assert (second.trial, second.attempt) == (third.trial, third.attempt) == (1, 2)
+    assert reconcile(again) == []  # nothing left to settle
+    again.close()

@@ -17,7 +17,6 @@ own messages down.
 
 from __future__ import annotations
 
-import hmac
 import json
 import math
 import time
@@ -27,6 +26,7 @@ from dataclasses import dataclass, field
 from shared.errors import UsageError
 from shared.game import ROLES, GameConfig, join_action, split_action
 from shared.messages import State, Summary
+from shared.secret import same_secret
 
 KEYS = ("left", "right", "thrust", "fire")
 MAX_MESSAGE = 512  # bytes: the largest message a browser has reason to send
@@ -167,7 +167,7 @@ class SeatBook:
         expected = self.tokens.get(role)
         if expected is None:
             return f"the {role} seat of this match is not open to people"
-        if not hmac.compare_digest(expected.encode(), token.encode()):
+        if not same_secret(token, expected):
             return f"wrong seat token for the {role} seat"
         if role in self.holders:
             return f"the {role} seat is already taken by another connection"

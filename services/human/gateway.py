@@ -246,11 +246,24 @@ def serve_page(connection: ServerConnection, request: Request) -> Response | Non
     return Response(200, "OK", headers, body)
 
 
-def same_origin(request: Request, allowed: tuple[str, ...]) -> bool:
-    """A browser's socket comes from the server's own page (Origin names the Host it asked for) or
+SINGLE = ("Host", "Origin")  # headers a request may carry once: two are refused with 400
+
+
+def duplicated(request: Request) -> bool:
+    """Whether the request carries a header of SINGLE more than once (which one counts would be a
+    guess, and websockets' own reading of it fails)."""
+    return any(len(request.headers.get_all(name)) > 1 for name in SINGLE)
+
+
+def same_origin(request: Request, allowed: tuple[str, ...], scheme: str = "http") -> bool:
+    """A browser's socket comes from the server's own page (Origin is `scheme`://the Host it asked
+    for, so a page over plain HTTP cannot drive a TLS server's socket nor the other way round) or
     from an allowed origin; a client that sends no Origin is no browser, and no web page drives it."""
     origin = request.headers.get("Origin")
-    return origin is None or origin in allowed or urlsplit(origin).netloc == request.headers.get("Host")
+    if origin is None or origin in allowed:
+        return True
+    parts = urlsplit(origin)
+    return parts.scheme == scheme and parts.netloc == request.headers.get("Host")
 
 
 Handler = Callable[[ServerConnection, zenoh.Session | None], Awaitable[None]]
@@ -293,8 +306,10 @@ class Gateway:
             self.loop.close()
 
     def _request(self, connection: ServerConnection, request: Request) -> Response | None:
+        if duplicated(request):
+            return connection.respond(400, "bad request\n")
         if request.path.split("?", 1)[0] == SOCKET_PATH:
-            if not same_origin(request, self.web.origins):
+            if not same_origin(request, self.web.origins, "https" if self.web.cert else "http"):
                 return connection.respond(403, "forbidden\n")
             if self.web.per_address and self.sockets[connection.remote_address[0]] >= self.web.per_address:
                 return connection.respond(429, "too many connections\n")

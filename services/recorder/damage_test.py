@@ -3,6 +3,7 @@ asserts exactly what is recovered, what is reported missing, and what `tsf repla
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from pathlib import Path
 
@@ -11,9 +12,10 @@ import pytest
 
 from services.cli import app
 from services.entry import run
-from services.recorder.log import HEADER, MAGIC, Damage
+from services.recorder.log import HEADER, MAGIC, Damage, LogWriter
 from services.recorder.recording import load, replay
 from services.recorder.recording_test import Script, record_match
+from shared import keys
 from shared.messages import Start, State, Summary, decode_any
 
 FRAMES = 12
@@ -176,3 +178,16 @@ def test_not_a_recording(tmp_path: Path, replay_cli) -> None:  # noqa: ANN001
     path = damaged(tmp_path, b"hello")
     code, output = replay_cli(path)
     assert (code, output.strip()) == (1, f"tsf replay: {path} is not a TSF recording (bad magic)")
+
+
+@pytest.mark.parametrize("frame", [0, 5])
+def test_a_stopped_matchs_fragment_is_never_complete(original, tmp_path: Path, frame: int) -> None:  # noqa: ANN001
+    """A match stopped early writes a summary at its last frame: the recording is whole up to it,
+    and still not the planned match."""
+    data, records = original
+    cut = next(end for _, end, m in records if isinstance(m, State) and m.frame == frame)
+    path = damaged(tmp_path, data[:cut])
+    summary = next(m for *_, m in records if isinstance(m, Summary))
+    with LogWriter(path) as log:
+        log.write(keys.summary(summary.match), dataclasses.replace(summary, frame=frame).encode())
+    assert load(path).problems() == [f"stopped at frame {frame} of {FRAMES}"]

@@ -60,12 +60,22 @@ class Recording:
         known = {s.frame for s in self.states} | {f for a, b in self.gaps for f in range(a, b + 1)}
         return _ranges(f for f in range(last + 1) if f not in known)
 
+    @property
+    def planned(self) -> int | None:
+        """The frames the match was to last, as its start record's config says (None without one)."""
+        frames = self.start.config.get("frames") if self.start is not None else None
+        return frames if isinstance(frames, int) else None
+
     def problems(self, allow_torn: bool = False) -> list[str]:
-        """What is missing or wrong, one phrase each; empty for a complete recording with a summary.
-        `allow_torn`: a missing end (no summary, maybe a last record cut short) is no problem."""
+        """What is missing or wrong, one phrase each; empty for a complete recording with a summary
+        at the planned last frame (a stopped match's summary comes early: a fragment, never
+        complete). `allow_torn`: a missing end (no summary, maybe a last record cut short) is no
+        problem."""
         damaged = [d for d in self.damage if not d.torn or not allow_torn]
         last = max((s.frame for s in self.states), default=None)
+        short = self.summary is not None and self.planned is not None and self.summary.frame < self.planned
         return [
+            *([f"stopped at frame {self.summary.frame} of {self.planned}"] if short else []),
             *(str(d) for d in damaged),
             *([f"frames {_text(self.lost())} lost"] if self.lost() else []),
             *([f"frames {_text(self.gaps)} never reached the recorder"] if self.gaps else []),

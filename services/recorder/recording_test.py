@@ -52,6 +52,7 @@ class Script:
     announced: dict[str, str] | None = None
     statuses: tuple[AdapterStatus, ...] = (ADAPTER,)
     switches: tuple[PolicySwitch, ...] = (SWITCH,)
+    human: str = ""  # a seat whose actions are sent as a person's (human/<role>)
 
 
 def record_match(
@@ -90,7 +91,8 @@ def record_match(
                 if switch.frame == state.frame:
                     log.write(keys.policy(m, switch.role), switch.encode())
                     players[switch.role].switch(switch.policy)
-            answers = [players[role].act(state, f"agent/{role}") for role in ROLES]
+            senders = {role: f"{'human' if role == script.human else 'agent'}/{role}" for role in ROLES}
+            answers = [players[role].act(state, senders[role]) for role in ROLES]
             for answer in answers:
                 log.write(keys.action(m, answer.role), answer.encode())
             applied = tuple(a.action for a in answers)

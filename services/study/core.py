@@ -27,6 +27,7 @@ from pathlib import Path
 from services.adapter.core import AdapterConfig
 from shared.errors import UsageError
 from shared.game import DURATION, FPS, ROLES, SEEDS, other
+from shared.secret import same_secret
 
 NAME = re.compile(r"[A-Za-z0-9_]{1,24}")
 DEFAULT_CONSENT = (
@@ -212,6 +213,20 @@ class Journal:
                 os.fsync(out.fileno())
 
 
+WORKER = re.compile(r"[A-Za-z0-9_.:@+-]{1,64}")  # what a platform's worker id may hold
+
+
+def worker_id(given: object) -> str | None:
+    """A crowd-sourcing worker id as the link gave it, without surrounding spaces; "" for none;
+    None for anything that is no id (not a string, control characters, markup, over 64)."""
+    if given is None or given == "":
+        return ""
+    if not isinstance(given, str):
+        return None
+    trimmed = given.strip()
+    return trimmed if WORKER.fullmatch(trimmed) else None
+
+
 class Study:
     """Participants and their progress, kept in the journal `<directory>/study.jsonl`: a header,
     then one line per new participant and one per change of an attempt. Read back on start, so a
@@ -221,7 +236,7 @@ class Study:
         self.config, self.directory = config, Path(directory)
         self.path = self.directory / "study.jsonl"
         self.participants: dict[str, Participant] = {}
-        self.workers: dict[str, str] = {}  # worker id -> participant id
+        self.workers: dict[str, str] = {}  # worker id, casefolded -> participant id
         records = Journal.read(self.path)
         if records and records[0].get("config") != config.hash():
             raise ValueError(f"{self.path} belongs to another version of study {records[0].get('study')!r}")
@@ -240,7 +255,11 @@ class Study:
     def _add(self, participant: Participant) -> None:
         self.participants[participant.id] = participant
         if participant.worker:
-            self.workers[participant.worker] = participant.id
+            self.workers[participant.worker.casefold()] = participant.id
+
+    def taken(self, worker: str) -> bool:
+        """Whether this crowd-sourcing worker id (in any case) has already taken part."""
+        return bool(worker) and worker.casefold() in self.workers
 
     def _attempt(self, participant: str, entry: dict) -> None:
         found = self.participants[participant]
@@ -249,7 +268,7 @@ class Study:
 
     def arrive(self, worker: str = "") -> Participant:
         """A new participant, who has consented: the next id, a role, an order of variants and a
-        completion code. A worker id already seen is the shell's to refuse (`workers`)."""
+        completion code. A worker id already seen is the shell's to refuse (`taken`)."""
         index = len(self.participants)
         participant = Participant(
             f"P{index + 1:03d}",
@@ -267,28 +286,41 @@ class Study:
     def resume(self, participant: str, key: str) -> Participant | None:
         """The participant with this id and key, or None."""
         found = self.participants.get(participant)
-        return found if found is not None and secrets.compare_digest(found.key, key) else None
+        return found if found is not None and same_secret(key, found.key) else None
 
     def next_trial(self, participant: Participant) -> Trial | None:
         """The first trial the participant has not completed, or None when all are done."""
-        for session, variant_index in enumerate(participant.order, start=1):
+        for session in range(1, len(participant.order) + 1):
             for trial in range(1, self.config.trials + 1):
                 if participant.done(session, trial):
                     continue
                 attempt = 1 + sum(
                     a["session"] == session and a["trial"] == trial for a in participant.attempts
                 )
-                match = f"{self.config.name}-{participant.id}-s{session}t{trial}" + (
-                    f"-a{attempt}" if attempt > 1 else ""
-                )
-                seed = int.from_bytes(hashlib.blake2b(match.encode(), digest_size=4).digest(), "big")
-                variant = self.config.variants[variant_index]
-                return Trial(participant.id, participant.role, session, trial, attempt, variant, match, seed)
+                return self._trial(participant, session, trial, attempt)
         return None
 
+    def _trial(self, participant: Participant, session: int, trial: int, attempt: int) -> Trial:
+        match = f"{self.config.name}-{participant.id}-s{session}t{trial}" + (
+            f"-a{attempt}" if attempt > 1 else ""
+        )
+        seed = int.from_bytes(hashlib.blake2b(match.encode(), digest_size=4).digest(), "big")
+        variant = self.config.variants[participant.order[session - 1]]
+        return Trial(participant.id, participant.role, session, trial, attempt, variant, match, seed)
+
+    def unsettled(self) -> list[Trial]:
+        """The attempts left `running` or `dropped` (a server killed mid-trial, a page closed): each
+        is for its recording to settle, `done` or `failed`."""
+        return [
+            self._trial(participant, a["session"], a["trial"], a["attempt"])
+            for participant in self.participants.values()
+            for a in participant.attempts
+            if a["status"] in ("running", "dropped")
+        ]
+
     def record(self, trial: Trial, status: str, kills: int | None = None) -> dict:
-        """Write down how an attempt went (`running`, `done` or `dropped`); returns the sidecar that
-        goes beside the trial's recording."""
+        """Write down how an attempt went (`running`, `dropped` while it runs out, then `done` or
+        `failed`); returns the sidecar that goes beside the trial's recording."""
         participant = self.participants[trial.participant]
         entry = {"session": trial.session, "trial": trial.trial, "attempt": trial.attempt}
         self._attempt(participant.id, {**entry, "match": trial.match, "status": status, "kills": kills})

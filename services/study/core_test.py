@@ -166,3 +166,21 @@ def test_a_changed_study_does_not_reuse_another_versions_file(tmp_path: Path) ->
     study.close()
     with pytest.raises(ValueError, match="another version"):
         Study(config(trials=3), tmp_path)
+
+
+def test_a_worker_id_is_trimmed_validated_and_taken_in_any_case(tmp_path):
+    from services.study.core import Study, worker_id
+
+    assert [worker_id(w) for w in ("", None, " W-17 ", "5f8e0c1d2a3b4c5d6e7f8a9b")] == [
+        "",
+        "",
+        "W-17",
+        "5f8e0c1d2a3b4c5d6e7f8a9b",
+    ]
+    for bad in ("W\x0017", "<b>W</b>", "\udc80", "W 17", "x" * 65, 17, ["W-17"]):
+        assert worker_id(bad) is None, bad
+    study = Study(config(), tmp_path)
+    study.arrive("W-17")
+    assert study.taken("w-17") and study.taken("W-17") and not study.taken("W-18") and not study.taken("")
+    study.close()
+    assert Study(config(), tmp_path).taken("w-17")  # read back from the journal

@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import hmac
 import json
 import logging
 import threading
@@ -49,11 +48,12 @@ from services.human.gateway import Bridge, Gateway, Handler, Outbox, Web, receiv
 from services.launch import HUMAN, MatchPlan, match_buses, run_match
 from services.recorder.recording import load
 from services.recorder.service import recording_path
-from services.study.core import Admission, Participant, Study, StudyConfig, Trial
+from services.study.core import Admission, Participant, Study, StudyConfig, Trial, worker_id
 from services.study.remote import Remote
 from shared import keys
 from shared.bus import BusConfig, free_endpoint
-from shared.game import other
+from shared.game import FPS, other
+from shared.secret import same_secret
 
 log = logging.getLogger("tsf.study")
 PROBLEM = "The game could not be started. Please tell the experimenter."
@@ -66,6 +66,7 @@ WARM_UP = 60.0  # seconds to wait for a match's processes before offering its tr
 ARRIVAL_BURST = 20  # participant ids issued at once, beyond the rate
 BUSY = "Too many people are starting right now. Please try again in a minute."
 TAKEN = "This worker id has already taken part in this study."
+NO_WORKER = "This link's worker id is not one this study can take (letters, digits and _ . : @ + - only)."
 
 
 @dataclass(frozen=True)
@@ -170,13 +171,25 @@ def run_trial(
             run_match(plan, stop=stop)
     except Exception as error:  # noqa: BLE001 - any failure fails the trial, never the server
         problems.append(str(error) or type(error).__name__)
+    kills, found = judge(recording_path(plan.directory, plan.match), role)
+    return kills, [*problems, *found]
+
+
+def judge(path: Path, role: str) -> tuple[int | None, list[str]]:
+    """A trial's recording read back: (kills, problems); no problems for a complete recording of
+    the planned length with the participant's seat played from this server to its last second.
+    The kills are the recording's, when it has a summary (a stopped match's sim still sends one)."""
     try:
-        recording = load(recording_path(plan.directory, plan.match))
+        recording = load(path)
     except (OSError, ValueError) as error:  # none, or not a recording
-        return None, [*problems, f"no recording: {error}"]
-    problems += recording.problems()
-    if not any(a.role == role and a.sender == f"human/{role}" for _, a in recording.actions):
+        return None, [f"no recording: {error}"]
+    problems = recording.problems()
+    answered = [a.frame for _, a in recording.actions if a.role == role and a.sender == f"human/{role}"]
+    if not answered:
         problems.append(f"no action of the participant's {role} seat was recorded")
+    elif recording.summary is not None and max(answered) < recording.summary.frame - FPS:
+        last = f"frame {max(answered)} of {recording.summary.frame}"
+        problems.append(f"the participant's {role} seat stopped answering at {last}")  # the page went
     return (recording.summary.kills if recording.summary else None), problems
 
 
@@ -234,10 +247,11 @@ class Matches:
 
         running.add_done_callback(ended)
 
-    async def end_previous(self, trial: Trial) -> None:
-        """One match per participant: a cut match still running out is ended first."""
-        if trial.participant in self.of:
-            running, stop = self.of[trial.participant]
+    async def end_previous(self, participant: str) -> None:
+        """One match per participant: a cut match still running out is ended first, and settled
+        (its attempt `done` or `failed`) before the next trial is chosen."""
+        if participant in self.of:
+            running, stop = self.of[participant]
             stop.set()
             await asyncio.wait({running})
 
@@ -253,6 +267,31 @@ class Matches:
             self.closed = True
             for stop in self.stops.values():
                 stop.set()
+
+
+def settle(study: Study, trial: Trial, kills: int | None, problems: list[str]) -> dict:
+    """Write down how an attempt ended, `done` without problems, else `failed` (offered again),
+    and its sidecar beside its recording; returns the sidecar."""
+    status = "failed" if problems else "done"
+    if problems:
+        log.error("trial %s failed: %s", trial.match, "; ".join(problems))
+    sidecar = study.record(trial, status, kills)
+    recordings = study.directory / "recordings"
+    recordings.mkdir(parents=True, exist_ok=True)
+    (recordings / f"{trial.match}.study.json").write_text(json.dumps(sidecar, indent=1))
+    log.info("%s: %s, %s kills", trial.match, status, kills)
+    return sidecar
+
+
+def reconcile(study: Study) -> list[dict]:
+    """Settle every attempt an earlier server left `running` or `dropped` (killed mid-trial, or
+    just after one) by its recording, before anyone is served: a complete one is `done` and never
+    played again, any other `failed`; each gets its sidecar. Returns the sidecars."""
+    recordings = study.directory / "recordings"
+    return [
+        settle(study, trial, *judge(recording_path(recordings, trial.match), trial.role))
+        for trial in study.unsettled()
+    ]
 
 
 def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remote | None = None) -> Handler:
@@ -273,14 +312,17 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
             if participant is None:
                 await refuse(socket.ws, "unknown participant or resume key")
             return participant
-        worker = hello.get("worker", "")
-        if worker in study.workers:
+        worker = worker_id(hello.get("worker"))
+        if worker is None:
+            await refuse(socket.ws, NO_WORKER)
+            return None
+        if study.taken(worker):
             await refuse(socket.ws, TAKEN)
             return None
         socket.send({"type": "consent", "text": config.consent})
         if not await socket.wait_for("consent"):
             return None
-        if worker in study.workers:  # a second window of the same worker consented first
+        if study.taken(worker):  # a second window of the same worker consented first
             await refuse(socket.ws, TAKEN)
             return None
         if not arrivals.allow():
@@ -342,7 +384,6 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
         for at most its length and `trial_timeout`. Returns the sidecar, or None if the participant
         left (a match they started runs out with their ship idle; one they had not is ended;
         either is marked dropped)."""
-        await matches.end_previous(trial)
         if not await slot(socket, trial.match):
             return None
         seats = {trial.role: HUMAN, **trial.variant.plan(other(trial.role), trial.seed)}
@@ -384,15 +425,11 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
         dropped = socket.gone.is_set() and not (ready and running.done())
 
         def finish(done: asyncio.Future) -> dict:
-            kills, problems = (None, ["cancelled"]) if done.cancelled() else done.result()
-            status = "dropped" if dropped else "failed" if problems else "done"
-            if problems and not dropped:
-                log.error("trial %s failed: %s", trial.match, "; ".join(problems))
-            sidecar = study.record(trial, status, kills)
-            recordings.mkdir(parents=True, exist_ok=True)
-            (recordings / f"{trial.match}.study.json").write_text(json.dumps(sidecar, indent=1))
-            log.info("%s: %s, %s kills", trial.match, status, kills)
-            return sidecar
+            if dropped:  # the page went: the recording alone says whether the trial was played
+                kills, problems = judge(recording_path(recordings, trial.match), trial.role)
+            else:
+                kills, problems = (None, ["cancelled"]) if done.cancelled() else done.result()
+            return settle(study, trial, kills, problems)
 
         if dropped:  # resumable at once; the sidecar follows when the match has ended
             study.record(trial, "dropped")
@@ -404,7 +441,11 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
     async def trials(socket: Socket, participant: Participant, obs: bool) -> None:
         """The participant's remaining trials; a failed one is offered again, RETRIES times."""
         last, failures = None, 0
-        while (trial := study.next_trial(participant)) is not None:
+        while True:
+            await matches.end_previous(participant.id)  # settled first: never a trial twice
+            trial = study.next_trial(participant)
+            if trial is None:
+                break
             offer = {
                 "type": "trial", "role": trial.role, "agent": trial.agent, "last": last,
                 "session": trial.session, "sessions": len(config.variants),
@@ -441,7 +482,7 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
                 participant = None
                 return
             playing.add(participant.id)
-            test = bool(serving.test_token) and hmac.compare_digest(hello.get("test", ""), serving.test_token)
+            test = bool(serving.test_token) and same_secret(hello.get("test"), serving.test_token)
             await trials(socket, participant, hello.get("obs", False) and test)
         finally:
             if participant is not None:
@@ -464,6 +505,8 @@ def run_study(
     progress lives in `directory` (a restarted server resumes everyone)."""
     stop = stop or threading.Event()
     study = Study(config, directory)
+    for sidecar in reconcile(study):
+        log.info("attempt %s left %s by an earlier server", sidecar["match"], sidecar["status"])
     matches = Matches(serving.max_matches)
     remote = Remote(serving.hosts) if serving.hosts else None
     try:

@@ -352,12 +352,14 @@ class SweepJob(Message):
     games, a batch of evaluation games, sessions, identification runs), its `kind` saying which.
     `match` carries the sweep id; `args` are the kind's arguments; `plugins` the `module:attr`
     partners or policies it needs imported; `library` and `config` the hashes the worker's own copies
-    must have."""
+    must have; `batch` the jobs handed to the worker at once, this one among them (sent back to back,
+    played together)."""
 
     TYPE: ClassVar[str] = "sweep_job"
     CHECKS: ClassVar[dict[str, Check]] = {
         "job": _JOB_ID,
         "kind": _one_of(JOB_KINDS),
+        "batch": _int(1, 100_000),
         "args": lambda v: isinstance(v, dict) and _plain()(v),
         "plugins": lambda v: isinstance(v, list) and len(v) <= 16 and all(_PLUGIN(x) for x in v),
         "library": _HASH,
@@ -366,6 +368,7 @@ class SweepJob(Message):
 
     job: str = ""
     kind: str = "table"
+    batch: int = 1
     args: dict[str, Any] = field(default_factory=dict)
     plugins: list[str] = field(default_factory=list)
     library: str = "0" * 16

@@ -17,6 +17,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections import Counter
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
@@ -111,14 +112,16 @@ class Coordination:
             state = self.state
         state.refused(worker, job, why)
 
-    def _message(self, job: Spec) -> bytes:
-        """The job as every worker receives it. One that no worker would take (over the size limit,
-        or breaking the job contract a worker checks) is a Failure here, before anything is sent,
-        rather than a job that waits for its timeout."""
-        data = SweepJob(
+    def _message(self, job: Spec) -> SweepJob:
+        """The job as every worker receives it (`batch` set as it is sent). One that no worker would
+        take (over the size limit, or breaking the job contract a worker checks) is a Failure here,
+        before anything is sent, rather than a job that waits for its timeout."""
+        message = SweepJob(
             match=self.sweep, frame=0, sender="coordinator", job=job.id, kind=job.kind, args=job.args,
             plugins=list(job.plugins), library=self.ours.library, config=self.ours.config,
-        ).encode()  # fmt: skip
+            batch=self.per_worker,
+        )  # fmt: skip
+        data = message.encode()
         if len(data) > MAX_BYTES:
             raise Failure(f"job {job.id} is {len(data)} bytes, over {MAX_BYTES}: make the jobs smaller")
         try:
@@ -127,7 +130,7 @@ class Coordination:
             raise Failure(
                 f"job {job.id} breaks the job contract, so no worker would run it: {error}"
             ) from None
-        return data
+        return message
 
     def run(self, todo: list[Spec], progress: Progress | None = None) -> dict[str, list] | None:
         """Hand out `todo` until every job has a result: the values by job id (None if stopped
@@ -153,8 +156,11 @@ class Coordination:
         while not state.finished and not self.stop.is_set():
             if state.failure:
                 raise Failure(f"{state.failure} (the journal {self.journal} keeps the jobs done)")
-            for worker, job in state.assignments(time.monotonic(), self.job_timeout):
-                self.z.put(keys.sweep_job(self.sweep, worker), messages[job.id])
+            sent = state.assignments(time.monotonic(), self.job_timeout)
+            batches = Counter(worker for worker, _ in sent)
+            for worker, job in sent:
+                message = dataclasses.replace(messages[job.id], batch=batches[worker])
+                self.z.put(keys.sweep_job(self.sweep, worker), message.encode())
             report()
             with state.changed:
                 state.changed.wait(0.5)
@@ -231,7 +237,7 @@ def run_worker(bus: BusConfig, sweep: str, worker: str, stop: threading.Event | 
                     batch = [inbox.get(timeout=0.2)]
                 except queue.Empty:
                     continue
-                batch += _drain(inbox)
+                batch += _rest(inbox, batch[0].batch - 1)
                 started = time.monotonic()
                 fits = []
                 for job in batch:
@@ -262,12 +268,13 @@ def _run(kind: str, jobs: list[SweepJob]) -> tuple[list[list] | None, str]:
         return None, why
 
 
-def _drain(inbox: queue.Queue[SweepJob], quiet: float = 0.05) -> list[SweepJob]:
-    """The rest of a batch: the coordinator sends a worker's jobs back to back, so whatever
-    arrives until the inbox has been quiet for `quiet` seconds."""
+def _rest(inbox: queue.Queue[SweepJob], count: int, patience: float = 1.0) -> list[SweepJob]:
+    """The rest of a batch: the `count` jobs the coordinator sent back to back with the first (or
+    what came of them within `patience` seconds each: a lost message costs a wait, not the run)."""
     more = []
-    while True:
+    while len(more) < count:
         try:
-            more.append(inbox.get(timeout=quiet))
+            more.append(inbox.get(timeout=patience))
         except queue.Empty:
-            return more
+            break
+    return more

@@ -203,3 +203,44 @@ def test_attempts_an_earlier_server_left_are_settled_by_their_recordings(tmp_pat
     assert (second.trial, second.attempt) == (third.trial, third.attempt) == (1, 2)
     assert reconcile(again) == []  # nothing left to settle
     again.close()
+
+
+def test_a_client_that_consents_and_goes_silent_frees_its_slot_for_a_newcomer(tmp_path, study_server):
+    """The only slot is taken by a socket that consents, is offered its trial and never says
+    Ready: after the Ready timeout its match ends and its slot goes to the newcomer waiting."""
+    import time
+
+    import websockets
+
+    config = StudyConfig("silent", VARIANTS[:1], trials=1, trial_seconds=1.5, seed=3, consent="Agree?")
+    serving = Serving(max_matches=1, test_token=TEST, ready_timeout=4.0)
+    stop, url, server = study_server(config, tmp_path, serving=serving)
+
+    async def silent() -> list[str]:
+        seen = []
+        async with websockets.connect(url.replace("http", "ws", 1) + "ws") as ws:
+            await ws.send(json.dumps({"type": "hello"}))
+            async for text in ws:
+                seen.append(json.loads(text).get("type"))
+                if seen[-1] == "consent":
+                    await ws.send(json.dumps({"type": "consent"}))
+                if seen[-1] == "trial":  # offered, the slot held: and now nothing
+                    break
+            with contextlib.suppress(websockets.ConnectionClosed):
+                await asyncio.wait_for(ws.wait_closed(), 30)
+        return seen
+
+    async def both() -> tuple[list[str], object, float]:
+        hold = asyncio.ensure_future(silent())
+        await asyncio.sleep(1.0)
+        started = time.monotonic()
+        newcomer = await stand_in(url, test=TEST)
+        return await hold, newcomer, time.monotonic() - started
+
+    seen, newcomer, waited = asyncio.run(both())
+    assert seen[-1] == "trial" and newcomer.done
+    assert waited < serving.ready_timeout + 30  # the timeout, then its own start-up and trial
+    stop.set()
+    study = server.result(timeout=60)
+    statuses = {p.id: [a["status"] for a in p.attempts] for p in study.participants.values()}
+    assert statuses == {"P001": ["failed"], "P002": ["done"]}

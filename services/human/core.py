@@ -111,6 +111,10 @@ class RateLimit:
         self.rate, self.burst, self.clock = rate, burst, clock
         self.tokens, self.last = float(burst), clock()
 
+    def full(self) -> bool:
+        """Whether the bucket has refilled: it is then as good as a new one."""
+        return self.tokens + (self.clock() - self.last) * self.rate >= self.burst
+
     def allow(self) -> bool:
         now = self.clock()
         self.tokens = min(self.burst, self.tokens + (now - self.last) * self.rate)
@@ -119,6 +123,23 @@ class RateLimit:
             return False
         self.tokens -= 1.0
         return True
+
+
+class PerAddress:
+    """A RateLimit per client address (`rate` 0: none). Buckets that have refilled are forgotten
+    once there are many, so a crowd of addresses costs no memory for long."""
+
+    def __init__(self, rate: float, burst: int, clock: Callable[[], float] = time.monotonic) -> None:
+        self.rate, self.burst, self.clock = rate, burst, clock
+        self.buckets: dict[str, RateLimit] = {}
+
+    def allow(self, address: str) -> bool:
+        if not self.rate:
+            return True
+        if len(self.buckets) > 10_000:
+            self.buckets = {a: bucket for a, bucket in self.buckets.items() if not bucket.full()}
+        bucket = self.buckets.setdefault(address, RateLimit(self.rate, self.burst, self.clock))
+        return bucket.allow()
 
 
 @dataclass

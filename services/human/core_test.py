@@ -134,3 +134,15 @@ def test_view_carries_what_the_page_draws() -> None:
     assert {m[2] for m in frame["missiles"]} == {0, 1}  # both ships' missiles, by owner
     assert frame["fortress"][0] == round(game.facing, 1)
     json.dumps(frame)  # what goes down the socket
+
+
+def test_one_address_gets_its_burst_then_its_rate_and_others_are_untouched():
+    from services.human.core import PerAddress
+
+    now = [0.0]
+    buckets = PerAddress(0.1, 3, clock=lambda: now[0])
+    assert [buckets.allow("10.0.0.1") for _ in range(5)] == [True, True, True, False, False]
+    assert buckets.allow("10.0.0.2")  # another address has a bucket of its own
+    now[0] += 10.0  # one id per 10 s
+    assert buckets.allow("10.0.0.1") and not buckets.allow("10.0.0.1")
+    assert all(PerAddress(0.0, 3).allow("10.0.0.1") for _ in range(100))  # 0: no limit

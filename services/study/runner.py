@@ -43,7 +43,7 @@ import websockets
 import zenoh
 from websockets.asyncio.server import ServerConnection
 
-from services.human.core import BadInput, Controls, RateLimit
+from services.human.core import BadInput, Controls, PerAddress, RateLimit
 from services.human.gateway import Bridge, Gateway, Handler, Outbox, Web, receive_first, refuse
 from services.launch import HUMAN, MatchPlan, match_buses, run_match
 from services.recorder.recording import load
@@ -64,6 +64,7 @@ THREADS = 512  # threads for blocking work off the event loop: two per running m
 DRAIN = 60.0  # seconds the stopping server waits for its matches to end and be written down
 WARM_UP = 60.0  # seconds to wait for a match's processes before offering its trial anyway
 ARRIVAL_BURST = 20  # participant ids issued at once, beyond the rate
+ADDRESS_BURST = 5  # ... to one address
 BUSY = "Too many people are starting right now. Please try again in a minute."
 TAKEN = "This worker id has already taken part in this study."
 NO_WORKER = "This link's worker id is not one this study can take (letters, digits and _ . : @ + - only)."
@@ -78,6 +79,10 @@ class Serving:
     low_latency: bool = True  # zenoh's low-latency transport within each match
     test_token: str = ""  # a hello with this `test` token may ask for the observation values (stand-ins)
     arrivals: float = 1.0  # new participant ids a second, on average (bursts of ARRIVAL_BURST)
+    # ... and from one address (bursts of ADDRESS_BURST; 0: none, as behind a reverse proxy, where
+    # every client has the proxy's address), so that one client cannot drain the ids of all
+    arrivals_per_address: float = 0.1
+    ready_timeout: float = 120.0  # seconds an offered trial waits for Ready; then its match and slot go
     starting: int = 2  # matches starting up at once (until their sim listens)
     hosts: BusConfig | None = None  # the router where match hosts offer their slots; None: local only
 
@@ -302,6 +307,7 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
     playing: set[str] = set()
     match_seconds = config.trial_seconds + START_UP
     arrivals = RateLimit(serving.arrivals, ARRIVAL_BURST)
+    per_address = PerAddress(serving.arrivals_per_address, ADDRESS_BURST)
     starting = asyncio.Semaphore(serving.starting)
 
     async def admit(socket: Socket, hello: dict) -> Participant | None:
@@ -325,7 +331,9 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
         if study.taken(worker):  # a second window of the same worker consented first
             await refuse(socket.ws, TAKEN)
             return None
-        if not arrivals.allow():
+        if socket.gone.is_set():  # consented and left: no id, no match
+            return None
+        if not (per_address.allow(socket.ws.remote_address[0]) and arrivals.allow()):
             await refuse(socket.ws, BUSY)
             return None
         participant = study.arrive(worker)
@@ -386,14 +394,18 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
         either is marked dropped)."""
         if not await slot(socket, trial.match):
             return None
+        if socket.gone.is_set():  # left as the slot came: nothing starts
+            matches.admission.end(trial.match)
+            matches.notify()
+            return None
         seats = {trial.role: HUMAN, **trial.variant.plan(other(trial.role), trial.seed)}
         host = matches.admission.running[trial.match]  # Admission.LOCAL: this machine
         endpoint = "" if host else free_endpoint()
         limit = config.trial_seconds + serving.trial_timeout
         plan = MatchPlan(
             trial.match, trial.seed, config.frames, directory=recordings, endpoint=endpoint,
-            low_latency=serving.low_latency, wait_players=READ_TIMEOUT + limit, wait_services=30.0,
-            timeout=READ_TIMEOUT + limit, **seats,
+            low_latency=serving.low_latency, wait_players=serving.ready_timeout + limit,
+            wait_services=30.0, timeout=serving.ready_timeout + limit, **seats,
         )  # fmt: skip
         study.record(trial, "running")
         stop = threading.Event()
@@ -409,7 +421,7 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
         ready = False
         if seat is not None:  # else the match cannot start: it fails at once
             socket.send(offer)
-            ready = await socket.wait_for("ready")
+            ready = await socket.wait_for("ready", serving.ready_timeout)  # a silent one frees the slot
         if not ready:
             stop.set()  # not started (or cannot be): ended at once
         else:

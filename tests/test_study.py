@@ -244,3 +244,35 @@ def test_a_client_that_consents_and_goes_silent_frees_its_slot_for_a_newcomer(tm
     study = server.result(timeout=60)
     statuses = {p.id: [a["status"] for a in p.attempts] for p in study.participants.values()}
     assert statuses == {"P001": ["failed"], "P002": ["done"]}
+
+
+def test_a_reload_during_set_up_is_a_resume(tmp_path, study_server):
+    """The page is reloaded while its trial is set up (offered, not Ready): the new page resumes
+    and plays every trial; the old socket is closed; the cut attempt is set down as failed."""
+    import websockets
+
+    config = StudyConfig("reload", VARIANTS[:1], trials=1, trial_seconds=1.5, seed=3, consent="Agree?")
+    stop, url, server = study_server(config, tmp_path)
+
+    async def reload() -> tuple[object, object]:
+        async with websockets.connect(url.replace("http", "ws", 1) + "ws") as ws:
+            await ws.send(json.dumps({"type": "hello"}))
+            async for text in ws:
+                message = json.loads(text)
+                if message["type"] == "consent":
+                    await ws.send(json.dumps({"type": "consent"}))
+                elif message["type"] == "participant":
+                    me = (message["participant"], message["key"])
+                elif message["type"] == "trial":  # set up, not Ready: and now the page reloads
+                    break
+            back = await asyncio.wait_for(stand_in(url, resume=me, test=TEST), 60)
+            with contextlib.suppress(websockets.ConnectionClosed):
+                await asyncio.wait_for(ws.recv(), 5)
+            return back, ws.close_reason
+
+    back, reason = asyncio.run(reload())
+    assert back.done and len(back.kills) == 1
+    assert reason == "the study was opened again in another window"
+    stop.set()
+    study = server.result(timeout=60)
+    assert [a["status"] for a in study.participants["P001"].attempts] == ["failed", "done"]

@@ -34,6 +34,7 @@ import contextlib
 import json
 import logging
 import threading
+import time
 from collections.abc import Awaitable, Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -198,9 +199,10 @@ def judge(path: Path, role: str) -> tuple[int | None, list[str]]:
     return (recording.summary.kills if recording.summary else None), problems
 
 
-def wait_alive(z: zenoh.Session, tokens: list[str], timeout: float) -> bool:
+def wait_alive(z: zenoh.Session, tokens: list[str], timeout: float, abort: threading.Event) -> bool:
     """Wait until every one of the liveliness `tokens` is declared (the match's processes are up);
-    False if some are still missing after `timeout` seconds. Declares and undeclares its
+    False if some are still missing after `timeout` seconds or once `abort` is set (the match
+    stopped, the participant gone: within a tenth of a second). Declares and undeclares its
     subscribers on the calling thread, never on zenoh's."""
     present: set[str] = set()
     changed = threading.Condition()
@@ -213,8 +215,11 @@ def wait_alive(z: zenoh.Session, tokens: list[str], timeout: float) -> bool:
     with contextlib.ExitStack() as stack:
         for token in tokens:
             stack.enter_context(z.liveliness().declare_subscriber(token, on_alive, history=True))
+        deadline = time.monotonic() + timeout
         with changed:
-            return changed.wait_for(lambda: present >= set(tokens), timeout)
+            while not present >= set(tokens) and not abort.is_set() and time.monotonic() < deadline:
+                changed.wait(0.1)
+            return present >= set(tokens)
 
 
 class Matches:
@@ -304,7 +309,7 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
     (here, or on a match host of `remote`)."""
     config = study.config
     recordings = study.directory / "recordings"
-    playing: set[str] = set()
+    playing: dict[str, tuple[Socket, asyncio.Event]] = {}  # participant -> their socket, set once it left
     match_seconds = config.trial_seconds + START_UP
     arrivals = RateLimit(serving.arrivals, ARRIVAL_BURST)
     per_address = PerAddress(serving.arrivals_per_address, ADDRESS_BURST)
@@ -360,7 +365,9 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
                 return False
         return True
 
-    async def bridge(socket: Socket, trial: Trial, endpoint: str, obs: bool) -> Bridge | None:
+    async def bridge(
+        socket: Socket, trial: Trial, endpoint: str, obs: bool, stop: threading.Event
+    ) -> Bridge | None:
         """The participant's seat in the trial's match, once every process of the match is up (then
         a Ready starts the game at once): for a local match from a session of its own (opened when
         the sim listens, closed by `leave`; None if the sim never listened), for a hosted one
@@ -376,7 +383,11 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
         tokens = [keys.alive(trial.match, "sim"), keys.alive(trial.match, "recorder")]
         tokens += [keys.alive(trial.match, "agent", agent)]
         tokens += [keys.alive(trial.match, "adapter")] if trial.variant.adaptive(agent, 0) else []
-        if not await asyncio.to_thread(wait_alive, z, tokens, WARM_UP):
+        alive = asyncio.ensure_future(asyncio.to_thread(wait_alive, z, tokens, WARM_UP, stop))
+        await first(alive, socket.gone.wait())
+        if socket.gone.is_set():  # left during set-up: the match ends, and the wait with it
+            stop.set()
+        if not await alive and not stop.is_set():
             log.warning("trial %s: not every process of its match is up after %g s", trial.match, WARM_UP)
         return Bridge(z, trial.match, trial.role, socket.controls, socket.outbox, obs)
 
@@ -417,7 +428,7 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
                 asyncio.to_thread(run_trial, plan, trial.role, stop, remote, host)
             )
             matches.add(trial, running, stop)
-            seat = await bridge(socket, trial, endpoint, obs)
+            seat = await bridge(socket, trial, endpoint, obs, stop)
         ready = False
         if seat is not None:  # else the match cannot start: it fails at once
             socket.send(offer)
@@ -483,22 +494,24 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
         hello = await receive_first(ws, ("hello",))
         if hello is None:
             return
-        socket = Socket(ws)
+        socket, left = Socket(ws), asyncio.Event()  # set once this handler is done
         participant = None
         try:
             participant = await admit(socket, hello)
             if participant is None:
                 return
-            if participant.id in playing:
-                await refuse(ws, "this participant is already playing in another window")
-                participant = None
-                return
-            playing.add(participant.id)
+            older = playing.get(participant.id)
+            if older is not None:  # a reload, or the page in another window: the newest one plays
+                await older[0].ws.close(1000, "the study was opened again in another window")
+                older[0].gone.set()
+                await older[1].wait()  # its trial ended and set down (resumed below)
+            playing[participant.id] = (socket, left)
             test = bool(serving.test_token) and same_secret(hello.get("test"), serving.test_token)
             await trials(socket, participant, hello.get("obs", False) and test)
         finally:
-            if participant is not None:
-                playing.discard(participant.id)
+            if participant is not None and playing.get(participant.id, (None,))[0] is socket:
+                del playing[participant.id]
+            left.set()
             for task in socket.tasks:
                 task.cancel()
 

@@ -125,13 +125,13 @@ class Socket:
     async def wait_for(self, kind: str, timeout: float = READ_TIMEOUT) -> bool:
         """Wait for the participant's `kind` message; False if the socket closed first or it took
         longer than `timeout` seconds (the socket is then closed: an idle socket holds nothing)."""
+        event: asyncio.Future | None = None
         try:
             async with asyncio.timeout(timeout):
                 while True:
                     event = asyncio.ensure_future(self.events.get())
                     await first(event, self.gone.wait())
                     if not event.done():
-                        event.cancel()
                         return False
                     if event.result() == kind:
                         return True
@@ -139,6 +139,9 @@ class Socket:
             await self.ws.close(1008, "idle for too long")
             self.gone.set()
             return False
+        finally:
+            if event is not None and not event.done():  # never a get left pending on the loop
+                event.cancel()
 
     async def close(self) -> None:
         """Let the outbox empty (what was just offered is queued after one turn of the loop), then close."""

@@ -276,3 +276,41 @@ def test_a_reload_during_set_up_is_a_resume(tmp_path, study_server):
     stop.set()
     study = server.result(timeout=60)
     assert [a["status"] for a in study.participants["P001"].attempts] == ["failed", "done"]
+
+
+def test_a_consent_flood_from_one_address_leaves_newcomers_from_others_served(tmp_path, study_server):
+    """One client loops hello, consent, close (as fast as the server answers, 40 times): it gets at
+    most its address's burst of ids and starts no match; four newcomers from other addresses
+    meanwhile are all served to the end."""
+    import time
+
+    import websockets
+
+    config = StudyConfig("flood", VARIANTS[:1], trials=1, trial_seconds=1.5, seed=3, consent="Agree?")
+    stop, url, server = study_server(config, tmp_path, serving=Serving(max_matches=2, test_token=TEST))
+
+    async def flood() -> int:
+        for _ in range(40):
+            with contextlib.suppress(websockets.ConnectionClosed, OSError):
+                async with websockets.connect(url.replace("http", "ws", 1) + "ws") as ws:
+                    await ws.send(json.dumps({"type": "hello"}))
+                    await ws.recv()  # the consent text
+                    await ws.send(json.dumps({"type": "consent"}))
+        return 40
+
+    async def everyone() -> tuple[list, float]:
+        started = time.monotonic()
+        flooding = asyncio.ensure_future(flood())
+        newcomers = [stand_in(url, test=TEST, address=f"127.0.0.{n}", seed=n) for n in range(2, 6)]
+        served = await asyncio.gather(*newcomers)
+        await flooding
+        return served, time.monotonic() - started
+
+    served, seconds = asyncio.run(everyone())
+    assert all(s.done and s.refused == "" for s in served), [s.refused for s in served]
+    assert seconds < 90
+    stop.set()
+    study = server.result(timeout=60)
+    flooder = [p for p in study.participants.values() if p.id not in {s.participant for s in served}]
+    assert len(flooder) <= 5 and not any(p.attempts for p in flooder)  # ADDRESS_BURST ids, no match
+    assert len(list((tmp_path / "recordings").glob("*.tsflog"))) == 4

@@ -226,8 +226,10 @@ async def receive_first(ws: ServerConnection, allowed: tuple[str, ...]) -> dict 
 
 
 async def refuse(ws: ServerConnection, reason: str) -> None:
-    await ws.send(json.dumps({"type": "refused", "reason": reason}))
-    await ws.close(REFUSED, reason[:120])
+    """Say why and close; a client that has gone already is simply gone (no traceback)."""
+    with contextlib.suppress(websockets.ConnectionClosed):
+        await ws.send(json.dumps({"type": "refused", "reason": reason}))
+        await ws.close(REFUSED, reason[:120])
 
 
 def serve_page(connection: ServerConnection, request: Request) -> Response | None:

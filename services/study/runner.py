@@ -43,6 +43,7 @@ from pathlib import Path
 import websockets
 import zenoh
 from websockets.asyncio.server import ServerConnection
+from websockets.protocol import State
 
 from services.human.core import BadInput, Controls, PerAddress, RateLimit
 from services.human.gateway import Bridge, Gateway, Handler, Outbox, Web, receive_first, refuse
@@ -104,6 +105,12 @@ class Socket:
 
     def send(self, message: dict) -> None:
         self.outbox.offer(json.dumps(message), control=True)
+
+    @property
+    def closed(self) -> bool:
+        """Whether the participant has gone, or is going: a close frame received counts at once,
+        before the reader has seen the end."""
+        return self.gone.is_set() or self.ws.state is not State.OPEN
 
     async def _read(self) -> None:
         try:
@@ -339,7 +346,7 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
         if study.taken(worker):  # a second window of the same worker consented first
             await refuse(socket.ws, TAKEN)
             return None
-        if socket.gone.is_set():  # consented and left: no id, no match
+        if socket.closed:  # consented and left: no id, no match
             return None
         if not (per_address.allow(socket.ws.remote_address[0]) and arrivals.allow()):
             await refuse(socket.ws, BUSY)
@@ -408,7 +415,7 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
         either is marked dropped)."""
         if not await slot(socket, trial.match):
             return None
-        if socket.gone.is_set():  # left as the slot came: nothing starts
+        if socket.closed:  # left as the slot came: nothing starts
             matches.admission.end(trial.match)
             matches.notify()
             return None

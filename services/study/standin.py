@@ -45,13 +45,15 @@ async def stand_in(
     test: str = "",
     worker: str = "",
     ssl: object = None,
+    address: str | None = None,
 ) -> StandInReport:
     """Take part in the study served at `url` (the page's address), playing each role with a policy
     key (default: the scripted circle bait and mirror shooter). `resume` = (participant, key) comes
     back as an earlier participant; `leave_after` > 0 drops the connection after that many frames,
     as a participant who walks away. `test` is the server's test token (Serving.test_token),
     without which it gets no observation values to play from; `worker` a crowd-sourcing worker
-    id; `ssl` an SSLContext for a wss:// server."""
+    id; `ssl` an SSLContext for a wss:// server; `address` the local address it connects from (a
+    loopback test's other clients: 127.0.0.2 and on)."""
     policies = policies or {"bait": "circle", "shooter": "mirror"}
     report = StandInReport()
     hello: dict = {"type": "hello", "obs": True, **({"test": test} if test else {})}
@@ -59,7 +61,9 @@ async def stand_in(
     if resume:
         hello.update(participant=resume[0], key=resume[1])
     policy, held, ready, queued = None, None, None, 0.0
-    async with websockets.connect(url.replace("http", "ws", 1).rstrip("/") + "/ws", ssl=ssl) as ws:
+    socket = url.replace("http", "ws", 1).rstrip("/") + "/ws"
+    local = {"local_addr": (address, 0)} if address else {}
+    async with websockets.connect(socket, ssl=ssl, **local) as ws:
         await ws.send(json.dumps(hello))
         async for text in ws:
             message = json.loads(text)

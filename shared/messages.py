@@ -48,6 +48,12 @@ class MessageError(ValueError):
 Check = Callable[[Any], bool]
 
 
+def printable(text: str, most: int) -> str:
+    """`text` as a message's free-text field takes it: printable ASCII (others become ?), at most
+    `most` characters; for reasons and errors that may hold anything a user's code raised."""
+    return "".join(c if " " <= c <= "~" else "?" for c in text)[:most]
+
+
 def _int(lo: int, hi: int) -> Check:
     return lambda v: isinstance(v, int) and not isinstance(v, bool) and lo <= v <= hi
 

@@ -9,7 +9,7 @@ from services.agent.library import policy_for
 from services.sim.observation import as_observation
 from services.sim.play import policy_seed, switch_seed
 from shared.game import NOOP, Policy, checked_action
-from shared.messages import Action, State
+from shared.messages import Action, State, printable
 
 PolicyLoader = Callable[[str, str], Policy]
 
@@ -59,5 +59,5 @@ class Player:
             action=action,
             policy=policy.key,
             failures=self.failures,
-            failure="".join(c if " " <= c <= "~" else "?" for c in failure)[:200],
+            failure=printable(failure, 200),
         )

@@ -25,13 +25,13 @@ from pathlib import Path
 import zenoh
 
 from services.jobs import kinds
-from services.jobs.core import Coordinator, Spec, check, journal_line, open_journal, read_journal
+from services.jobs.core import Coordinator, JournalFile, Spec, check
 from services.jobs.kinds import Progress
 from services.processes import Processes
 from shared import keys
 from shared.bus import BusConfig, Drops, free_endpoint, session, subscribe
 from shared.errors import Failure, UsageError
-from shared.messages import MAX_BYTES, MessageError, SweepJob, SweepResult, decode
+from shared.messages import MAX_BYTES, MessageError, SweepJob, SweepResult, decode, printable
 
 log = logging.getLogger("tsf.jobs")
 
@@ -58,7 +58,7 @@ class Coordination:
     def __enter__(self) -> Coordination:
         self._stack = ExitStack()
         self.z = self._stack.enter_context(session(self.bus))
-        self.journal_file = self._stack.enter_context(open_journal(self.journal))
+        self.journal_file = self._stack.enter_context(JournalFile(self.journal, self.ours))
         sweep = self.sweep
         self._stack.enter_context(
             subscribe(self.z, keys.sweep_result(sweep), SweepResult, self._result, self.drops)
@@ -103,8 +103,7 @@ class Coordination:
             raise MessageError("mismatch", f"{worker}, job {result.job}: {why}")
         if state.result(worker, result.job, result.values):
             with self.lock:
-                self.journal_file.write(journal_line(result.job, result.values, self.ours))
-                self.journal_file.flush()
+                self.journal_file.append(result.job, result.values)
 
     def _bar(self, worker: str, job: str, why: str) -> None:
         with self.lock:
@@ -136,11 +135,9 @@ class Coordination:
         """Hand out `todo` until every job has a result: the values by job id (None if stopped
         first; the journal keeps what was collected, and a run of the same jobs resumes from it)."""
         jobs = {job.id: job for job in todo}
-        earlier = read_journal(self.journal, jobs, self.ours)
-        if earlier.refused:
-            log.warning("%d journal lines refused, the first: %s", len(earlier.refused), earlier.refused[0])
-        messages = {job.id: self._message(job) for job in todo if job.id not in earlier.done}
-        state = Coordinator(todo, earlier.done, self.per_worker)
+        earlier = self.journal_file.earlier(jobs)
+        messages = {job.id: self._message(job) for job in todo if job.id not in earlier}
+        state = Coordinator(todo, earlier, self.per_worker)
         with self.lock:
             self.state, state.barred = state, set(self.barred)
             live = set(self.live)
@@ -220,7 +217,7 @@ def run_worker(bus: BusConfig, sweep: str, worker: str, stop: threading.Event | 
         publisher = z.declare_publisher(keys.sweep_result(sweep))
 
         def answer(job: SweepJob, values: list, error: str, fault: str, seconds: float) -> None:
-            error = "".join(c if " " <= c <= "~" else "?" for c in error)[:300]
+            error = printable(error, 300)
             result = SweepResult(
                 match=sweep, frame=0, sender=sender, job=job.job, values=values, error=error,
                 fault=fault if error else "", seconds=seconds, library=ours.library, config=ours.config,

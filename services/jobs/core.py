@@ -99,14 +99,35 @@ def read_journal(path: Path, jobs: dict[str, Spec], ours: Hashes) -> Journal:
     return out
 
 
-def open_journal(path: Path) -> TextIO:
-    """The journal, open for appending results; a line torn by a killed run is ended first."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    journal = open(path, "a+")  # noqa: SIM115 - the caller's ExitStack closes it
-    journal.seek(max(journal.tell() - 1, 0))
-    if journal.read(1) not in ("", "\n"):
-        journal.write("\n")
-    return journal
+class JournalFile:
+    """A run's journal, open for as long as the `with` block lasts, whichever engine runs the jobs:
+    what earlier runs counted (`earlier`, each line checked as a result is) and each new counted
+    result appended and flushed (`append`). A line torn by a killed run is ended on opening."""
+
+    def __init__(self, path: Path, ours: Hashes) -> None:
+        self.path, self.ours = path, ours
+
+    def __enter__(self) -> JournalFile:
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.file: TextIO = open(self.path, "a+")  # noqa: SIM115 - closed by __exit__
+        self.file.seek(max(self.file.tell() - 1, 0))
+        if self.file.read(1) not in ("", "\n"):
+            self.file.write("\n")
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.file.close()
+
+    def earlier(self, jobs: dict[str, Spec]) -> dict[str, list]:
+        """The counted results of `jobs` an earlier run left; refused lines are warned of once."""
+        read = read_journal(self.path, jobs, self.ours)
+        if read.refused:
+            log.warning("%d journal lines refused, the first: %s", len(read.refused), read.refused[0])
+        return read.done
+
+    def append(self, job: str, values: list) -> None:
+        self.file.write(journal_line(job, values, self.ours))
+        self.file.flush()
 
 
 class Coordinator:

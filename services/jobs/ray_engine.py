@@ -12,6 +12,7 @@ local run: pickled by Ray instead of msgpack, never rounded.
 
 from __future__ import annotations
 
+import functools
 import logging
 import threading
 from contextlib import ExitStack
@@ -19,16 +20,21 @@ from pathlib import Path
 from typing import Any
 
 from services.jobs import kinds
-from services.jobs.core import Hashes, Spec, check, journal_line, open_journal, read_journal
+from services.jobs.core import Hashes, JournalFile, Spec, check
 from shared.errors import Failure, UsageError
 
-log = logging.getLogger("tsf.jobs")
 RETRIES = 3  # a job's re-runs after its node or worker process is lost (Ray's max_retries)
+
+
+@functools.cache
+def _here() -> Hashes:
+    """This Ray worker process's library and rules hashes, read once (a process serves many tasks)."""
+    return kinds.hashes()
 
 
 def _job(kind: str, args: dict[str, Any], plugins: list[str], ours: Hashes) -> tuple[list, str, str, Hashes]:
     """One job on a Ray worker: (values, why not, whose fault, the hashes it computed with)."""
-    here = kinds.hashes()
+    here = _here()
     why = kinds.cannot_run(ours.library, ours.config, plugins, here)
     if why:
         return [], why, "worker", here
@@ -63,7 +69,7 @@ class OnRay:
             ) from None
         self._stack = ExitStack()
         self._stack.callback(ray.shutdown)
-        self.journal_file = self._stack.enter_context(open_journal(self.journal))
+        self.journal_file = self._stack.enter_context(JournalFile(self.journal, self.ours))
         self.task = ray.remote(num_cpus=1, max_retries=RETRIES, retry_exceptions=False)(_job)
         return self
 
@@ -74,10 +80,7 @@ class OnRay:
         """Every job of `todo` not in the journal as a Ray task, until each has a counted result: the
         values by job id (None if stopped first; the journal keeps what was collected)."""
         jobs = {job.id: job for job in todo}
-        earlier = read_journal(self.journal, jobs, self.ours)
-        if earlier.refused:
-            log.warning("%d journal lines refused, the first: %s", len(earlier.refused), earlier.refused[0])
-        done = dict(earlier.done)
+        done = self.journal_file.earlier(jobs)
         flying = {
             self.task.remote(job.kind, job.args, list(job.plugins), self.ours): job
             for job in todo
@@ -101,8 +104,7 @@ class OnRay:
                     if refused:
                         raise Failure(f"job {job.id}: {refused}")
                     done[job.id] = values
-                    self.journal_file.write(journal_line(job.id, values, self.ours))
-                    self.journal_file.flush()
+                    self.journal_file.append(job.id, values)
         finally:
             for ref in flying:
                 self.ray.cancel(ref, force=True)

@@ -10,7 +10,9 @@ The browser protocol is JSON text frames. Up (browser -> gateway):
     {"type": "keys", "left": b, "right": b, "thrust": b, "fire": b}   the held keys, on every change
 
 Down (gateway -> browser): `welcome` (the seat and the arena's geometry) or `refused` (why), then
-`setup` (the match's own numbers), `state` (one frame to draw) and `end` (the match's result). The
+`setup` (the match's own numbers), `state` (one frame to draw, with what it means for the person:
+Narrator), `event` (a kill, death, shield hit or respawn, as it happens) and `end` (the match's
+result). The
 study runner (services/study/runner.py) uses the same socket with `hello` and `consent` up and its
 own messages down.
 """
@@ -23,9 +25,10 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from services.agent.policy import stalled
 from shared.errors import UsageError
 from shared.game import ROLES, GameConfig, join_action, split_action
-from shared.messages import State, Summary
+from shared.messages import GameEvent, State, Summary
 from shared.secret import same_secret
 
 KEYS = ("left", "right", "thrust", "fire")
@@ -209,8 +212,9 @@ def setup(config: GameConfig) -> dict:
     return {name: getattr(config, name) for name in names}
 
 
-def view(state: State) -> dict:
-    """One frame as the page draws it, rounded to what a screen shows (a tenth of a pixel)."""
+def view(state: State, narration: dict | None = None) -> dict:
+    """One frame as the page draws it, rounded to what a screen shows (a tenth of a pixel), with the
+    actions that led to it (the page draws a thrusting ship's flame) and the Narrator's fields."""
     return {
         "type": "state",
         "frame": state.frame,
@@ -221,7 +225,46 @@ def view(state: State) -> dict:
         "shells": [[_r(s[0]), _r(s[1])] for s in state.shells],
         "kills": state.kills,
         "points": state.points,
+        "applied": state.applied,
+        **(narration or {"respawn": None, "ending": False}),
     }
+
+
+NARRATED = ("kill", "death", "shield_hit", "respawn", "reset", "fortress_respawn")  # what the page shows
+# Agents that do not end stalled rounds (docs/library.md "Stalled rounds"); a person does not either.
+NO_ROUND_ENDING = ("idle", "random")
+
+
+def event_view(event: GameEvent) -> dict | None:
+    """A game event as the page shows it (a death with its cause in `detail`), or None for those it
+    does not show (missiles, shells and locks are seen in the frames)."""
+    if event.kind not in NARRATED:
+        return None
+    return {"type": "event", **{name: getattr(event, name) for name in ("frame", "kind", "role", "detail")}}
+
+
+class Narrator:
+    """What a frame means for the person in `role`, which the page says in words: `respawn`, the
+    frames until a round whose ships are both dead resets (None while one lives), and `ending`,
+    whether the partner is an agent ending a stalled round on purpose (its own rule, policy.stalled
+    on its observation: this ship dead, it alive, the fortress up, no missile that can kill), so
+    the page can say why it flies into the wall. Fed every state in order: the page may skip
+    frames, the gateway does not."""
+
+    def __init__(self, role: str | None, partner_ends_rounds: bool, delay: int) -> None:
+        self.role, self.delay = role, delay
+        self.partner = None if role is None or not partner_ends_rounds else ROLES[1 - ROLES.index(role)]
+        self.both_dead: int | None = None  # the first frame of the round's both-dead count-down
+
+    def __call__(self, state: State) -> dict:
+        if any(ship[5] for ship in state.ships):
+            self.both_dead = None
+        elif self.both_dead is None:
+            self.both_dead = state.frame
+        respawn = None if self.both_dead is None else max(0, self.both_dead + self.delay - state.frame)
+        partner_obs = state.obs.get(self.partner) if self.partner else None
+        ending = partner_obs is not None and bool(stalled(partner_obs))
+        return {"respawn": respawn, "ending": ending}
 
 
 def end(summary: Summary) -> dict:

@@ -20,7 +20,7 @@ from services.human.core import (
 )
 from services.sim.engine import Game
 from services.sim.match import state_message
-from shared.game import GameConfig, split_action
+from shared.game import DEATH_CAUSES, GameConfig, split_action
 
 
 def keys(**held: bool) -> dict[str, bool]:
@@ -146,3 +146,55 @@ def test_one_address_gets_its_burst_then_its_rate_and_others_are_untouched():
     now[0] += 10.0  # one id per 10 s
     assert buckets.allow("10.0.0.1") and not buckets.allow("10.0.0.1")
     assert all(PerAddress(0.0, 3).allow("10.0.0.1") for _ in range(100))  # 0: no limit
+
+
+def play(game: Game, bait: int, shooter: int, narrator, until) -> tuple[list[dict], list]:  # noqa: ANN001
+    """Step `game` with fixed actions until `until(game)`: the narrated views and the events."""
+    views, events = [], []
+    while not until(game) and game.frame < game.config.frames:
+        events += game.step(bait, shooter)
+        views.append(view(state := state_message(game, "m", "sim", (bait, shooter)), narrator(state)))
+    return views, events
+
+
+def test_the_both_dead_count_down_reaches_zero_on_the_reset_frame() -> None:
+    from services.human.core import Narrator
+
+    game = Game(GameConfig(frames=600), seed=1)
+    narrator = Narrator("bait", True, game.config.respawn_delay)
+    # both ships thrust straight ahead, roughly at the fortress: both die, then the reset
+    views, events = play(game, 2, 2, narrator, lambda g: any(e.kind == "reset" for e in g.events))
+    deaths = [e for e in events if e.kind == "death"]
+    assert {e.role for e in deaths} == {"bait", "shooter"} and all(e.detail in DEATH_CAUSES for e in deaths)
+    reset = next(e.frame for e in events if e.kind == "reset")
+    both_dead = max(e.frame for e in deaths)
+    counts = {v["frame"]: v["respawn"] for v in views}
+    assert counts[both_dead] == game.config.respawn_delay
+    assert [counts[f] for f in range(both_dead, reset)] == list(range(game.config.respawn_delay, 0, -1))
+    assert counts[reset] is None and counts[both_dead - 1] is None  # ships alive: no count-down
+
+
+def test_the_partners_deliberate_round_end_is_narrated_only_for_an_agent_partner() -> None:
+    from services.human.core import Narrator
+
+    config = GameConfig(frames=900)
+    told = {ends: Narrator("bait", ends, config.respawn_delay) for ends in (True, False)}
+    game = Game(config, seed=2)
+    play(game, 2, 0, lambda s: {}, lambda g: not g.bait.alive)  # the person's bait flies into the shield
+    assert game.shooter.alive and game.fortress_alive
+    state = state_message(game, "m", "sim", (2, 0))
+    assert told[True](state)["ending"] and told[True](state)["respawn"] is None
+    assert not told[False](state)["ending"]  # a person or an idle partner: nothing to announce
+    shooter_seat = Narrator("shooter", True, config.respawn_delay)
+    assert not shooter_seat(state)["ending"]  # the person's own ship lives
+    assert not Narrator(None, True, config.respawn_delay)(state)["ending"]  # a spectator has no partner
+
+
+def test_the_page_is_sent_the_events_it_shows() -> None:
+    from services.human.core import event_view
+    from shared.messages import GameEvent
+
+    death = GameEvent(match="m", frame=7, sender="sim", kind="death", role="bait", detail="border")
+    shown = {"type": "event", "frame": 7, "kind": "death", "role": "bait", "detail": "border"}
+    assert event_view(death) == shown
+    assert event_view(GameEvent(match="m", frame=7, sender="sim", kind="missile", role="bait")) is None

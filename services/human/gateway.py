@@ -31,11 +31,24 @@ from websockets.asyncio.server import ServerConnection, serve
 from websockets.datastructures import Headers
 from websockets.http11 import Request, Response
 
-from services.human.core import MAX_MESSAGE, BadInput, Controls, SeatBook, end, parse, setup, view
+from services.human.core import (
+    MAX_MESSAGE,
+    NO_ROUND_ENDING,
+    BadInput,
+    Controls,
+    Narrator,
+    SeatBook,
+    end,
+    event_view,
+    parse,
+    setup,
+    view,
+)
+from services.launch import HUMAN
 from shared import keys
 from shared.bus import BusConfig, Drops, session, subscribe
 from shared.game import GameConfig
-from shared.messages import Action, Message, MessageError, Start, State, Summary
+from shared.messages import Action, GameEvent, Message, MessageError, Start, State, Summary
 
 log = logging.getLogger("tsf.human")
 STATIC = Path(__file__).parent / "static"
@@ -122,8 +135,8 @@ class Outbox:
 
 class Bridge:
     """One seat of one match on the bus, for one connection: answers each state with the held keys
-    (once the person is ready), forwards frames and the result down, holds the seat's token. With
-    no role it only forwards (a spectator)."""
+    (once the person is ready), forwards frames (narrated for the seat), the events the page shows
+    and the result down, holds the seat's token. With no role it only forwards (a spectator)."""
 
     def __init__(
         self,
@@ -139,6 +152,7 @@ class Bridge:
         self.sender = f"human/{role or 'watch'}"
         self.drops = Drops(self.sender)
         self.config = GameConfig()
+        self.narrator = Narrator(role, False, self.config.respawn_delay)
         self.summary = threading.Event()
         self.declared = contextlib.ExitStack()  # everything below, undeclared together by close()
         declare = self.declared.enter_context
@@ -151,6 +165,7 @@ class Bridge:
         declare(subscribe(z, keys.state(match), State, self._on_state, self.drops))
         declare(subscribe(z, keys.start(match), Start, self._on_start, self.drops))
         declare(subscribe(z, keys.summary(match), Summary, self._on_summary, self.drops))
+        declare(subscribe(z, keys.event(match), GameEvent, self._on_event, self.drops))
 
     def live(self) -> None:
         """The person is ready: take the seat on the bus (the sim waits for it)."""
@@ -174,7 +189,7 @@ class Bridge:
                 policy="",
             )
             self.publisher.put(action.encode())
-        frame = view(state)
+        frame = view(state, self.narrator(state))
         if self.obs and self.role is not None:
             frame["obs"] = state.obs[self.role]
         self.outbox.offer(json.dumps(frame, separators=(",", ":")))
@@ -182,7 +197,16 @@ class Bridge:
     def _on_start(self, start: Start) -> None:
         self._check(start)
         self.config = GameConfig.from_dict(start.config)
+        partner = next((p for r, p in start.policies.items() if r != self.role), HUMAN)
+        ends = self.role is not None and partner not in (HUMAN, *NO_ROUND_ENDING)
+        self.narrator = Narrator(self.role, ends, self.config.respawn_delay)
         self.outbox.offer(json.dumps({"type": "setup", **setup(self.config)}), control=True)
+
+    def _on_event(self, event: GameEvent) -> None:
+        self._check(event)
+        shown = event_view(event)
+        if shown is not None:
+            self.outbox.offer(json.dumps(shown, separators=(",", ":")), control=True)
 
     def _on_summary(self, summary: Summary) -> None:
         self._check(summary)

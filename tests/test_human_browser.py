@@ -93,6 +93,31 @@ def test_a_person_plays_the_bait_from_the_browser(browser, match, tmp_path):
     assert any(max(abs(a - b) for a, b in zip(c, BAIT_COLOUR, strict=True)) < 30 for _, c in colours)
 
 
+def test_the_page_says_why_the_ship_died_and_when_it_comes_back(browser, match):
+    """A person's bait that thrusts ahead dies (its cause shown); the agent shooter then ends the
+    stalled round on purpose, which the page announces, and the count-down to the respawn runs."""
+    links, running = match
+    page = browser.new_page(viewport={"width": 900, "height": 800})
+    page.goto(links["bait"])
+    wait_in_page(page, "window.tsf.phase === 'instructions'", 10_000)
+    text = page.locator("#text").inner_text()
+    assert "shell hits it" in text and "blue shield" in text and "the edge kills" in text
+    page.keyboard.press("Space")
+    wait_in_page(page, "window.tsf.phase === 'playing'", 30_000)
+    page.keyboard.down("ArrowUp")
+    said: set[str] = set()
+    while page.evaluate("window.tsf.phase") == "playing":
+        said.update(page.evaluate("window.tsf.said"))
+        page.wait_for_timeout(40)
+    page.keyboard.up("ArrowUp")
+    running.result(timeout=30)
+    print(sorted(said))
+    deaths = {"A shell hit you", "You flew into the shield", "You flew out of the arena: the edge kills"}
+    assert said & deaths, "the cause of the person's death"
+    assert "Your teammate ends the round so you can respawn" in said
+    assert any(line.startswith("Both ships are down: you respawn in") for line in said)
+
+
 def test_a_wrong_seat_token_is_refused_in_the_page(browser, bus):
     book = SeatBook({"bait": "right-token"})
     with Gateway(bus.config(listen=True), seat_handler("refused", book), Web(port=0)) as gateway:

@@ -168,7 +168,9 @@ function connect() {
     if (params.has("watch")) {
       send({ type: "watch" });
     } else if (params.has("token")) {
-      send({ type: "join", role: params.get("role") || "", token: params.get("token") });
+      // ?obs=1: the seat's observation values too (a scripted player's, bench/human.py)
+      send({ type: "join", role: params.get("role") || "", token: params.get("token"),
+        ...(params.has("obs") ? { obs: true } : {}) });
     } else {
       const saved = JSON.parse(localStorage.getItem("tsf-participant") || "{}");
       const participant = params.get("participant") || saved.participant;

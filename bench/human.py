@@ -12,7 +12,8 @@ match's frames reached the client.
 from a key press to the ship's response on screen, in frames and ms, and what drawing a frame
 costs. `--play-test ROLE`: a scripted player at human timing (Playwright key events: a reaction
 time, intermittent decisions, held keys) plays ROLE from the page against a library agent; its
-kills/min, beside the same pair's in-process figure at machine timing.
+kills/min, beside the same pair's in-process figure at machine timing (`--reaction-ms`,
+`--decide-ms`, `--hold-ms` change the timing: Timing).
 
     .venv/bin/python bench/human.py --page [--presses 30]
     .venv/bin/python bench/human.py --play-test bait [--policy circle --partner S5 --games 3 --seconds 60]
@@ -31,6 +32,7 @@ import tempfile
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import parse_qs, urlsplit
 
@@ -167,17 +169,28 @@ def key_to_screen(presses: int, seed: int) -> None:
     )
 
 
-# A scripted player at human timing (our choices, within what people show: a visual choice
-# reaction time of 200-300 ms, corrections a few times a second, key taps of 100 ms and more).
-REACTION_MS = (250.0, 0.2)  # lognormal: median, sigma
-DECIDE_MS = (100.0, 200.0)  # uniform: time between two decisions
-HOLD_MS = 100.0  # a key stays down (or up) at least this long
+@dataclass(frozen=True)
+class Timing:
+    """A scripted player's timing. The defaults are human timing, our choices within what people
+    show: a visual choice reaction time of 200-300 ms, corrections a few times a second, key
+    presses of 100 ms and more."""
+
+    reaction_ms: float = 250.0  # median of a lognormal (sigma 0.2): from the frame seen to the keys
+    decide_ms: tuple[float, float] = (100.0, 200.0)  # uniform: time between two decisions
+    hold_ms: float = 100.0  # a key stays down (or up) at least this long
+
+    def __str__(self) -> str:
+        low, high = self.decide_ms
+        every = f"a decision every {low:g}-{high:g} ms"
+        return f"reaction {self.reaction_ms:g} ms, {every}, holds {self.hold_ms:g}+ ms"
 
 
-def play_test(role: str, policy_key: str, partner: str, seconds: float, games: int, seed: int) -> None:
+def play_test(
+    role: str, policy_key: str, partner: str, seconds: float, games: int, seed: int, timing: Timing
+) -> None:
     """`games` real-time matches in which a scripted player plays `role` from the page with keys, as
-    a person would: it looks at the frame on screen every DECIDE_MS, picks the keys `policy_key`
-    would play, and presses them REACTION_MS later, each key held HOLD_MS at least."""
+    a person would: it looks at the frame on screen every `decide_ms`, picks the keys `policy_key`
+    would play, and presses them `reaction_ms` later, each key held `hold_ms` at least."""
     rng = random.Random(seed)
     rates = []
     for game in range(games):
@@ -193,13 +206,13 @@ def play_test(role: str, policy_key: str, partner: str, seconds: float, games: i
                 if now >= decide:
                     frame = page.evaluate("window.tsf.frame")
                     action = policy.act(as_observation(frame["obs"], policy.view))
-                    delay = rng.lognormvariate(math.log(REACTION_MS[0]), REACTION_MS[1]) / 1000
+                    delay = rng.lognormvariate(math.log(timing.reaction_ms), 0.2) / 1000
                     planned.append((now + delay, action_keys(action)))
-                    decide = now + rng.uniform(*DECIDE_MS) / 1000
+                    decide = now + rng.uniform(*timing.decide_ms) / 1000
                 while planned and planned[0][0] <= now:
                     _, wanted = planned.pop(0)
                     for key, down in wanted.items():
-                        if down != held[key] and now - changed[key] >= HOLD_MS / 1000:
+                        if down != held[key] and now - changed[key] >= timing.hold_ms / 1000:
                             (page.keyboard.down if down else page.keyboard.up)(KEY_NAMES[key])
                             held[key], changed[key] = down, now
                 page.wait_for_timeout(10)
@@ -211,7 +224,7 @@ def play_test(role: str, policy_key: str, partner: str, seconds: float, games: i
         )
     se = statistics.stdev(rates) / math.sqrt(len(rates)) if len(rates) > 1 else float("nan")
     print(
-        f"scripted {role} {policy_key} at human timing from the page, with {partner}: "
+        f"scripted {role} {policy_key} from the page ({timing}), with {partner}: "
         f"{statistics.mean(rates):.2f} kills/min (s.e. {se:.2f}) over {games} games of {seconds:.0f} s"
     )
     seats = {role: policy_key, "shooter" if role == "bait" else "bait": partner}
@@ -222,7 +235,7 @@ def play_test(role: str, policy_key: str, partner: str, seconds: float, games: i
             for s in range(20)
         ]
     )
-    print(f"  the same pair in-process, at machine timing : {machine}")
+    print(f"  the same pair in-process, at machine timing: {machine}")
 
 
 def main() -> None:
@@ -235,6 +248,11 @@ def main() -> None:
     parser.add_argument("--partner", help="the library agent beside it (default S5 / B5)")
     parser.add_argument("--games", type=int, default=3, help="games played (--play-test)")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--reaction-ms", type=float, default=Timing.reaction_ms, help="median reaction time")
+    parser.add_argument(
+        "--decide-ms", type=float, nargs=2, default=Timing.decide_ms, help="between decisions"
+    )
+    parser.add_argument("--hold-ms", type=float, default=Timing.hold_ms, help="shortest key press")
     args = parser.parse_args()
     if args.page:
         key_to_screen(args.presses, args.seed)
@@ -243,7 +261,8 @@ def main() -> None:
         role = args.play_test
         policy = args.policy or ("circle" if role == "bait" else "mirror")
         partner = args.partner or ("S5" if role == "bait" else "B5")
-        play_test(role, policy, partner, args.seconds, args.games, args.seed)
+        timing = Timing(args.reaction_ms, tuple(args.decide_ms), args.hold_ms)
+        play_test(role, policy, partner, args.seconds, args.games, args.seed, timing)
         return
     frames = round(args.seconds * FPS)
     links: list[dict[str, str]] = []

@@ -6,6 +6,7 @@ before committing). Skipped, with the reason, where Chromium is missing."""
 
 from __future__ import annotations
 
+import functools
 import io
 import os
 from pathlib import Path
@@ -65,6 +66,7 @@ def first(events: list[dict], kind: str, role: str | None = None) -> int | None:
     return next((e["frame"] for e in events if e["kind"] == kind and role in (None, e["role"])), None)
 
 
+@functools.cache
 def scenes() -> dict[str, tuple[dict, list[dict], str]]:
     """The four pictures: the bait's death (the agent shooter ends the round), both ships down
     (the count-down), the fortress's opening with missiles in flight, and the round's end (a kill)."""
@@ -149,3 +151,19 @@ def test_the_scenes_differ_where_they_should(page) -> None:
     names = list(pictures)
     for a, b in zip(names, names[1:], strict=False):
         assert (np.abs(pictures[a] - pictures[b]).max(axis=2) > TOLERANCE).mean() > 0.002, (a, b)
+
+
+def test_sound_is_off_until_the_person_turns_it_on(page) -> None:
+    """Off by default; M (or the button) turns it on and off, and the browser remembers."""
+    button = page.locator("#sound")
+    assert (
+        page.evaluate("localStorage.getItem('tsf-sound')") is None and button.inner_text() == "Sound: off (M)"
+    )
+    page.keyboard.press("KeyM")
+    assert (
+        button.inner_text() == "Sound: on (M)" and page.evaluate("localStorage.getItem('tsf-sound')") == "on"
+    )
+    frame, events, role = scenes()["round_end"]
+    drawn(page, frame, events, role)  # a kill's tone played: WebAudio, no file, no error
+    button.click()
+    assert button.inner_text() == "Sound: off (M)"

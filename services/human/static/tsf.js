@@ -9,7 +9,6 @@ const COLOURS = {
   background: "rgb(12,14,28)", border: "rgb(110,110,140)", region: "rgb(50,110,60)",
   shield: "rgb(80,140,255)", opening: "rgb(255,60,200)", fortress: "rgb(200,200,215)",
   facing: "rgb(255,215,0)", missile: "rgb(255,255,140)", shell: "rgb(255,70,70)", text: "#dde",
-  bait: "rgb(255,150,40)", shooter: "rgb(60,220,255)",
 };
 const ROLES = ["bait", "shooter"];
 const HUD = 40; // px of score line above the arena
@@ -268,7 +267,7 @@ function sound(event) {
 // picture is a function of the numbers, the seat and the events still shown, whose effects age in
 // game frames, never by the clock: a given state always draws the same pixels (tsf.render, below,
 // is how the screenshot test draws given states).
-const SHADES = { // light, body, dark
+const SHADES = { // each role's light, body and dark colours
   bait: ["rgb(255,214,160)", "rgb(255,150,40)", "rgb(150,80,10)"],
   shooter: ["rgb(190,250,255)", "rgb(60,220,255)", "rgb(10,110,150)"],
 };

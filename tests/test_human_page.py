@@ -109,6 +109,15 @@ def drawn(page, frame: dict, events: list[dict], role: str) -> np.ndarray:  # no
     return np.asarray(Image.open(io.BytesIO(shot)).convert("RGB")).astype(int), said
 
 
+def widest(page) -> float:  # noqa: ANN001
+    """The width of the longest line the page says now, in its font."""
+    return page.evaluate(
+        """() => { const c = document.createElement("canvas").getContext("2d");
+           c.font = "bold 18px sans-serif";
+           return Math.max(0, ...tsf.said.map((t) => c.measureText(t).width)); }"""
+    )
+
+
 SAYS = {
     "death": ["Your teammate ends the round so you can respawn"],
     "respawn": ["You flew out of the arena", "Your teammate", "Both ships are down: you respawn in 0.6 s"],
@@ -133,6 +142,7 @@ def test_the_page_draws_each_scene_as_its_reference(page, name: str) -> None:
         )
     if name == "opening":
         assert said == [] and frame["fortress"][2] > 0
+    assert widest(page) <= image.shape[1] - 24, "every line the page says fits the arena's width"
     again, _ = drawn(page, frame, events, role)
     assert (again == image).all(), "a given state draws the same pixels"
     reference = FIGURES / f"page_{name}.png"
@@ -167,3 +177,11 @@ def test_sound_is_off_until_the_person_turns_it_on(page) -> None:
     drawn(page, frame, events, role)  # a kill's tone played: WebAudio, no file, no error
     button.click()
     assert button.inner_text() == "Sound: off (M)"
+
+
+def test_beside_a_person_the_page_says_when_the_ship_comes_back(page) -> None:
+    """No agent partner ending the round: the page says what ends it instead."""
+    frame, events, role = scenes()["death"]
+    _, said = drawn(page, {**frame, "ending": False}, events, role)
+    assert said[1] == "You respawn when the fortress falls or both ships are down"
+    assert widest(page) <= 710 - 24

@@ -506,8 +506,8 @@ function banner(g, s, shown) {
       "rgb(255,230,120)"]);
   } else if (me >= 0 && !s.ships[me][3]) {
     lines.push(s.ending ? ["Your teammate ends the round so you can respawn", "rgb(255,230,120)"] :
-      [s.fortress[1] ? "You come back when the round ends: the fortress destroyed or both ships down" :
-        "You come back with the fortress", "#dde"]);
+      [s.fortress[1] ? "You respawn when the fortress falls or both ships are down" :
+        "You respawn with the fortress", "#dde"]);
   }
   tsf.said = lines.map(([text]) => text);
   ctx.font = "bold 18px sans-serif";

@@ -133,6 +133,8 @@ def test_view_carries_what_the_page_draws() -> None:
     assert len(frame["missiles"]) == len(game.missiles) > 0
     assert {m[2] for m in frame["missiles"]} == {0, 1}  # both ships' missiles, by owner
     assert frame["fortress"][0] == round(game.facing, 1)
+    assert frame["applied"] == [1, 5]  # the page draws a thrusting ship's flame from these
+    assert frame["respawn"] is None and frame["ending"] is False  # not narrated: nothing to say
     json.dumps(frame)  # what goes down the socket
 
 

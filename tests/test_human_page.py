@@ -22,7 +22,7 @@ from services.sim.engine import Game
 from services.sim.match import event_messages, state_message
 from services.sim.observation import observe
 from services.sim.play import policy_seed
-from shared.game import ROLES, GameConfig
+from shared.game import DEATH_CAUSES, ROLES, GameConfig
 
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is not installed")
 FIGURES = Path(__file__).resolve().parent.parent / "docs" / "figures"
@@ -185,3 +185,12 @@ def test_beside_a_person_the_page_says_when_the_ship_comes_back(page) -> None:
     _, said = drawn(page, {**frame, "ending": False}, events, role)
     assert said[1] == "You respawn when the fortress falls or both ships are down"
     assert widest(page) <= 710 - 24
+
+
+def test_each_roles_instructions_name_every_rule_that_kills(page) -> None:
+    """Every death cause of the rules (a new one fails here until the page names it)."""
+    words = {"shell": "a shell hits it", "shield": "touches the blue shield", "border": "the edge kills"}
+    assert set(words) == set(DEATH_CAUSES)
+    for role in ROLES:
+        text = page.evaluate("(role) => instructions(role)", role)
+        assert role.upper() in text and all(w in text for w in words.values()), role

@@ -12,9 +12,8 @@ The browser protocol is JSON text frames. Up (browser -> gateway):
 Down (gateway -> browser): `welcome` (the seat and the arena's geometry) or `refused` (why), then
 `setup` (the match's own numbers), `state` (one frame to draw, with what it means for the person:
 Narrator), `event` (a kill, death, shield hit or respawn, as it happens) and `end` (the match's
-result). The
-study runner (services/study/runner.py) uses the same socket with `hello` and `consent` up and its
-own messages down.
+result). The study runner (services/study/runner.py) uses the same socket with `hello` and
+`consent` up and its own messages down.
 """
 
 from __future__ import annotations

@@ -12,14 +12,13 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
+from services.plots import place_labels, save  # noqa: E402
+
 DPI = 100
 
 
 def _save(fig: plt.Figure, path: Path) -> Path:
-    fig.tight_layout()
-    fig.savefig(path, dpi=DPI)
-    plt.close(fig)
-    return path
+    return save(fig, path, DPI)
 
 
 def _roles_axes(roles: list[str], height: float = 4.5) -> tuple[plt.Figure, list[plt.Axes]]:
@@ -28,27 +27,31 @@ def _roles_axes(roles: list[str], height: float = 4.5) -> tuple[plt.Figure, list
 
 
 def policy_space(points: pd.DataFrame, variance: pd.DataFrame, path: Path) -> Path:
-    """Per role: library policies (crosses) and partners (discs, area growing with kills/min) on the
-    first two principal components of their similarity vectors."""
+    """Per role: library policies (crosses, labelled) and partners (discs, area growing with
+    kills/min; each partner's name once, at the mean of its matches) on the first two principal
+    components of their similarity vectors. Labels are placed where they meet no other text."""
     roles = list(variance["role"])
     fig, axes = _roles_axes(roles)
     for ax, role in zip(axes, roles, strict=False):
         mine = points[points["role"] == role]
         lib, partners = mine[mine["kind"] == "library"], mine[mine["kind"] == "partner"]
         ax.scatter(lib["pc1"], lib["pc2"], marker="x", color="black", label="library policy")
-        for row in lib.itertuples():
-            ax.annotate(row.name, (row.pc1, row.pc2), textcoords="offset points", xytext=(4, 4), fontsize=8)
         sizes = 30 + 40 * partners["kills_per_minute"].clip(lower=0)
         ax.scatter(partners["pc1"], partners["pc2"], s=sizes, alpha=0.6, color="tab:orange", label="partner")
-        for row in partners.itertuples():
-            ax.annotate(row.name, (row.pc1, row.pc2), textcoords="offset points", xytext=(4, -10), fontsize=7)
         share = variance[variance["role"] == role].iloc[0]
         ax.set_xlabel(f"PC1 ({100 * share['pc1']:.0f}% of variance)")
         ax.set_ylabel(f"PC2 ({100 * share['pc2']:.0f}% of variance)")
-        ax.set_title(f"{role} partners in the {role} library's policy space")
-        ax.legend(fontsize=8, loc="best")
+        ax.set_title(f"{role} partners in the {role} library's policy space", fontsize=10)
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     if not roles:
         axes[0].text(0.5, 0.5, "no partners", ha="center", va="center")
+    fig.tight_layout()  # the final layout first: labels are placed in its pixels
+    for ax, role in zip(axes, roles, strict=False):
+        mine = points[points["role"] == role]
+        lib = mine[mine["kind"] == "library"]
+        centres = mine[mine["kind"] == "partner"].groupby("name", sort=True)[["pc1", "pc2"]].mean()
+        place_labels(ax, list(zip(lib["pc1"], lib["pc2"], strict=True)), list(lib["name"]), 8)
+        place_labels(ax, list(zip(centres["pc1"], centres["pc2"], strict=True)), list(centres.index), 7)
     return _save(fig, path)
 
 
@@ -90,19 +93,35 @@ def curves(curves: pd.DataFrame, fps: float, path: Path) -> Path:
 
 
 def variants(summary: pd.DataFrame, tests: pd.DataFrame, path: Path) -> Path:
-    """Team performance per agent variant, mean with standard-error bars; adaptive variants in orange."""
-    fig, ax = plt.subplots(figsize=(max(5.0, 0.8 * len(summary) + 2), 4.5))
-    colours = ["tab:orange" if a else "tab:blue" for a in summary["adaptive"]]
-    ax.bar(summary["variant"], summary["mean"], yerr=summary["stderr"].fillna(0), color=colours, capsize=4)
-    ax.set_ylabel("team kills per minute")
-    ax.set_xlabel("agent variant (n matches below)")
-    ax.set_xticks(
-        range(len(summary)), [f"{v}\nn={n}" for v, n in zip(summary["variant"], summary["n"], strict=True)]
-    )
-    ax.tick_params(axis="x", labelsize=8)
-    done = tests.dropna(subset=["p"])
-    title = "; ".join(f"{r.adaptive} vs {r.static}: {r.test}, p = {r.p:.3g}" for r in done.itertuples())
-    ax.set_title(title or "adaptive vs static: no test (see the table)", fontsize=9)
+    """Per group (kind of match, partner's seat), one panel: team performance per agent variant as
+    horizontal bars, mean with standard-error bars, adaptive variants in orange, each group's tests
+    below its title. Groups are never drawn on one axis, as they are never compared."""
+    groups = list(summary.groupby(["kind", "partner_role"], sort=True)) or [(("", ""), summary)]
+    heights = [1.6 + 0.45 * max(1, len(mine)) + 0.3 * len(tests) for _, mine in groups]
+    fig, axes = plt.subplots(len(groups), 1, figsize=(8, sum(heights)), squeeze=False,
+                             gridspec_kw={"height_ratios": heights})  # fmt: skip
+    for ax, ((kind, role), mine) in zip(axes[:, 0], groups, strict=True):
+        if mine.empty:
+            ax.text(0.5, 0.5, "no agent variants", ha="center", va="center")
+            ax.set_axis_off()
+            continue
+        colours = ["tab:orange" if a else "tab:blue" for a in mine["adaptive"]]
+        rows = range(len(mine))
+        ax.barh(rows, mine["mean"], xerr=mine["stderr"].fillna(0), color=colours, capsize=4)
+        ax.set_yticks(
+            rows, [f"{v} (n={n})" for v, n in zip(mine["variant"], mine["n"], strict=True)], fontsize=8
+        )
+        ax.invert_yaxis()
+        ax.set_xlabel("team kills per minute (mean ± s.e.)")
+        mine_tests = tests[(tests["kind"] == kind) & (tests["partner_role"] == role)]
+        lines = [
+            f"{r.adaptive} vs {r.static}: {r.test}, p = {r.p:.3g}"
+            if np.isfinite(r.p)
+            else f"{r.adaptive}: {r.note}"
+            for r in mine_tests.itertuples()
+        ]
+        title = "\n".join([f"{kind}, {role} partners", *(lines or ["no adaptive-vs-static test"])])
+        ax.set_title(title, fontsize=9)
     return _save(fig, path)
 
 

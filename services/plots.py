@@ -22,7 +22,7 @@ OFFSETS = tuple(
 )
 
 
-_checked: list[plt.Figure] | None = None  # while `legibility` runs: the figures saved, kept open
+_checked: list[plt.Figure] | None = None  # while `drawn` runs: the figures saved, kept open
 
 
 def save(fig: plt.Figure, path: Path, dpi: int = 100) -> Path:
@@ -37,20 +37,23 @@ def save(fig: plt.Figure, path: Path, dpi: int = 100) -> Path:
     return path
 
 
-def legibility(draw: Callable[[], object]) -> dict[str, list[str]]:
-    """Run `draw`, which saves figures through `save`, and check each figure it saved as saved:
-    its file name and `text_problems` (none: every label legible)."""
+def drawn(draw: Callable[[], object]) -> list[plt.Figure]:
+    """Run `draw`, which saves figures through `save`, and return them open, as saved (the caller
+    closes them): for checks of what a figure shows."""
     global _checked
     _checked = []
     try:
         draw()
-        figures = list(_checked)
+        return list(_checked)
     finally:
         _checked = None
+
+
+def legibility(draw: Callable[[], object]) -> dict[str, list[str]]:
+    """The `text_problems` of every figure `draw` saves, by file name (none: every label legible)."""
+    figures = drawn(draw)
     try:
-        return {
-            Path(fig.get_label() or f"figure {i}").name: text_problems(fig) for i, fig in enumerate(figures)
-        }
+        return {Path(fig.get_label()).name: text_problems(fig) for fig in figures}
     finally:
         for fig in figures:
             plt.close(fig)

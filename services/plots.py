@@ -104,7 +104,11 @@ def text_problems(fig: plt.Figure, slack: float = 0.5) -> list[str]:
 
 
 def place_labels(
-    ax: plt.Axes, points: Sequence[tuple[float, float]], labels: Sequence[str], fontsize: float = 8
+    ax: plt.Axes,
+    points: Sequence[tuple[float, float]],
+    labels: Sequence[str],
+    fontsize: float = 8,
+    color: str = "black",
 ) -> None:
     """Annotate each point with its label at the first offset (OFFSETS) where the label meets no
     text already in the figure and stays inside the axes; where none is free, the last tried."""
@@ -116,7 +120,9 @@ def place_labels(
         for dx, dy in OFFSETS:
             if note is not None:
                 note.remove()
-            note = ax.annotate(label, (x, y), textcoords="offset points", xytext=(dx, dy), fontsize=fontsize)
+            note = ax.annotate(
+                label, (x, y), textcoords="offset points", xytext=(dx, dy), fontsize=fontsize, color=color
+            )
             box = note.get_window_extent(fig.canvas.get_renderer())
             fits = inside.x0 <= box.x0 and box.x1 <= inside.x1 and inside.y0 <= box.y0 and box.y1 <= inside.y1
             if fits and not any(_overlap(box, other, 0.0) for other in taken):

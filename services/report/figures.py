@@ -49,10 +49,28 @@ def policy_space(points: pd.DataFrame, variance: pd.DataFrame, path: Path) -> Pa
     for ax, role in zip(axes, roles, strict=False):
         mine = points[points["role"] == role]
         lib = mine[mine["kind"] == "library"]
-        centres = mine[mine["kind"] == "partner"].groupby("name", sort=True)[["pc1", "pc2"]].mean()
         place_labels(ax, list(zip(lib["pc1"], lib["pc2"], strict=True)), list(lib["name"]), 8)
-        place_labels(ax, list(zip(centres["pc1"], centres["pc2"], strict=True)), list(centres.index), 7)
+        centres, names = _clusters(mine[mine["kind"] == "partner"])
+        place_labels(ax, centres, names, 7, "tab:brown")
     return _save(fig, path)
+
+
+def _clusters(partners: pd.DataFrame, share: float = 0.05) -> tuple[list[tuple[float, float]], list[str]]:
+    """Each partner's matches that lie within `share` of the plot's span of each other, as one point
+    (their mean) and one label: a partner that played alike with every agent gets one label, one that
+    played differently gets one per place."""
+    span = max(np.ptp(partners["pc1"]), np.ptp(partners["pc2"]), 1e-9) if len(partners) else 1.0
+    centres, names = [], []
+    for name, group in partners.groupby("name", sort=True):
+        clusters: list[list[np.ndarray]] = []
+        for point in group[["pc1", "pc2"]].to_numpy():
+            near = next(
+                (c for c in clusters if np.linalg.norm(np.mean(c, axis=0) - point) < share * span), None
+            )
+            (near.append(point) if near is not None else clusters.append([point]))
+        centres += [tuple(np.mean(c, axis=0)) for c in clusters]
+        names += [str(name)] * len(clusters)
+    return centres, names
 
 
 def similarity(similarity: pd.DataFrame, correlations: pd.DataFrame, path: Path) -> Path:
@@ -97,7 +115,8 @@ def variants(summary: pd.DataFrame, tests: pd.DataFrame, path: Path) -> Path:
     horizontal bars, mean with standard-error bars, adaptive variants in orange, each group's tests
     below its title. Groups are never drawn on one axis, as they are never compared."""
     groups = list(summary.groupby(["kind", "partner_role"], sort=True)) or [(("", ""), summary)]
-    heights = [1.6 + 0.45 * max(1, len(mine)) + 0.3 * len(tests) for _, mine in groups]
+    tested = tests.groupby(["kind", "partner_role"]).size() if len(tests) else pd.Series(dtype=int)
+    heights = [1.6 + 0.45 * max(1, len(mine)) + 0.3 * tested.get(group, 0) for group, mine in groups]
     fig, axes = plt.subplots(len(groups), 1, figsize=(8, sum(heights)), squeeze=False,
                              gridspec_kw={"height_ratios": heights})  # fmt: skip
     for ax, ((kind, role), mine) in zip(axes[:, 0], groups, strict=True):

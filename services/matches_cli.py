@@ -66,7 +66,7 @@ def match_command(
         bait, shooter, out, adapter=config if adaptive else None,
     )  # fmt: skip
     seats = plan.policies()
-    view = {"partner": "-", "switches": 0}
+    view = {"partner": "?", "switches": 0}  # "?" until the adapter names a partner
 
     def adapted(status) -> None:  # noqa: ANN001 - an AdapterStatus
         if status.policy != seats[status.role]:  # a switch: counted, so that the scoreboard shows it

@@ -225,24 +225,25 @@ def similarity_to_optimal(partners: pd.DataFrame, table: Table) -> pd.DataFrame:
         else:
             continue
         rows.append(
-            {"match": row["match"], "partner_role": role, "partner": row["partner"], "agent": agent,
-             "optimal": optimal, "similarity": row[optimal], "kills_per_minute": row["kills_per_minute"]}
+            {"match": row["match"], "kind": row["kind"], "partner_role": role, "partner": row["partner"],
+             "agent": agent, "optimal": optimal, "similarity": row[optimal],
+             "kills_per_minute": row["kills_per_minute"]}
         )  # fmt: skip
-    columns = ["match", "partner_role", "partner", "agent", "optimal", "similarity", "kills_per_minute"]
+    columns = ["match", *GROUP, "partner", "agent", "optimal", "similarity", "kills_per_minute"]
     return pd.DataFrame(rows, columns=columns)
 
 
 def correlations(similarity: pd.DataFrame) -> pd.DataFrame:
-    """Pearson r and its two-sided p between similarity to optimal and team performance, per role.
-    r and p are left empty (NaN) with fewer than three seats or a constant column."""
+    """Pearson r and its two-sided p between similarity to optimal and team performance, per group
+    (kind of match, partner's seat). r and p are left empty (NaN), with the reason, with fewer than
+    three seats or a constant column."""
     rows = []
-    for role in ROLES:
-        mine = similarity[similarity["partner_role"] == role]
+    for (kind, role), mine in similarity.groupby(GROUP, sort=True):
         x, y = mine["similarity"].to_numpy(float), mine["kills_per_minute"].to_numpy(float)
         refusal = "fewer than 3 seats" if len(mine) < 3 else "a constant column" if _constant(x, y) else ""
         r, p, note = _test(stats.pearsonr, refusal, x, y)
-        rows.append({"partner_role": role, "n": len(mine), "r": r, "p": p, "note": note})
-    return pd.DataFrame(rows)
+        rows.append({"kind": kind, "partner_role": role, "n": len(mine), "r": r, "p": p, "note": note})
+    return pd.DataFrame(rows, columns=[*GROUP, "n", "r", "p", "note"])
 
 
 def _constant(*samples: np.ndarray) -> bool:

@@ -21,7 +21,7 @@ def _save(fig: plt.Figure, path: Path) -> Path:
     return save(fig, path, DPI)
 
 
-def _roles_axes(roles: list[str], height: float = 4.5) -> tuple[plt.Figure, list[plt.Axes]]:
+def _roles_axes(roles: list, height: float = 4.5) -> tuple[plt.Figure, list[plt.Axes]]:
     fig, axes = plt.subplots(1, max(1, len(roles)), figsize=(5.5 * max(1, len(roles)), height), squeeze=False)
     return fig, list(axes[0])
 
@@ -74,18 +74,18 @@ def _clusters(partners: pd.DataFrame, share: float = 0.05) -> tuple[list[tuple[f
 
 
 def similarity(similarity: pd.DataFrame, correlations: pd.DataFrame, path: Path) -> Path:
-    """Per role with pairs: similarity to the agent's optimal partner policy against team performance."""
-    roles = list(correlations[correlations["n"] > 0]["partner_role"])
-    fig, axes = _roles_axes(roles, 4.0)
-    for ax, role in zip(axes, roles, strict=False):
-        mine = similarity[similarity["partner_role"] == role]
+    """Per group (kind of match, partner's seat) with pairs: similarity to the agent's optimal partner
+    policy against team performance."""
+    groups = list(correlations[correlations["n"] > 0].itertuples())
+    fig, axes = _roles_axes(groups, 4.0)
+    for ax, c in zip(axes, groups, strict=False):
+        mine = similarity[(similarity["kind"] == c.kind) & (similarity["partner_role"] == c.partner_role)]
         ax.scatter(mine["similarity"], mine["kills_per_minute"], color="tab:blue")
-        c = correlations[correlations["partner_role"] == role].iloc[0]
-        stat = f"r = {c['r']:.2f}, p = {c['p']:.3g}" if np.isfinite(c["r"]) else c["note"]
-        ax.set_title(f"{role} partners: {stat} (n = {c['n']})", fontsize=10)
+        stat = f"r = {c.r:.2f}, p = {c.p:.3g}" if np.isfinite(c.r) else c.note
+        ax.set_title(f"{c.kind}, {c.partner_role} partners:\n{stat} (n = {c.n})", fontsize=10)
         ax.set_xlabel("similarity to the optimal policy (mean log-prob)")
         ax.set_ylabel("team kills per minute")
-    if not roles:
+    if not groups:
         axes[0].text(0.5, 0.5, "no pair whose agent played a library policy", ha="center", va="center")
     return _save(fig, path)
 

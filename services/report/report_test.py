@@ -200,22 +200,27 @@ def test_similarity_vectors_and_performance(built: tuple[Report, dict[str, Path]
 def test_similarity_to_optimal_and_correlation(built: tuple[Report, dict[str, Path], Path]) -> None:
     _, _, out = built
     table, partners = Table.load(), csv(out, "partners")
-    similarity, correlations = csv(out, "similarity"), csv(out, "correlations").set_index("partner_role")
+    similarity = csv(out, "similarity")
+    correlations = csv(out, "correlations").set_index(["kind", "partner_role"])
     for row in similarity.itertuples():
         best = table.best_bait(row.agent) if row.partner_role == "bait" else table.best_shooter(row.agent)
         assert row.optimal == best
         seat = partners[(partners["match"] == row.match) & (partners["partner_role"] == row.partner_role)]
-        assert row.similarity == pytest.approx(seat.iloc[0][best])
+        assert row.similarity == pytest.approx(seat.iloc[0][best]) and row.kind == seat.iloc[0]["kind"]
     # the scripted seats of no match here: every seat's agent is a library policy
     assert len(similarity) == len(partners)
+    # one correlation per group: the study trial's single pair is not pooled with the agent matches
+    assert correlations.loc[("study trial", "bait"), "n"] == 1
+    assert correlations.loc[("study trial", "bait"), "note"] == "fewer than 3 seats"
     for role in ("bait", "shooter"):
-        mine = similarity[similarity["partner_role"] == role]
+        mine = similarity[(similarity["partner_role"] == role) & (similarity["kind"] == "agents only")]
         x, y = mine["similarity"].to_numpy(), mine["kills_per_minute"].to_numpy()
         r = np.corrcoef(x, y)[0, 1]
         t = r * math.sqrt((len(x) - 2) / (1 - r * r))
-        assert correlations.loc[role, "n"] == len(mine)
-        assert correlations.loc[role, "r"] == pytest.approx(r)
-        assert correlations.loc[role, "p"] == pytest.approx(2 * stats.t.sf(abs(t), len(x) - 2))
+        group = ("agents only", role)
+        assert correlations.loc[group, "n"] == len(mine)
+        assert correlations.loc[group, "r"] == pytest.approx(r)
+        assert correlations.loc[group, "p"] == pytest.approx(2 * stats.t.sf(abs(t), len(x) - 2))
 
 
 def test_policy_space(built: tuple[Report, dict[str, Path], Path]) -> None:

@@ -23,7 +23,7 @@ if TYPE_CHECKING:
     from shared.game import Policy
 
 ENV_ID = "tsf/Role-v0"
-DEFAULT_PARTNER = {"bait": "S5", "shooter": "B5"}  # the adapter's best-average policy of each seat
+DEFAULT_PARTNER = {"bait": "S5", "shooter": "B5"}  # a strong library partner for each seat
 
 
 def register() -> None:

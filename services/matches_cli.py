@@ -66,16 +66,18 @@ def match_command(
         bait, shooter, out, adapter=config if adaptive else None,
     )  # fmt: skip
     seats = plan.policies()
-    view = {"partner": "-"}
+    view = {"partner": "?", "switches": 0}  # "?" until the adapter names a partner
 
     def adapted(status) -> None:  # noqa: ANN001 - an AdapterStatus
+        if status.policy != seats[status.role]:  # a switch: counted, so that the scoreboard shows it
+            view["switches"] += 1
         seats[status.role] = status.policy
         view["partner"] = (status.partner or "?") + (" (out of library)" if status.out_of_library else "")
 
     with Live(console=console, transient=True) as live:
 
         def scoreboard(state) -> None:  # noqa: ANN001 - a State
-            estimate = f"  partner like {view['partner']}" if adaptive else ""
+            estimate = f"  partner like {view['partner']}, switches {view['switches']}" if adaptive else ""
             live.update(
                 f"[bold]{plan.match}[/] frame {state.frame}/{state.frames}  kills [green]{state.kills}[/]  "
                 f"points {state.points}  bait {seats['bait']}  shooter {seats['shooter']}{estimate}"

@@ -90,6 +90,15 @@ def test_report_from_bus_recordings(matches: dict[str, tuple[Summary, Path]], tm
     run = tsf("report", *map(str, paths), str(truncated), "--out", str(out), "--reference-games", "1")
     assert run.returncode == 0, run.stdout + run.stderr
     assert "cut: no summary" in run.stdout
+    # one match of each variant: nothing to test, and the command says so rather than run a test
+    assert (
+        "not compared: agents only, bait partners (3 pairings): no static variant with 2 or more matches"
+        in run.stdout
+    )
+    assert (
+        "not compared: agents only, shooter partners (2 pairings): no adaptive variant to test" in run.stdout
+    )
+    assert pd.read_csv(out / "data" / "adaptive_tests.csv").empty
     partners = pd.read_csv(out / "data" / "partners.csv")
     assert len(partners) == 2 * len(PAIRS) + 1  # agent-agent: each seat is the other's partner
     for name, (summary, _) in matches.items():

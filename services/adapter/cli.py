@@ -186,6 +186,9 @@ def calibrate_adapter(
     sweep_id: str = typer.Option(
         "calibrate", "--sweep", help="Sweep id of the jobs: tsf worker --sweep ID joins."
     ),
+    seeds: int = number(
+        2, GAMES, "Seeded one-minute games of each pair (seeds 0..N-1); 2 for the shipped one."
+    ),
     ray: str | None = RAY,
     *,
     bus: BusConfig,
@@ -197,7 +200,7 @@ def calibrate_adapter(
 
     journal = out.with_name(out.name + ".journal")
     with open_engine(bus, sweep_id, journal, workers, ray, stop_on_signals()) as engine:
-        result = calibrate(run=on_workers(engine))
+        result = calibrate(seeds=list(range(seeds)), run=on_workers(engine))
     for role, thresholds in result["thresholds"].items():
         console.print(f"{role}: " + ", ".join(f"T={t}: {v:.2f}" for t, v in thresholds.items()))
     console.print(f"written to {write_calibration(result, out)}")

@@ -1,9 +1,10 @@
-"""Figures of the adapter evaluation: identification accuracy against the window, the adaptive
-agent against every static policy (bars with standard errors, as in the study), and the
+"""Figures of the adapter evaluation: identification accuracy against the window, each adaptive
+agent's difference from the best static policy (bars with standard errors, the default marked), and the
 log-probability curves of each library policy over one game (as in the study's figure)."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import matplotlib
@@ -12,17 +13,19 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402 - after choosing the file-only backend
 import numpy as np  # noqa: E402
 
-from services.adapter.core import ADAPTIVE  # noqa: E402
+from services.adapter.core import ADAPTIVE, AdapterConfig  # noqa: E402
+from services.plots import save  # noqa: E402
 from shared.game import FPS  # noqa: E402
 
 GOALS = {150: 0.80, 400: 0.95, 800: 0.99}
 
 
 def accuracy_vs_window(identification: dict, path: Path) -> Path:
-    windows = sorted(int(w) for w in identification["windows"])
+    by_window = {int(w): values for w, values in identification["windows"].items()}  # JSON keys are text
+    windows = sorted(by_window)
     fig, ax = plt.subplots(figsize=(5, 3.5))
     for label, field in (("CEM window (argmax)", "accuracy"), ("Bayesian filter", "bayes_accuracy")):
-        ax.plot(windows, [identification["windows"][w][field] for w in windows], "o-", label=label)
+        ax.plot(windows, [by_window[w][field] for w in windows], "o-", label=label)
     goals = [w for w in windows if w in GOALS]
     ax.plot(goals, [GOALS[w] for w in goals], "k_", markersize=18, mew=2, label="goal")
     ax.set(xlabel="window T (frames)", ylabel="identification accuracy", ylim=(0, 1.02))
@@ -31,22 +34,39 @@ def accuracy_vs_window(identification: dict, path: Path) -> Path:
     return _save(fig, path)
 
 
-def adaptive_vs_static(comparison: dict, path: Path) -> Path:
-    agents = comparison["agents"]
-    names = sorted(agents, key=lambda a: (a.startswith(ADAPTIVE), a))
-    means = [agents[a]["mean"] for a in names]
-    errors = [agents[a]["stderr"] for a in names]
-    colors = ["tab:orange" if a.startswith(ADAPTIVE) else "tab:blue" for a in names]
-    fig, ax = plt.subplots(figsize=(max(6, 0.6 * len(names)), 4))
-    ax.bar(range(len(names)), means, yerr=errors, color=colors, capsize=3)
+def adaptive_vs_static(comparison: dict, path: Path, default: str = AdapterConfig().name) -> Path:
+    """The headline figure: each adaptive agent's paired difference from the best static policy in
+    kills/min (mean ± s.e. over the same partners and seeds), as horizontal bars from zero, with the
+    difference in per cent of the best static mean; the default strategy is marked. A difference is
+    drawn, not the two means, because a gain of a few per cent is invisible on an axis from zero."""
     best = comparison["best_static"]
-    ax.axhline(agents[best]["mean"], color="grey", linestyle="--", linewidth=1, label=f"best static ({best})")
-    ax.set_xticks(range(len(names)), [a.removeprefix(ADAPTIVE) for a in names], rotation=45, ha="right")
-    ax.set_ylabel("team kills / min (mean ± s.e.)")
+    base = comparison["agents"][best]["mean"]
+    tests = comparison["tests"]
+    names = list(tests)
+    diffs = np.array([tests[a]["mean_difference"] for a in names])
+    errors = np.array([tests[a]["stderr"] for a in names])
+    fig, ax = plt.subplots(figsize=(8, 1.4 + 0.42 * len(names)))
+    colours = ["tab:green" if a == default else "tab:orange" for a in names]
+    rows = np.arange(len(names))
+    ax.barh(rows, diffs, xerr=errors, color=colours, capsize=3)
+    ax.axvline(0, color="black", linewidth=1)
+    labels = [a.removeprefix(ADAPTIVE) + (" (default)" if a == default else "") for a in names]
+    ax.set_yticks(rows, labels, fontsize=8)
+    for tick, name in zip(ax.get_yticklabels(), names, strict=True):
+        tick.set_fontweight("bold" if name == default else "normal")
+    ax.invert_yaxis()
+    reach = float(max(np.max(diffs + errors), 0.0))
+    low = float(min(np.min(diffs - errors), 0.0))
+    for row, d, e in zip(rows, diffs, errors, strict=True):
+        text = f"{d:+.3f} ± {e:.3f} ({100 * d / base:+.1f} %)"
+        ax.text(max(d + e, 0.0) + 0.02 * (reach - low), row, text, va="center", fontsize=7)
+    ax.set_xlim(low - 0.05 * (reach - low), reach + 0.75 * (reach - low))
+    ax.set_xlabel(f"kills/min minus the best static policy, {best} ({base:.2f}): paired mean ± s.e.")
     ax.set_title(
-        f"{comparison['partners']} partners × seeds = {comparison['units']} games per agent", fontsize=10
+        f"Adaptive agents against {best}: {comparison['partners']} partners, "
+        f"{comparison['units']} paired games each",
+        fontsize=10,
     )
-    ax.legend(fontsize=8)
     return _save(fig, path)
 
 
@@ -70,9 +90,18 @@ def logprob_curves(
     return _save(fig, path)
 
 
+def redraw(directory: Path) -> list[Path]:
+    """Draw an evaluation's figures again from its shipped numbers (`identification.json`,
+    `comparison.json` in `directory`, as `tsf eval` wrote them), after a change of the figures."""
+    drawn = []
+    if (ident := directory / "identification.json").exists():
+        drawn.append(accuracy_vs_window(json.loads(ident.read_text()), directory / "identification.png"))
+    if (comparison := directory / "comparison.json").exists():
+        drawn.append(
+            adaptive_vs_static(json.loads(comparison.read_text()), directory / "adaptive_vs_static.png")
+        )
+    return drawn
+
+
 def _save(fig: plt.Figure, path: Path) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save(fig, path, 120)

@@ -13,6 +13,11 @@ The partner's label is the sidecar's `participant`, else its policy key, else "p
 variant is the sidecar's `variant`, else the agent's policy key (a static agent), else
 `adaptive-T<window>-<strategy>` from the adapter statuses.
 
+Each pairing has a kind of match (`kind_of`): a study trial (the recording has a study sidecar), a
+person's match outside a study, or agents only. Variants are summarised, and adaptive ones tested,
+within one kind and one partner seat at a time (a group): a study's participants and agent stand-ins,
+or bait partners and shooter partners, are different populations, never pooled in one comparison.
+
 A partner's similarity to a library policy is the mean log-probability that policy gives the
 partner's actions in the states the partner answered (the CEM of services/adapter/cem.py): each
 recorded action of the partner's seat with the state named by its frame, one per frame (the last
@@ -40,6 +45,8 @@ from shared.game import FPS, ROLES, GameConfig, Policy, other
 ROUND_ENDS = ("kill", "reset")  # the events that end a round (docs/rules.md)
 PERSON = ("", "human")  # what a start record names a person's seat
 SMOOTH = FPS  # frames in the log-probability curves' moving mean (one second)
+KINDS = ("study trial", "person", "agents only")  # the kinds of match, never compared with each other
+GROUP = ["kind", "partner_role"]  # one population: a kind of match and the partner's seat
 
 
 @dataclass(frozen=True)
@@ -47,6 +54,7 @@ class Seat:
     """One partner-agent pairing in one match."""
 
     match: str
+    kind: str  # one of KINDS
     partner_role: str
     partner: str
     agent: str  # the key the agent seat played most (a library key, for the table)
@@ -67,6 +75,14 @@ def adaptive_seat(match: Match) -> str | None:
 def person_seats(match: Match) -> list[str]:
     """Seats a person played: the start record names no policy for them ("", or the launcher's "human")."""
     return [r for r in ROLES if match.policies[r] in PERSON]
+
+
+def kind_of(match: Match) -> str:
+    """A study trial (a study sidecar names its participant or seat), a person's match outside a
+    study, or agents only."""
+    if match.meta.get("participant") or match.meta.get("role"):
+        return KINDS[0]
+    return KINDS[1] if person_seats(match) else KINDS[2]
 
 
 def seats(match: Match, partner_role: str | None = None) -> list[Seat]:
@@ -90,6 +106,7 @@ def seats(match: Match, partner_role: str | None = None) -> list[Seat]:
         out.append(
             Seat(
                 match.name,
+                kind_of(match),
                 role,
                 match.meta.get("participant") or partner,
                 most_played(match, agent_role),
@@ -208,24 +225,25 @@ def similarity_to_optimal(partners: pd.DataFrame, table: Table) -> pd.DataFrame:
         else:
             continue
         rows.append(
-            {"match": row["match"], "partner_role": role, "partner": row["partner"], "agent": agent,
-             "optimal": optimal, "similarity": row[optimal], "kills_per_minute": row["kills_per_minute"]}
+            {"match": row["match"], "kind": row["kind"], "partner_role": role, "partner": row["partner"],
+             "agent": agent, "optimal": optimal, "similarity": row[optimal],
+             "kills_per_minute": row["kills_per_minute"]}
         )  # fmt: skip
-    columns = ["match", "partner_role", "partner", "agent", "optimal", "similarity", "kills_per_minute"]
+    columns = ["match", *GROUP, "partner", "agent", "optimal", "similarity", "kills_per_minute"]
     return pd.DataFrame(rows, columns=columns)
 
 
 def correlations(similarity: pd.DataFrame) -> pd.DataFrame:
-    """Pearson r and its two-sided p between similarity to optimal and team performance, per role.
-    r and p are left empty (NaN) with fewer than three seats or a constant column."""
+    """Pearson r and its two-sided p between similarity to optimal and team performance, per group
+    (kind of match, partner's seat). r and p are left empty (NaN), with the reason, with fewer than
+    three seats or a constant column."""
     rows = []
-    for role in ROLES:
-        mine = similarity[similarity["partner_role"] == role]
+    for (kind, role), mine in similarity.groupby(GROUP, sort=True):
         x, y = mine["similarity"].to_numpy(float), mine["kills_per_minute"].to_numpy(float)
         refusal = "fewer than 3 seats" if len(mine) < 3 else "a constant column" if _constant(x, y) else ""
         r, p, note = _test(stats.pearsonr, refusal, x, y)
-        rows.append({"partner_role": role, "n": len(mine), "r": r, "p": p, "note": note})
-    return pd.DataFrame(rows)
+        rows.append({"kind": kind, "partner_role": role, "n": len(mine), "r": r, "p": p, "note": note})
+    return pd.DataFrame(rows, columns=[*GROUP, "n", "r", "p", "note"])
 
 
 def _constant(*samples: np.ndarray) -> bool:
@@ -283,57 +301,100 @@ def round_means(curves: pd.DataFrame) -> pd.DataFrame:
 
 
 def variants(partners: pd.DataFrame) -> pd.DataFrame:
-    """Team performance per agent variant: matches, mean and standard error of kills per minute."""
+    """Team performance per agent variant within each group (kind of match, partner's seat):
+    matches, mean and standard error of kills per minute."""
+    columns = [*GROUP, "variant", "adaptive", "n", "mean", "stderr"]
     rows = []
-    for (variant, adaptive), group in partners.groupby(["variant", "adaptive"], sort=True):
+    for (kind, role, variant, adaptive), group in partners.groupby(
+        [*GROUP, "variant", "adaptive"], sort=True
+    ):
         values = group["kills_per_minute"].to_numpy(float)
         stderr = values.std(ddof=1) / math.sqrt(len(values)) if len(values) > 1 else math.nan
-        rows.append({"variant": variant, "adaptive": bool(adaptive), "n": len(values),
-                     "mean": values.mean(), "stderr": stderr})  # fmt: skip
-    return pd.DataFrame(rows, columns=["variant", "adaptive", "n", "mean", "stderr"])
+        values_row = (kind, role, variant, bool(adaptive), len(values), values.mean(), stderr)
+        rows.append(dict(zip(columns, values_row, strict=True)))
+    return pd.DataFrame(rows, columns=columns)
+
+
+TEST_COLUMNS = [*GROUP, "adaptive", "static", "test", "n_adaptive", "n_static", "mean_adaptive",
+                "mean_static", "t", "p", "note"]  # fmt: skip
 
 
 def adaptive_tests(partners: pd.DataFrame, summary: pd.DataFrame) -> pd.DataFrame:
-    """Each adaptive variant against the best static one (the highest mean among static variants
-    with two or more matches), two-sided.
+    """Within each group, each adaptive variant against the group's best static one (the highest mean
+    among static variants with two or more matches), two-sided.
 
     Where every partner played both variants (a within-partner design, as in the study, and as in
     agent-only sweeps over partners), a paired t-test on each partner's mean: it removes the large
     differences between partners from the comparison. Otherwise Welch's unequal-variance t-test
     over matches: the groups are then different partners, of unequal sizes, with no reason to
-    share a variance. The `test` column says which was run."""
-    columns = ["adaptive", "static", "test", "n_adaptive", "n_static", "mean_adaptive", "mean_static",
-               "t", "p", "note"]  # fmt: skip
-    static = summary[(~summary["adaptive"]) & (summary["n"] >= 2)]
-    if static.empty:
-        return pd.DataFrame(columns=columns)
-    best = static.sort_values(["mean", "variant"], ascending=[False, True]).iloc[0]["variant"]
-    b = partners[partners["variant"] == best]
+    share a variance. The `test` column says which was run; a group with no static variant to
+    compare with gets no test, and `left_out` says so."""
     rows = []
-    for variant in summary[summary["adaptive"]]["variant"]:
-        a = partners[partners["variant"] == variant]
-        x, y = a["kills_per_minute"].to_numpy(float), b["kills_per_minute"].to_numpy(float)
-        per_a = a.groupby("partner")["kills_per_minute"].mean()
-        per_b = b.groupby("partner")["kills_per_minute"].mean()
-        if len(per_a) >= 2 and set(per_a.index) == set(per_b.index):
-            test, x, y = (
-                "paired t (partner means)",
-                per_a.sort_index().to_numpy(),
-                per_b.sort_index().to_numpy(),
+    for (kind, role), mine in summary.groupby(GROUP, sort=True):
+        static = mine[(~mine["adaptive"]) & (mine["n"] >= 2)]
+        if static.empty:
+            continue
+        best = static.sort_values(["mean", "variant"], ascending=[False, True]).iloc[0]["variant"]
+        pairs = partners[(partners["kind"] == kind) & (partners["partner_role"] == role)]
+        for variant in mine[mine["adaptive"]]["variant"]:
+            test = _test_variant(pairs[pairs["variant"] == variant], pairs[pairs["variant"] == best])
+            rows.append(dict(zip(TEST_COLUMNS, (kind, role, variant, best, *test), strict=True)))
+    return pd.DataFrame(rows, columns=TEST_COLUMNS)
+
+
+def _test_variant(a: pd.DataFrame, b: pd.DataFrame) -> tuple:
+    """The test of one adaptive variant's pairings `a` against the best static one's `b`."""
+    x, y = a["kills_per_minute"].to_numpy(float), b["kills_per_minute"].to_numpy(float)
+    per_a = a.groupby("partner")["kills_per_minute"].mean()
+    per_b = b.groupby("partner")["kills_per_minute"].mean()
+    if len(per_a) >= 2 and set(per_a.index) == set(per_b.index):
+        test, x, y = "paired t (partner means)", per_a.sort_index().to_numpy(), per_b.sort_index().to_numpy()
+        refusal = "no variance in the differences" if _constant(x - y) else ""
+        t, p, note = _test(stats.ttest_rel, refusal, x, y)
+    else:
+        test = "Welch t"
+        refusal = (
+            "fewer than 2 adaptive matches" if len(x) < 2
+            else "no variance in either group" if _constant(x) and _constant(y)
+            else ""
+        )  # fmt: skip
+        t, p, note = _test(functools.partial(stats.ttest_ind, equal_var=False), refusal, x, y)
+    return test, len(x), len(y), x.mean(), y.mean(), t, p, note
+
+
+def left_out(summary: pd.DataFrame, tests: pd.DataFrame) -> pd.DataFrame:
+    """What the adaptive-vs-static tests did not compare, and why: every group without a test (no
+    adaptive variant, or no static variant with two or more matches), and every static variant too
+    rare to be a group's best static one. Groups are never compared with each other."""
+    rows = []
+    tested = set(zip(tests["kind"], tests["partner_role"], strict=True))
+    for (kind, role), mine in summary.groupby(GROUP, sort=True):
+        matches = int(mine["n"].sum())
+        if (kind, role) not in tested:
+            adaptive = mine[mine["adaptive"]]
+            reason = (
+                "no adaptive variant to test"
+                if adaptive.empty
+                else "no static variant with 2 or more matches to test the adaptive ones against"
             )
-            refusal = "no variance in the differences" if _constant(x - y) else ""
-            t, p, note = _test(stats.ttest_rel, refusal, x, y)
-        else:
-            test = "Welch t"
-            refusal = (
-                "fewer than 2 adaptive matches" if len(x) < 2
-                else "no variance in either group" if _constant(x) and _constant(y)
-                else ""
-            )  # fmt: skip
-            t, p, note = _test(functools.partial(stats.ttest_ind, equal_var=False), refusal, x, y)
-        values = (variant, best, test, len(x), len(y), x.mean(), y.mean(), t, p, note)
-        rows.append(dict(zip(columns, values, strict=True)))
-    return pd.DataFrame(rows, columns=columns)
+            rows.append({"kind": kind, "partner_role": role, "variant": "", "n": matches, "reason": reason})
+            continue
+        for row in mine[(~mine["adaptive"]) & (mine["n"] < 2)].itertuples():
+            reason = "fewer than 2 matches: not a candidate for the best static variant"
+            rows.append(
+                {"kind": kind, "partner_role": role, "variant": row.variant, "n": row.n, "reason": reason}
+            )
+    return pd.DataFrame(rows, columns=[*GROUP, "variant", "n", "reason"])
+
+
+def left_out_lines(left: pd.DataFrame) -> list[str]:
+    """`left_out` as sentences, for the console and the report's page."""
+    return [
+        f"{r.kind}, {r.partner_role} partners"
+        + (f", {r.variant}" if r.variant else "")
+        + f" ({r.n} pairings): {r.reason}"
+        for r in left.itertuples()
+    ]
 
 
 def adapter_timeline(matches: list[Match]) -> pd.DataFrame:

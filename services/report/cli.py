@@ -40,6 +40,8 @@ def report_command(
     for problem in report.problems:
         colour = "yellow" if problem.used else "red"
         console.print(f"[{colour}]{problem.name}: {problem.reason}[/]")
+    for line in report.left_out:
+        console.print(f"[yellow]not compared: {line}[/]", highlight=False)
     console.print(f"report: {report.html}  ({len(report.figures)} figures, numbers in {out / 'data'})")
     console.print("\n".join(provenance.lines(report.provenance)), highlight=False)
     if not report.matches:

@@ -30,6 +30,7 @@ class Report:
     data: dict[str, pd.DataFrame] = field(default_factory=dict)
     problems: list[Problem] = field(default_factory=list)
     matches: int = 0  # recordings in the analyses (none: the report names only problems)
+    left_out: list[str] = field(default_factory=list)  # what the adaptive-vs-static tests did not compare
     provenance: dict[str, str] = field(default_factory=dict)  # what made it (services/provenance.py)
 
 
@@ -62,13 +63,16 @@ def build_report(
     correlations = analysis.correlations(similarity)
     summary = analysis.variants(partners)
     tests = analysis.adaptive_tests(partners, summary)
+    left = analysis.left_out(summary, tests)
     timeline = analysis.adapter_timeline(matches)
     trial_match, seat = _trial(matches, partners, trial, partner_role)
     if trial and seat is None:
         problems.append(Problem(trial, "", "--trial: no analysed match of that name has a partner", True))
     curves = analysis.curves(trial_match, seat) if seat else pd.DataFrame()
 
-    report = Report(out / "report.html", problems=problems, matches=len(matches))
+    report = Report(
+        out / "report.html", problems=problems, matches=len(matches), left_out=analysis.left_out_lines(left)
+    )
     report.provenance = provenance(config, table_path)
     report.data = {
         "table": pd.DataFrame(
@@ -98,6 +102,7 @@ def build_report(
         "logprob_rounds": analysis.round_means(curves),
         "variants": summary,
         "adaptive_tests": tests,
+        "left_out": left,
         "adapter": timeline,
         "problems": pd.DataFrame([p.__dict__ for p in problems], columns=["name", "path", "reason", "used"]),
         "provenance": pd.DataFrame(list(report.provenance.items()), columns=["field", "value"]),
@@ -115,9 +120,7 @@ def build_report(
     report.figures["variants"] = figures.variants(summary, tests, fig / "variants.png")
     if not timeline.empty:
         report.figures["adapter"] = figures.adapter(timeline, fig / "adapter.png")
-    write_html(
-        report.html, "Team Space Fortress: study report", _intro(matches, problems), _sections(report, seat)
-    )
+    write_html(report.html, "Team Space Fortress: study report", _intro(report), _sections(report, seat))
     return report
 
 
@@ -146,11 +149,17 @@ def _per_round(means: pd.DataFrame) -> pd.DataFrame:
     return wide.rename(columns=lambda r: f"round {r}").reset_index()
 
 
-def _intro(matches: list[Match], problems: list[Problem]) -> str:
-    text = f"{len(matches)} recordings analysed."
-    for p in problems:
+def _intro(report: Report) -> str:
+    text = f"{report.matches} recordings analysed."
+    for p in report.problems:
         status = "used" if p.used else "left out"
         text += f"<br><span class='problem'>{p.name} ({status}): {p.reason}</span>"
+    groups = report.data["variants"][analysis.GROUP].drop_duplicates()
+    if len(groups) > 1:
+        names = ", ".join(f"{g.kind} with {g.partner_role} partners" for g in groups.itertuples())
+        text += f"<br>Compared within each group, never across them: {names}."
+    for line in report.left_out:
+        text += f"<br><span class='problem'>Not compared: {line}</span>"
     return text
 
 
@@ -194,12 +203,15 @@ def _sections(report: Report, seat: analysis.Seat | None) -> list[Section]:
     sections.append(
         Section(
             "Adaptive vs static",
-            "Team performance per agent variant (mean and standard error). Each adaptive variant is tested "
-            "against the best static variant: a paired t-test on the partners' means where every partner "
-            "played both, else Welch's t-test over matches (unpaired, unequal variances); n counts "
-            "partners or matches accordingly.",
+            "Team performance per agent variant (mean and standard error), within each group: a kind of "
+            "match (study trials, a person's matches, agents only) and the partner's seat; groups are "
+            "different populations and are never compared with each other. Within a group, each adaptive "
+            "variant is tested against the best static variant: a paired t-test on the partners' means "
+            "where every partner played both, else Welch's t-test over matches (unpaired, unequal "
+            "variances); n counts partners or matches accordingly. What was not compared is listed, with "
+            "the reason.",
             f["variants"],
-            [("Variants", d["variants"]), ("Tests", d["adaptive_tests"])],
+            [("Variants", d["variants"]), ("Tests", d["adaptive_tests"]), ("Not compared", d["left_out"])],
         )
     )
     if "adapter" in f:

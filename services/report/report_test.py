@@ -19,12 +19,15 @@ from scipy import stats
 
 from services.adapter.cem import log_probs
 from services.agent import library
+from services.plots import legibility, save
 from services.provenance import FIELDS
 from services.recorder.recording import Recording, load
 from services.recorder.recording_test import Script, record_match
-from services.report.analysis import adaptive_tests, seats, variants
+from services.report import figures
+from services.report.analysis import adaptive_tests, left_out, left_out_lines, seats, variants
 from services.report.load import Match, load_matches
 from services.report.report import Report, build_report
+from services.table.plot import heatmap
 from services.table.table import Table
 from shared.game import GameConfig
 from shared.messages import AdapterStatus, PolicySwitch
@@ -197,22 +200,27 @@ def test_similarity_vectors_and_performance(built: tuple[Report, dict[str, Path]
 def test_similarity_to_optimal_and_correlation(built: tuple[Report, dict[str, Path], Path]) -> None:
     _, _, out = built
     table, partners = Table.load(), csv(out, "partners")
-    similarity, correlations = csv(out, "similarity"), csv(out, "correlations").set_index("partner_role")
+    similarity = csv(out, "similarity")
+    correlations = csv(out, "correlations").set_index(["kind", "partner_role"])
     for row in similarity.itertuples():
         best = table.best_bait(row.agent) if row.partner_role == "bait" else table.best_shooter(row.agent)
         assert row.optimal == best
         seat = partners[(partners["match"] == row.match) & (partners["partner_role"] == row.partner_role)]
-        assert row.similarity == pytest.approx(seat.iloc[0][best])
+        assert row.similarity == pytest.approx(seat.iloc[0][best]) and row.kind == seat.iloc[0]["kind"]
     # the scripted seats of no match here: every seat's agent is a library policy
     assert len(similarity) == len(partners)
+    # one correlation per group: the study trial's single pair is not pooled with the agent matches
+    assert correlations.loc[("study trial", "bait"), "n"] == 1
+    assert correlations.loc[("study trial", "bait"), "note"] == "fewer than 3 seats"
     for role in ("bait", "shooter"):
-        mine = similarity[similarity["partner_role"] == role]
+        mine = similarity[(similarity["partner_role"] == role) & (similarity["kind"] == "agents only")]
         x, y = mine["similarity"].to_numpy(), mine["kills_per_minute"].to_numpy()
         r = np.corrcoef(x, y)[0, 1]
         t = r * math.sqrt((len(x) - 2) / (1 - r * r))
-        assert correlations.loc[role, "n"] == len(mine)
-        assert correlations.loc[role, "r"] == pytest.approx(r)
-        assert correlations.loc[role, "p"] == pytest.approx(2 * stats.t.sf(abs(t), len(x) - 2))
+        group = ("agents only", role)
+        assert correlations.loc[group, "n"] == len(mine)
+        assert correlations.loc[group, "r"] == pytest.approx(r)
+        assert correlations.loc[group, "p"] == pytest.approx(2 * stats.t.sf(abs(t), len(x) - 2))
 
 
 def test_policy_space(built: tuple[Report, dict[str, Path], Path]) -> None:
@@ -235,26 +243,67 @@ def test_policy_space(built: tuple[Report, dict[str, Path], Path]) -> None:
         assert all(ref.loc[key].idxmax() == key for key in keys)
 
 
-def test_adaptive_vs_static(built: tuple[Report, dict[str, Path], Path]) -> None:
-    _, paths, out = built
-    variants, tests = csv(out, "variants").set_index("variant"), csv(out, "adaptive_tests")
+def test_adaptive_vs_static_within_each_kind_and_seat(built: tuple[Report, dict[str, Path], Path]) -> None:
+    """Variants are summarised per group (kind of match, partner's seat): the study trial's S5 is not
+    pooled with the agent matches' S5, nor a bait variant with the shooter variants; the adaptive
+    shooter is tested against the best static shooter of the agent matches with bait partners."""
+    report, paths, out = built
+    variants, tests = csv(out, "variants"), csv(out, "adaptive_tests")
+    agents = variants[(variants["kind"] == "agents only") & (variants["partner_role"] == "bait")]
+    agents = agents.set_index("variant")
     kpm = {name: load(path).summary.kills_per_minute for name, path in paths.items()}
     adaptive = [kpm[f"adaptive-{p}"] for p, _ in ADAPTIVE]
-    row = variants.loc[f"adaptive-T{WINDOW}-cem"]
+    row = agents.loc[f"adaptive-T{WINDOW}-cem"]
     assert row["n"] == len(ADAPTIVE) and row["mean"] == pytest.approx(statistics.fmean(adaptive))
     assert row["stderr"] == pytest.approx(statistics.stdev(adaptive) / math.sqrt(len(adaptive)))
-    s5 = [kpm[f"static-{b}-{s}"] for b, s in STATIC if s == "S5"] + [kpm["person-1"]]
-    assert variants.loc["S5", "n"] == len(s5) and variants.loc["S5", "mean"] == pytest.approx(
+    s5 = [kpm[f"static-{b}-{s}"] for b, s in STATIC if s == "S5"]
+    assert agents.loc["S5", "n"] == len(s5) and agents.loc["S5", "mean"] == pytest.approx(
         statistics.fmean(s5)
     )
-    statics = variants[(~variants["adaptive"]) & (variants["n"] >= 2)]
+    study = variants[variants["kind"] == "study trial"]
+    assert list(zip(study["partner_role"], study["variant"], study["n"], strict=True)) == [("bait", "S5", 1)]
+    shooters = variants[(variants["kind"] == "agents only") & (variants["partner_role"] == "shooter")]
+    assert set(shooters["variant"]) == {b for b, _ in STATIC}  # the baits, as the shooters' agents
+    statics = agents[(~agents["adaptive"]) & (agents["n"] >= 2)]
     best = statics["mean"].idxmax()
     [test] = tests.itertuples()
-    assert test.static == best and test.test == "Welch t"  # the partners differ: B4 met no S5
-    b = np.array([kpm[m] for m in csv(out, "partners").query("variant == @best")["match"]])
+    assert (test.kind, test.partner_role, test.static, test.test) == ("agents only", "bait", best, "Welch t")
+    group = csv(out, "partners").query(
+        "kind == 'agents only' and partner_role == 'bait' and variant == @best"
+    )
+    b = np.array([kpm[m] for m in group["match"]])
     a = np.array(adaptive)
     se = math.sqrt(a.var(ddof=1) / len(a) + b.var(ddof=1) / len(b))
     assert test.t == pytest.approx((a.mean() - b.mean()) / se)
+    # what was not compared is said, in the data, on the page and in the report's lines
+    left = csv(out, "left_out")
+    untested = left[left["variant"].isna()]
+    assert set(zip(untested["kind"], untested["partner_role"], strict=True)) == {
+        ("agents only", "shooter"),
+        ("study trial", "bait"),
+    }
+    assert set(left.dropna(subset=["variant"])["variant"]) == set(statics.index.symmetric_difference(
+        agents[~agents["adaptive"]].index))  # fmt: skip
+    page = report.html.read_text()
+    assert "Not compared: study trial, bait partners (1 pairings): no adaptive variant to test" in page
+    assert "never across them" in page and len(report.left_out) == len(left)
+
+
+def test_left_out_names_a_group_with_no_static_variant_to_compare() -> None:
+    rows = [
+        {"kind": "study trial", "partner_role": "bait", "partner": p, "variant": v,
+         "adaptive": v.startswith("a"), "kills_per_minute": k}
+        for p, v, k in (("P1", "adaptive-T400-cem", 3.0), ("P2", "adaptive-T400-cem", 4.0), ("P1", "S5", 2.0))
+    ]  # fmt: skip
+    partners = pd.DataFrame(rows)
+    summary = variants(partners)
+    tests = adaptive_tests(partners, summary)
+    assert tests.empty
+    [line] = left_out_lines(left_out(summary, tests))
+    assert line == (
+        "study trial, bait partners (3 pairings): no static variant with 2 or more matches to test the "
+        "adaptive ones against"
+    )
 
 
 def test_adapter_timeline_and_curves(built: tuple[Report, dict[str, Path], Path]) -> None:
@@ -310,6 +359,46 @@ def test_figures_and_page(built: tuple[Report, dict[str, Path], Path]) -> None:
     assert set(pd.read_csv(out / "data" / "provenance.csv")["field"]) == set(FIELDS)
 
 
+def test_no_label_of_a_report_figure_overlaps_another_or_is_cut_off(
+    built: tuple[Report, dict[str, Path], Path], tmp_path: Path
+) -> None:
+    """Every figure of the report drawn again from its data and checked as rendered: the extents of
+    its texts (titles, tick and axis labels, point labels, legends) intersect nowhere and stay inside
+    the figure."""
+    report, _, _ = built
+    d = report.data
+
+    def draw() -> None:
+        heatmap(Table.load(), tmp_path / "table.png")
+        figures.policy_space(d["policy_space"], d["policy_space_variance"], tmp_path / "policy_space.png")
+        figures.similarity(d["similarity"], d["correlations"], tmp_path / "similarity.png")
+        figures.curves(d["logprob_curves"], 30, tmp_path / "logprob.png")
+        figures.variants(d["variants"], d["adaptive_tests"], tmp_path / "variants.png")
+        figures.adapter(d["adapter"], tmp_path / "adapter.png")
+
+    checked = legibility(draw)
+    assert len(checked) == 6
+    assert {name: problems for name, problems in checked.items() if problems} == {}
+
+
+def test_the_legibility_check_sees_overlapping_and_clipped_labels(tmp_path: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    def draw() -> None:
+        fig, ax = plt.subplots(figsize=(3, 2))
+        ax.annotate("first label", (0.5, 0.5))
+        ax.annotate("second label", (0.5, 0.5))
+        fig.text(0.9, 0.5, "past the edge")
+        save(fig, tmp_path / "bad.png")
+
+    [problems] = legibility(draw).values()
+    assert (
+        "'second label' overlaps 'first label'" in problems
+        or "'first label' overlaps 'second label'" in problems
+    )
+    assert "'past the edge' is cut off by the figure's edge" in problems
+
+
 def test_a_report_with_nothing_usable_still_builds(tmp_path: Path) -> None:
     bad = tmp_path / "bad.tsflog"
     bad.write_bytes(b"TSFLOG1\n" + b"\xff" * 40)  # the magic, then a corrupt first record
@@ -325,6 +414,8 @@ def test_paired_test_where_every_partner_met_both() -> None:
     kpm = {"B1": (2.0, 1.0), "B2": (5.0, 3.0), "B3": (7.0, 6.5), "B4": (3.0, 3.5)}  # adaptive, static
     rows = [
         {
+            "kind": "agents only",
+            "partner_role": "bait",
             "partner": partner,
             "variant": variant,
             "adaptive": variant == "adaptive-T400-cem",
@@ -333,8 +424,9 @@ def test_paired_test_where_every_partner_met_both() -> None:
         for partner, pair in kpm.items()
         for variant, k in zip(("adaptive-T400-cem", "S5"), pair, strict=True)
     ]
-    rows.append({"partner": "B1", "variant": "S6", "adaptive": False, "kills_per_minute": 0.5})
-    rows.append({"partner": "B2", "variant": "S6", "adaptive": False, "kills_per_minute": 1.5})
+    group = {"kind": "agents only", "partner_role": "bait"}
+    rows.append({**group, "partner": "B1", "variant": "S6", "adaptive": False, "kills_per_minute": 0.5})
+    rows.append({**group, "partner": "B2", "variant": "S6", "adaptive": False, "kills_per_minute": 1.5})
     partners = pd.DataFrame(rows)
     [test] = adaptive_tests(partners, variants(partners)).itertuples()
     d = np.array([a - s for a, s in kpm.values()])

@@ -12,6 +12,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.patches import Rectangle  # noqa: E402
 
 from services.agent import library  # noqa: E402
+from services.plots import save  # noqa: E402
 from services.table.table import Table  # noqa: E402
 
 
@@ -43,7 +44,4 @@ def heatmap(table: Table, path: Path) -> Path:
     for i in family_breaks(table.baits):
         ax.axhline(i - 0.5, color="white", linewidth=2)
     ax.set_title(f"Self-play table P: mean kills/min over {table.games} games (red: best shooter)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save(fig, path)

@@ -1,0 +1,258 @@
+"""The pages a newcomer reads, checked against what ships, so that none goes stale again: every name
+and number the README and docs/ state about the shipped table, library and results is recomputed
+here from services/agent/library/table.json, docs/eval and docs/figures/report_data; the env page's
+examples run; the citation validates; every relative link resolves."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from PIL import Image
+
+from services.adapter.core import STRATEGIES, AdapterConfig
+from services.plots import legibility
+from services.report import figures
+from services.report.analysis import reference_partner
+from services.table.table import Table
+
+ROOT = Path(__file__).resolve().parent.parent
+PAGES = ["README.md", *sorted(str(p.relative_to(ROOT)) for p in (ROOT / "docs").glob("*.md"))]
+REPORT_DATA = ROOT / "docs" / "figures" / "report_data"
+
+
+def page(name: str) -> str:
+    """A page's text with its line breaks and indentation folded to single spaces, so that a claim
+    is found wherever the page wraps it."""
+    return re.sub(r"\s+", " ", (ROOT / name).read_text())
+
+
+@pytest.fixture(scope="module")
+def table() -> Table:
+    return Table.load()
+
+
+def grouped(text: str) -> dict[str, str]:
+    """A page's 'S4 for B2, B4; S6 for B1' as {'B2': 'S4', 'B4': 'S4', 'B1': 'S6'}."""
+    pairs = {}
+    for part in text.split(";"):
+        answer, keys = part.strip().split(" for ")
+        pairs.update(dict.fromkeys((k.strip() for k in keys.split(",")), answer))
+    return pairs
+
+
+# --- the citation and the README's first screen --------------------------------------------------
+
+
+def test_the_citation_file_is_valid_cff_and_the_readme_cites_the_same_study() -> None:
+    run = subprocess.run(
+        [sys.executable, "-m", "check_jsonschema", "--builtin-schema", "vendor.citation-file-format",
+         str(ROOT / "CITATION.cff")],
+        capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert run.returncode == 0, run.stdout + run.stderr
+    import yaml
+
+    cff = yaml.safe_load((ROOT / "CITATION.cff").read_text())
+    assert cff["cff-version"] == "1.2.0" and cff["type"] == "software"
+    [study] = cff["references"]
+    readme = page("README.md")
+    assert study["title"] in readme and "arXiv:2103.04439" in readme and "CITATION.cff" in readme
+    authors = ", ".join(f"{a['family-names']}, {a['given-names'][0]}." for a in study["authors"])
+    assert authors in readme  # the same nine authors, in the same order
+    version = re.search(r'^version = "(.+)"$', (ROOT / "pyproject.toml").read_text(), re.M)[1]
+    assert cff["version"] == version
+
+
+def test_the_readme_opens_with_a_small_animated_picture_of_a_match() -> None:
+    readme = (ROOT / "README.md").read_text()
+    picture = ROOT / "docs" / "figures" / "match.gif"
+    first_screen = readme[: readme.index("## Two commands")]
+    assert "](docs/figures/match.gif)" in first_screen and "## Your first ten minutes" in first_screen
+    assert picture.stat().st_size < 2_000_000
+    with Image.open(picture) as gif:
+        assert gif.format == "GIF" and gif.n_frames > 100
+    assert "scripts/gif docs/figures/match.gif" in readme and (ROOT / "scripts" / "gif").exists()
+    assert "set -- --bait B5 --adaptive shooter" in (ROOT / "scripts" / "match").read_text()
+
+
+@pytest.mark.parametrize("name", PAGES)
+def test_every_relative_link_resolves(name: str) -> None:
+    text = (ROOT / name).read_text()
+    links = re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", text)
+    missing = [link for link in links if "://" not in link and not ((ROOT / name).parent / link).exists()]
+    assert missing == []
+
+
+# --- the glossary and the env page ----------------------------------------------------------------
+
+
+def test_the_glossary_defines_every_strategy_and_the_words_of_the_study() -> None:
+    glossary = page("docs/glossary.md")
+    for strategy in STRATEGIES:
+        assert f"`{strategy}`" in glossary and f"`{strategy}`" in page("docs/adapter.md")
+    assert f"`{AdapterConfig().name}`" in glossary and "(the default)" in glossary
+    for word in ("CEM, the cross-entropy metric", "not** the cross-entropy method", "Window T", "Table P",
+                 "Bait.", "Shooter.", "B1-B9, S1-S7", "Kills/min", "Lanes."):  # fmt: skip
+        assert word in glossary, word
+    assert "docs/glossary.md" in page("README.md")
+
+
+def python_blocks(name: str) -> list[str]:
+    return re.findall(r"```python\n(.*?)```", (ROOT / name).read_text(), re.S)
+
+
+@pytest.mark.parametrize("block", range(2))
+def test_the_env_page_examples_run(block: int) -> None:
+    blocks = python_blocks("docs/env.md")
+    assert len(blocks) == 2
+    exec(compile(blocks[block], f"docs/env.md block {block}", "exec"), {})  # noqa: S102 - the page's own code
+
+
+def test_the_env_page_tables_are_the_envs() -> None:
+    from services import envs
+    from services.sim.env import TSFParallelEnv
+    from shared.game import FPS, GameConfig
+
+    env = envs.parallel_env()
+    box = env.observation_space("bait")
+    text = page("docs/env.md")
+    assert f"Box({box.low.min():.0f}, {box.high.max():.0f}, (64,), float32)" in text
+    assert f"[{box.low.min():.0f}, {box.high.max():.0f}], float32" in text
+    assert f"Discrete({env.action_space('bait').n})" in text
+    assert f"`agents = {env.possible_agents}`".replace("'", '"') in text
+    assert f"`{TSFParallelEnv.metadata['name']}`" in text and f"| Render FPS | {FPS} |" in text
+    config = GameConfig()
+    for points, event in ((config.points_kill, "a kill"), (config.points_death, "a ship dies"),
+                          (config.points_shield_hit, "a shield hit")):  # fmt: skip
+        assert re.search(rf"{event}[^|]*\| {re.escape(f'{points:+d}')} \|", text), event
+    assert f"({config.frames:,} frames, {config.frames // FPS} s)" in text
+    partners = envs.DEFAULT_PARTNER
+    assert f"`{partners['bait']}` for the bait seat, `{partners['shooter']}` for the shooter seat" in text
+
+
+# --- claims about the shipped table and library ---------------------------------------------------
+
+
+def test_the_library_page_states_the_tables_complementarity(table: Table) -> None:
+    text = page("docs/library.md")
+    shooters = re.search(r"The best response differs by bait: ([^(]+) \((\d) distinct best shooters\)", text)
+    baits = re.search(r"with (\d) distinct best baits \(([^)]+)\)", text)
+    best_shooter = {b: table.best_shooter(b) for b in table.baits}
+    best_bait = {s: table.best_bait(s) for s in table.shooters}
+    assert grouped(shooters[1]) == best_shooter and int(shooters[2]) == len(set(best_shooter.values()))
+    assert grouped(baits[2]) == best_bait and int(baits[1]) == len(set(best_bait.values()))
+
+
+def test_the_pages_name_the_shipped_tables_best_responses(table: Table) -> None:
+    shooter, bait = AdapterConfig(role="shooter"), AdapterConfig(role="bait")
+    best_shooter = {b: table.best_shooter(b) for b in table.baits}
+    best_bait = {s: table.best_bait(s) for s in table.shooters}
+    start = shooter.initial_policy()
+    claims = {
+        "README.md": [
+            f"starts as {start} (the best average in the table)",
+            f"switches to {best_shooter['B5']}, the table's best response",
+            f"shooter {best_shooter['B5']} partner like B5",
+            f"the table's best shooter for it is {best_shooter['B3']}, not {start}",
+            f"a shooter agent that starts with `{start}` (the adapter's best-average choice)",
+            f"(`{best_shooter['B5']}` for `B5`)",
+            f"(`{AdapterConfig().strategy}`, the default strategy",
+        ],
+        "docs/adapter.md": [
+            f"{start} for the shooter seat, {bait.initial_policy()} for the bait seat with the shipped table",
+            f"falls back to the best static policy ({start} with the shipped table)",
+        ],
+        "docs/report.md": [
+            f"({reference_partner(table, 'bait')} for baits, "
+            f"{reference_partner(table, 'shooter')} for shooters)",
+            f"starting as {start}, the best average in the table",
+            f"({', '.join(best_shooter.values())} for B1-B9)",
+            f"For every shooter here, the table's best bait is {best_bait['S4']}",
+        ],
+    }
+    assert best_bait["S4"] == best_bait["S5"] == best_bait["S6"]  # "for every shooter here"
+    missing = {name: [c for c in texts if c not in page(name)] for name, texts in claims.items()}
+    assert {name: c for name, c in missing.items() if c} == {}
+
+
+def test_the_adapter_page_reports_the_shipped_evaluation() -> None:
+    comparison = json.loads((ROOT / "docs" / "eval" / "comparison.json").read_text())
+    text = page("docs/adapter.md")
+    best = comparison["best_static"]
+    agents = comparison["agents"]
+    assert f"best static {best}, {agents[best]['mean']:.3f} ± {agents[best]['stderr']:.3f}" in text
+    rows = re.findall(r"^\| \**(adaptive-[A-Za-z0-9-]+)\** [^|]*\| \**([+-][0-9.]+) ± ([0-9.]+)\**", (
+        ROOT / "docs" / "adapter.md").read_text(), re.M)  # fmt: skip
+    memory = f"{AdapterConfig().name}-memory"  # plays single games as the default does; the page says so
+    assert {name for name, _, _ in rows} == set(comparison["tests"]) - {memory}
+    for name, difference, stderr in rows:
+        test = comparison["tests"][name]
+        assert (float(difference), float(stderr)) == (
+            round(test["mean_difference"], 3),
+            round(test["stderr"], 3),
+        ), name
+    assert f"**{AdapterConfig().name}** (the default)" in text
+    summary = page("docs/eval/summary.md")
+    assert f"Best static policy: **{best}**" in summary
+
+
+# --- the report's worked example ----------------------------------------------------------------------
+
+
+def report_data(name: str) -> pd.DataFrame:
+    return pd.read_csv(REPORT_DATA / f"{name}.csv", keep_default_na=False, na_values=[""])
+
+
+def test_the_report_example_states_the_numbers_of_its_data(table: Table) -> None:
+    text = page("docs/report.md")
+    variants = report_data("variants")
+    assert set(variants["kind"]) == {"agents only"} and set(variants["partner_role"]) == {"bait"}
+    for row in variants.itertuples():
+        assert f"| {row.variant} | {row.n} | {row.mean:.2f} ± {row.stderr:.2f} |" in text, row.variant
+    [test] = report_data("adaptive_tests").itertuples()
+    assert (
+        f"the best static shooter, {test.static} (paired t = {test.t:.2f}, p = {test.p:.2g}, 9 partners)"
+        in text
+    )
+    assert f"{test.mean_adaptive - test.mean_static:.1f} kills/min more" in text
+    assert report_data("left_out").empty and "`data/left_out.csv` is empty" in text
+    correlation = report_data("correlations").set_index(["kind", "partner_role"]).loc[("agents only", "bait")]
+    p = re.sub(r"e-0(\d)", r"e-\1", f"{correlation.p:.1e}")  # as the page writes it: 2.5e-5
+    assert f"r = {correlation.r:.2f}, p = {p}, n = {int(correlation.n)}" in text
+    assert set(report_data("similarity")["optimal"]) == {table.best_bait("S4")}
+    variance = report_data("policy_space_variance").set_index("role").loc["bait"]
+    assert (
+        f"PC1 explains {100 * variance.pc1:.0f} % of the variance and PC2 {100 * variance.pc2:.0f} %" in text
+    )
+    adapter = report_data("adapter")
+    settled = adapter.groupby("match")["policy"].last()
+    picks = [settled[f"st-B{i}-ad"] for i in range(1, 10)]
+    assert f"({', '.join(picks)} for B1-B9)" in text
+    assert picks == [table.best_shooter(f"B{i}") for i in range(1, 10)]
+
+
+def test_the_report_figures_of_the_example_are_legible(tmp_path: Path) -> None:
+    """The report's figures drawn from the example's data (45 points, nine partners in four matches
+    each): no label overlaps another or is cut off."""
+
+    def draw() -> None:
+        figures.policy_space(report_data("policy_space"), report_data("policy_space_variance"),
+                             tmp_path / "report_policy_space.png")  # fmt: skip
+        figures.similarity(
+            report_data("similarity"), report_data("correlations"), tmp_path / "report_similarity.png"
+        )
+        figures.variants(
+            report_data("variants"), report_data("adaptive_tests"), tmp_path / "report_variants.png"
+        )
+
+    checked = legibility(draw)
+    assert len(checked) == 3 and {name: p for name, p in checked.items() if p} == {}
+    for name in checked:  # the shipped PNGs are these figures
+        with Image.open(ROOT / "docs" / "figures" / name) as shipped, Image.open(tmp_path / name) as fresh:
+            assert shipped.size == fresh.size

@@ -179,6 +179,13 @@ def study(
     test_token: str = typer.Option(
         "", envvar="TSF_TEST_TOKEN", help="Stand-ins that show this token get the observation values."
     ),
+    link_secret: Path | None = typer.Option(
+        None,
+        envvar="TSF_LINK_SECRET_FILE",
+        dir_okay=False,
+        help="Sign the links: a file holding the secret; new participants then need a worker id and "
+        "its signature (sig=HMAC-SHA256 of the id, hex).",
+    ),
     listen: list[str] | None = typer.Option(
         None,
         help="Be the router that match hosts (`tsf match-host`) connect to, at this zenoh endpoint, "
@@ -194,6 +201,7 @@ def study(
     from services.human.gateway import Web
     from services.study.core import StudyConfig
     from services.study.runner import Serving, run_study
+    from shared.secret import read_secret
 
     hosts = None
     if listen or connect:
@@ -202,6 +210,7 @@ def study(
         raise UsageError(
             "--max-matches", 0, "no match could run: give match hosts with --listen or --connect"
         )
+    signed = read_secret(link_secret, "--link-secret") if link_secret else b""
     protocol = StudyConfig.load(config)
     for variant in protocol.variants:  # adaptive agents' thresholds: refused now, not at a trial
         for role in protocol.roles:
@@ -219,7 +228,7 @@ def study(
     if (cert is None) != (key is None):
         raise UsageError("--cert/--key", str(cert or key), "give both, or neither")
     web = Web(host, port, cert, key, tuple(origin or ()), per_address)
-    serving = Serving(max_matches, trial_timeout, test_token=test_token, hosts=hosts)
+    serving = Serving(max_matches, trial_timeout, test_token=test_token, hosts=hosts, link_secret=signed)
     done = run_study(protocol, directory, web, stop_on_signals(), show, serving)
     finished = sum(done.next_trial(p) is None for p in done.participants.values())
     console.print(f"{len(done.participants)} participants, {finished} finished")

@@ -260,6 +260,12 @@ MISTAKES = [
     ("study {tmp}/empty.toml", 2, "tsf study: CONFIG {tmp}/empty.toml: not a study: "),
     ("study {tmp}/long.toml --max-matches 0", 2, "tsf study: --max-matches 0: no match could run"),
     ("study {tmp}/long.toml --listen nowhere", 2, "tsf study: --listen nowhere: not a zenoh endpoint"),
+    (
+        "study {tmp}/long.toml --link-secret {tmp}/empty.toml",
+        2,
+        "tsf study: --link-secret {tmp}/empty.toml: the secret needs at least 16 characters, it has 0",
+    ),
+    ("study {tmp}/long.toml --link-secret {tmp}", 2, "TSF_LINK_SECRET_FILE'): file '{tmp}' is a directory."),
     ("match-host", 2, "tsf match-host: --connect (none): a match host needs the router's endpoint"),
     (
         "match-host --slots 0 --connect tcp/127.0.0.1:1",

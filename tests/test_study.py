@@ -314,3 +314,38 @@ def test_a_consent_flood_from_one_address_leaves_newcomers_from_others_served(tm
     flooder = [p for p in study.participants.values() if p.id not in {s.participant for s in served}]
     assert len(flooder) <= 5 and not any(p.attempts for p in flooder)  # ADDRESS_BURST ids, no match
     assert len(list((tmp_path / "recordings").glob("*.tsflog"))) == 4
+
+
+def test_a_signed_study_takes_only_a_link_signed_for_its_worker_id(tmp_path, study_server):
+    """With a link secret, a hello without a worker id, with no signature or with another id's is
+    refused with the page's line; the link signed for its worker id gets the consent text."""
+    import websockets
+
+    from services.study.runner import UNSIGNED
+    from shared.secret import signature
+
+    secret = b"the-study-secret-0123"
+    config = StudyConfig("signed", VARIANTS[:1], trials=1, trial_seconds=1.5, consent="Agree?")
+    stop, url, server = study_server(config, tmp_path, serving=Serving(test_token=TEST, link_secret=secret))
+
+    async def hello(**fields: str) -> dict:
+        async with websockets.connect(url.replace("http", "ws", 1) + "ws") as ws:
+            await ws.send(json.dumps({"type": "hello", **fields}))
+            return json.loads(await ws.recv())
+
+    signed = signature(secret, "W-17")
+    answers = [
+        asyncio.run(hello(**fields))
+        for fields in (
+            {},
+            {"worker": "W-17"},
+            {"worker": "W-18", "sig": signed},
+            {"worker": "W-17", "sig": signed.upper()},
+            {"worker": "W-17", "sig": "é" * 64},
+            {"worker": " W-17 ", "sig": signed},
+        )
+    ]
+    assert answers[:-1] == [{"type": "refused", "reason": UNSIGNED}] * 5
+    assert answers[-1] == {"type": "consent", "text": "Agree?"}
+    stop.set()
+    assert server.result(timeout=60).participants == {}

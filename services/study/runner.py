@@ -55,7 +55,7 @@ from services.study.remote import Remote
 from shared import keys
 from shared.bus import BusConfig, free_endpoint
 from shared.game import FPS, other
-from shared.secret import same_secret
+from shared.secret import same_secret, signature
 
 log = logging.getLogger("tsf.study")
 PROBLEM = "The game could not be started. Please tell the experimenter."
@@ -70,6 +70,7 @@ ADDRESS_BURST = 5  # ... to one address
 BUSY = "Too many people are starting right now. Please try again in a minute."
 TAKEN = "This worker id has already taken part in this study."
 NO_WORKER = "This link's worker id is not one this study can take (letters, digits and _ . : @ + - only)."
+UNSIGNED = "This link is not signed for its worker id. Please open the link exactly as the study gave it."
 
 
 @dataclass(frozen=True)
@@ -87,6 +88,9 @@ class Serving:
     ready_timeout: float = 120.0  # seconds an offered trial waits for Ready; then its match and slot go
     starting: int = 2  # matches starting up at once (until their sim listens)
     hosts: BusConfig | None = None  # the router where match hosts offer their slots; None: local only
+    # A signed link's secret: new participants need a worker id and its signature (`sig`, the
+    # HMAC-SHA256 of the id with this secret, shared.secret.signature); b"": links are not signed.
+    link_secret: bytes = b""
 
 
 SERVING, WEB = Serving(), Web()
@@ -336,6 +340,11 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
         worker = worker_id(hello.get("worker"))
         if worker is None:
             await refuse(socket.ws, NO_WORKER)
+            return None
+        if serving.link_secret and not (
+            worker and same_secret(hello.get("sig"), signature(serving.link_secret, worker))
+        ):
+            await refuse(socket.ws, UNSIGNED)
             return None
         if study.taken(worker):
             await refuse(socket.ws, TAKEN)

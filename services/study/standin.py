@@ -44,6 +44,7 @@ async def stand_in(
     seed: int = 0,
     test: str = "",
     worker: str = "",
+    sig: str = "",
     ssl: object = None,
     address: str | None = None,
 ) -> StandInReport:
@@ -52,12 +53,13 @@ async def stand_in(
     back as an earlier participant; `leave_after` > 0 drops the connection after that many frames,
     as a participant who walks away. `test` is the server's test token (Serving.test_token),
     without which it gets no observation values to play from; `worker` a crowd-sourcing worker
-    id; `ssl` an SSLContext for a wss:// server; `address` the local address it connects from (a
-    loopback test's other clients: 127.0.0.2 and on)."""
+    id, `sig` its signed link's signature; `ssl` an SSLContext for a wss:// server; `address`
+    the local address it connects from (a loopback test's other clients: 127.0.0.2 and on)."""
     policies = policies or {"bait": "circle", "shooter": "mirror"}
     report = StandInReport()
     hello: dict = {"type": "hello", "obs": True, **({"test": test} if test else {})}
     hello.update({"worker": worker} if worker else {})
+    hello.update({"sig": sig} if sig else {})
     if resume:
         hello.update(participant=resume[0], key=resume[1])
     policy, held, ready, queued = None, None, None, 0.0

@@ -154,10 +154,13 @@ function connect() {
     } else {
       const saved = JSON.parse(localStorage.getItem("tsf-participant") || "{}");
       const participant = params.get("participant") || saved.participant;
-      // A crowd-sourcing platform's worker id, under the names the common ones use in the link.
+      // A crowd-sourcing platform's worker id, under the names the common ones use in the link,
+      // and its signature when the study signs its links.
       const worker = params.get("worker") || params.get("workerId") || params.get("PROLIFIC_PID");
+      const sig = params.get("sig");
       send(participant ? { type: "hello", participant, key: params.get("key") || saved.key || "-" } :
-        worker ? { type: "hello", worker: worker.slice(0, 64) } : { type: "hello" });
+        worker ? { type: "hello", worker: worker.slice(0, 64), ...(sig ? { sig: sig.slice(0, 64) } : {}) } :
+        { type: "hello" });
     }
   };
   socket.onmessage = (event) => {

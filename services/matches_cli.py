@@ -173,7 +173,9 @@ def study(
     ),
     origin: list[str] | None = typer.Option(
         None,
-        help="Another origin whose pages may open the socket, e.g. https://study.example.org (repeatable).",
+        help="The study's public origin, e.g. https://study.example.org: its pages may open the socket "
+        "and requests for its host name are taken (repeatable; needed when participants reach the "
+        "server by a name, as behind a reverse proxy).",
     ),
     per_address: int = typer.Option(8, min=0, help="Sockets one address may hold at once (0: no cap)."),
     test_token: str = typer.Option(

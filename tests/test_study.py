@@ -11,6 +11,7 @@ import os
 import signal
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -135,13 +136,16 @@ def test_eight_stand_ins_at_once_each_in_a_match_of_their_own(tmp_path, study_se
         assert recording.problems() == [] and len(recording.states) == config.frames + 1
 
 
-def test_sigterm_ends_the_study_server_and_every_match_it_started(tmp_path):
+@contextlib.contextmanager
+def study_command(tmp_path: Path, *options: str) -> Iterator[tuple[subprocess.Popen, str]]:
+    """A real `tsf study` process of one 600-s trial on a free port: (the process, its address);
+    killed with its process group at the end if it is still running."""
     config = tmp_path / "long.toml"
     variant = '[[variants]]\nname = "s"\nbait = "B5"\nshooter = "S5"\n'
     config.write_text(f'name = "long"\ntrials = 1\ntrial_seconds = 600\n{variant}')
     server = subprocess.Popen(
         [sys.executable, "-m", "services.cli", "study", str(config), "--out", str(tmp_path), "--port", "0",
-         "--test-token", TEST],
+         "--test-token", TEST, *options],
         stdout=subprocess.PIPE, text=True, start_new_session=True,
     )  # fmt: skip
     try:
@@ -149,15 +153,46 @@ def test_sigterm_ends_the_study_server_and_every_match_it_started(tmp_path):
         while "http" not in line:
             line = server.stdout.readline()
             assert line, "the server printed no address"
-        url = line[line.index("http") :].split()[0]
+        yield server, line[line.index("http") :].split()[0]
+    finally:
+        if server.poll() is None:
+            os.killpg(server.pid, signal.SIGKILL)
+            server.wait()
+
+
+def test_sigterm_ends_the_study_server_and_every_match_it_started(tmp_path):
+    with study_command(tmp_path) as (server, url):
         asyncio.run(stand_in(url, leave_after=30, test=TEST))  # the match runs out for ten minutes
         assert len([p for p in _processes() if "long-P001" in p]) >= 3, "sim, agent and recorder run"
         server.send_signal(signal.SIGTERM)
         assert server.wait(60) == 0
         assert not [p for p in _processes() if "long-P001" in p], "no match process is left behind"
-    finally:
-        if server.poll() is None:
-            os.killpg(server.pid, signal.SIGKILL)
+
+
+def test_ctrl_c_during_a_matchs_warm_up_ends_the_server_at_once(tmp_path):
+    """SIGINT just as a trial's match starts up (its sim not yet listening, the server's session to
+    it not yet open): the server exits within seconds (it took a minute, and at times for ever)."""
+    import time
+
+    import websockets
+
+    with study_command(tmp_path) as (server, url):
+
+        async def consent() -> None:
+            async with websockets.connect(url.replace("http", "ws", 1) + "ws") as ws:
+                await ws.send(json.dumps({"type": "hello"}))
+                assert json.loads(await ws.recv())["type"] == "consent"
+                await ws.send(json.dumps({"type": "consent"}))
+                assert json.loads(await ws.recv())["type"] == "participant"
+                sent = time.monotonic()  # the trial's match starts now
+                server.send_signal(signal.SIGINT)
+                status = await asyncio.to_thread(server.wait, 30)
+                waited = time.monotonic() - sent
+                assert status == 0
+                assert waited < 10.0
+
+        asyncio.run(consent())
+        assert not [p for p in _processes() if "long-P001" in p], "no match process is left behind"
 
 
 def _processes() -> list[str]:

@@ -34,7 +34,7 @@ from websockets.http11 import Request, Response
 
 from services.human.core import MAX_MESSAGE, BadInput, Controls, SeatBook, end, parse, setup, view
 from shared import keys
-from shared.bus import BusConfig, Drops, session, subscribe
+from shared.bus import BusConfig, Drops, session, subscribe, until_stopped
 from shared.game import GameConfig
 from shared.messages import Action, Message, MessageError, Start, State, Summary
 
@@ -440,4 +440,4 @@ def run_human(
     stop = stop or threading.Event()
     with Gateway(bus, seat_handler(match, SeatBook(tokens), stop), Web(host, port)) as gateway:
         on_ready(gateway)
-        stop.wait()
+        until_stopped(stop)

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import json
 import logging
 import threading
@@ -53,7 +54,7 @@ from services.recorder.service import recording_path
 from services.study.core import Admission, Participant, Study, StudyConfig, Trial, worker_id
 from services.study.remote import Remote
 from shared import keys
-from shared.bus import BusConfig, free_endpoint
+from shared.bus import BusConfig, free_endpoint, until_stopped
 from shared.game import FPS, other
 from shared.secret import same_secret, signature
 
@@ -91,6 +92,7 @@ class Serving:
     # A signed link's secret: new participants need a worker id and its signature (`sig`, the
     # HMAC-SHA256 of the id with this secret, shared.secret.signature); b"": links are not signed.
     link_secret: bytes = b""
+    host_secret: bytes = b""  # shared with the match hosts: every message between them is sealed with it
 
 
 SERVING, WEB = Serving(), Web()
@@ -211,6 +213,20 @@ def judge(path: Path, role: str) -> tuple[int | None, list[str]]:
         last = f"frame {max(answered)} of {recording.summary.frame}"
         problems.append(f"the participant's {role} seat stopped answering at {last}")  # the page went
     return (recording.summary.kills if recording.summary else None), problems
+
+
+def open_session(bus: BusConfig, patience: float, abort: threading.Event) -> zenoh.Session:
+    """A client session to a match's sim, which may not listen yet: tried for a second at a time
+    for up to `patience` seconds, so that a stopped match (Ctrl-C) ends the wait within a second
+    (one try of the whole minute held a thread that held the server's exit). ZError if none."""
+    deadline = time.monotonic() + patience
+    once = dataclasses.replace(bus, wait_router=1.0)
+    while True:
+        try:
+            return zenoh.open(once.to_zenoh())
+        except zenoh.ZError:
+            if abort.is_set() or time.monotonic() > deadline:
+                raise
 
 
 def wait_alive(z: zenoh.Session, tokens: list[str], timeout: float, abort: threading.Event) -> bool:
@@ -393,7 +409,7 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
         (no `endpoint`) from the router's session."""
         try:
             z = remote.z if not endpoint and remote else await asyncio.to_thread(
-                zenoh.open, match_buses(endpoint, serving.low_latency)[1].to_zenoh()
+                open_session, match_buses(endpoint, serving.low_latency)[1], WARM_UP, stop
             )  # fmt: skip
         except zenoh.ZError as error:
             log.error("trial %s: no session to its sim: %s", trial.match, error)
@@ -552,7 +568,7 @@ def run_study(
     for sidecar in reconcile(study):
         log.info("attempt %s left %s by an earlier server", sidecar["match"], sidecar["status"])
     matches = Matches(serving.max_matches)
-    remote = Remote(serving.hosts) if serving.hosts else None
+    remote = Remote(serving.hosts, serving.host_secret) if serving.hosts else None
     try:
         gateway = Gateway(None, study_handler(study, serving, matches, remote), web)
         # A running match holds a thread (run_trial) for its length, its start-up another: asyncio's
@@ -562,7 +578,7 @@ def run_study(
             remote.on_change = lambda: gateway.loop.call_soon_threadsafe(matches.notify)
         with gateway:
             on_ready(gateway)
-            stop.wait()
+            until_stopped(stop)
             matches.stop_all()
             with contextlib.suppress(TimeoutError):  # a match's thread that hangs: leave it to exit
                 asyncio.run_coroutine_threadsafe(matches.drained(), gateway.loop).result(DRAIN)

@@ -137,15 +137,18 @@ def test_eight_stand_ins_at_once_each_in_a_match_of_their_own(tmp_path, study_se
 
 
 @contextlib.contextmanager
-def study_command(tmp_path: Path, *options: str) -> Iterator[tuple[subprocess.Popen, str]]:
-    """A real `tsf study` process of one 600-s trial on a free port: (the process, its address);
-    killed with its process group at the end if it is still running."""
-    config = tmp_path / "long.toml"
+def study_command(
+    tmp_path: Path, name: str = "long", trials: int = 1, seconds: float = 600
+) -> Iterator[tuple[subprocess.Popen, str]]:
+    """A real `tsf study` process (study `name`: `trials` trials of `seconds` with one static agent,
+    its journal and recordings in tmp_path/name) on a free port: (the process, its address); killed
+    with its process group at the end if it is still running. Started again, it resumes the study."""
+    config = tmp_path / f"{name}.toml"
     variant = '[[variants]]\nname = "s"\nbait = "B5"\nshooter = "S5"\n'
-    config.write_text(f'name = "long"\ntrials = 1\ntrial_seconds = 600\n{variant}')
+    config.write_text(f'name = "{name}"\ntrials = {trials}\ntrial_seconds = {seconds}\n{variant}')
     server = subprocess.Popen(
         [sys.executable, "-m", "services.cli", "study", str(config), "--out", str(tmp_path), "--port", "0",
-         "--test-token", TEST, *options],
+         "--test-token", TEST],
         stdout=subprocess.PIPE, text=True, start_new_session=True,
     )  # fmt: skip
     try:
@@ -195,12 +198,13 @@ def test_ctrl_c_during_a_matchs_warm_up_ends_the_server_at_once(tmp_path):
         assert not [p for p in _processes() if "long-P001" in p], "no match process is left behind"
 
 
-def _processes() -> list[str]:
-    """The command lines of every process running now."""
+def _processes(pids: bool = False) -> list[str]:
+    """The command lines of every process running now (each after its pid, with `pids`)."""
     found = []
     for cmdline in Path("/proc").glob("[0-9]*/cmdline"):
         with contextlib.suppress(OSError):
-            found.append(cmdline.read_bytes().replace(b"\0", b" ").decode(errors="replace"))
+            line = cmdline.read_bytes().replace(b"\0", b" ").decode(errors="replace")
+            found.append(f"{cmdline.parent.name} {line}" if pids else line)
     return found
 
 
@@ -384,3 +388,99 @@ def test_a_signed_study_takes_only_a_link_signed_for_its_worker_id(tmp_path, stu
     assert answers[-1] == {"type": "consent", "text": "Agree?"}
     stop.set()
     assert server.result(timeout=60).participants == {}
+
+
+def _killed_at(moment: str, url: str, server: subprocess.Popen, recordings: Path) -> tuple[str, str]:
+    """Play the study as a participant until `moment` of the first trial, then SIGKILL the server:
+    `set_up` (the trial offered, its match started, before Ready), `after_end` (the game's end
+    shown, before the server has written the trial down), `read_back` (the recording complete on
+    disk, its recorder gone, and the server reading it back). Returns (participant, resume key)."""
+    import websockets
+
+    def kill() -> None:
+        if server.poll() is None:
+            os.kill(server.pid, signal.SIGKILL)  # its matches' processes die with it
+            server.wait()
+
+    def kill_at_read_back(recorder: int) -> None:
+        """Once the match's recorder has exited and been reaped, the server reads the recording."""
+        while Path(f"/proc/{recorder}").exists():
+            pass
+        kill()
+
+    async def play() -> tuple[str, str]:
+        me, recorder = ("", ""), 0
+        async with websockets.connect(url.replace("http", "ws", 1) + "ws") as ws:
+            await ws.send(json.dumps({"type": "hello"}))
+            async for text in ws:
+                message = json.loads(text)
+                if message["type"] == "consent":
+                    await ws.send(json.dumps({"type": "consent"}))
+                elif message["type"] == "participant":
+                    me = (message["participant"], message["key"])
+                elif message["type"] == "trial":
+                    if moment == "set_up":
+                        break
+                    match = f"kill-{me[0]}-s1t1"
+                    recorder = next(
+                        int(p.split()[0]) for p in _processes(pids=True) if "recorder" in p and match in p
+                    )
+                    await ws.send(json.dumps({"type": "ready"}))
+                elif message["type"] == "end":
+                    if moment == "read_back":
+                        await asyncio.to_thread(kill_at_read_back, recorder)
+                    break
+            kill()
+        return me
+
+    return asyncio.run(play())
+
+
+@pytest.mark.parametrize(
+    "moment",
+    [
+        "after_end",
+        pytest.param("set_up", marks=pytest.mark.slow),
+        pytest.param("read_back", marks=pytest.mark.slow),
+    ],
+)
+def test_a_server_killed_at_the_worst_moment_settles_every_attempt_and_plays_no_trial_twice(tmp_path, moment):
+    """A real `tsf study` SIGKILLed during the first trial's set-up, just after its end, or while
+    it reads the recording back; started again, it settles the attempt it left `running` by its
+    recording (`done` if complete, else `failed` and offered again), the participant resumes and
+    finishes, every attempt has its sidecar, and no trial is played again once done."""
+    from services.study.core import Journal, Study
+
+    directory = tmp_path / "kill"
+    with study_command(tmp_path, "kill", trials=2, seconds=2) as (server, url):
+        me = _killed_at(moment, url, server, directory / "recordings")
+    at_kill = {
+        r["attempt"]["match"]: r["attempt"]["status"]
+        for r in Journal.read(directory / "study.jsonl")[1:]
+        if "attempt" in r
+    }
+    assert at_kill == {f"kill-{me[0]}-s1t1": "running"}, "killed before the trial was written down"
+    with study_command(tmp_path, "kill", trials=2, seconds=2) as (server, url):
+        back = asyncio.run(asyncio.wait_for(stand_in(url, resume=me, test=TEST), 120))
+        server.send_signal(signal.SIGTERM)
+        assert server.wait(60) == 0
+    assert back.done, back.refused
+
+    study = Study(StudyConfig.load(tmp_path / "kill.toml"), directory)
+    attempts = study.participants[me[0]].attempts
+    study.close()
+    for attempt in attempts:
+        sidecar = json.loads((directory / "recordings" / f"{attempt['match']}.study.json").read_text())
+        assert sidecar["status"] == attempt["status"] in ("done", "failed")
+    for trial in (1, 2):
+        played = [a["status"] for a in attempts if a["trial"] == trial]
+        assert played.count("done") == 1 and played[-1] == "done", f"trial {trial}: {played}"
+    first = [a["status"] for a in attempts if a["trial"] == 1]
+    complete = (
+        load(directory / "recordings" / f"kill-{me[0]}-s1t1.tsflog").problems() == []
+        if moment != "set_up"
+        else False
+    )
+    assert first == (["done"] if complete else ["failed", "done"]), (moment, first)
+    if moment == "read_back":
+        assert complete, "the recording was whole on disk when the server died"

@@ -11,7 +11,7 @@ import os
 import signal
 import subprocess
 import sys
-from collections.abc import Iterator
+from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 
 import pytest
@@ -295,12 +295,8 @@ def test_a_reload_during_set_up_is_a_resume(tmp_path, study_server):
 
     async def reload() -> tuple[object, object]:
         async with websockets.connect(url.replace("http", "ws", 1) + "ws") as ws:
-            await ws.send(json.dumps({"type": "hello"}))
-            async for text in ws:
-                message = json.loads(text)
-                if message["type"] == "consent":
-                    await ws.send(json.dumps({"type": "consent"}))
-                elif message["type"] == "participant":
+            async for message in _consenting(ws):
+                if message["type"] == "participant":
                     me = (message["participant"], message["key"])
                 elif message["type"] == "trial":  # set up, not Ready: and now the page reloads
                     break
@@ -390,6 +386,17 @@ def test_a_signed_study_takes_only_a_link_signed_for_its_worker_id(tmp_path, stu
     assert server.result(timeout=60).participants == {}
 
 
+async def _consenting(ws) -> AsyncIterator[dict]:  # noqa: ANN001 - a websockets client connection
+    """A new participant's socket: hello, consent when asked; every other message the server sends."""
+    await ws.send(json.dumps({"type": "hello"}))
+    async for text in ws:
+        message = json.loads(text)
+        if message["type"] == "consent":
+            await ws.send(json.dumps({"type": "consent"}))
+        else:
+            yield message
+
+
 def _killed_at(moment: str, url: str, server: subprocess.Popen, recordings: Path) -> tuple[str, str]:
     """Play the study as a participant until `moment` of the first trial, then SIGKILL the server:
     `set_up` (the trial offered, its match started, before Ready), `after_end` (the game's end
@@ -411,12 +418,8 @@ def _killed_at(moment: str, url: str, server: subprocess.Popen, recordings: Path
     async def play() -> tuple[str, str]:
         me, recorder = ("", ""), 0
         async with websockets.connect(url.replace("http", "ws", 1) + "ws") as ws:
-            await ws.send(json.dumps({"type": "hello"}))
-            async for text in ws:
-                message = json.loads(text)
-                if message["type"] == "consent":
-                    await ws.send(json.dumps({"type": "consent"}))
-                elif message["type"] == "participant":
+            async for message in _consenting(ws):
+                if message["type"] == "participant":
                     me = (message["participant"], message["key"])
                 elif message["type"] == "trial":
                     if moment == "set_up":

@@ -49,6 +49,7 @@ def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_unti
     assert (leaver.consent, second.consent, back.consent) == ("Agree?", "Agree?", "")  # asked once
     assert back.end == second.end == "Bye now."
     assert len(back.kills) == len(second.kills) == 2
+    assert (back.set_ups, second.set_ups) == (2, 2), "each game's set-up is said, with its length"
 
     attempts = {p.id: [(a["session"], a["trial"], a["attempt"], a["status"]) for a in p.attempts]
                 for p in study.participants.values()}  # fmt: skip
@@ -487,3 +488,33 @@ def test_a_server_killed_at_the_worst_moment_settles_every_attempt_and_plays_no_
     assert first == (["done"] if complete else ["failed", "done"]), (moment, first)
     if moment == "read_back":
         assert complete, "the recording was whole on disk when the server died"
+
+
+def test_a_participant_who_declines_is_told_so_and_nothing_is_recorded(tmp_path, study_server):
+    """The consent text states the study's numbers and pay; a decline gets a closing line and the
+    socket closes: no id, no journal line, no match."""
+    import websockets
+
+    from services.study.runner import DECLINED
+
+    config = StudyConfig("decline", VARIANTS[:1], trials=2, trial_seconds=1.5, pay="GBP 1 via Prolific")
+    stop, url, server = study_server(config, tmp_path)
+
+    async def decline() -> list[dict]:
+        async with websockets.connect(url.replace("http", "ws", 1) + "ws") as ws:
+            await ws.send(json.dumps({"type": "hello"}))
+            seen = [json.loads(await ws.recv())]
+            await ws.send(json.dumps({"type": "decline"}))
+            seen += [json.loads(text) async for text in ws]  # until the server closes
+            return seen
+
+    consent, *after = asyncio.run(asyncio.wait_for(decline(), 30))
+    assert consent == {"type": "consent", "text": config.consent_text()}
+    assert (
+        "play 2 games of 1.5 seconds each" in consent["text"] and "Pay: GBP 1 via Prolific" in consent["text"]
+    )
+    assert after == [{"type": "declined", "text": DECLINED}]
+    stop.set()
+    study = server.result(timeout=60)
+    assert study.participants == {} and len((tmp_path / "study.jsonl").read_text().splitlines()) == 1
+    assert not (tmp_path / "recordings").exists()

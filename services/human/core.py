@@ -90,6 +90,7 @@ _FIELDS: dict[str, dict[str, Callable[[object], bool]]] = {
         "test": _short_text,
     },
     "consent": {},
+    "decline": {},
 }
 
 

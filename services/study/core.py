@@ -32,9 +32,11 @@ from shared.secret import same_secret
 NAME = re.compile(r"[A-Za-z0-9_]{1,24}")
 DEFAULT_CONSENT = (
     "This study is about teamwork between people and computer agents in a video game. You will "
-    "play several one-minute games with different computer teammates. Your key presses and the "
-    "games are recorded under a participant number, not your name. You may stop at any time."
+    "play {games} of {seconds} seconds each with different computer teammates, about "
+    "{minutes} minutes in all. Your key presses and the games are recorded under a participant "
+    "number, not your name. You may stop at any time."
 )
+SET_UP = 20.0  # seconds a game takes to set up: for the time a study takes in all, and the waits shown
 DEFAULT_END = "Thank you for taking part. You may close this window now."
 
 
@@ -74,7 +76,10 @@ class StudyConfig:
     trial_seconds: float = 60.0
     seed: int = 0
     roles: tuple[str, ...] = ROLES  # the roles participants are given
+    # What a participant agrees to: {games} ("15 games"), {seconds}, {minutes} (in all) and {pay}
+    # are filled in from the config (`consent_text`); a `pay` the text does not place is added at its end.
     consent: str = DEFAULT_CONSENT
+    pay: str = ""  # e.g. "GBP 2.50 through Prolific"
     end: str = DEFAULT_END
     instructions: dict[str, str] = field(default_factory=dict)  # role -> text; else the page's own
 
@@ -93,6 +98,13 @@ class StudyConfig:
             raise ValueError(f"seed {self.seed}: outside the range {SEEDS}")
         if not self.roles or not set(self.roles) <= set(ROLES):
             raise ValueError(f"roles must be among {ROLES}")
+        try:
+            self.consent_text()
+        except (KeyError, IndexError, ValueError) as error:
+            raise ValueError(
+                f"consent: cannot fill in {error} (the text may name {{games}}, {{seconds}}, "
+                "{minutes} and {pay}; a brace itself is written {{ or }})"
+            ) from None
         for variant in self.variants:
             for role in self.roles:
                 agent = other(role)
@@ -102,6 +114,16 @@ class StudyConfig:
     @property
     def frames(self) -> int:
         return round(self.trial_seconds * FPS)
+
+    def consent_text(self) -> str:
+        """The consent text as shown: the study's numbers filled in, and its pay."""
+        games = self.trials * len(self.variants)
+        minutes = math.ceil(games * (self.trial_seconds + SET_UP) / 60)
+        counted = f"{games} game{'s' if games != 1 else ''}"
+        shown = self.consent.format(
+            games=counted, seconds=f"{self.trial_seconds:g}", minutes=minutes, pay=self.pay
+        )
+        return shown if not self.pay or "{pay}" in self.consent else f"{shown}\n\nPay: {self.pay}"
 
     @classmethod
     def load(cls, path: str | Path) -> StudyConfig:

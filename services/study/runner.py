@@ -15,11 +15,12 @@ machine's `max_matches` are taken, a trial's match is offered to a live host wit
 (services/study/remote.py), the participant's seat is bridged over the router, and the host's
 recording is fetched into the study directory with its hash checked before the trial is judged.
 
-Study messages (down): `consent` (text), `participant` (id and resume key, kept by the browser),
-`trial` (session, trial, role, the agent's label; what to read first), `queue` (place, seconds
-to wait, while the trial waits for a free match), then the gateway's `state`/`end` frames, and at
-last `done` (the end text) or `problem`. Up: `hello` (optionally with the participant id and key
-to resume), `consent`, `ready`, `keys`.
+Study messages (down): `consent` (text), `declined` (text: the participant said no, nothing was
+recorded), `participant` (id and resume key, kept by the browser), `wait` (reason, seconds: a
+game is being set up), `trial` (session, trial, role, the agent's label; what to read first),
+`queue` (place, seconds to wait, while the trial waits for a free match), then the gateway's
+`state`/`end` frames, and at last `done` (the end text) or `problem`. Up: `hello` (optionally
+with the participant id and key to resume), `consent` or `decline`, `ready`, `keys`.
 
 Each trial's metadata goes into a sidecar `<match>.study.json` beside its recording, rather than
 onto the bus: the participant id is nobody's business but the study's (bus traffic may cross a lab
@@ -51,7 +52,7 @@ from services.human.gateway import Bridge, Gateway, Handler, Outbox, Web, receiv
 from services.launch import HUMAN, MatchPlan, match_buses, run_match
 from services.recorder.recording import load
 from services.recorder.service import recording_path
-from services.study.core import Admission, Participant, Study, StudyConfig, Trial, worker_id
+from services.study.core import SET_UP, Admission, Participant, Study, StudyConfig, Trial, worker_id
 from services.study.remote import Remote
 from shared import keys
 from shared.bus import BusConfig, free_endpoint, until_stopped
@@ -62,7 +63,6 @@ log = logging.getLogger("tsf.study")
 PROBLEM = "The game could not be started. Please tell the experimenter."
 RETRIES = 3  # failed attempts in a row before the participant is told of a problem
 READ_TIMEOUT = 900.0  # seconds a participant may take to read the consent text or the instructions
-START_UP = 20.0  # seconds a match takes to start, for the estimated wait
 THREADS = 512  # threads for blocking work off the event loop: two per running match, and more
 DRAIN = 60.0  # seconds the stopping server waits for its matches to end and be written down
 WARM_UP = 60.0  # seconds to wait for a match's processes before offering its trial anyway
@@ -71,6 +71,8 @@ ADDRESS_BURST = 5  # ... to one address
 BUSY = "Too many people are starting right now. Please try again in a minute."
 TAKEN = "This worker id has already taken part in this study."
 NO_WORKER = "This link's worker id is not one this study can take (letters, digits and _ . : @ + - only)."
+DECLINED = "You declined to take part. Nothing about you was recorded. You may close this window now."
+SETTING_UP = "Your next game is being set up."
 UNSIGNED = "This link is not signed for its worker id. Please open the link exactly as the study gave it."
 
 
@@ -121,7 +123,7 @@ class Socket:
     async def _read(self) -> None:
         try:
             async for text in self.ws:
-                message = self.controls.receive(text, ("consent", "ready", "keys"))
+                message = self.controls.receive(text, ("consent", "decline", "ready", "keys"))
                 if message is not None and message["type"] != "keys":
                     self.events.put_nowait(message["type"])
         except BadInput as error:
@@ -135,9 +137,10 @@ class Socket:
         with contextlib.suppress(websockets.ConnectionClosed):
             await self.outbox.pump(self.ws)
 
-    async def wait_for(self, kind: str, timeout: float = READ_TIMEOUT) -> bool:
-        """Wait for the participant's `kind` message; False if the socket closed first or it took
-        longer than `timeout` seconds (the socket is then closed: an idle socket holds nothing)."""
+    async def wait_for(self, kind: str | tuple[str, ...], timeout: float = READ_TIMEOUT) -> str:
+        """Wait for the participant's `kind` message (or one of the kinds) and return its kind; ""
+        if the socket closed first or it took longer than `timeout` seconds (the socket is then
+        closed: an idle socket holds nothing)."""
         event: asyncio.Future | None = None
         try:
             async with asyncio.timeout(timeout):
@@ -145,13 +148,13 @@ class Socket:
                     event = asyncio.ensure_future(self.events.get())
                     await first(event, self.gone.wait())
                     if not event.done():
-                        return False
-                    if event.result() == kind:
-                        return True
+                        return ""
+                    if event.result() in ((kind,) if isinstance(kind, str) else kind):
+                        return event.result()
         except TimeoutError:
             await self.ws.close(1008, "idle for too long")
             self.gone.set()
-            return False
+            return ""
         finally:
             if event is not None and not event.done():  # never a get left pending on the loop
                 event.cancel()
@@ -340,7 +343,7 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
     config = study.config
     recordings = study.directory / "recordings"
     playing: dict[str, tuple[Socket, asyncio.Event]] = {}  # participant -> their socket, set once it left
-    match_seconds = config.trial_seconds + START_UP
+    match_seconds = config.trial_seconds + SET_UP
     arrivals = RateLimit(serving.arrivals, ARRIVAL_BURST)
     per_address = PerAddress(serving.arrivals_per_address, ADDRESS_BURST)
     starting = asyncio.Semaphore(serving.starting)
@@ -365,8 +368,12 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
         if study.taken(worker):
             await refuse(socket.ws, TAKEN)
             return None
-        socket.send({"type": "consent", "text": config.consent})
-        if not await socket.wait_for("consent"):
+        socket.send({"type": "consent", "text": config.consent_text()})
+        answer = await socket.wait_for(("consent", "decline"))
+        if answer == "decline":  # no id, nothing written
+            socket.send({"type": "declined", "text": DECLINED})
+            await socket.close()
+        if answer != "consent":
             return None
         if study.taken(worker):  # a second window of the same worker consented first
             await refuse(socket.ws, TAKEN)
@@ -444,6 +451,7 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
             matches.admission.end(trial.match)
             matches.notify()
             return None
+        socket.send({"type": "wait", "reason": SETTING_UP, "seconds": round(SET_UP)})
         seats = {trial.role: HUMAN, **trial.variant.plan(other(trial.role), trial.seed)}
         host = matches.admission.running[trial.match]  # Admission.LOCAL: this machine
         endpoint = "" if host else free_endpoint()

@@ -34,6 +34,7 @@ class StandInReport:
     first_frames: list[float] = field(default_factory=list)  # seconds from each Ready to its first frame
     waits: list[float] = field(default_factory=list)  # seconds each trial waited in the queue (if it did)
     again: int = 0  # trials offered again after a failed attempt
+    set_ups: int = 0  # `wait` messages: a game being set up, said before each trial
 
 
 async def stand_in(
@@ -102,6 +103,8 @@ async def stand_in(
                 if keys != held:  # a person's keyboard reports changes, not frames
                     held = keys
                     await ws.send(json.dumps({"type": "keys", **keys}))
+            elif kind == "wait":
+                report.set_ups += 1
             elif kind == "end":
                 report.kills.append(message["kills"])
             elif kind == "done":

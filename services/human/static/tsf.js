@@ -37,6 +37,7 @@ const screen = document.getElementById("screen");
 const title = document.getElementById("title");
 const text = document.getElementById("text");
 const go = document.getElementById("go");
+const no = document.getElementById("no");  // the consent's decline
 const params = new URLSearchParams(location.search);
 const held = { left: false, right: false, thrust: false, fire: false };
 // What tests and the curious can read: the phase, the role and the last frame drawn.
@@ -55,6 +56,7 @@ function show(heading, body, button, action) {
   go.hidden = !button;
   go.textContent = button || "";
   onGo = action || null;
+  no.hidden = true;
   screen.hidden = false;
 }
 
@@ -116,6 +118,15 @@ const handlers = {
       send({ type: "consent" });
       show("Thank you", "Setting up\u2026");
     });
+    no.hidden = false;
+  },
+  declined(m) {
+    tsf.phase = "done";
+    show("Thank you", m.text);
+  },
+  wait(m) {  // a game is being set up: after a game's end, below its result
+    const after = tsf.phase === "ended" ? `${text.textContent}\n\n` : "";
+    show(after ? title.textContent : "Please wait", `${after}${m.reason} This takes about ${m.seconds} seconds.`);
   },
   trial(m) {
     tsf.role = m.role;
@@ -209,6 +220,10 @@ document.addEventListener("keydown", (e) => onKey(e, true));
 document.addEventListener("keyup", (e) => onKey(e, false));
 window.addEventListener("blur", release);
 go.addEventListener("click", () => onGo && onGo());
+no.addEventListener("click", () => {
+  send({ type: "decline" });
+  show("Thank you", "\u2026");
+});
 
 // Drawing. World: fortress at the origin, y up, angles in degrees counter-clockwise.
 function polar(degrees, radius) {

@@ -518,3 +518,29 @@ def test_a_participant_who_declines_is_told_so_and_nothing_is_recorded(tmp_path,
     study = server.result(timeout=60)
     assert study.participants == {} and len((tmp_path / "study.jsonl").read_text().splitlines()) == 1
     assert not (tmp_path / "recordings").exists()
+
+
+def test_a_practice_game_comes_before_the_first_recorded_one_and_is_no_trial(tmp_path, study_server):
+    """With `practice_seconds`, a new participant first plays a short game with the scripted
+    partner: offered as practice, kept apart in practice/, neither in the journal nor a sidecar;
+    a participant who resumes after beginning the recorded trials gets none."""
+    config = StudyConfig("practice", VARIANTS[:1], trials=1, trial_seconds=1.5, seed=3, practice_seconds=1.0)
+    stop, url, server = study_server(config, tmp_path)
+    report = asyncio.run(asyncio.wait_for(stand_in(url, test=TEST), 120))
+    again = asyncio.run(
+        asyncio.wait_for(stand_in(url, resume=(report.participant, report.key), test=TEST), 60)
+    )
+    stop.set()
+    study = server.result(timeout=60)
+
+    assert report.done and report.agents == ["a practice partner", "Agent 1"] and len(report.kills) == 2
+    assert again.done and again.agents == [], "done already: no practice, no trial"
+    (practice,) = (tmp_path / "practice").glob("*.tsflog")
+    recording = load(practice)
+    assert recording.problems() == [] and len(recording.states) == 30 + 1  # 1 s at 30 frames a second
+    assert set(recording.start.policies.values()) == {
+        HUMAN,
+        "circle" if report.role == "shooter" else "mirror",
+    }
+    assert [a["match"] for a in study.participants["P001"].attempts] == ["practice-P001-s1t1"]
+    assert [p.name for p in (tmp_path / "recordings").iterdir() if "practice-P001-practice" in p.name] == []

@@ -46,6 +46,7 @@ def test_the_shipped_studies_load_and_name_library_policies(name: str) -> None:
         ({"trial_seconds": float("nan")}, r"trial_seconds nan: outside the range"),
         ({"seed": -1}, r"seed -1: outside the range 0 to 4294967295"),
         ({"roles": ("pilot",)}, "roles must be"),
+        ({"practice_seconds": 1e9}, r"practice_seconds 1000000000.0: 0 \(none\) or in the range 0.1"),
         ({"consent": "You earn {money}."}, r"consent: cannot fill in 'money' \(the text may name \{games\}"),
         ({"consent": "A { alone"}, "consent: cannot fill in expected '}' before end of string"),
     ],
@@ -201,3 +202,16 @@ def test_the_consent_text_states_the_studys_numbers_and_pay() -> None:
     placed = dataclasses.replace(paid, consent="{games} for {pay}; {{braces}} stay.")
     assert placed.consent_text() == f"{games} games for GBP 2.50 through Prolific; {{braces}} stay."
     assert study.hash() != paid.hash(), "what a participant agrees to is part of the study's version"
+
+
+def test_a_practice_game_only_before_the_recorded_ones_and_a_new_match_each_time(tmp_path: Path) -> None:
+    assert Study(config(), tmp_path / "none").practice(Study(config(), tmp_path / "n").arrive()) is None
+    study = Study(config(practice_seconds=5.0), tmp_path / "study")
+    participant = study.arrive()
+    first, again = study.practice(participant), study.practice(participant)
+    assert first.practice and first.agent == "a practice partner" and first.match != again.match
+    assert first.variant.plan("shooter", 0) == {"shooter": "mirror"} and first.variant.plan("bait", 0) == {
+        "bait": "circle"
+    }
+    study.record(study.next_trial(participant), "running")
+    assert study.practice(participant) is None, "the recorded trials have begun"

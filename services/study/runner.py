@@ -341,7 +341,8 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
     """Serve participants: consent or resume, then their trials one by one, each in a free match
     (here, or on a match host of `remote`)."""
     config = study.config
-    recordings = study.directory / "recordings"
+    recordings, practice = study.directory / "recordings", study.directory / "practice"
+    practice_frames = round(config.practice_seconds * FPS)
     playing: dict[str, tuple[Socket, asyncio.Event]] = {}  # participant -> their socket, set once it left
     match_seconds = config.trial_seconds + SET_UP
     arrivals = RateLimit(serving.arrivals, ARRIVAL_BURST)
@@ -456,12 +457,14 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
         host = matches.admission.running[trial.match]  # Admission.LOCAL: this machine
         endpoint = "" if host else free_endpoint()
         limit = config.trial_seconds + serving.trial_timeout
+        frames, directory = (practice_frames, practice) if trial.practice else (config.frames, recordings)
         plan = MatchPlan(
-            trial.match, trial.seed, config.frames, directory=recordings, endpoint=endpoint,
+            trial.match, trial.seed, frames, directory=directory, endpoint=endpoint,
             low_latency=serving.low_latency, wait_players=serving.ready_timeout + limit,
             wait_services=30.0, timeout=serving.ready_timeout + limit, **seats,
         )  # fmt: skip
-        study.record(trial, "running")
+        if not trial.practice:
+            study.record(trial, "running")
         stop = threading.Event()
         if host:
             log.info("trial %s runs on match host %s", trial.match, host)
@@ -492,33 +495,43 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
 
         def finish(done: asyncio.Future) -> dict:
             if dropped:  # the page went: the recording alone says whether the trial was played
-                kills, problems = judge(recording_path(recordings, trial.match), trial.role)
+                kills, problems = judge(recording_path(plan.directory, trial.match), trial.role)
             else:
                 kills, problems = (None, ["cancelled"]) if done.cancelled() else done.result()
+            if trial.practice:  # no trial: nothing written down
+                return {"status": "failed" if problems else "done", "kills": kills}
             return settle(study, trial, kills, problems)
 
-        if dropped:  # resumable at once; the sidecar follows when the match has ended
+        if dropped and not trial.practice:  # resumable at once; the sidecar follows when the match has ended
             study.record(trial, "dropped")
             running.add_done_callback(finish)
             return None
         await asyncio.wait({running})  # ended by the stop above, if not over
         return finish(running)
 
+    def offer_of(trial: Trial, last: int | None, again: bool) -> dict:
+        """The `trial` message: where the game sits in the study, what to read first."""
+        return {
+            "type": "trial", "role": trial.role, "agent": trial.agent, "last": last,
+            "session": trial.session, "sessions": len(config.variants),
+            "trial": trial.trial, "trials": config.trials, "again": again, "practice": trial.practice,
+            "instructions": config.instructions.get(trial.role, ""),
+        }  # fmt: skip
+
     async def trials(socket: Socket, participant: Participant, obs: bool) -> None:
-        """The participant's remaining trials; a failed one is offered again, RETRIES times."""
+        """The participant's remaining trials, after a practice game if the study has one and they
+        have not begun; a failed trial is offered again, RETRIES times."""
         last, failures = None, 0
+        await matches.end_previous(participant.id)  # a reload's practice game still running out
+        first = study.practice(participant)
+        if first is not None and await play(socket, first, obs, offer_of(first, None, False)) is None:
+            return
         while True:
             await matches.end_previous(participant.id)  # settled first: never a trial twice
             trial = study.next_trial(participant)
             if trial is None:
                 break
-            offer = {
-                "type": "trial", "role": trial.role, "agent": trial.agent, "last": last,
-                "session": trial.session, "sessions": len(config.variants),
-                "trial": trial.trial, "trials": config.trials, "again": failures > 0,
-                "instructions": config.instructions.get(trial.role, ""),
-            }  # fmt: skip
-            sidecar = await play(socket, trial, obs, offer)
+            sidecar = await play(socket, trial, obs, offer_of(trial, last, failures > 0))
             if sidecar is None:
                 return
             if sidecar["status"] == "failed":

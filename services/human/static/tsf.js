@@ -135,6 +135,11 @@ const handlers = {
       `Last game: your team destroyed ${m.last} fortress${m.last === 1 ? "" : "es"}.\n\n`;
     const again = m.again ? "The last game could not be completed; please play it again.\n\n" : "";
     const intro = m.trial === 1 ? instructions(m.role, m.instructions) + "\n\n" : "";
+    if (m.practice) {
+      show("Practice game", `${intro}This short game is for practice; it does not count. ` +
+        `Your partner: ${m.agent}.`, "Start", ready);
+      return;
+    }
     show(`Session ${m.session} of ${m.sessions}: game ${m.trial} of ${m.trials}`,
       `${again}${last}${intro}Your partner in this session: ${m.agent}.`, "Start", ready);
   },

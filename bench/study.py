@@ -56,6 +56,7 @@ from services.study.standin import StandInReport, stand_in
 from shared.bus import BusConfig, free_endpoint
 
 TOKEN = "bench"
+HOST_SECRET = b"the-bench-host-secret"  # shared by the server and its match host
 JITTER_MS = 5.0
 
 
@@ -164,8 +165,11 @@ def ip(*args: str) -> None:
 def second_host(how: str, slots: int, out: Path) -> Iterator[BusConfig]:
     """A match host of `slots` slots, in a network namespace (`netns`) or as a plain process;
     yields the study server's router config that it connects to. Everything is removed on exit."""
+    secret = out / "host-secret"
+    secret.parent.mkdir(parents=True, exist_ok=True)
+    secret.write_bytes(HOST_SECRET)
     command = [sys.executable, "-m", "services.cli", "match-host", "--mode", "client", "--slots", str(slots)]
-    command += ["--id", f"{how}-host", "--out", str(out), "-q"]
+    command += ["--id", f"{how}-host", "--out", str(out), "--host-secret", str(secret), "-q"]
     with contextlib.ExitStack() as undo:
         if how == "netns":
             ip("netns", "add", NETNS)
@@ -202,7 +206,7 @@ def arrival_test(
     )
     print(f"arrivals: {n} participants at random over {over:g} s, one {seconds:g} s trial each, {where}")
     load = os.getloadavg()[0]
-    serving = Serving(max_matches=cap, test_token=TOKEN, hosts=hosts)
+    serving = Serving(max_matches=cap, test_token=TOKEN, hosts=hosts, host_secret=HOST_SECRET)
     reports, attempts, _ = serve(config, serving, arrivals)
     completed = sum(r.done for r in reports)
     waits = [w for r in reports for w in r.waits] or [0.0]

@@ -32,6 +32,26 @@ from shared.game import FRAMES, ROLES, Range, other
 commands = typer.Typer()
 
 
+HOST_SECRET = typer.Option(
+    None,
+    envvar="TSF_HOST_SECRET_FILE",
+    dir_okay=False,
+    help="A file holding the secret the study server and its match hosts share (at least 16 "
+    "characters); every message between them is sealed with it.",
+)
+
+
+def host_secret_of(path: Path | None) -> bytes:
+    """The host secret from its file; match hosts without one are a UsageError."""
+    from shared.secret import read_secret
+
+    if path is None:
+        raise UsageError(
+            "--host-secret", "(none)", "the study server and its match hosts need a shared secret: its file"
+        )
+    return read_secret(path, "--host-secret")
+
+
 @commands.command("match")
 @adapter_options("role", "seed")
 def match_command(
@@ -175,11 +195,20 @@ def study(
     ),
     origin: list[str] | None = typer.Option(
         None,
-        help="Another origin whose pages may open the socket, e.g. https://study.example.org (repeatable).",
+        help="The study's public origin, e.g. https://study.example.org: its pages may open the socket "
+        "and requests for its host name are taken (repeatable; needed when participants reach the "
+        "server by a name, as behind a reverse proxy).",
     ),
     per_address: int = typer.Option(8, min=0, help="Sockets one address may hold at once (0: no cap)."),
     test_token: str = typer.Option(
         "", envvar="TSF_TEST_TOKEN", help="Stand-ins that show this token get the observation values."
+    ),
+    link_secret: Path | None = typer.Option(
+        None,
+        envvar="TSF_LINK_SECRET_FILE",
+        dir_okay=False,
+        help="Sign the links: a file holding the secret; new participants then need a worker id and "
+        "its signature (sig=HMAC-SHA256 of the id, hex).",
     ),
     listen: list[str] | None = typer.Option(
         None,
@@ -190,20 +219,24 @@ def study(
         None,
         help="Meet match hosts at this zenoh router (`tsf router`), e.g. tcp/10.0.0.1:7447 (repeatable).",
     ),
+    host_secret: Path | None = HOST_SECRET,
 ) -> None:
     """Serve a study: participants open the link, consent, get a role and play every agent variant.
     With --listen or --connect, match hosts on other machines add capacity beyond --max-matches."""
     from services.human.gateway import Web
     from services.study.core import StudyConfig
     from services.study.runner import Serving, run_study
+    from shared.secret import read_secret
 
-    hosts = None
+    hosts, sealing = None, b""
     if listen or connect:
         hosts = BusConfig("router" if listen else "client", tuple(listen or ()), tuple(connect or ()))
+        sealing = host_secret_of(host_secret)
     elif max_matches == 0:
         raise UsageError(
             "--max-matches", 0, "no match could run: give match hosts with --listen or --connect"
         )
+    signed = read_secret(link_secret, "--link-secret") if link_secret else b""
     protocol = StudyConfig.load(config)
     for variant in protocol.variants:  # adaptive agents' thresholds: refused now, not at a trial
         for role in protocol.roles:
@@ -221,7 +254,10 @@ def study(
     if (cert is None) != (key is None):
         raise UsageError("--cert/--key", str(cert or key), "give both, or neither")
     web = Web(host, port, cert, key, tuple(origin or ()), per_address)
-    serving = Serving(max_matches, trial_timeout, test_token=test_token, hosts=hosts)
+    serving = Serving(
+        max_matches, trial_timeout, test_token=test_token, hosts=hosts,
+        link_secret=signed, host_secret=sealing,
+    )  # fmt: skip
     done = run_study(protocol, directory, web, stop_on_signals(), show, serving)
     finished = sum(done.next_trial(p) is None for p in done.participants.values())
     console.print(f"{len(done.participants)} participants, {finished} finished")
@@ -233,6 +269,7 @@ def match_host_command(
     slots: int = number(2, SLOTS, "Matches this host runs at once."),
     host_id: str = typer.Option("", "--id", help="This host's name (default: host name and pid)."),
     out: Path = output(Path("recordings"), "Directory of the recordings made here.", directory=True),
+    host_secret: Path | None = HOST_SECRET,
     *,
     bus: BusConfig,
 ) -> None:
@@ -244,7 +281,11 @@ def match_host_command(
     from services.study.host import run_match_host
 
     name = host_id or f"{socket.gethostname()}-{os.getpid()}".replace(".", "-")
-    played = run_match_host(bus, name, slots, out, stop_on_signals())
+    if not bus.connect:
+        raise UsageError(
+            "--connect", "(none)", "a match host needs the router's endpoint, e.g. tcp/10.0.0.1:7447"
+        )
+    played = run_match_host(bus, name, slots, out, stop_on_signals(), host_secret_of(host_secret))
     console.print(f"match host {name} ran {played} matches")
 
 

@@ -18,7 +18,7 @@ from pathlib import Path
 import zenoh
 
 from shared import keys
-from shared.bus import BusConfig
+from shared.bus import BusConfig, until_stopped
 from shared.errors import UsageError
 
 USERS = (
@@ -81,6 +81,6 @@ def run_router(listen: tuple[str, ...], credentials: Path | None, stop: threadin
     router = zenoh.open(router_config(listen, credentials))
     logging.getLogger("tsf.router").info("routing on %s%s", listen, " (secured)" if credentials else "")
     try:
-        stop.wait()
+        until_stopped(stop)
     finally:
         router.close()

@@ -178,6 +178,14 @@ def stop_on_summary(z: zenoh.Session, match: str, stop: threading.Event, drops: 
     return subscribe(z, keys.summary(match), Summary, lambda _: stop.set(), drops)
 
 
+def until_stopped(stop: threading.Event) -> None:
+    """Wait until `stop` is set, waking twice a second. A signal the kernel hands to another thread
+    (zenoh's own) only sets a flag: Python runs the handler in the main thread when it next wakes,
+    and a wait without end never did (a Ctrl-C of `tsf study` was lost)."""
+    while not stop.wait(0.5):
+        pass
+
+
 def stop_on_signals() -> threading.Event:
     """An event set by SIGINT, SIGTERM or SIGHUP (Ctrl-C, `timeout` or a scheduler, a closed
     terminal or a supervisor): services poll it and leave through their `finally`, launchers end

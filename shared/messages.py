@@ -9,6 +9,8 @@ log once per reason. docs/contract.md lists the fields.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import hmac
 import math
 import re
 from collections.abc import Callable
@@ -29,6 +31,7 @@ from shared.game import (
     GameConfig,
     Range,
 )
+from shared.secret import same_secret, signature
 
 SCHEMA_VERSION = 1
 MAX_BYTES = 64 * 1024
@@ -415,6 +418,7 @@ class SweepResult(Message):
 CHUNK = 48 * 1024  # bytes of a recording in one RecordingChunk (a message stays under MAX_BYTES)
 _WAIT = _number(0.0, 24 * 3600.0)
 _SHA256 = _text(r"[0-9a-f]{64}")
+_AUTH = _text(r"(?:[0-9a-f]{64})?")  # a host message's HMAC (sealed), "" before it is sealed
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -422,10 +426,11 @@ class HostStatus(Message):
     """A match host's capacity, put every second while it runs. `match` carries the host's name."""
 
     TYPE: ClassVar[str] = "host_status"
-    CHECKS: ClassVar[dict[str, Check]] = {"slots": _int(0, 1024), "free": _int(0, 1024)}
+    CHECKS: ClassVar[dict[str, Check]] = {"slots": _int(0, 1024), "free": _int(0, 1024), "auth": _AUTH}
 
     slots: int = 1
     free: int = 1
+    auth: str = ""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -446,6 +451,7 @@ class MatchOffer(Message):
         "timeout": _WAIT,
         "library": _HASH,
         "config": _HASH,
+        "auth": _AUTH,
     }
 
     seed: int = 0
@@ -457,6 +463,7 @@ class MatchOffer(Message):
     timeout: float = 0.0
     library: str = "0" * 16
     config: str = "0" * 16
+    auth: str = ""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -464,10 +471,15 @@ class MatchAnswer(Message):
     """A match host's reply to an offer: accepted, or why not (full, other library, ...)."""
 
     TYPE: ClassVar[str] = "match_answer"
-    CHECKS: ClassVar[dict[str, Check]] = {"accepted": _bool, "reason": _text(r"[ -~]{0,300}")}
+    CHECKS: ClassVar[dict[str, Check]] = {
+        "accepted": _bool,
+        "reason": _text(r"[ -~]{0,300}"),
+        "auth": _AUTH,
+    }
 
     accepted: bool = False
     reason: str = ""
+    auth: str = ""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -475,6 +487,9 @@ class MatchStop(Message):
     """A study server asks the match host to end `match` now (the participant left, or it ran late)."""
 
     TYPE: ClassVar[str] = "match_stop"
+    CHECKS: ClassVar[dict[str, Check]] = {"auth": _AUTH}
+
+    auth: str = ""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -487,11 +502,13 @@ class MatchDone(Message):
         "error": _text(r"[ -~]{0,300}"),
         "size": _int(0, 2**40),
         "sha256": lambda v: v == "" or _SHA256(v),
+        "auth": _AUTH,
     }
 
     error: str = ""
     size: int = 0
     sha256: str = ""
+    auth: str = ""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -503,11 +520,43 @@ class RecordingChunk(Message):
         "offset": _int(0, 2**40),
         "size": _int(0, 2**40),
         "data": lambda v: isinstance(v, bytes) and len(v) <= CHUNK,
+        "auth": _AUTH,
     }
 
     offset: int = 0
     size: int = 0
     data: bytes = b""
+    auth: str = ""
+
+
+HostMessage = TypeVar("HostMessage", bound=Message)  # one of the six above, each with its `auth`
+
+
+def sealed(message: HostMessage, secret: bytes) -> HostMessage:
+    """A match-host message signed with the study's host secret: its `auth` is the HMAC-SHA256 of
+    its encoding with `auth` empty, so a peer without the secret can neither make one nor alter one."""
+    return dataclasses.replace(message, auth=_seal(message, secret))
+
+
+def authentic(message: HostMessage, secret: bytes) -> bool:
+    """Whether `message` was sealed with `secret` (compared as bytes)."""
+    return same_secret(message.auth, _seal(message, secret))
+
+
+def _seal(message: HostMessage, secret: bytes) -> str:
+    unsealed = dataclasses.replace(message, auth="").encode()
+    return hmac.new(secret, unsealed, hashlib.sha256).hexdigest()
+
+
+def recording_query(key: str, offset: int, secret: bytes) -> str:
+    """The selector that asks a host for a chunk of a recording (`key`: keys.host_recording) from
+    `offset`, signed: `auth` is `recording_auth`."""
+    return f"{key}?offset={offset};auth={recording_auth(key, str(offset), secret)}"
+
+
+def recording_auth(key: str, offset: str, secret: bytes) -> str:
+    """The HMAC-SHA256 of a recording query's selector without its `auth` (`key?offset=N`)."""
+    return signature(secret, f"{key}?offset={offset}")
 
 
 TYPES: dict[str, type[Message]] = {

@@ -220,3 +220,26 @@ def test_two_host_or_origin_headers_are_refused_with_400_and_the_scheme_must_mat
     https = f"Origin: https://{gateway.web.host}:{gateway.port}"  # a page over TLS of the same host
     assert raw_request(gateway, host, https) == b"HTTP/1.1 403 Forbidden"
     assert raw_request(gateway, host, "Origin: http://evil.example") == b"HTTP/1.1 403 Forbidden"
+
+
+def test_a_rebinding_domain_is_refused_and_a_configured_public_origin_is_taken(gateway):
+    """A page of evil.example whose name now points at this server sends Host and Origin both
+    evil.example: refused (421) by a server listening on an IP without --origin; localhost and the
+    IP are taken, and a public name given as an origin (a reverse proxy's) is taken too."""
+    evil = (f"Host: evil.example:{gateway.port}", f"Origin: http://evil.example:{gateway.port}")
+    assert raw_request(gateway, *evil) == b"HTTP/1.1 421 Misdirected Request"
+    assert (
+        raw_request(gateway, "Origin: http://evil.example") == b"HTTP/1.1 421 Misdirected Request"
+    )  # no Host
+    local = (f"Host: localhost:{gateway.port}", f"Origin: http://localhost:{gateway.port}")
+    assert raw_request(gateway, *local) == b"HTTP/1.1 101 Switching Protocols"
+    public = ("Host: study.example.org", "Origin: https://study.example.org")
+    assert raw_request(gateway, *public) == b"HTTP/1.1 421 Misdirected Request"
+    web = Web(port=0, origins=("https://study.example.org",))
+    with Gateway(None, seat_handler(MATCH, SeatBook({})), web) as proxied:
+        assert raw_request(proxied, *public) == b"HTTP/1.1 101 Switching Protocols"
+        assert (
+            raw_request(proxied, "Host: Study.Example.org", public[1]) == b"HTTP/1.1 101 Switching Protocols"
+        )
+        evil = (f"Host: evil.example:{proxied.port}", f"Origin: http://evil.example:{proxied.port}")
+        assert raw_request(proxied, *evil) == b"HTTP/1.1 421 Misdirected Request"

@@ -1,7 +1,8 @@
 """Studies across machines: the study server is the router, `tsf match-host` processes connect to
 it over loopback and run the trials' matches, and every recording comes back into the study's
 directory with its hash checked; a host killed mid-trial leaves no recording marked done, and the
-trial is played again on another host."""
+trial is played again on another host; a peer on the router without the study's host secret can
+neither offer slots nor return a recording."""
 
 from __future__ import annotations
 
@@ -20,18 +21,29 @@ import pytest
 import zenoh
 from conftest import STAND_IN_TOKEN, wait_until
 
+from services.launch import HUMAN, MatchPlan
 from services.recorder.recording import load
 from services.study.core import StudyConfig, Variant
-from services.study.host import Host, sha256
+from services.study.host import Host, offer_of, sha256
 from services.study.remote import Remote
 from services.study.runner import Serving
 from services.study.standin import stand_in
 from shared import keys
 from shared.bus import BusConfig, free_endpoint, session
 from shared.errors import Failure
-from shared.messages import MatchDone
+from shared.messages import (
+    HostStatus,
+    MatchAnswer,
+    MatchDone,
+    MatchOffer,
+    RecordingChunk,
+    decode,
+    recording_query,
+    sealed,
+)
 
 TEST = STAND_IN_TOKEN
+SECRET = b"the-hosts-secret-0123"  # the study's host secret, shared with its hosts
 
 
 @pytest.fixture
@@ -39,10 +51,13 @@ def match_host(tmp_path):  # noqa: ANN201
     """Start `tsf match-host` processes: host(name, endpoint) -> Popen; all are killed at teardown."""
     started: list[subprocess.Popen] = []
 
+    secret = tmp_path / "host-secret"
+    secret.write_bytes(SECRET + b"\n")
+
     def start(name: str, endpoint: str, slots: int = 1) -> subprocess.Popen:
         command = [
             sys.executable, "-m", "services.cli", "match-host", "--connect", endpoint,
-            "--slots", str(slots), "--id", name, "--out", str(tmp_path / name),
+            "--slots", str(slots), "--id", name, "--out", str(tmp_path / name), "--host-secret", str(secret),
         ]  # fmt: skip
         started.append(subprocess.Popen(command, start_new_session=True))
         return started[-1]
@@ -56,7 +71,7 @@ def match_host(tmp_path):  # noqa: ANN201
 
 def hosted(endpoint: str) -> Serving:
     """A study server that runs no match itself: every trial goes to a match host."""
-    return Serving(max_matches=0, test_token=TEST, hosts=BusConfig("router", (endpoint,)))
+    return Serving(max_matches=0, test_token=TEST, hosts=BusConfig("router", (endpoint,)), host_secret=SECRET)
 
 
 def test_trials_run_on_a_match_host_and_their_recordings_come_back_whole(tmp_path, study_server, match_host):
@@ -126,24 +141,24 @@ def test_a_recording_whose_hash_differs_never_lands_in_the_study(tmp_path: Path)
     source = tmp_path / "host" / "m.tsflog"
     source.parent.mkdir()
     source.write_bytes(bytes(range(256)) * 1000)  # several chunks
-    host = Host("lab-1", 1, source.parent)
+    host = Host("lab-1", 1, source.parent, SECRET)
     host.finished["m"] = source
 
     def serve(query: zenoh.Query) -> None:
-        chunk = host.chunk(keys.parse(query.key_expr).match, int(query.parameters.get("offset", "0")))
+        chunk = host.chunk(str(query.key_expr), query.parameters.get("offset"), query.parameters.get("auth"))
         query.reply(query.key_expr, chunk.encode())
 
-    remote = Remote(BusConfig("router", (endpoint,)))
+    remote = Remote(BusConfig("router", (endpoint,)), SECRET)
     try:
         with (
             session(BusConfig("client", (), (endpoint,))) as z,
             z.declare_queryable(keys.host_recording("lab-1"), serve),
         ):
-            asked = f"{keys.host_recording('lab-1', 'm')}?offset=0"
+            asked = recording_query(keys.host_recording("lab-1", "m"), 0, SECRET)
             assert wait_until(lambda: any(r.ok for r in remote.z.get(asked, timeout=1)), timeout=10)
             done = MatchDone(
                 match="m", frame=0, sender="host/lab-1", size=source.stat().st_size, sha256=sha256(source)
-            )
+            )  # taken as the host's (the seal is checked where it arrives, below)
             remote.fetch("lab-1", "m", done, tmp_path / "study" / "m.tsflog")
             assert (tmp_path / "study" / "m.tsflog").read_bytes() == source.read_bytes()
             with pytest.raises(Failure, match="does not match its sha256"):
@@ -157,3 +172,63 @@ def test_a_recording_whose_hash_differs_never_lands_in_the_study(tmp_path: Path)
     assert sorted(p.name for p in (tmp_path / "study").iterdir()) == ["m.tsflog"], (
         "nothing else, nothing half"
     )
+
+
+def test_a_peer_without_the_host_secret_can_neither_offer_slots_nor_return_a_recording(tmp_path, match_host):
+    """A peer on the study's router that holds a host's token, puts its slots (unsealed, or sealed
+    with another secret), answers offers, reports the match's end and serves chunks: the server
+    sees no slot and takes neither answer nor end nor chunk (each counted and dropped, logged once);
+    a real host that holds the secret is seen beside it; and a match host takes no offer, stop or
+    recording query that the secret did not seal."""
+    endpoint = free_endpoint()
+    wrong = b"a-guessed-secret-0123"
+    remote = Remote(BusConfig("router", (endpoint,)), SECRET)
+    rogue = "lab-9"
+    offers: list[MatchOffer] = []
+
+    def answer(query: zenoh.Query) -> None:
+        offers.append(decode(query.payload.to_bytes(), MatchOffer))
+        yes = MatchAnswer(match=offers[-1].match, frame=0, sender=f"host/{rogue}", accepted=True)
+        query.reply(query.key_expr, sealed(yes, wrong).encode())
+
+    def chunk(query: zenoh.Query) -> None:
+        data = RecordingChunk(match="m", frame=0, sender=f"host/{rogue}", offset=0, size=3, data=b"abc")
+        query.reply(query.key_expr, data.encode())
+
+    try:
+        with (
+            session(BusConfig("client", (), (endpoint,))) as z,
+            z.liveliness().declare_token(keys.host_alive(rogue)),
+            z.declare_queryable(keys.host_offer(rogue), answer),
+            z.declare_queryable(keys.host_recording(rogue), chunk),
+        ):
+            status = HostStatus(match=rogue, frame=0, sender=f"host/{rogue}", slots=8, free=8)
+            for _ in range(10):
+                z.put(keys.host_status(rogue), status.encode())
+                z.put(keys.host_status(rogue), sealed(status, wrong).encode())
+            match_host("lab-1", endpoint, slots=2)  # a real host, with the secret
+            assert wait_until(lambda: remote.hosts() == {"lab-1": 2}, timeout=60)
+            assert remote.drops.counts["unauthenticated"] == 20, "every forged status counted"
+            # ... which answers no offer and no recording query the secret did not seal
+            offer = offer_of(MatchPlan("mx", 0, 60, bait=HUMAN, shooter="S5"), f"host/{rogue}")
+            for payload in (offer.encode(), sealed(offer, wrong).encode()):
+                assert not [r for r in z.get(keys.host_offer("lab-1"), payload=payload, timeout=3) if r.ok]
+            unsigned = f"{keys.host_recording('lab-1', 'mx')}?offset=0"
+            assert not list(z.get(unsigned, timeout=3)), "not even an error"
+            plan = MatchPlan(f"m{rogue}", 0, 60, bait=HUMAN, shooter="S5", directory=tmp_path)
+            with pytest.raises(Failure, match="did not answer"):
+                remote.run(rogue, plan, threading.Event())  # its accepted answer is not taken
+            assert offers and offers[0].auth, "the server's offer is sealed"
+            done = MatchDone(
+                match="m", frame=0, sender=f"host/{rogue}", size=3, sha256=hashlib.sha256(b"abc").hexdigest()
+            )
+            with pytest.raises(Failure, match="did not serve"):
+                remote.fetch(rogue, "m", done, tmp_path / "m.tsflog")
+            with remote.changed:
+                remote.offered.add("m")
+            z.put(keys.host_done(rogue), done.encode())
+            z.put(keys.host_done(rogue), sealed(done, wrong).encode())
+            assert wait_until(lambda: remote.drops.counts["unauthenticated"] >= 24, timeout=10)
+            assert remote.done == {} and not (tmp_path / "m.tsflog").exists()
+    finally:
+        remote.close()

@@ -260,6 +260,12 @@ MISTAKES = [
     ("study {tmp}/empty.toml", 2, "tsf study: CONFIG {tmp}/empty.toml: not a study: "),
     ("study {tmp}/long.toml --max-matches 0", 2, "tsf study: --max-matches 0: no match could run"),
     ("study {tmp}/long.toml --listen nowhere", 2, "tsf study: --listen nowhere: not a zenoh endpoint"),
+    (
+        "study {tmp}/long.toml --link-secret {tmp}/empty.toml",
+        2,
+        "tsf study: --link-secret {tmp}/empty.toml: the secret needs at least 16 characters, it has 0",
+    ),
+    ("study {tmp}/long.toml --link-secret {tmp}", 2, "TSF_LINK_SECRET_FILE'): file '{tmp}' is a directory."),
     ("match-host", 2, "tsf match-host: --connect (none): a match host needs the router's endpoint"),
     (
         "match-host --slots 0 --connect tcp/127.0.0.1:1",
@@ -267,7 +273,22 @@ MISTAKES = [
         "'--slots': 0 is outside the range 1 to 1024",
     ),
     (
-        "match-host --mode client --connect tcp/127.0.0.1:1 --wait-router 0.2",
+        "match-host --connect tcp/127.0.0.1:1",
+        2,
+        "tsf match-host: --host-secret (none): the study server and its match hosts need a shared secret",
+    ),
+    (
+        "study {tmp}/long.toml --connect tcp/127.0.0.1:1",
+        2,
+        "tsf study: --host-secret (none): the study server and its match hosts need a shared secret",
+    ),
+    (
+        "match-host --connect tcp/127.0.0.1:1 --host-secret {tmp}/empty.toml",
+        2,
+        "tsf match-host: --host-secret {tmp}/empty.toml: the secret needs at least 16 characters",
+    ),
+    (
+        "match-host --mode client --connect tcp/127.0.0.1:1 --wait-router 0.2 --host-secret {garbage}",
         1,
         "tsf match-host: cannot reach the router at tcp/127.0.0.1:1: Unable to connect",
     ),

@@ -11,6 +11,7 @@ import os
 import signal
 import subprocess
 import sys
+from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 
 import pytest
@@ -48,6 +49,7 @@ def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_unti
     assert (leaver.consent, second.consent, back.consent) == ("Agree?", "Agree?", "")  # asked once
     assert back.end == second.end == "Bye now."
     assert len(back.kills) == len(second.kills) == 2
+    assert (back.set_ups, second.set_ups) == (2, 2), "each game's set-up is said, with its length"
 
     attempts = {p.id: [(a["session"], a["trial"], a["attempt"], a["status"]) for a in p.attempts]
                 for p in study.participants.values()}  # fmt: skip
@@ -135,10 +137,16 @@ def test_eight_stand_ins_at_once_each_in_a_match_of_their_own(tmp_path, study_se
         assert recording.problems() == [] and len(recording.states) == config.frames + 1
 
 
-def test_sigterm_ends_the_study_server_and_every_match_it_started(tmp_path):
-    config = tmp_path / "long.toml"
+@contextlib.contextmanager
+def study_command(
+    tmp_path: Path, name: str = "long", trials: int = 1, seconds: float = 600
+) -> Iterator[tuple[subprocess.Popen, str]]:
+    """A real `tsf study` process (study `name`: `trials` trials of `seconds` with one static agent,
+    its journal and recordings in tmp_path/name) on a free port: (the process, its address); killed
+    with its process group at the end if it is still running. Started again, it resumes the study."""
+    config = tmp_path / f"{name}.toml"
     variant = '[[variants]]\nname = "s"\nbait = "B5"\nshooter = "S5"\n'
-    config.write_text(f'name = "long"\ntrials = 1\ntrial_seconds = 600\n{variant}')
+    config.write_text(f'name = "{name}"\ntrials = {trials}\ntrial_seconds = {seconds}\n{variant}')
     server = subprocess.Popen(
         [sys.executable, "-m", "services.cli", "study", str(config), "--out", str(tmp_path), "--port", "0",
          "--test-token", TEST],
@@ -149,23 +157,55 @@ def test_sigterm_ends_the_study_server_and_every_match_it_started(tmp_path):
         while "http" not in line:
             line = server.stdout.readline()
             assert line, "the server printed no address"
-        url = line[line.index("http") :].split()[0]
+        yield server, line[line.index("http") :].split()[0]
+    finally:
+        if server.poll() is None:
+            os.killpg(server.pid, signal.SIGKILL)
+            server.wait()
+
+
+def test_sigterm_ends_the_study_server_and_every_match_it_started(tmp_path):
+    with study_command(tmp_path) as (server, url):
         asyncio.run(stand_in(url, leave_after=30, test=TEST))  # the match runs out for ten minutes
         assert len([p for p in _processes() if "long-P001" in p]) >= 3, "sim, agent and recorder run"
         server.send_signal(signal.SIGTERM)
         assert server.wait(60) == 0
         assert not [p for p in _processes() if "long-P001" in p], "no match process is left behind"
-    finally:
-        if server.poll() is None:
-            os.killpg(server.pid, signal.SIGKILL)
 
 
-def _processes() -> list[str]:
-    """The command lines of every process running now."""
+def test_ctrl_c_during_a_matchs_warm_up_ends_the_server_at_once(tmp_path):
+    """SIGINT just as a trial's match starts up (its sim not yet listening, the server's session to
+    it not yet open): the server exits within seconds (it took a minute, and at times for ever)."""
+    import time
+
+    import websockets
+
+    with study_command(tmp_path) as (server, url):
+
+        async def consent() -> None:
+            async with websockets.connect(url.replace("http", "ws", 1) + "ws") as ws:
+                await ws.send(json.dumps({"type": "hello"}))
+                assert json.loads(await ws.recv())["type"] == "consent"
+                await ws.send(json.dumps({"type": "consent"}))
+                assert json.loads(await ws.recv())["type"] == "participant"
+                sent = time.monotonic()  # the trial's match starts now
+                server.send_signal(signal.SIGINT)
+                status = await asyncio.to_thread(server.wait, 30)
+                waited = time.monotonic() - sent
+                assert status == 0
+                assert waited < 10.0
+
+        asyncio.run(consent())
+        assert not [p for p in _processes() if "long-P001" in p], "no match process is left behind"
+
+
+def _processes(pids: bool = False) -> list[str]:
+    """The command lines of every process running now (each after its pid, with `pids`)."""
     found = []
     for cmdline in Path("/proc").glob("[0-9]*/cmdline"):
         with contextlib.suppress(OSError):
-            found.append(cmdline.read_bytes().replace(b"\0", b" ").decode(errors="replace"))
+            line = cmdline.read_bytes().replace(b"\0", b" ").decode(errors="replace")
+            found.append(f"{cmdline.parent.name} {line}" if pids else line)
     return found
 
 
@@ -256,12 +296,8 @@ def test_a_reload_during_set_up_is_a_resume(tmp_path, study_server):
 
     async def reload() -> tuple[object, object]:
         async with websockets.connect(url.replace("http", "ws", 1) + "ws") as ws:
-            await ws.send(json.dumps({"type": "hello"}))
-            async for text in ws:
-                message = json.loads(text)
-                if message["type"] == "consent":
-                    await ws.send(json.dumps({"type": "consent"}))
-                elif message["type"] == "participant":
+            async for message in _consenting(ws):
+                if message["type"] == "participant":
                     me = (message["participant"], message["key"])
                 elif message["type"] == "trial":  # set up, not Ready: and now the page reloads
                     break
@@ -314,3 +350,197 @@ def test_a_consent_flood_from_one_address_leaves_newcomers_from_others_served(tm
     flooder = [p for p in study.participants.values() if p.id not in {s.participant for s in served}]
     assert len(flooder) <= 5 and not any(p.attempts for p in flooder)  # ADDRESS_BURST ids, no match
     assert len(list((tmp_path / "recordings").glob("*.tsflog"))) == 4
+
+
+def test_a_signed_study_takes_only_a_link_signed_for_its_worker_id(tmp_path, study_server):
+    """With a link secret, a hello without a worker id, with no signature or with another id's is
+    refused with the page's line; the link signed for its worker id gets the consent text."""
+    import websockets
+
+    from services.study.runner import UNSIGNED
+    from shared.secret import signature
+
+    secret = b"the-study-secret-0123"
+    config = StudyConfig("signed", VARIANTS[:1], trials=1, trial_seconds=1.5, consent="Agree?")
+    stop, url, server = study_server(config, tmp_path, serving=Serving(test_token=TEST, link_secret=secret))
+
+    async def hello(**fields: str) -> dict:
+        async with websockets.connect(url.replace("http", "ws", 1) + "ws") as ws:
+            await ws.send(json.dumps({"type": "hello", **fields}))
+            return json.loads(await ws.recv())
+
+    signed = signature(secret, "W-17")
+    answers = [
+        asyncio.run(hello(**fields))
+        for fields in (
+            {},
+            {"worker": "W-17"},
+            {"worker": "W-18", "sig": signed},
+            {"worker": "W-17", "sig": signed.upper()},
+            {"worker": "W-17", "sig": "é" * 64},
+            {"worker": " W-17 ", "sig": signed},
+        )
+    ]
+    assert answers[:-1] == [{"type": "refused", "reason": UNSIGNED}] * 5
+    assert answers[-1] == {"type": "consent", "text": "Agree?"}
+    stop.set()
+    assert server.result(timeout=60).participants == {}
+
+
+async def _consenting(ws) -> AsyncIterator[dict]:  # noqa: ANN001 - a websockets client connection
+    """A new participant's socket: hello, consent when asked; every other message the server sends."""
+    await ws.send(json.dumps({"type": "hello"}))
+    async for text in ws:
+        message = json.loads(text)
+        if message["type"] == "consent":
+            await ws.send(json.dumps({"type": "consent"}))
+        else:
+            yield message
+
+
+def _killed_at(moment: str, url: str, server: subprocess.Popen, recordings: Path) -> tuple[str, str]:
+    """Play the study as a participant until `moment` of the first trial, then SIGKILL the server:
+    `set_up` (the trial offered, its match started, before Ready), `after_end` (the game's end
+    shown, before the server has written the trial down), `read_back` (the recording complete on
+    disk, its recorder gone, and the server reading it back). Returns (participant, resume key)."""
+    import websockets
+
+    def kill() -> None:
+        if server.poll() is None:
+            os.kill(server.pid, signal.SIGKILL)  # its matches' processes die with it
+            server.wait()
+
+    def kill_at_read_back(recorder: int) -> None:
+        """Once the match's recorder has exited and been reaped, the server reads the recording."""
+        while Path(f"/proc/{recorder}").exists():
+            pass
+        kill()
+
+    async def play() -> tuple[str, str]:
+        me, recorder = ("", ""), 0
+        async with websockets.connect(url.replace("http", "ws", 1) + "ws") as ws:
+            async for message in _consenting(ws):
+                if message["type"] == "participant":
+                    me = (message["participant"], message["key"])
+                elif message["type"] == "trial":
+                    if moment == "set_up":
+                        break
+                    match = f"kill-{me[0]}-s1t1"
+                    recorder = next(
+                        int(p.split()[0]) for p in _processes(pids=True) if "recorder" in p and match in p
+                    )
+                    await ws.send(json.dumps({"type": "ready"}))
+                elif message["type"] == "end":
+                    if moment == "read_back":
+                        await asyncio.to_thread(kill_at_read_back, recorder)
+                    break
+            kill()
+        return me
+
+    return asyncio.run(play())
+
+
+@pytest.mark.parametrize(
+    "moment",
+    [
+        "after_end",
+        pytest.param("set_up", marks=pytest.mark.slow),
+        pytest.param("read_back", marks=pytest.mark.slow),
+    ],
+)
+def test_a_server_killed_at_the_worst_moment_settles_every_attempt_and_plays_no_trial_twice(tmp_path, moment):
+    """A real `tsf study` SIGKILLed during the first trial's set-up, just after its end, or while
+    it reads the recording back; started again, it settles the attempt it left `running` by its
+    recording (`done` if complete, else `failed` and offered again), the participant resumes and
+    finishes, every attempt has its sidecar, and no trial is played again once done."""
+    from services.study.core import Journal, Study
+
+    directory = tmp_path / "kill"
+    with study_command(tmp_path, "kill", trials=2, seconds=2) as (server, url):
+        me = _killed_at(moment, url, server, directory / "recordings")
+    at_kill = {
+        r["attempt"]["match"]: r["attempt"]["status"]
+        for r in Journal.read(directory / "study.jsonl")[1:]
+        if "attempt" in r
+    }
+    assert at_kill == {f"kill-{me[0]}-s1t1": "running"}, "killed before the trial was written down"
+    with study_command(tmp_path, "kill", trials=2, seconds=2) as (server, url):
+        back = asyncio.run(asyncio.wait_for(stand_in(url, resume=me, test=TEST), 120))
+        server.send_signal(signal.SIGTERM)
+        assert server.wait(60) == 0
+    assert back.done, back.refused
+
+    study = Study(StudyConfig.load(tmp_path / "kill.toml"), directory)
+    attempts = study.participants[me[0]].attempts
+    study.close()
+    for attempt in attempts:
+        sidecar = json.loads((directory / "recordings" / f"{attempt['match']}.study.json").read_text())
+        assert sidecar["status"] == attempt["status"] in ("done", "failed")
+    for trial in (1, 2):
+        played = [a["status"] for a in attempts if a["trial"] == trial]
+        assert played.count("done") == 1 and played[-1] == "done", f"trial {trial}: {played}"
+    first = [a["status"] for a in attempts if a["trial"] == 1]
+    complete = (
+        load(directory / "recordings" / f"kill-{me[0]}-s1t1.tsflog").problems() == []
+        if moment != "set_up"
+        else False
+    )
+    assert first == (["done"] if complete else ["failed", "done"]), (moment, first)
+    if moment == "read_back":
+        assert complete, "the recording was whole on disk when the server died"
+
+
+def test_a_participant_who_declines_is_told_so_and_nothing_is_recorded(tmp_path, study_server):
+    """The consent text states the study's numbers and pay; a decline gets a closing line and the
+    socket closes: no id, no journal line, no match."""
+    import websockets
+
+    from services.study.runner import DECLINED
+
+    config = StudyConfig("decline", VARIANTS[:1], trials=2, trial_seconds=1.5, pay="GBP 1 via Prolific")
+    stop, url, server = study_server(config, tmp_path)
+
+    async def decline() -> list[dict]:
+        async with websockets.connect(url.replace("http", "ws", 1) + "ws") as ws:
+            await ws.send(json.dumps({"type": "hello"}))
+            seen = [json.loads(await ws.recv())]
+            await ws.send(json.dumps({"type": "decline"}))
+            seen += [json.loads(text) async for text in ws]  # until the server closes
+            return seen
+
+    consent, *after = asyncio.run(asyncio.wait_for(decline(), 30))
+    assert consent == {"type": "consent", "text": config.consent_text()}
+    assert (
+        "play 2 games of 1.5 seconds each" in consent["text"] and "Pay: GBP 1 via Prolific" in consent["text"]
+    )
+    assert after == [{"type": "declined", "text": DECLINED}]
+    stop.set()
+    study = server.result(timeout=60)
+    assert study.participants == {} and len((tmp_path / "study.jsonl").read_text().splitlines()) == 1
+    assert not (tmp_path / "recordings").exists()
+
+
+def test_a_practice_game_comes_before_the_first_recorded_one_and_is_no_trial(tmp_path, study_server):
+    """With `practice_seconds`, a new participant first plays a short game with the scripted
+    partner: offered as practice, kept apart in practice/, neither in the journal nor a sidecar;
+    a participant who resumes after beginning the recorded trials gets none."""
+    config = StudyConfig("practice", VARIANTS[:1], trials=1, trial_seconds=1.5, seed=3, practice_seconds=1.0)
+    stop, url, server = study_server(config, tmp_path)
+    report = asyncio.run(asyncio.wait_for(stand_in(url, test=TEST), 120))
+    again = asyncio.run(
+        asyncio.wait_for(stand_in(url, resume=(report.participant, report.key), test=TEST), 60)
+    )
+    stop.set()
+    study = server.result(timeout=60)
+
+    assert report.done and report.agents == ["a practice partner", "Agent 1"] and len(report.kills) == 2
+    assert again.done and again.agents == [], "done already: no practice, no trial"
+    (practice,) = (tmp_path / "practice").glob("*.tsflog")
+    recording = load(practice)
+    assert recording.problems() == [] and len(recording.states) == 30 + 1  # 1 s at 30 frames a second
+    assert set(recording.start.policies.values()) == {
+        HUMAN,
+        "circle" if report.role == "shooter" else "mirror",
+    }
+    assert [a["match"] for a in study.participants["P001"].attempts] == ["practice-P001-s1t1"]
+    assert [p.name for p in (tmp_path / "recordings").iterdir() if "practice-P001-practice" in p.name] == []

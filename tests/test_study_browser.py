@@ -18,7 +18,7 @@ from conftest import CHROMIUM
 
 from services.human.gateway import Web
 from services.study.core import StudyConfig, Variant
-from services.study.runner import TAKEN, Serving
+from services.study.runner import DECLINED, TAKEN, Serving
 
 pytestmark = pytest.mark.skipif(
     CHROMIUM is None or shutil.which("openssl") is None,
@@ -71,6 +71,22 @@ def test_a_crowd_worker_takes_part_once_over_tls_and_gets_a_completion_code(brow
     (participant,) = study.participants.values()
     assert (participant.worker, participant.code) == ("W-17", code)
     assert [a["status"] for a in participant.attempts] == ["done"]
+
+
+def test_a_participant_who_declines_gets_a_closing_page(browser, tls_study):
+    expect = pytest.importorskip("playwright.sync_api").expect
+    url, stop, server = tls_study
+    page = browser.new_context(ignore_https_errors=True).new_page()
+    page.goto(url + "?workerId=W-18")
+    expect(page.locator("#title")).to_have_text("Before we start", timeout=20_000)
+    assert "play 1 game of 2 seconds each" in page.locator("#text").inner_text()
+    page.click("#no")
+    expect(page.locator("#text")).to_have_text(DECLINED, timeout=20_000)
+    assert page.locator("#go").is_hidden() and page.locator("#no").is_hidden()
+    page.wait_for_timeout(500)  # the socket closed: the page stays as it is
+    expect(page.locator("#text")).to_have_text(DECLINED)
+    stop.set()
+    assert server.result(timeout=60).participants == {}
 
 
 def test_sockets_from_other_origins_are_refused_and_errors_say_nothing_internal(tls_study):

@@ -9,7 +9,7 @@ import zenoh
 
 from services.agent.player import Player
 from shared import keys
-from shared.bus import BusConfig, Drops, session, stop_on_summary, subscribe
+from shared.bus import BusConfig, Drops, session, stop_on_summary, subscribe, until_stopped
 from shared.messages import MessageError, PolicySwitch, State
 
 log = logging.getLogger("tsf.agent")
@@ -50,5 +50,5 @@ def run_agent(
             stop_on_summary(z, match, stop, drops),
             z.liveliness().declare_token(keys.alive(match, "agent", role)),
         ):
-            stop.wait()
+            until_stopped(stop)
     return drops

@@ -88,9 +88,11 @@ _FIELDS: dict[str, dict[str, Callable[[object], bool]]] = {
         "key": _short_text,
         "obs": _is_bool,
         "worker": _short_text,
+        "sig": _short_text,
         "test": _short_text,
     },
     "consent": {},
+    "decline": {},
 }
 
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import ipaddress
 import json
 import logging
 import mimetypes
@@ -46,7 +47,7 @@ from services.human.core import (
 )
 from services.launch import HUMAN
 from shared import keys
-from shared.bus import BusConfig, Drops, session, subscribe
+from shared.bus import BusConfig, Drops, session, subscribe, until_stopped
 from shared.game import GameConfig
 from shared.messages import Action, GameEvent, Message, MessageError, Start, State, Summary
 
@@ -76,8 +77,9 @@ HEADERS = (
 class Web:
     """How the page is served. `cert`/`key` (PEM files) turn on TLS; `origins` are further origins
     (`https://study.example.org`) whose pages may open the socket besides the server's own (the
-    Host the browser asked for); `per_address` caps the sockets one address holds at once (0: no
-    cap; behind a reverse proxy every client has the proxy's address, so let the proxy cap them)."""
+    Host the browser asked for), and whose host names requests may ask for (`known_host`);
+    `per_address` caps the sockets one address holds at once (0: no cap; behind a reverse proxy
+    every client has the proxy's address, so let the proxy cap them)."""
 
     host: str = "127.0.0.1"
     port: int = 8000
@@ -292,6 +294,23 @@ def same_origin(request: Request, allowed: tuple[str, ...], scheme: str = "http"
     return parts.scheme == scheme and parts.netloc == request.headers.get("Host")
 
 
+def known_host(request: Request, web: Web) -> bool:
+    """Whether the Host the browser asked for is this server's. Against DNS rebinding: a page of
+    evil.example whose name is then pointed at this server's address sends Host and Origin both
+    evil.example, which the Origin check alone takes for the server's own page. Taken: an address
+    (an IP literal, or localhost, which browsers resolve themselves: no one can re-point them), the
+    name the server listens on, or an allowed origin's (`--origin`, a reverse proxy's public name)."""
+    host = request.headers.get("Host")
+    if host is None:
+        return False
+    name = (urlsplit(f"//{host}").hostname or "").lower()
+    with contextlib.suppress(ValueError):
+        ipaddress.ip_address(name)
+        return True
+    allowed = {urlsplit(origin).netloc.lower() for origin in web.origins}
+    return name in ("localhost", web.host.lower()) or host.lower() in allowed
+
+
 Handler = Callable[[ServerConnection, zenoh.Session | None], Awaitable[None]]
 
 
@@ -301,7 +320,7 @@ class Gateway:
     `handler(ws, z)` serves one socket. The session listens where `bus` says, so that a match's sim
     can connect to it (MatchPlan.peers); with no `bus` there is none (z is None): the study server
     opens a session per trial instead, to that match's sim alone. Served as `web` says: TLS, the
-    Origin check, a cap on sockets per address, no version banner."""
+    Host and Origin checks, a cap on sockets per address, no version banner."""
 
     def __init__(self, bus: BusConfig | None, handler: Handler, web: Web = Web()) -> None:
         self.bus, self.handler, self.web = bus, handler, web
@@ -312,6 +331,7 @@ class Gateway:
         self.thread = threading.Thread(target=self.loop.run_until_complete, args=(self._run(),), daemon=True)
         self.closing: asyncio.Future | None = None
         self.sockets: Counter[str] = Counter()  # open sockets per address
+        self.misdirected = False  # a request for another host has been logged
 
     @property
     def url(self) -> str:
@@ -334,6 +354,14 @@ class Gateway:
     def _request(self, connection: ServerConnection, request: Request) -> Response | None:
         if duplicated(request):
             return connection.respond(400, "bad request\n")
+        if not known_host(request, self.web):
+            if not self.misdirected:
+                self.misdirected = True
+                log.warning(
+                    "refused a request for host %r (and say so once): not this server's name; a "
+                    "public name goes in --origin", request.headers.get("Host", "")[:80],
+                )  # fmt: skip
+            return connection.respond(421, "misdirected request\n")
         if request.path.split("?", 1)[0] == SOCKET_PATH:
             if not same_origin(request, self.web.origins, "https" if self.web.cert else "http"):
                 return connection.respond(403, "forbidden\n")
@@ -436,4 +464,4 @@ def run_human(
     stop = stop or threading.Event()
     with Gateway(bus, seat_handler(match, SeatBook(tokens), stop), Web(host, port)) as gateway:
         on_ready(gateway)
-        stop.wait()
+        until_stopped(stop)

@@ -17,7 +17,7 @@ import zenoh
 
 from services.recorder.log import GapTracker, LogWriter, read_log
 from shared import keys
-from shared.bus import BusConfig, Drops, session
+from shared.bus import BusConfig, Drops, session, until_stopped
 from shared.errors import Failure, UsageError
 from shared.game import ROLES, GameConfig
 from shared.messages import Message, MessageError, Start, State, Summary, decode_any
@@ -95,7 +95,7 @@ def run_recorder(
         with session(bus) as z, z.declare_subscriber(keys.everything(match), on_sample):
             _wait_for_seats(z, match, wait_seats, stop)
             with z.liveliness().declare_token(keys.alive(match, "recorder")):
-                stop.wait()
+                until_stopped(stop)
                 time.sleep(0.5)  # actions still in flight after the summary (they come over other links)
         inbox.put(_DONE)
         drainer.join()

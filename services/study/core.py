@@ -32,10 +32,13 @@ from shared.secret import same_secret
 NAME = re.compile(r"[A-Za-z0-9_]{1,24}")
 DEFAULT_CONSENT = (
     "This study is about teamwork between people and computer agents in a video game. You will "
-    "play several one-minute games with different computer teammates. Your key presses and the "
-    "games are recorded under a participant number, not your name. You may stop at any time."
+    "play {games} of {seconds} seconds each with different computer teammates, about "
+    "{minutes} minutes in all. Your key presses and the games are recorded under a participant "
+    "number, not your name. You may stop at any time."
 )
+SET_UP = 20.0  # seconds a game takes to set up: for the time a study takes in all, and the waits shown
 DEFAULT_END = "Thank you for taking part. You may close this window now."
+PRACTICE = ("practice", "circle", "mirror")  # the practice partner: the library's scripted bait and shooter
 
 
 @dataclass(frozen=True)
@@ -74,9 +77,15 @@ class StudyConfig:
     trial_seconds: float = 60.0
     seed: int = 0
     roles: tuple[str, ...] = ROLES  # the roles participants are given
+    # What a participant agrees to: {games} ("15 games"), {seconds}, {minutes} (in all) and {pay}
+    # are filled in from the config (`consent_text`); a `pay` the text does not place is added at its end.
     consent: str = DEFAULT_CONSENT
+    pay: str = ""  # e.g. "GBP 2.50 through Prolific"
     end: str = DEFAULT_END
     instructions: dict[str, str] = field(default_factory=dict)  # role -> text; else the page's own
+    # A practice game of this many seconds before the first recorded one (0: none), with a scripted
+    # partner (PRACTICE); it is no trial: not in the journal, its recording apart in practice/.
+    practice_seconds: float = 0.0
 
     def __post_init__(self) -> None:
         if not NAME.fullmatch(self.name):
@@ -89,10 +98,19 @@ class StudyConfig:
             raise ValueError("need at least one trial")
         if self.trial_seconds not in DURATION:
             raise ValueError(f"trial_seconds {self.trial_seconds}: outside the range {DURATION}")
+        if self.practice_seconds and self.practice_seconds not in DURATION:
+            raise ValueError(f"practice_seconds {self.practice_seconds}: 0 (none) or in the range {DURATION}")
         if self.seed not in SEEDS:
             raise ValueError(f"seed {self.seed}: outside the range {SEEDS}")
         if not self.roles or not set(self.roles) <= set(ROLES):
             raise ValueError(f"roles must be among {ROLES}")
+        try:
+            self.consent_text()
+        except (KeyError, IndexError, ValueError) as error:
+            raise ValueError(
+                f"consent: cannot fill in {error} (the text may name {{games}}, {{seconds}}, "
+                "{minutes} and {pay}; a brace itself is written {{ or }})"
+            ) from None
         for variant in self.variants:
             for role in self.roles:
                 agent = other(role)
@@ -102,6 +120,16 @@ class StudyConfig:
     @property
     def frames(self) -> int:
         return round(self.trial_seconds * FPS)
+
+    def consent_text(self) -> str:
+        """The consent text as shown: the study's numbers filled in, and its pay."""
+        games = self.trials * len(self.variants)
+        minutes = math.ceil(games * (self.trial_seconds + SET_UP) / 60)
+        counted = f"{games} game{'s' if games != 1 else ''}"
+        shown = self.consent.format(
+            games=counted, seconds=f"{self.trial_seconds:g}", minutes=minutes, pay=self.pay
+        )
+        return shown if not self.pay or "{pay}" in self.consent else f"{shown}\n\nPay: {self.pay}"
 
     @classmethod
     def load(cls, path: str | Path) -> StudyConfig:
@@ -149,10 +177,11 @@ class Trial:
     variant: Variant
     match: str
     seed: int
+    practice: bool = False  # the practice game: no trial of the protocol
 
     @property
     def agent(self) -> str:
-        return f"Agent {self.session}"
+        return "a practice partner" if self.practice else f"Agent {self.session}"
 
 
 @dataclass
@@ -225,6 +254,11 @@ def worker_id(given: object) -> str | None:
         return None
     trimmed = given.strip()
     return trimmed if WORKER.fullmatch(trimmed) else None
+
+
+def _seed(match: str) -> int:
+    """A game's seed from its match id: fixed by the protocol, different for every attempt."""
+    return int.from_bytes(hashlib.blake2b(match.encode(), digest_size=4).digest(), "big")
 
 
 class Study:
@@ -304,9 +338,16 @@ class Study:
         match = f"{self.config.name}-{participant.id}-s{session}t{trial}" + (
             f"-a{attempt}" if attempt > 1 else ""
         )
-        seed = int.from_bytes(hashlib.blake2b(match.encode(), digest_size=4).digest(), "big")
         variant = self.config.variants[participant.order[session - 1]]
-        return Trial(participant.id, participant.role, session, trial, attempt, variant, match, seed)
+        return Trial(participant.id, participant.role, session, trial, attempt, variant, match, _seed(match))
+
+    def practice(self, participant: Participant) -> Trial | None:
+        """The practice game before the participant's first recorded one, or None (none configured,
+        or the recorded ones begun). A new match id each time: a reload plays it again."""
+        if not self.config.practice_seconds or participant.attempts:
+            return None
+        match = f"{self.config.name}-{participant.id}-practice-{secrets.token_hex(3)}"
+        return Trial(participant.id, participant.role, 1, 1, 1, Variant(*PRACTICE), match, _seed(match), True)
 
     def unsettled(self) -> list[Trial]:
         """The attempts left `running` or `dropped` (a server killed mid-trial, a page closed): each

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from collections import Counter
 from pathlib import Path
 
@@ -45,6 +46,9 @@ def test_the_shipped_studies_load_and_name_library_policies(name: str) -> None:
         ({"trial_seconds": float("nan")}, r"trial_seconds nan: outside the range"),
         ({"seed": -1}, r"seed -1: outside the range 0 to 4294967295"),
         ({"roles": ("pilot",)}, "roles must be"),
+        ({"practice_seconds": 1e9}, r"practice_seconds 1000000000.0: 0 \(none\) or in the range 0.1"),
+        ({"consent": "You earn {money}."}, r"consent: cannot fill in 'money' \(the text may name \{games\}"),
+        ({"consent": "A { alone"}, "consent: cannot fill in expected '}' before end of string"),
     ],
 )
 def test_bad_configs_are_refused(changes: dict, message: str) -> None:
@@ -184,3 +188,30 @@ def test_a_worker_id_is_trimmed_validated_and_taken_in_any_case(tmp_path):
     assert study.taken("w-17") and study.taken("W-17") and not study.taken("W-18") and not study.taken("")
     study.close()
     assert Study(config(), tmp_path).taken("w-17")  # read back from the journal
+
+
+def test_the_consent_text_states_the_studys_numbers_and_pay() -> None:
+    """Games, their length and the time in all come from the config, not a fixed "one-minute"."""
+    study = config(trials=2, trial_seconds=30.0)
+    games = 2 * len(study.variants)
+    shown = study.consent_text()
+    assert f"play {games} games of 30 seconds each" in shown and "minute games" not in shown
+    assert f"about {math.ceil(games * 50 / 60)} minutes in all" in shown and "Pay" not in shown
+    paid = dataclasses.replace(study, pay="GBP 2.50 through Prolific")
+    assert paid.consent_text().endswith("\n\nPay: GBP 2.50 through Prolific")
+    placed = dataclasses.replace(paid, consent="{games} for {pay}; {{braces}} stay.")
+    assert placed.consent_text() == f"{games} games for GBP 2.50 through Prolific; {{braces}} stay."
+    assert study.hash() != paid.hash(), "what a participant agrees to is part of the study's version"
+
+
+def test_a_practice_game_only_before_the_recorded_ones_and_a_new_match_each_time(tmp_path: Path) -> None:
+    assert Study(config(), tmp_path / "none").practice(Study(config(), tmp_path / "n").arrive()) is None
+    study = Study(config(practice_seconds=5.0), tmp_path / "study")
+    participant = study.arrive()
+    first, again = study.practice(participant), study.practice(participant)
+    assert first.practice and first.agent == "a practice partner" and first.match != again.match
+    assert first.variant.plan("shooter", 0) == {"shooter": "mirror"} and first.variant.plan("bait", 0) == {
+        "bait": "circle"
+    }
+    study.record(study.next_trial(participant), "running")
+    assert study.practice(participant) is None, "the recorded trials have begun"

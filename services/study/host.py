@@ -38,8 +38,12 @@ from shared.messages import (
     MatchStop,
     MessageError,
     RecordingChunk,
+    authentic,
     decode,
+    recording_auth,
+    sealed,
 )
+from shared.secret import same_secret
 
 log = logging.getLogger("tsf.host")
 WAIT_SERVICES = 30.0  # seconds a hosted match's sim waits for its recorder and adapter
@@ -88,8 +92,10 @@ def sha256(path: Path) -> str:
 class Host:
     """The bookkeeping of one match host, apart from the bus: its matches and their recordings."""
 
-    def __init__(self, name: str, slots: int, out: Path) -> None:
-        self.name, self.slots, self.out = name, slots, out
+    def __init__(self, name: str, slots: int, out: Path, secret: bytes) -> None:
+        if not secret:
+            raise ValueError("a match host needs the study's host secret")
+        self.name, self.slots, self.out, self.secret = name, slots, out, secret
         self.sender = f"host/{name}"
         self.running: dict[str, tuple[threading.Event, threading.Thread]] = {}
         self.finished: dict[str, Path] = {}  # match -> its recording, served in chunks
@@ -99,7 +105,16 @@ class Host:
     def status(self) -> HostStatus:
         with self.lock:
             free = max(0, self.slots - len(self.running))
-        return HostStatus(match=self.name, frame=0, sender=self.sender, slots=self.slots, free=free)
+        return sealed(
+            HostStatus(match=self.name, frame=0, sender=self.sender, slots=self.slots, free=free), self.secret
+        )
+
+    def check(self, message: MatchOffer | MatchStop) -> None:
+        """MessageError unless `message` is the study server's, sealed with the secret."""
+        if not authentic(message, self.secret):
+            raise MessageError(
+                "unauthenticated", f"{message.TYPE} from {message.sender} not sealed with the secret"
+            )
 
     def refusal(self, offer: MatchOffer) -> str:
         """Why this host cannot run `offer` now; "" if it can."""
@@ -112,8 +127,13 @@ class Host:
                 return f"host {self.name} has no free slot"
         return ""
 
-    def chunk(self, match: str, offset: int) -> RecordingChunk:
-        """Up to CHUNK bytes of a finished match's recording from `offset`; ValueError if there is none."""
+    def chunk(self, key: str, offset: str, auth: object) -> RecordingChunk:
+        """Up to CHUNK bytes from `offset` of the recording of the finished match `key` names (a
+        recording query's, signed with `auth`); ValueError if the query is not the server's or
+        there is no such recording."""
+        if not same_secret(auth, recording_auth(key, offset, self.secret)):
+            raise MessageError("unauthenticated", f"a query for {key} not signed with the secret")
+        match, offset = keys.parse(key).match, int(offset)
         with self.lock:
             path = self.finished.get(match)
         if path is None or not path.exists():
@@ -122,16 +142,16 @@ class Host:
             size = data.seek(0, 2)
             data.seek(min(offset, size))
             block = data.read(CHUNK)
-        return RecordingChunk(match=match, frame=0, sender=self.sender, offset=offset, size=size, data=block)
+        chunk = RecordingChunk(match=match, frame=0, sender=self.sender, offset=offset, size=size, data=block)
+        return sealed(chunk, self.secret)
 
 
-def run_match_host(bus: BusConfig, name: str, slots: int, out: Path, stop: threading.Event) -> int:
-    """Serve matches until `stop`; then end the running ones. Returns the number of matches run."""
-    if not bus.connect:
-        raise UsageError(
-            "--connect", "(none)", "a match host needs the router's endpoint, e.g. tcp/10.0.0.1:7447"
-        )
-    host = Host(keys.check_match(name), slots, out)
+def run_match_host(
+    bus: BusConfig, name: str, slots: int, out: Path, stop: threading.Event, secret: bytes
+) -> int:
+    """Serve matches until `stop`; then end the running ones. Returns the number of matches run.
+    `secret` is the study's host secret."""
+    host = Host(keys.check_match(name), slots, out, secret)
     drops = Drops(host.sender)
     try:
         z = zenoh.open(bus.to_zenoh())
@@ -155,6 +175,7 @@ def run_match_host(bus: BusConfig, name: str, slots: int, out: Path, stop: threa
             host.finished[plan.match] = path
         log.info("match %s ended%s; recording %d bytes", plan.match, f": {error}" if error else "", size)
         done = MatchDone(match=plan.match, frame=0, sender=host.sender, error=error, size=size, sha256=digest)
+        done = sealed(done, host.secret)
         if not z.is_closed():
             z.put(keys.host_done(name), done.encode())
             put_status()
@@ -163,6 +184,7 @@ def run_match_host(bus: BusConfig, name: str, slots: int, out: Path, stop: threa
         nonlocal played
         try:
             offer = decode(query.payload.to_bytes() if query.payload else b"", MatchOffer)
+            host.check(offer)
         except MessageError as error:
             drops.drop(keys.host_offer(name), error)
             return
@@ -181,13 +203,17 @@ def run_match_host(bus: BusConfig, name: str, slots: int, out: Path, stop: threa
         if thread is not None:
             thread.start()
             log.info("runs match %s", offer.match)
-        answer = MatchAnswer(
-            match=offer.match, frame=0, sender=host.sender, accepted=plan is not None, reason=reason
+        answer = sealed(
+            MatchAnswer(
+                match=offer.match, frame=0, sender=host.sender, accepted=plan is not None, reason=reason
+            ),
+            host.secret,
         )
         query.reply(keys.host_offer(name), answer.encode())
         put_status()
 
     def on_stop(message: MatchStop) -> None:
+        host.check(message)
         with host.lock:
             ended = host.running.get(message.match, (None,))[0]
         if ended is not None:
@@ -196,11 +222,14 @@ def run_match_host(bus: BusConfig, name: str, slots: int, out: Path, stop: threa
 
     def on_recording(query: zenoh.Query) -> None:
         try:
-            match = keys.parse(query.key_expr).match
-            chunk = host.chunk(match, int(query.parameters.get("offset", "0")))
+            parameters = query.parameters
+            chunk = host.chunk(
+                str(query.key_expr), int(parameters.get("offset", "0")), parameters.get("auth")
+            )
         except ValueError as error:
             drops.drop(str(query.key_expr), error)
-            query.reply_err(str(error)[:300].encode())
+            if getattr(error, "reason", "") != "unauthenticated":  # a peer without the secret learns nothing
+                query.reply_err(str(error)[:300].encode())
             return
         query.reply(query.key_expr, chunk.encode())
 

@@ -1,4 +1,5 @@
-"""The match host's bookkeeping, apart from the bus: offers in and out, refusals, chunks."""
+"""The match host's bookkeeping, apart from the bus: offers in and out, refusals, chunks, and the
+seal on every message."""
 
 from __future__ import annotations
 
@@ -11,10 +12,21 @@ import pytest
 from services.adapter.core import AdapterConfig
 from services.launch import HUMAN, MatchPlan
 from services.study.host import Host, offer_of, plan_of, sha256
+from shared import keys
 from shared.bus import BusConfig
-from shared.messages import CHUNK, MatchOffer, decode
+from shared.messages import (
+    CHUNK,
+    MatchOffer,
+    MatchStop,
+    MessageError,
+    authentic,
+    decode,
+    recording_query,
+    sealed,
+)
 
 ROUTER = BusConfig(connect=("tcp/10.0.0.1:7447",))
+SECRET = b"the-hosts-secret-0123"
 
 
 @pytest.mark.parametrize(
@@ -42,7 +54,7 @@ def test_an_offer_the_host_cannot_fill_is_refused(tmp_path: Path) -> None:
         plan_of(dataclasses.replace(offer, shooter="S99"), tmp_path, ROUTER)
     with pytest.raises(ValueError, match="adaptive agent"):
         plan_of(dataclasses.replace(offer, adapter="adaptive-T30-cem"), tmp_path, ROUTER)
-    host = Host("lab-1", 1, tmp_path)
+    host = Host("lab-1", 1, tmp_path, SECRET)
     assert host.refusal(offer) == ""
     assert "update its checkout" in host.refusal(dataclasses.replace(offer, library="0" * 16))
     host.running["other"] = (threading.Event(), threading.Thread())
@@ -55,14 +67,47 @@ def test_an_offer_the_host_cannot_fill_is_refused(tmp_path: Path) -> None:
 def test_a_recording_is_served_in_chunks_that_add_up_to_its_hash(tmp_path: Path) -> None:
     path = tmp_path / "m.tsflog"
     path.write_bytes(bytes(range(256)) * (CHUNK // 100))
-    host = Host("lab-1", 1, tmp_path)
+    host = Host("lab-1", 1, tmp_path, SECRET)
+    key = keys.host_recording("lab-1", "m")
+
+    def chunk(offset: int):  # noqa: ANN202 - a RecordingChunk
+        """The chunk the server's signed query gets."""
+        parameters = dict(p.split("=") for p in recording_query(key, offset, SECRET).split("?")[1].split(";"))
+        return host.chunk(key, parameters["offset"], parameters["auth"])
+
     with pytest.raises(ValueError, match="no recording of m"):
-        host.chunk("m", 0)
+        chunk(0)
     host.finished["m"] = path
     data = b""
     while len(data) < path.stat().st_size:
-        chunk = host.chunk("m", len(data))
-        assert chunk.size == path.stat().st_size and 0 < len(chunk.data) <= CHUNK
-        data += chunk.data
+        served = chunk(len(data))
+        assert served.size == path.stat().st_size and 0 < len(served.data) <= CHUNK
+        assert authentic(served, SECRET) and not authentic(served, b"another-secret-0123")
+        data += served.data
     assert data == path.read_bytes() and len(sha256(path)) == 64
-    assert host.chunk("m", len(data)).data == b""
+    assert chunk(len(data)).data == b""
+    signed = recording_query(key, 0, SECRET).rsplit("=", 1)[1]
+    for offset, auth in (("0", ""), ("0", None), ("1", signed), ("0", signed.upper()), ("0", "é" * 64)):
+        with pytest.raises(MessageError, match="unauthenticated"):
+            host.chunk(key, offset, auth)
+
+
+def test_a_message_is_authentic_only_as_sealed_with_the_secret(tmp_path: Path) -> None:
+    """A host takes an offer or a stop only if the study's secret sealed it, and seals its own."""
+    host = Host("lab-1", 1, tmp_path, SECRET)
+    offer = offer_of(MatchPlan("m", bait=HUMAN, shooter="S5"), "study")
+    good = decode(sealed(offer, SECRET).encode(), MatchOffer)  # as it arrives
+    host.check(good)
+    for bad in (
+        offer,  # unsealed
+        sealed(offer, b"another-secret-0123"),
+        dataclasses.replace(good, seed=1),  # altered after sealing
+        dataclasses.replace(good, auth=good.auth.upper()),
+    ):
+        with pytest.raises(MessageError, match="unauthenticated"):
+            host.check(bad)
+    with pytest.raises(MessageError, match="unauthenticated"):
+        host.check(MatchStop(match="m", frame=0, sender="study"))
+    assert authentic(host.status(), SECRET) and not authentic(host.status(), b"another-secret-0123")
+    with pytest.raises(ValueError, match="secret"):
+        Host("lab-1", 1, tmp_path, b"")

@@ -7,6 +7,10 @@ for the host's MatchDone, and fetches the recording chunk by chunk into the stud
 written aside, its sha256 checked against the host's, and only then put in place, so a recording
 in the study directory is always whole. A host that goes away mid-trial fails the trial (it is
 offered again, as after a local timeout); so does a host that does not answer or refuses.
+
+Every message both ways is sealed with the study's host secret (shared.messages.sealed): what a
+peer without it puts on the router (slots, answers, a match's end, chunks of a recording) is
+counted, logged once and dropped, so it can neither offer slots nor return a recording.
 """
 
 from __future__ import annotations
@@ -33,7 +37,10 @@ from shared.messages import (
     MatchStop,
     MessageError,
     RecordingChunk,
+    authentic,
     decode,
+    recording_query,
+    sealed,
 )
 
 log = logging.getLogger("tsf.study")
@@ -45,7 +52,10 @@ SENDER = "study"
 class Remote:
     """The match hosts on the router, and the matches offered to them."""
 
-    def __init__(self, bus: BusConfig) -> None:
+    def __init__(self, bus: BusConfig, secret: bytes) -> None:
+        if not secret:
+            raise ValueError("match hosts need the study's host secret")
+        self.secret = secret
         try:
             self.z = zenoh.open(bus.to_zenoh())
         except zenoh.ZError as error:
@@ -81,7 +91,14 @@ class Remote:
             self.changed.notify_all()
         self.on_change()
 
+    def _check(self, message: HostStatus | MatchDone) -> None:
+        if not authentic(message, self.secret):
+            raise MessageError(
+                "unauthenticated", f"{message.TYPE} from {message.sender} not sealed with the secret"
+            )
+
     def _on_status(self, status: HostStatus) -> None:
+        self._check(status)
         with self.changed:
             if status.match not in self.alive or self.slots.get(status.match) == status.slots:
                 return
@@ -90,6 +107,7 @@ class Remote:
         self.on_change()
 
     def _on_done(self, done: MatchDone) -> None:
+        self._check(done)
         with self.changed:
             if done.match not in self.offered:
                 raise MessageError("unknown_match", f"no match {done.match} was offered")
@@ -99,7 +117,7 @@ class Remote:
     def run(self, host: str, plan: MatchPlan, stop: threading.Event) -> None:
         """Run `plan` on `host` and put its recording into `plan.directory`, hash checked; a
         Failure says why the match or its recording failed (the recording, if whole, is kept)."""
-        offer = offer_of(plan, SENDER)
+        offer = sealed(offer_of(plan, SENDER), self.secret)
         answer = self._ask(keys.host_offer(host), MatchAnswer, payload=offer.encode())
         if answer is None:
             raise Failure(f"match host {host} did not answer the offer of {plan.match}")
@@ -128,9 +146,8 @@ class Remote:
                 if time.monotonic() > deadline:
                     raise Failure(f"match host {host} never reported the end of {plan.match}")
                 if stop.is_set() and not asked:
-                    self.z.put(
-                        keys.host_stop(host), MatchStop(match=plan.match, frame=0, sender=SENDER).encode()
-                    )
+                    stopping = sealed(MatchStop(match=plan.match, frame=0, sender=SENDER), self.secret)
+                    self.z.put(keys.host_stop(host), stopping.encode())
                     deadline, asked = min(deadline, time.monotonic() + ENDING), True
                 self.changed.wait(0.2)
             return self.done.pop(plan.match)
@@ -144,7 +161,7 @@ class Remote:
         try:
             with part.open("wb") as out:
                 while (offset := out.tell()) < done.size:
-                    selector = f"{keys.host_recording(host, match)}?offset={offset}"
+                    selector = recording_query(keys.host_recording(host, match), offset, self.secret)
                     chunk = self._ask(selector, RecordingChunk)
                     if chunk is None or chunk.offset != offset or chunk.size != done.size or not chunk.data:
                         raise Failure(
@@ -164,7 +181,9 @@ class Remote:
             if reply.ok is None:
                 continue
             try:
-                return decode(reply.ok.payload.to_bytes(), kind)
+                message = decode(reply.ok.payload.to_bytes(), kind)
+                self._check(message)
+                return message
             except MessageError as error:
                 self.drops.drop(selector, error)
         return None

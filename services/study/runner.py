@@ -15,11 +15,12 @@ machine's `max_matches` are taken, a trial's match is offered to a live host wit
 (services/study/remote.py), the participant's seat is bridged over the router, and the host's
 recording is fetched into the study directory with its hash checked before the trial is judged.
 
-Study messages (down): `consent` (text), `participant` (id and resume key, kept by the browser),
-`trial` (session, trial, role, the agent's label; what to read first), `queue` (place, seconds
-to wait, while the trial waits for a free match), then the gateway's `state`/`end` frames, and at
-last `done` (the end text) or `problem`. Up: `hello` (optionally with the participant id and key
-to resume), `consent`, `ready`, `keys`.
+Study messages (down): `consent` (text), `declined` (text: the participant said no, nothing was
+recorded), `participant` (id and resume key, kept by the browser), `wait` (reason, seconds: a
+game is being set up), `trial` (session, trial, role, the agent's label; what to read first),
+`queue` (place, seconds to wait, while the trial waits for a free match), then the gateway's
+`state`/`end` frames, and at last `done` (the end text) or `problem`. Up: `hello` (optionally
+with the participant id and key to resume), `consent` or `decline`, `ready`, `keys`.
 
 Each trial's metadata goes into a sidecar `<match>.study.json` beside its recording, rather than
 onto the bus: the participant id is nobody's business but the study's (bus traffic may cross a lab
@@ -31,6 +32,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import json
 import logging
 import threading
@@ -50,18 +52,17 @@ from services.human.gateway import Bridge, Gateway, Handler, Outbox, Web, receiv
 from services.launch import HUMAN, MatchPlan, match_buses, run_match
 from services.recorder.recording import load
 from services.recorder.service import recording_path
-from services.study.core import Admission, Participant, Study, StudyConfig, Trial, worker_id
+from services.study.core import SET_UP, Admission, Participant, Study, StudyConfig, Trial, worker_id
 from services.study.remote import Remote
 from shared import keys
-from shared.bus import BusConfig, free_endpoint
+from shared.bus import BusConfig, free_endpoint, until_stopped
 from shared.game import FPS, other
-from shared.secret import same_secret
+from shared.secret import same_secret, signature
 
 log = logging.getLogger("tsf.study")
 PROBLEM = "The game could not be started. Please tell the experimenter."
 RETRIES = 3  # failed attempts in a row before the participant is told of a problem
 READ_TIMEOUT = 900.0  # seconds a participant may take to read the consent text or the instructions
-START_UP = 20.0  # seconds a match takes to start, for the estimated wait
 THREADS = 512  # threads for blocking work off the event loop: two per running match, and more
 DRAIN = 60.0  # seconds the stopping server waits for its matches to end and be written down
 WARM_UP = 60.0  # seconds to wait for a match's processes before offering its trial anyway
@@ -70,6 +71,9 @@ ADDRESS_BURST = 5  # ... to one address
 BUSY = "Too many people are starting right now. Please try again in a minute."
 TAKEN = "This worker id has already taken part in this study."
 NO_WORKER = "This link's worker id is not one this study can take (letters, digits and _ . : @ + - only)."
+DECLINED = "You declined to take part. Nothing about you was recorded. You may close this window now."
+SETTING_UP = "Your next game is being set up."
+UNSIGNED = "This link is not signed for its worker id. Please open the link exactly as the study gave it."
 
 
 @dataclass(frozen=True)
@@ -87,6 +91,10 @@ class Serving:
     ready_timeout: float = 120.0  # seconds an offered trial waits for Ready; then its match and slot go
     starting: int = 2  # matches starting up at once (until their sim listens)
     hosts: BusConfig | None = None  # the router where match hosts offer their slots; None: local only
+    # A signed link's secret: new participants need a worker id and its signature (`sig`, the
+    # HMAC-SHA256 of the id with this secret, shared.secret.signature); b"": links are not signed.
+    link_secret: bytes = b""
+    host_secret: bytes = b""  # shared with the match hosts: every message between them is sealed with it
 
 
 SERVING, WEB = Serving(), Web()
@@ -115,7 +123,7 @@ class Socket:
     async def _read(self) -> None:
         try:
             async for text in self.ws:
-                message = self.controls.receive(text, ("consent", "ready", "keys"))
+                message = self.controls.receive(text, ("consent", "decline", "ready", "keys"))
                 if message is not None and message["type"] != "keys":
                     self.events.put_nowait(message["type"])
         except BadInput as error:
@@ -129,9 +137,10 @@ class Socket:
         with contextlib.suppress(websockets.ConnectionClosed):
             await self.outbox.pump(self.ws)
 
-    async def wait_for(self, kind: str, timeout: float = READ_TIMEOUT) -> bool:
-        """Wait for the participant's `kind` message; False if the socket closed first or it took
-        longer than `timeout` seconds (the socket is then closed: an idle socket holds nothing)."""
+    async def wait_for(self, kind: str | tuple[str, ...], timeout: float = READ_TIMEOUT) -> str:
+        """Wait for the participant's `kind` message (or one of the kinds) and return its kind; ""
+        if the socket closed first or it took longer than `timeout` seconds (the socket is then
+        closed: an idle socket holds nothing)."""
         event: asyncio.Future | None = None
         try:
             async with asyncio.timeout(timeout):
@@ -139,13 +148,13 @@ class Socket:
                     event = asyncio.ensure_future(self.events.get())
                     await first(event, self.gone.wait())
                     if not event.done():
-                        return False
-                    if event.result() == kind:
-                        return True
+                        return ""
+                    if event.result() in ((kind,) if isinstance(kind, str) else kind):
+                        return event.result()
         except TimeoutError:
             await self.ws.close(1008, "idle for too long")
             self.gone.set()
-            return False
+            return ""
         finally:
             if event is not None and not event.done():  # never a get left pending on the loop
                 event.cancel()
@@ -207,6 +216,20 @@ def judge(path: Path, role: str) -> tuple[int | None, list[str]]:
         last = f"frame {max(answered)} of {recording.summary.frame}"
         problems.append(f"the participant's {role} seat stopped answering at {last}")  # the page went
     return (recording.summary.kills if recording.summary else None), problems
+
+
+def open_session(bus: BusConfig, patience: float, abort: threading.Event) -> zenoh.Session:
+    """A client session to a match's sim, which may not listen yet: tried for a second at a time
+    for up to `patience` seconds, so that a stopped match (Ctrl-C) ends the wait within a second
+    (one try of the whole minute held a thread that held the server's exit). ZError if none."""
+    deadline = time.monotonic() + patience
+    once = dataclasses.replace(bus, wait_router=1.0)
+    while True:
+        try:
+            return zenoh.open(once.to_zenoh())
+        except zenoh.ZError:
+            if abort.is_set() or time.monotonic() > deadline:
+                raise
 
 
 def wait_alive(z: zenoh.Session, tokens: list[str], timeout: float, abort: threading.Event) -> bool:
@@ -318,9 +341,10 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
     """Serve participants: consent or resume, then their trials one by one, each in a free match
     (here, or on a match host of `remote`)."""
     config = study.config
-    recordings = study.directory / "recordings"
+    recordings, practice = study.directory / "recordings", study.directory / "practice"
+    practice_frames = round(config.practice_seconds * FPS)
     playing: dict[str, tuple[Socket, asyncio.Event]] = {}  # participant -> their socket, set once it left
-    match_seconds = config.trial_seconds + START_UP
+    match_seconds = config.trial_seconds + SET_UP
     arrivals = RateLimit(serving.arrivals, ARRIVAL_BURST)
     per_address = PerAddress(serving.arrivals_per_address, ADDRESS_BURST)
     starting = asyncio.Semaphore(serving.starting)
@@ -337,11 +361,20 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
         if worker is None:
             await refuse(socket.ws, NO_WORKER)
             return None
+        if serving.link_secret and not (
+            worker and same_secret(hello.get("sig"), signature(serving.link_secret, worker))
+        ):
+            await refuse(socket.ws, UNSIGNED)
+            return None
         if study.taken(worker):
             await refuse(socket.ws, TAKEN)
             return None
-        socket.send({"type": "consent", "text": config.consent})
-        if not await socket.wait_for("consent"):
+        socket.send({"type": "consent", "text": config.consent_text()})
+        answer = await socket.wait_for(("consent", "decline"))
+        if answer == "decline":  # no id, nothing written
+            socket.send({"type": "declined", "text": DECLINED})
+            await socket.close()
+        if answer != "consent":
             return None
         if study.taken(worker):  # a second window of the same worker consented first
             await refuse(socket.ws, TAKEN)
@@ -384,7 +417,7 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
         (no `endpoint`) from the router's session."""
         try:
             z = remote.z if not endpoint and remote else await asyncio.to_thread(
-                zenoh.open, match_buses(endpoint, serving.low_latency)[1].to_zenoh()
+                open_session, match_buses(endpoint, serving.low_latency)[1], WARM_UP, stop
             )  # fmt: skip
         except zenoh.ZError as error:
             log.error("trial %s: no session to its sim: %s", trial.match, error)
@@ -419,16 +452,19 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
             matches.admission.end(trial.match)
             matches.notify()
             return None
+        socket.send({"type": "wait", "reason": SETTING_UP, "seconds": round(SET_UP)})
         seats = {trial.role: HUMAN, **trial.variant.plan(other(trial.role), trial.seed)}
         host = matches.admission.running[trial.match]  # Admission.LOCAL: this machine
         endpoint = "" if host else free_endpoint()
         limit = config.trial_seconds + serving.trial_timeout
+        frames, directory = (practice_frames, practice) if trial.practice else (config.frames, recordings)
         plan = MatchPlan(
-            trial.match, trial.seed, config.frames, directory=recordings, endpoint=endpoint,
+            trial.match, trial.seed, frames, directory=directory, endpoint=endpoint,
             low_latency=serving.low_latency, wait_players=serving.ready_timeout + limit,
             wait_services=30.0, timeout=serving.ready_timeout + limit, **seats,
         )  # fmt: skip
-        study.record(trial, "running")
+        if not trial.practice:
+            study.record(trial, "running")
         stop = threading.Event()
         if host:
             log.info("trial %s runs on match host %s", trial.match, host)
@@ -459,33 +495,43 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
 
         def finish(done: asyncio.Future) -> dict:
             if dropped:  # the page went: the recording alone says whether the trial was played
-                kills, problems = judge(recording_path(recordings, trial.match), trial.role)
+                kills, problems = judge(recording_path(plan.directory, trial.match), trial.role)
             else:
                 kills, problems = (None, ["cancelled"]) if done.cancelled() else done.result()
+            if trial.practice:  # no trial: nothing written down
+                return {"status": "failed" if problems else "done", "kills": kills}
             return settle(study, trial, kills, problems)
 
-        if dropped:  # resumable at once; the sidecar follows when the match has ended
+        if dropped and not trial.practice:  # resumable at once; the sidecar follows when the match has ended
             study.record(trial, "dropped")
             running.add_done_callback(finish)
             return None
         await asyncio.wait({running})  # ended by the stop above, if not over
         return finish(running)
 
+    def offer_of(trial: Trial, last: int | None, again: bool) -> dict:
+        """The `trial` message: where the game sits in the study, what to read first."""
+        return {
+            "type": "trial", "role": trial.role, "agent": trial.agent, "last": last,
+            "session": trial.session, "sessions": len(config.variants),
+            "trial": trial.trial, "trials": config.trials, "again": again, "practice": trial.practice,
+            "instructions": config.instructions.get(trial.role, ""),
+        }  # fmt: skip
+
     async def trials(socket: Socket, participant: Participant, obs: bool) -> None:
-        """The participant's remaining trials; a failed one is offered again, RETRIES times."""
+        """The participant's remaining trials, after a practice game if the study has one and they
+        have not begun; a failed trial is offered again, RETRIES times."""
         last, failures = None, 0
+        await matches.end_previous(participant.id)  # a reload's practice game still running out
+        first = study.practice(participant)
+        if first is not None and await play(socket, first, obs, offer_of(first, None, False)) is None:
+            return
         while True:
             await matches.end_previous(participant.id)  # settled first: never a trial twice
             trial = study.next_trial(participant)
             if trial is None:
                 break
-            offer = {
-                "type": "trial", "role": trial.role, "agent": trial.agent, "last": last,
-                "session": trial.session, "sessions": len(config.variants),
-                "trial": trial.trial, "trials": config.trials, "again": failures > 0,
-                "instructions": config.instructions.get(trial.role, ""),
-            }  # fmt: skip
-            sidecar = await play(socket, trial, obs, offer)
+            sidecar = await play(socket, trial, obs, offer_of(trial, last, failures > 0))
             if sidecar is None:
                 return
             if sidecar["status"] == "failed":
@@ -543,7 +589,7 @@ def run_study(
     for sidecar in reconcile(study):
         log.info("attempt %s left %s by an earlier server", sidecar["match"], sidecar["status"])
     matches = Matches(serving.max_matches)
-    remote = Remote(serving.hosts) if serving.hosts else None
+    remote = Remote(serving.hosts, serving.host_secret) if serving.hosts else None
     try:
         gateway = Gateway(None, study_handler(study, serving, matches, remote), web)
         # A running match holds a thread (run_trial) for its length, its start-up another: asyncio's
@@ -553,7 +599,7 @@ def run_study(
             remote.on_change = lambda: gateway.loop.call_soon_threadsafe(matches.notify)
         with gateway:
             on_ready(gateway)
-            stop.wait()
+            until_stopped(stop)
             matches.stop_all()
             with contextlib.suppress(TimeoutError):  # a match's thread that hangs: leave it to exit
                 asyncio.run_coroutine_threadsafe(matches.drained(), gateway.loop).result(DRAIN)

@@ -34,6 +34,7 @@ class StandInReport:
     first_frames: list[float] = field(default_factory=list)  # seconds from each Ready to its first frame
     waits: list[float] = field(default_factory=list)  # seconds each trial waited in the queue (if it did)
     again: int = 0  # trials offered again after a failed attempt
+    set_ups: int = 0  # `wait` messages: a game being set up, said before each trial
 
 
 async def stand_in(
@@ -44,6 +45,7 @@ async def stand_in(
     seed: int = 0,
     test: str = "",
     worker: str = "",
+    sig: str = "",
     ssl: object = None,
     address: str | None = None,
 ) -> StandInReport:
@@ -52,12 +54,13 @@ async def stand_in(
     back as an earlier participant; `leave_after` > 0 drops the connection after that many frames,
     as a participant who walks away. `test` is the server's test token (Serving.test_token),
     without which it gets no observation values to play from; `worker` a crowd-sourcing worker
-    id; `ssl` an SSLContext for a wss:// server; `address` the local address it connects from (a
-    loopback test's other clients: 127.0.0.2 and on)."""
+    id, `sig` its signed link's signature; `ssl` an SSLContext for a wss:// server; `address`
+    the local address it connects from (a loopback test's other clients: 127.0.0.2 and on)."""
     policies = policies or {"bait": "circle", "shooter": "mirror"}
     report = StandInReport()
     hello: dict = {"type": "hello", "obs": True, **({"test": test} if test else {})}
     hello.update({"worker": worker} if worker else {})
+    hello.update({"sig": sig} if sig else {})
     if resume:
         hello.update(participant=resume[0], key=resume[1])
     policy, held, ready, queued = None, None, None, 0.0
@@ -100,6 +103,8 @@ async def stand_in(
                 if keys != held:  # a person's keyboard reports changes, not frames
                     held = keys
                     await ws.send(json.dumps({"type": "keys", **keys}))
+            elif kind == "wait":
+                report.set_ups += 1
             elif kind == "end":
                 report.kills.append(message["kills"])
             elif kind == "done":

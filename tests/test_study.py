@@ -114,14 +114,17 @@ def test_a_restarted_server_resumes_everyone(tmp_path, study_server):
 
 @pytest.mark.slow
 def test_eight_stand_ins_at_once_each_in_a_match_of_their_own(tmp_path, study_server):
-    """Eight participants arrive together with room for six matches at once: two wait in the queue
-    and are told their place; every trial is played, recorded completely and marked done."""
+    """Eight participants arrive together (each from an address of its own, as people do: one
+    address gets at most ADDRESS_BURST ids at once) with room for six matches at once: two wait in
+    the queue and are told their place; every trial is played, recorded completely and marked done."""
     config = StudyConfig("many", (VARIANTS[0],), trials=1, trial_seconds=3.0, seed=5)
     stop, url, server = study_server(config, tmp_path, Serving(max_matches=6, test_token=TEST))
     try:
 
         async def crowd():  # noqa: ANN202
-            return await asyncio.gather(*(stand_in(url, seed=i, test=TEST) for i in range(8)))
+            return await asyncio.gather(
+                *(stand_in(url, seed=i, test=TEST, address=f"127.0.0.{i + 2}") for i in range(8))
+            )
 
         reports = asyncio.run(asyncio.wait_for(crowd(), 600))
     finally:

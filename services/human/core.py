@@ -79,7 +79,8 @@ def _short_text(v: object) -> bool:
 
 _FIELDS: dict[str, dict[str, Callable[[object], bool]]] = {
     "join": {"role": lambda v: v in ROLES, "token": _short_text, "obs": _is_bool},
-    "watch": {},
+    "watch": {"token": _short_text, "match": _short_text},  # both for the study's dashboard only
+    "dashboard": {"token": _short_text},  # services/study/dashboard.py
     "ready": {},
     "keys": dict.fromkeys(KEYS, _is_bool),
     # the study runner's messages (services/study/runner.py)

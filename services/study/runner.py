@@ -51,6 +51,7 @@ from services.launch import HUMAN, MatchPlan, match_buses, run_match
 from services.recorder.recording import load
 from services.recorder.service import recording_path
 from services.study.core import Admission, Participant, Study, StudyConfig, Trial, worker_id
+from services.study.dashboard import Dashboard, overview
 from services.study.remote import Remote
 from shared import keys
 from shared.bus import BusConfig, free_endpoint
@@ -87,6 +88,8 @@ class Serving:
     ready_timeout: float = 120.0  # seconds an offered trial waits for Ready; then its match and slot go
     starting: int = 2  # matches starting up at once (until their sim listens)
     hosts: BusConfig | None = None  # the router where match hosts offer their slots; None: local only
+    dashboard: Web | None = None  # where the experimenter's dashboard is served (services/study/dashboard.py)
+    dashboard_token: str = ""  # ... to whoever shows this token
 
 
 SERVING, WEB = Serving(), Web()
@@ -238,6 +241,7 @@ class Matches:
     def __init__(self, cap: int) -> None:
         self.admission = Admission(cap)
         self.stops: dict[str, threading.Event] = {}  # match -> its stop
+        self.endpoints: dict[str, str] = {}  # match -> its sim's endpoint, "" on a match host (spectators)
         self.of: dict[str, tuple[asyncio.Future, threading.Event]] = {}  # participant -> their match
         self.running: set[asyncio.Future] = set()
         self.lock = threading.Lock()  # stops is read by stop_all from another thread
@@ -248,7 +252,8 @@ class Matches:
         self.changed.set()
         self.changed = asyncio.Event()
 
-    def add(self, trial: Trial, running: asyncio.Future, stop: threading.Event) -> None:
+    def add(self, trial: Trial, running: asyncio.Future, stop: threading.Event, endpoint: str) -> None:
+        self.endpoints[trial.match] = endpoint
         with self.lock:
             self.stops[trial.match] = stop
             if self.closed:
@@ -258,6 +263,7 @@ class Matches:
 
         def ended(_: asyncio.Future) -> None:
             self.running.discard(running)
+            self.endpoints.pop(trial.match, None)
             with self.lock:
                 del self.stops[trial.match]
             if self.of.get(trial.participant, (None,))[0] is running:
@@ -437,7 +443,7 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
             running = asyncio.ensure_future(
                 asyncio.to_thread(run_trial, plan, trial.role, stop, remote, host)
             )
-            matches.add(trial, running, stop)
+            matches.add(trial, running, stop, endpoint)
             seat = await bridge(socket, trial, endpoint, obs, stop)
         ready = False
         if seat is not None:  # else the match cannot start: it fails at once
@@ -551,7 +557,12 @@ def run_study(
         gateway.loop.set_default_executor(ThreadPoolExecutor(THREADS, thread_name_prefix="study"))
         if remote is not None:  # a host that comes or goes changes the room in the queue
             remote.on_change = lambda: gateway.loop.call_soon_threadsafe(matches.notify)
-        with gateway:
+        board = serving.dashboard and Dashboard(
+            serving.dashboard_token, serving.dashboard, gateway.loop,
+            lambda: overview(study, matches.admission), matches.endpoints.get, serving.low_latency,
+            remote and remote.z,
+        )  # fmt: skip
+        with gateway, board or contextlib.nullcontext():
             on_ready(gateway)
             stop.wait()
             matches.stop_all()

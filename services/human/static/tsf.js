@@ -165,7 +165,9 @@ function connect() {
   socket = new WebSocket(scheme + location.host + "/ws");
   socket.onopen = () => {
     if (params.has("watch")) {
-      send({ type: "watch" });
+      // the study's dashboard names the match, and its token comes in the fragment (never sent in a request)
+      const token = new URLSearchParams(location.hash.slice(1)).get("token");
+      send(params.has("match") ? { type: "watch", match: params.get("match"), ...(token ? { token } : {}) } : { type: "watch" });
     } else if (params.has("token")) {
       // ?obs=1: the seat's observation values too (a scripted player's, bench/human.py)
       send({ type: "join", role: params.get("role") || "", token: params.get("token"),

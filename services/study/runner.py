@@ -51,6 +51,7 @@ from services.launch import HUMAN, MatchPlan, match_buses, run_match
 from services.recorder.recording import load
 from services.recorder.service import recording_path
 from services.study.core import Admission, Participant, Study, StudyConfig, Trial, worker_id
+from services.study.crowd import FAILS, attention_check, write_bonuses
 from services.study.dashboard import Dashboard, overview
 from services.study.remote import Remote
 from shared import keys
@@ -68,9 +69,10 @@ DRAIN = 60.0  # seconds the stopping server waits for its matches to end and be 
 WARM_UP = 60.0  # seconds to wait for a match's processes before offering its trial anyway
 ARRIVAL_BURST = 20  # participant ids issued at once, beyond the rate
 ADDRESS_BURST = 5  # ... to one address
+SCREENED = "Thank you. This study cannot go on: two attention checks were not passed."
 BUSY = "Too many people are starting right now. Please try again in a minute."
 TAKEN = "This worker id has already taken part in this study."
-NO_WORKER = "This link's worker id is not one this study can take (letters, digits and _ . : @ + - only)."
+NO_WORKER = "This link's ids are not ones this study can take (letters, digits and _ . : @ + - only)."
 
 
 @dataclass(frozen=True)
@@ -104,6 +106,7 @@ class Socket:
         self.outbox = Outbox(asyncio.get_running_loop())
         self.events: asyncio.Queue[str] = asyncio.Queue()
         self.gone = asyncio.Event()
+        self.answer = ""  # the last answer to an attention check
         self.tasks = [asyncio.ensure_future(self._read()), asyncio.ensure_future(self._pump())]
 
     def send(self, message: dict) -> None:
@@ -118,7 +121,9 @@ class Socket:
     async def _read(self) -> None:
         try:
             async for text in self.ws:
-                message = self.controls.receive(text, ("consent", "ready", "keys"))
+                message = self.controls.receive(text, ("consent", "ready", "keys", "answer"))
+                if message is not None and message["type"] == "answer":
+                    self.answer = message["answer"]
                 if message is not None and message["type"] != "keys":
                     self.events.put_nowait(message["type"])
         except BadInput as error:
@@ -339,10 +344,12 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
             if participant is None:
                 await refuse(socket.ws, "unknown participant or resume key")
             return participant
-        worker = worker_id(hello.get("worker"))
-        if worker is None:
+        ids = [worker_id(v) for v in config.crowd.ids(hello.get("link", {}))]
+        worker = ids[0] or worker_id(hello.get("worker"))
+        if worker is None or None in ids:
             await refuse(socket.ws, NO_WORKER)
             return None
+        link = {k: v for k, v in zip(("study", "session"), ids[1:], strict=True) if v}
         if study.taken(worker):
             await refuse(socket.ws, TAKEN)
             return None
@@ -357,7 +364,7 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
         if not (per_address.allow(socket.ws.remote_address[0]) and arrivals.allow()):
             await refuse(socket.ws, BUSY)
             return None
-        participant = study.arrive(worker)
+        participant = study.arrive(worker, link)
         log.info("participant %s arrives and plays the %s", participant.id, participant.role)
         socket.send({"type": "participant", "participant": participant.id, "key": participant.key})
         return participant
@@ -477,6 +484,23 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
         await asyncio.wait({running})  # ended by the stop above, if not over
         return finish(running)
 
+    async def attend(socket: Socket, participant: Participant, trial: Trial) -> bool:
+        """The attention check due before `trial`, if any; False (the page sent on to the
+        screened-out address) once the participant has failed FAILS, or if they left."""
+        if config.crowd.check_due(trial.session, trial.trial, len(participant.checks)):
+            check, word = attention_check(f"{config.seed}/{participant.id}/check/{len(participant.checks)}")
+            socket.send(check)
+            if not await socket.wait_for("answer"):
+                return False
+            study.check(participant, socket.answer == word)
+        if participant.screened:
+            redirect = config.crowd.redirect(config.crowd.screened_out_url, participant.code)
+            socket.send({"type": "screened", "text": SCREENED, "redirect": redirect})
+            log.info("participant %s is screened out: %d attention checks failed", participant.id, FAILS)
+            await socket.close()
+            return False
+        return True
+
     async def trials(socket: Socket, participant: Participant, obs: bool) -> None:
         """The participant's remaining trials; a failed one is offered again, RETRIES times."""
         last, failures = None, 0
@@ -485,6 +509,8 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
             trial = study.next_trial(participant)
             if trial is None:
                 break
+            if not await attend(socket, participant, trial):
+                return
             offer = {
                 "type": "trial", "role": trial.role, "agent": trial.agent, "last": last,
                 "session": trial.session, "sessions": len(config.variants),
@@ -502,7 +528,8 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
                 await socket.close()
                 return
             last, failures = sidecar["kills"], 0
-        socket.send({"type": "done", "text": config.end, "code": participant.code})
+        redirect = config.crowd.redirect(config.crowd.completion_url, participant.code)
+        socket.send({"type": "done", "text": config.end, "code": participant.code, "redirect": redirect})
         log.info("participant %s is done", participant.id)
         await socket.close()
 
@@ -572,4 +599,6 @@ def run_study(
         if remote is not None:
             remote.close()
         study.close()
+        if (bonuses := write_bonuses(study)) is not None:
+            log.info("bonuses written to %s", bonuses)
     return study

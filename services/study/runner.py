@@ -16,10 +16,12 @@ machine's `max_matches` are taken, a trial's match is offered to a live host wit
 recording is fetched into the study directory with its hash checked before the trial is judged.
 
 Study messages (down): `consent` (text), `participant` (id and resume key, kept by the browser),
-`trial` (session, trial, role, the agent's label; what to read first), `queue` (place, seconds
-to wait, while the trial waits for a free match), then the gateway's `state`/`end` frames, and at
-last `done` (the end text) or `problem`. Up: `hello` (optionally with the participant id and key
-to resume), `consent`, `ready`, `keys`.
+`check` (an attention check, services/study/crowd.py), `trial` (session, trial, role, the agent's
+label; what to read first), `queue` (place, seconds to wait, while the trial waits for a free
+match), then the gateway's `state`/`end` frames, and at last `done` (the end text, code and
+redirect), `screened` or `problem`. Up: `hello` (optionally with the participant id and key to
+resume, the link's parameters), `consent`, `answer`, `ready`, `keys`. The experimenter's
+dashboard is served beside it (services/study/dashboard.py).
 
 Each trial's metadata goes into a sidecar `<match>.study.json` beside its recording, rather than
 onto the bus: the participant id is nobody's business but the study's (bus traffic may cross a lab

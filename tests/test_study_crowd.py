@@ -20,6 +20,7 @@ from services.study.standin import stand_in
 DONE = "https://app.prolific.com/submissions/complete?cc={code}"
 OUT = "https://app.prolific.com/submissions/complete?cc=SCREENED"
 VARIANTS = (Variant("a", "B5", "S5"), Variant("b", "B1", "S1"))
+STRONG = {"bait": "B5", "shooter": "S5"}  # the stand-in's policies: ones that kill
 BONUS = Bonus(per_kill=0.5, per_point=0.01, max=2.0)
 
 
@@ -29,9 +30,9 @@ def crowd_config(trial_seconds: float) -> StudyConfig:
 
 
 def test_stand_ins_from_a_platform_are_checked_redirected_and_paid_their_bonus(tmp_path, study_server):
-    stop, url, server = study_server(crowd_config(4.0), tmp_path)
+    stop, url, server = study_server(crowd_config(8.0), tmp_path)  # 8 s: long enough for a kill
     ids = {"PROLIFIC_PID": "5f00aa11", "STUDY_ID": "S-1", "SESSION_ID": "sess-9"}
-    attentive = asyncio.run(stand_in(url, test=STAND_IN_TOKEN, link=ids))
+    attentive = asyncio.run(stand_in(url, test=STAND_IN_TOKEN, link=ids, policies=STRONG))
     careless = asyncio.run(
         stand_in(url, test=STAND_IN_TOKEN, link={"PROLIFIC_PID": "6e00bb22"}, attentive=False)
     )
@@ -64,6 +65,7 @@ def test_stand_ins_from_a_platform_are_checked_redirected_and_paid_their_bonus(t
         earned = sum(BONUS.per_kill * s.kills + BONUS.per_point * max(s.points, 0) for s in summaries)
         amount = round(min(earned, BONUS.max), 2)
         rows += [f"{participant.worker},{amount:.2f}\n"] if amount > 0 else []
+    assert rows, "a bonus was earned (the scripted pairs destroy a fortress in about 8 s)"
     assert (tmp_path / BONUSES).read_text() == "".join(rows)
 
 

@@ -35,10 +35,15 @@ function watchLink(match) {
   return a;
 }
 
+function count(n, one, many) {
+  return `${n} ${n === 1 ? one : many || `${one}s`}`;
+}
+
 function draw(o) {
   document.getElementById("study").textContent = `Study ${o.study}`;
-  status.textContent = `${o.participants.length} participants, ${o.matches.length} matches running, ` +
-    `${o.queue.length} waiting; updated ${new Date().toLocaleTimeString()}`;
+  status.textContent = `${count(o.participants.length, "participant")}, ` +
+    `${count(o.matches.length, "match", "matches")} running, ${o.queue.length} waiting; ` +
+    `updated ${new Date().toLocaleTimeString()}`;
   rows("participants", o.participants, (p) => [p.id, p.role, p.done, p.failed, p.replayed, p.match || ""]);
   rows("matches", o.matches, (m) => [m.match, m.participant, m.host, watchLink(m.match)]);
   rows("queue", o.queue, (q, i) => [i + 1, q.match, q.participant]);

@@ -212,6 +212,15 @@ def study(
         raise UsageError(
             "--max-matches", 0, "no match could run: give match hosts with --listen or --connect"
         )
+    board, token = None, ""
+    if dashboard_token is not None:
+        try:
+            token = read_token(dashboard_token.read_text())
+        except (ValueError, UnicodeDecodeError) as error:
+            raise UsageError("--dashboard-token", str(dashboard_token), str(error)) from None
+        if dashboard_port == port:
+            raise UsageError("--dashboard-port", port, "the participants' port: give another")
+        board = Web(host, dashboard_port, cert, key)
     protocol = StudyConfig.load(config)
     for variant in protocol.variants:  # adaptive agents' thresholds: refused now, not at a trial
         for role in protocol.roles:
@@ -232,15 +241,6 @@ def study(
     if (cert is None) != (key is None):
         raise UsageError("--cert/--key", str(cert or key), "give both, or neither")
     web = Web(host, port, cert, key, tuple(origin or ()), per_address)
-    board, token = None, ""
-    if dashboard_token is not None:
-        try:
-            token = read_token(dashboard_token.read_text())
-        except (ValueError, UnicodeDecodeError) as error:
-            raise UsageError("--dashboard-token", str(dashboard_token), str(error)) from None
-        if dashboard_port == port:
-            raise UsageError("--dashboard-port", port, "the participants' port: give another")
-        board = Web(host, dashboard_port, cert, key)
     serving = Serving(
         max_matches, trial_timeout, test_token=test_token, hosts=hosts, dashboard=board, dashboard_token=token
     )

@@ -260,6 +260,16 @@ MISTAKES = [
     ("study {tmp}/empty.toml", 2, "tsf study: CONFIG {tmp}/empty.toml: not a study: "),
     ("study {tmp}/long.toml --max-matches 0", 2, "tsf study: --max-matches 0: no match could run"),
     ("study {tmp}/long.toml --listen nowhere", 2, "tsf study: --listen nowhere: not a zenoh endpoint"),
+    (
+        "study {tmp}/long.toml --dashboard-token {tmp}/empty.toml",
+        2,
+        "tsf study: --dashboard-token {tmp}/empty.toml: 0 characters: give 16 to 64",
+    ),
+    (
+        "study {tmp}/long.toml --dashboard-token {garbage} --dashboard-port 8000",
+        2,
+        "tsf study: --dashboard-port 8000: the participants' port: give another",
+    ),
     ("match-host", 2, "tsf match-host: --connect (none): a match host needs the router's endpoint"),
     (
         "match-host --slots 0 --connect tcp/127.0.0.1:1",

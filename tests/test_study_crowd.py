@@ -6,10 +6,11 @@ computed from the recordings when the server stops. Skipped, with the reason, wi
 from __future__ import annotations
 
 import asyncio
+import re
 from urllib.parse import quote
 
 import pytest
-from conftest import CHROMIUM, STAND_IN_TOKEN
+from conftest import CHROMIUM, STAND_IN_TOKEN, wait_in_page
 
 from services.recorder.recording import load
 from services.study.core import StudyConfig, Variant
@@ -69,34 +70,54 @@ def test_stand_ins_from_a_platform_are_checked_redirected_and_paid_their_bonus(t
     assert (tmp_path / BONUSES).read_text() == "".join(rows)
 
 
+def take_part(page, url: str, pid: str, attentive: bool) -> str:  # noqa: ANN001 - a Playwright Page
+    """Go through the study in the page as a participant would, each check answered right or
+    wrong, until it says the end; returns the completion code shown ("" if none)."""
+    page.goto(url + f"?PROLIFIC_PID={pid}&STUDY_ID=S-2&SESSION_ID=sess-{pid}")
+    wait_in_page(page, "tsf.phase === 'consent'", 20_000)
+    page.click("#go")
+    while True:
+        wait_in_page(page, "['check', 'instructions', 'done'].includes(tsf.phase)", 60_000)
+        phase = page.evaluate("tsf.phase")
+        if phase == "check":
+            word = page.locator("#text").inner_text().split('"')[1]
+            buttons = page.locator("button.answer")
+            choice = word if attentive else next(o for o in buttons.all_inner_texts() if o != word)
+            buttons.filter(has_text=re.compile(f"^{choice}$")).click()
+        elif phase == "instructions":
+            page.click("#go")
+        else:
+            text = page.locator("#text").inner_text()
+            return text.split("Your completion code: ")[1].split()[0] if "completion code" in text else ""
+        wait_in_page(page, f"tsf.phase !== '{phase}'", 5_000)
+
+
 @pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is not installed")
-def test_a_prolific_link_in_chromium_ends_on_the_platforms_completion_page(tmp_path, browser, study_server):
-    expect = pytest.importorskip("playwright.sync_api").expect
-    config = StudyConfig("crowdpage", VARIANTS[:1], trials=1, trial_seconds=2.0, crowd=Crowd(
-        completion_url=DONE, screened_out_url=OUT, attention_checks=(1,)))  # fmt: skip
-    stop, url, server = study_server(config, tmp_path)
-    page = browser.new_page()
+def test_prolific_links_in_chromium_end_on_the_platforms_completion_or_screened_out_page(
+    tmp_path, browser, study_server
+):
+    stop, url, server = study_server(crowd_config(2.0), tmp_path)
     visited = []
 
     def platform(route) -> None:  # noqa: ANN001 - Playwright's Route: the platform's site, answered here
         visited.append(route.request.url)
         route.fulfill(status=200, content_type="text/html", body="<p>Submission complete</p>")
 
+    page = browser.new_page()
     page.route("https://app.prolific.com/**", platform)
-    page.goto(url + "?PROLIFIC_PID=5f00cc33&STUDY_ID=S-2&SESSION_ID=sess-3")
-    title = page.locator("#title")
-    expect(title).to_have_text("Before we start", timeout=20_000)
-    page.click("#go")
-    expect(title).to_have_text("A quick check", timeout=20_000)
-    word = page.locator("#text").inner_text().split('"')[1]
-    page.locator("button.answer", has_text=word).click()
-    expect(title).to_contain_text("Session 1 of 1", timeout=30_000)
-    page.click("#go")
-    expect(title).to_have_text("The end", timeout=120_000)
-    code = page.locator("#text").inner_text().split("Your completion code: ")[1].split()[0]
+    code = take_part(page, url, "5f00cc33", attentive=True)
     page.wait_for_url(DONE.replace("{code}", code), timeout=15_000)  # after the 5 s notice
-    assert visited == [DONE.replace("{code}", code)]
+    careless = browser.new_page()
+    careless.route("https://app.prolific.com/**", platform)
+    assert take_part(careless, url, "6e00dd44", attentive=False) == ""
+    assert SCREENED in careless.locator("#text").inner_text()
+    careless.wait_for_url(OUT, timeout=15_000)
+    assert visited == [DONE.replace("{code}", code), OUT]
     stop.set()
-    (participant,) = server.result(timeout=60).participants.values()
-    assert (participant.worker, participant.link, participant.checks) == (
-        "5f00cc33", {"study": "S-2", "session": "sess-3"}, [True])  # fmt: skip
+    first, second = server.result(timeout=60).participants.values()
+    assert (first.worker, first.link, first.checks) == (
+        "5f00cc33",
+        {"study": "S-2", "session": "sess-5f00cc33"},
+        [True] * 2,
+    )
+    assert (second.worker, second.checks) == ("6e00dd44", [False, False])

@@ -167,6 +167,7 @@ const handlers = {
       button.className = "answer";
       button.addEventListener("click", () => {
         send({ type: "answer", answer: option });
+        tsf.phase = "answered";
         show("Thank you", "Setting up\u2026");
       });
       buttons.append(button, " ");

@@ -202,6 +202,7 @@ def study(
     With --listen or --connect, match hosts on other machines add capacity beyond --max-matches."""
     from services.human.gateway import Web
     from services.study.core import StudyConfig
+    from services.study.crowd import BONUSES
     from services.study.dashboard import read_token
     from services.study.runner import Serving, run_study
 
@@ -247,6 +248,8 @@ def study(
     done = run_study(protocol, directory, web, stop_on_signals(), show, serving)
     finished = sum(done.next_trial(p) is None for p in done.participants.values())
     console.print(f"{len(done.participants)} participants, {finished} finished")
+    if protocol.crowd.bonus is not None:
+        console.print(f"bonuses for the platform's bulk upload: {directory / BONUSES}")
 
 
 @commands.command("match-host")

@@ -8,6 +8,7 @@ import typer
 from rich.live import Live
 
 from services.options import (
+    PORTS,
     SECONDS,
     SLOTS,
     AdapterFactory,
@@ -220,11 +221,21 @@ def study(
         help="Meet match hosts at this zenoh router (`tsf router`), e.g. tcp/10.0.0.1:7447 (repeatable).",
     ),
     host_secret: Path | None = HOST_SECRET,
+    dashboard_token: Path | None = typer.Option(
+        None,
+        exists=True,
+        dir_okay=False,
+        help="Serve the experimenter's dashboard to whoever shows the token this file holds "
+        "(16-64 characters, e.g. from `openssl rand -hex 24`), on --dashboard-port.",
+    ),
+    dashboard_port: int = number(8001, PORTS, "Port of the experimenter's dashboard (--dashboard-token)."),
 ) -> None:
     """Serve a study: participants open the link, consent, get a role and play every agent variant.
     With --listen or --connect, match hosts on other machines add capacity beyond --max-matches."""
     from services.human.gateway import Web
     from services.study.core import StudyConfig
+    from services.study.crowd import BONUSES
+    from services.study.dashboard import read_token
     from services.study.runner import Serving, run_study
     from shared.secret import read_secret
 
@@ -237,6 +248,15 @@ def study(
             "--max-matches", 0, "no match could run: give match hosts with --listen or --connect"
         )
     signed = read_secret(link_secret, "--link-secret") if link_secret else b""
+    board, token = None, ""
+    if dashboard_token is not None:
+        try:
+            token = read_token(dashboard_token.read_text())
+        except (ValueError, UnicodeDecodeError) as error:
+            raise UsageError("--dashboard-token", str(dashboard_token), str(error)) from None
+        if dashboard_port == port:
+            raise UsageError("--dashboard-port", port, "the participants' port: give another")
+        board = Web(host, dashboard_port, cert, key)
     protocol = StudyConfig.load(config)
     for variant in protocol.variants:  # adaptive agents' thresholds: refused now, not at a trial
         for role in protocol.roles:
@@ -250,17 +270,22 @@ def study(
             f"{protocol.trial_seconds:g} s; progress and recordings in {directory}"
         )
         console.print(f"participants open [bold]{gateway.url}[/] (Ctrl-C ends the study server)")
+        if board is not None:
+            dashboard = gateway.url.replace(f":{gateway.port}/", f":{board.port}/")
+            console.print(f"the dashboard: [bold]{dashboard}#token=[/]<the token in {dashboard_token}>")
 
     if (cert is None) != (key is None):
         raise UsageError("--cert/--key", str(cert or key), "give both, or neither")
     web = Web(host, port, cert, key, tuple(origin or ()), per_address)
     serving = Serving(
         max_matches, trial_timeout, test_token=test_token, hosts=hosts,
-        link_secret=signed, host_secret=sealing,
+        link_secret=signed, host_secret=sealing, dashboard=board, dashboard_token=token,
     )  # fmt: skip
     done = run_study(protocol, directory, web, stop_on_signals(), show, serving)
     finished = sum(done.next_trial(p) is None for p in done.participants.values())
     console.print(f"{len(done.participants)} participants, {finished} finished")
+    if protocol.crowd.bonus is not None:
+        console.print(f"bonuses for the platform's bulk upload: {directory / BONUSES}")
 
 
 @commands.command("match-host")

@@ -266,6 +266,16 @@ MISTAKES = [
         "tsf study: --link-secret {tmp}/empty.toml: the secret needs at least 16 characters, it has 0",
     ),
     ("study {tmp}/long.toml --link-secret {tmp}", 2, "TSF_LINK_SECRET_FILE'): file '{tmp}' is a directory."),
+    (
+        "study {tmp}/long.toml --dashboard-token {tmp}/empty.toml",
+        2,
+        "tsf study: --dashboard-token {tmp}/empty.toml: 0 characters: give 16 to 64",
+    ),
+    (
+        "study {tmp}/long.toml --dashboard-token {garbage} --dashboard-port 8000",
+        2,
+        "tsf study: --dashboard-port 8000: the participants' port: give another",
+    ),
     ("match-host", 2, "tsf match-host: --connect (none): a match host needs the router's endpoint"),
     (
         "match-host --slots 0 --connect tcp/127.0.0.1:1",

@@ -31,7 +31,7 @@ from shared.messages import GameEvent, State, Summary
 from shared.secret import same_secret
 
 KEYS = ("left", "right", "thrust", "fire")
-MAX_MESSAGE = 512  # bytes: the largest message a browser has reason to send
+MAX_MESSAGE = 1024  # bytes: the largest message a browser has reason to send (a hello with its link)
 RATE = 60.0  # messages a second a connection may send on average (a person changes keys far less)
 BURST = 60  # and at once
 STRIKES = 300  # messages dropped (bad or over the rate) before the connection is closed
@@ -77,9 +77,18 @@ def _short_text(v: object) -> bool:
     return isinstance(v, str) and 0 < len(v) <= 64
 
 
+LINK_PARAMS = 6  # the link's parameters a study's hello may carry
+
+
+def _link(v: object) -> bool:
+    """The link's parameters (services/study/crowd.py): a few names and values, each short."""
+    return isinstance(v, dict) and len(v) <= LINK_PARAMS and all(map(_short_text, [*v, *v.values()]))
+
+
 _FIELDS: dict[str, dict[str, Callable[[object], bool]]] = {
     "join": {"role": lambda v: v in ROLES, "token": _short_text, "obs": _is_bool},
-    "watch": {},
+    "watch": {"token": _short_text, "match": _short_text},  # both for the study's dashboard only
+    "dashboard": {"token": _short_text},  # services/study/dashboard.py
     "ready": {},
     "keys": dict.fromkeys(KEYS, _is_bool),
     # the study runner's messages (services/study/runner.py)
@@ -90,9 +99,11 @@ _FIELDS: dict[str, dict[str, Callable[[object], bool]]] = {
         "worker": _short_text,
         "sig": _short_text,
         "test": _short_text,
+        "link": _link,
     },
     "consent": {},
     "decline": {},
+    "answer": {"answer": _short_text},  # to an attention check (services/study/crowd.py)
 }
 
 

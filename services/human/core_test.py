@@ -8,6 +8,7 @@ import pytest
 
 from services.human.core import (
     BURST,
+    LINK_PARAMS,
     STRIKES,
     BadInput,
     Controls,
@@ -51,7 +52,7 @@ def test_key_state_maps_to_the_action_encoding() -> None:
         ('{"type": "keys", "left": true, "right": false, "thrust": false, "fire": false, "x": 1}', "shape"),
         ('{"type": "join", "role": "pilot", "token": "t"}', "shape"),
         ('{"type": "join", "role": "bait", "token": ""}', "shape"),
-        ('{"type": "join", "role": "bait", "token": "' + "t" * 600 + '"}', "too_large"),
+        ('{"type": "join", "role": "bait", "token": "' + "t" * 1100 + '"}', "too_large"),
         (b"\x00\x01", "binary"),
     ],
 )
@@ -200,3 +201,12 @@ def test_the_page_is_sent_the_events_it_shows() -> None:
     shown = {"type": "event", "frame": 7, "kind": "death", "role": "bait", "detail": "border"}
     assert event_view(death) == shown
     assert event_view(GameEvent(match="m", frame=7, sender="sim", kind="missile", role="bait")) is None
+
+
+def test_a_hello_carries_a_few_short_link_parameters_and_nothing_else():
+    six = {f"P{i}": "v" * 40 for i in range(LINK_PARAMS)}
+    assert parse(json.dumps({"type": "hello", "link": six}), ("hello",))["link"] == six
+    for link in ({**six, "more": "x"}, {"STUDY_ID": 7}, {"STUDY_ID": ""}, {"x" * 65: "v"}, ["STUDY_ID"]):
+        with pytest.raises(BadInput) as error:
+            parse(json.dumps({"type": "hello", "link": link}), ("hello",))
+        assert error.value.reason == "shape"

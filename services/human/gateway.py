@@ -258,12 +258,15 @@ async def refuse(ws: ServerConnection, reason: str) -> None:
         await ws.close(REFUSED, reason[:120])
 
 
-def serve_page(connection: ServerConnection, request: Request) -> Response | None:
-    """Plain HTTP for the page and its script; the socket path goes on to the WebSocket handshake."""
+def serve_page(
+    connection: ServerConnection, request: Request, pages: dict[str, str] = PAGES
+) -> Response | None:
+    """Plain HTTP for the `pages` (path -> file in static/); the socket path goes on to the
+    WebSocket handshake."""
     path = request.path.split("?", 1)[0]
     if path == SOCKET_PATH:
         return None
-    name = PAGES.get(path)
+    name = pages.get(path)
     if name is None:
         return connection.respond(404, "not found\n")
     body = (STATIC / name).read_bytes()
@@ -320,10 +323,13 @@ class Gateway:
     `handler(ws, z)` serves one socket. The session listens where `bus` says, so that a match's sim
     can connect to it (MatchPlan.peers); with no `bus` there is none (z is None): the study server
     opens a session per trial instead, to that match's sim alone. Served as `web` says: TLS, the
-    Host and Origin checks, a cap on sockets per address, no version banner."""
+    Host and Origin checks, a cap on sockets per address, no version banner; `pages` are the files it
+    serves."""
 
-    def __init__(self, bus: BusConfig | None, handler: Handler, web: Web = Web()) -> None:
-        self.bus, self.handler, self.web = bus, handler, web
+    def __init__(
+        self, bus: BusConfig | None, handler: Handler, web: Web = Web(), pages: dict[str, str] = PAGES
+    ) -> None:
+        self.bus, self.handler, self.web, self.pages = bus, handler, web, pages
         self.port = web.port
         self.loop = asyncio.new_event_loop()
         self.ready = threading.Event()
@@ -367,7 +373,7 @@ class Gateway:
                 return connection.respond(403, "forbidden\n")
             if self.web.per_address and self.sockets[connection.remote_address[0]] >= self.web.per_address:
                 return connection.respond(429, "too many connections\n")
-        return serve_page(connection, request)
+        return serve_page(connection, request, self.pages)
 
     async def _handle(self, ws: ServerConnection, z: zenoh.Session | None) -> None:
         address = ws.remote_address[0]

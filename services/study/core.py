@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from services.adapter.core import AdapterConfig
+from services.study.crowd import FAILS, Crowd
 from shared.errors import UsageError
 from shared.game import DURATION, FPS, ROLES, SEEDS, other
 from shared.secret import same_secret
@@ -86,6 +87,7 @@ class StudyConfig:
     # A practice game of this many seconds before the first recorded one (0: none), with a scripted
     # partner (PRACTICE); it is no trial: not in the journal, its recording apart in practice/.
     practice_seconds: float = 0.0
+    crowd: Crowd = field(default_factory=Crowd)  # a platform's ids, redirects, bonus (study/crowd.py)
 
     def __post_init__(self) -> None:
         if not NAME.fullmatch(self.name):
@@ -111,6 +113,8 @@ class StudyConfig:
                 f"consent: cannot fill in {error} (the text may name {{games}}, {{seconds}}, "
                 "{minutes} and {pay}; a brace itself is written {{ or }})"
             ) from None
+        if any(s > len(self.variants) for s in self.crowd.attention_checks):
+            raise ValueError(f"crowd.attention_checks: sessions are 1 to {len(self.variants)}")
         for variant in self.variants:
             for role in self.roles:
                 agent = other(role)
@@ -140,12 +144,18 @@ class StudyConfig:
             variants = tuple(Variant(**v) for v in data.pop("variants", []))
             if "roles" in data:
                 data["roles"] = tuple(data["roles"])
+            if "crowd" in data:
+                data["crowd"] = Crowd.from_toml(data["crowd"])
             return cls(variants=variants, **data)
         except (ValueError, TypeError) as error:  # TOML syntax, unknown or missing fields, bad values
             raise UsageError("CONFIG", path, f"not a study: {error}") from None
 
     def hash(self) -> str:
-        text = json.dumps(dataclasses.asdict(self), sort_keys=True)
+        """The protocol's fingerprint; the platform's logistics (`crowd`) may change mid-study."""
+        protocol = {k: v for k, v in dataclasses.asdict(self).items() if k != "crowd"}
+        if self.crowd.attention_checks:  # these do change what participants go through
+            protocol["attention_checks"] = self.crowd.attention_checks
+        text = json.dumps(protocol, sort_keys=True)
         return hashlib.blake2b(text.encode(), digest_size=8).hexdigest()
 
 
@@ -196,6 +206,13 @@ class Participant:
     attempts: list[dict] = field(default_factory=list)  # {session, trial, attempt, match, status, kills}
     worker: str = ""  # the crowd-sourcing platform's worker id, if the link gave one
     code: str = ""  # the completion code shown at the end (for the platform's payment)
+    link: dict[str, str] = field(default_factory=dict)  # the platform's study and session ids, if given
+    checks: list[bool] = field(default_factory=list)  # each attention check answered: passed?
+
+    @property
+    def screened(self) -> bool:
+        """Screened out: failed FAILS attention checks (services/study/crowd.py)."""
+        return self.checks.count(False) >= FAILS
 
     def done(self, session: int, trial: int) -> bool:
         return any(
@@ -277,6 +294,8 @@ class Study:
         for record in records[1:]:
             if "participant" in record:
                 self._add(Participant(**record["participant"]))
+            elif "check" in record:
+                self.participants[record["id"]].checks.append(record["check"])
             else:
                 self._attempt(record["id"], record["attempt"])
         self.journal = Journal(self.path)
@@ -300,7 +319,7 @@ class Study:
         same = ("session", "trial", "attempt")
         found.attempts = [a for a in found.attempts if any(a[k] != entry[k] for k in same)] + [entry]
 
-    def arrive(self, worker: str = "") -> Participant:
+    def arrive(self, worker: str = "", link: dict[str, str] | None = None) -> Participant:
         """A new participant, who has consented: the next id, a role, an order of variants and a
         completion code. A worker id already seen is the shell's to refuse (`taken`)."""
         index = len(self.participants)
@@ -312,10 +331,16 @@ class Study:
             variant_order(self.config, index),
             worker=worker,
             code=secrets.token_hex(4).upper(),
+            link=link or {},
         )
         self._add(participant)
         self.journal.append({"participant": dataclasses.asdict(participant)})
         return participant
+
+    def check(self, participant: Participant, passed: bool) -> None:
+        """Write down an attention check's outcome."""
+        participant.checks.append(passed)
+        self.journal.append({"id": participant.id, "check": passed})
 
     def resume(self, participant: str, key: str) -> Participant | None:
         """The participant with this id and key, or None."""

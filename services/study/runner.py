@@ -16,11 +16,14 @@ machine's `max_matches` are taken, a trial's match is offered to a live host wit
 recording is fetched into the study directory with its hash checked before the trial is judged.
 
 Study messages (down): `consent` (text), `declined` (text: the participant said no, nothing was
-recorded), `participant` (id and resume key, kept by the browser), `wait` (reason, seconds: a
-game is being set up), `trial` (session, trial, role, the agent's label; what to read first),
-`queue` (place, seconds to wait, while the trial waits for a free match), then the gateway's
-`state`/`end` frames, and at last `done` (the end text) or `problem`. Up: `hello` (optionally
-with the participant id and key to resume), `consent` or `decline`, `ready`, `keys`.
+recorded), `participant` (id and resume key, kept by the browser), `check` (an attention check,
+services/study/crowd.py), `wait` (reason, seconds: a game is being set up), `trial` (session,
+trial, role, the agent's label; what to read first), `queue` (place, seconds to wait, while the
+trial waits for a free match), then the gateway's `state`/`end` frames, and at last `done` (the
+end text, code and redirect), `screened` or `problem`. Up: `hello` (optionally with the
+participant id and key to resume, the link's parameters and signature), `consent` or `decline`,
+`answer`, `ready`, `keys`. The experimenter's dashboard is served beside it
+(services/study/dashboard.py).
 
 Each trial's metadata goes into a sidecar `<match>.study.json` beside its recording, rather than
 onto the bus: the participant id is nobody's business but the study's (bus traffic may cross a lab
@@ -53,6 +56,8 @@ from services.launch import HUMAN, MatchPlan, match_buses, run_match
 from services.recorder.recording import load
 from services.recorder.service import recording_path
 from services.study.core import SET_UP, Admission, Participant, Study, StudyConfig, Trial, worker_id
+from services.study.crowd import FAILS, attention_check, write_bonuses
+from services.study.dashboard import Dashboard, overview
 from services.study.remote import Remote
 from shared import keys
 from shared.bus import BusConfig, free_endpoint, until_stopped
@@ -68,9 +73,10 @@ DRAIN = 60.0  # seconds the stopping server waits for its matches to end and be 
 WARM_UP = 60.0  # seconds to wait for a match's processes before offering its trial anyway
 ARRIVAL_BURST = 20  # participant ids issued at once, beyond the rate
 ADDRESS_BURST = 5  # ... to one address
+SCREENED = "Thank you. This study cannot go on: two attention checks were not passed."
 BUSY = "Too many people are starting right now. Please try again in a minute."
 TAKEN = "This worker id has already taken part in this study."
-NO_WORKER = "This link's worker id is not one this study can take (letters, digits and _ . : @ + - only)."
+NO_WORKER = "This link's ids are not ones this study can take (letters, digits and _ . : @ + - only)."
 DECLINED = "You declined to take part. Nothing about you was recorded. You may close this window now."
 SETTING_UP = "Your next game is being set up."
 UNSIGNED = "This link is not signed for its worker id. Please open the link exactly as the study gave it."
@@ -95,6 +101,8 @@ class Serving:
     # HMAC-SHA256 of the id with this secret, shared.secret.signature); b"": links are not signed.
     link_secret: bytes = b""
     host_secret: bytes = b""  # shared with the match hosts: every message between them is sealed with it
+    dashboard: Web | None = None  # where the experimenter's dashboard is served (services/study/dashboard.py)
+    dashboard_token: str = ""  # ... to whoever shows this token
 
 
 SERVING, WEB = Serving(), Web()
@@ -109,6 +117,7 @@ class Socket:
         self.outbox = Outbox(asyncio.get_running_loop())
         self.events: asyncio.Queue[str] = asyncio.Queue()
         self.gone = asyncio.Event()
+        self.answer = ""  # the last answer to an attention check
         self.tasks = [asyncio.ensure_future(self._read()), asyncio.ensure_future(self._pump())]
 
     def send(self, message: dict) -> None:
@@ -123,7 +132,9 @@ class Socket:
     async def _read(self) -> None:
         try:
             async for text in self.ws:
-                message = self.controls.receive(text, ("consent", "decline", "ready", "keys"))
+                message = self.controls.receive(text, ("consent", "decline", "ready", "keys", "answer"))
+                if message is not None and message["type"] == "answer":
+                    self.answer = message["answer"]
                 if message is not None and message["type"] != "keys":
                     self.events.put_nowait(message["type"])
         except BadInput as error:
@@ -261,6 +272,7 @@ class Matches:
     def __init__(self, cap: int) -> None:
         self.admission = Admission(cap)
         self.stops: dict[str, threading.Event] = {}  # match -> its stop
+        self.endpoints: dict[str, str] = {}  # match -> its sim's endpoint, "" on a match host (spectators)
         self.of: dict[str, tuple[asyncio.Future, threading.Event]] = {}  # participant -> their match
         self.running: set[asyncio.Future] = set()
         self.lock = threading.Lock()  # stops is read by stop_all from another thread
@@ -271,7 +283,8 @@ class Matches:
         self.changed.set()
         self.changed = asyncio.Event()
 
-    def add(self, trial: Trial, running: asyncio.Future, stop: threading.Event) -> None:
+    def add(self, trial: Trial, running: asyncio.Future, stop: threading.Event, endpoint: str) -> None:
+        self.endpoints[trial.match] = endpoint
         with self.lock:
             self.stops[trial.match] = stop
             if self.closed:
@@ -281,6 +294,7 @@ class Matches:
 
         def ended(_: asyncio.Future) -> None:
             self.running.discard(running)
+            self.endpoints.pop(trial.match, None)
             with self.lock:
                 del self.stops[trial.match]
             if self.of.get(trial.participant, (None,))[0] is running:
@@ -357,8 +371,9 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
             if participant is None:
                 await refuse(socket.ws, "unknown participant or resume key")
             return participant
-        worker = worker_id(hello.get("worker"))
-        if worker is None:
+        ids = [worker_id(v) for v in config.crowd.ids(hello.get("link", {}))]
+        worker = ids[0] or worker_id(hello.get("worker"))
+        if worker is None or None in ids:
             await refuse(socket.ws, NO_WORKER)
             return None
         if serving.link_secret and not (
@@ -366,6 +381,7 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
         ):
             await refuse(socket.ws, UNSIGNED)
             return None
+        link = {k: v for k, v in zip(("study", "session"), ids[1:], strict=True) if v}
         if study.taken(worker):
             await refuse(socket.ws, TAKEN)
             return None
@@ -384,7 +400,7 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
         if not (per_address.allow(socket.ws.remote_address[0]) and arrivals.allow()):
             await refuse(socket.ws, BUSY)
             return None
-        participant = study.arrive(worker)
+        participant = study.arrive(worker, link)
         log.info("participant %s arrives and plays the %s", participant.id, participant.role)
         socket.send({"type": "participant", "participant": participant.id, "key": participant.key})
         return participant
@@ -473,7 +489,7 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
             running = asyncio.ensure_future(
                 asyncio.to_thread(run_trial, plan, trial.role, stop, remote, host)
             )
-            matches.add(trial, running, stop)
+            matches.add(trial, running, stop, endpoint)
             seat = await bridge(socket, trial, endpoint, obs, stop)
         ready = False
         if seat is not None:  # else the match cannot start: it fails at once
@@ -518,6 +534,23 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
             "instructions": config.instructions.get(trial.role, ""),
         }  # fmt: skip
 
+    async def attend(socket: Socket, participant: Participant, trial: Trial) -> bool:
+        """The attention check due before `trial`, if any; False (the page sent on to the
+        screened-out address) once the participant has failed FAILS, or if they left."""
+        if config.crowd.check_due(trial.session, trial.trial, len(participant.checks)):
+            check, word = attention_check(f"{config.seed}/{participant.id}/check/{len(participant.checks)}")
+            socket.send(check)
+            if not await socket.wait_for("answer"):
+                return False
+            study.check(participant, socket.answer == word)
+        if participant.screened:
+            redirect = config.crowd.redirect(config.crowd.screened_out_url, participant.code)
+            socket.send({"type": "screened", "text": SCREENED, "redirect": redirect})
+            log.info("participant %s is screened out: %d attention checks failed", participant.id, FAILS)
+            await socket.close()
+            return False
+        return True
+
     async def trials(socket: Socket, participant: Participant, obs: bool) -> None:
         """The participant's remaining trials, after a practice game if the study has one and they
         have not begun; a failed trial is offered again, RETRIES times."""
@@ -531,6 +564,8 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
             trial = study.next_trial(participant)
             if trial is None:
                 break
+            if not await attend(socket, participant, trial):
+                return
             sidecar = await play(socket, trial, obs, offer_of(trial, last, failures > 0))
             if sidecar is None:
                 return
@@ -542,7 +577,8 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
                 await socket.close()
                 return
             last, failures = sidecar["kills"], 0
-        socket.send({"type": "done", "text": config.end, "code": participant.code})
+        redirect = config.crowd.redirect(config.crowd.completion_url, participant.code)
+        socket.send({"type": "done", "text": config.end, "code": participant.code, "redirect": redirect})
         log.info("participant %s is done", participant.id)
         await socket.close()
 
@@ -597,7 +633,12 @@ def run_study(
         gateway.loop.set_default_executor(ThreadPoolExecutor(THREADS, thread_name_prefix="study"))
         if remote is not None:  # a host that comes or goes changes the room in the queue
             remote.on_change = lambda: gateway.loop.call_soon_threadsafe(matches.notify)
-        with gateway:
+        board = serving.dashboard and Dashboard(
+            serving.dashboard_token, serving.dashboard, gateway.loop,
+            lambda: overview(study, matches.admission), matches.endpoints.get, serving.low_latency,
+            remote and remote.z,
+        )  # fmt: skip
+        with gateway, board or contextlib.nullcontext():
             on_ready(gateway)
             until_stopped(stop)
             matches.stop_all()
@@ -607,4 +648,6 @@ def run_study(
         if remote is not None:
             remote.close()
         study.close()
+        if (bonuses := write_bonuses(study)) is not None:
+            log.info("bonuses written to %s", bonuses)
     return study

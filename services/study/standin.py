@@ -28,6 +28,9 @@ class StandInReport:
     consent: str = ""  # the consent text shown
     end: str = ""  # the end screen's text
     code: str = ""  # the completion code shown at the end
+    redirect: str = ""  # where the page would go at the end (the platform's completion address)
+    checks: int = 0  # attention checks asked
+    screened: bool = False  # screened out (failed attention checks)
     done: bool = False
     refused: str = ""
     queued: int = 0  # the furthest place in the queue it was shown
@@ -48,19 +51,24 @@ async def stand_in(
     sig: str = "",
     ssl: object = None,
     address: str | None = None,
+    link: dict[str, str] | None = None,
+    attentive: bool = True,
 ) -> StandInReport:
     """Take part in the study served at `url` (the page's address), playing each role with a policy
     key (default: the scripted circle bait and mirror shooter). `resume` = (participant, key) comes
     back as an earlier participant; `leave_after` > 0 drops the connection after that many frames,
     as a participant who walks away. `test` is the server's test token (Serving.test_token),
     without which it gets no observation values to play from; `worker` a crowd-sourcing worker
-    id, `sig` its signed link's signature; `ssl` an SSLContext for a wss:// server; `address`
-    the local address it connects from (a loopback test's other clients: 127.0.0.2 and on)."""
+    id, `sig` its signed link's signature; `link` the link's other parameters (a platform's ids);
+    `attentive` False answers every attention check with a wrong button; `ssl` an SSLContext for a
+    wss:// server; `address` the local address it connects from (a loopback test's other clients:
+    127.0.0.2 and on)."""
     policies = policies or {"bait": "circle", "shooter": "mirror"}
     report = StandInReport()
     hello: dict = {"type": "hello", "obs": True, **({"test": test} if test else {})}
     hello.update({"worker": worker} if worker else {})
     hello.update({"sig": sig} if sig else {})
+    hello.update({"link": link} if link else {})
     if resume:
         hello.update(participant=resume[0], key=resume[1])
     policy, held, ready, queued = None, None, None, 0.0
@@ -76,6 +84,11 @@ async def stand_in(
                 await ws.send(json.dumps({"type": "consent"}))
             elif kind == "participant":
                 report.participant, report.key = message["participant"], message["key"]
+            elif kind == "check":
+                report.checks += 1
+                word = message["text"].split('"')[1]  # the button the check names
+                answer = word if attentive else next(o for o in message["options"] if o != word)
+                await ws.send(json.dumps({"type": "answer", "answer": answer}))
             elif kind == "queue":
                 report.queued = max(report.queued, message["place"])
                 queued = queued or time.monotonic()
@@ -109,6 +122,10 @@ async def stand_in(
                 report.kills.append(message["kills"])
             elif kind == "done":
                 report.done, report.end, report.code = True, message["text"], message.get("code", "")
+                report.redirect = message.get("redirect", "")
+                return report
+            elif kind == "screened":
+                report.screened, report.end, report.redirect = True, message["text"], message["redirect"]
                 return report
             elif kind in ("refused", "problem"):
                 report.refused = message.get("reason") or message.get("text", "")

@@ -31,6 +31,7 @@ const DEATHS = "\n\nYour ship is destroyed if a shell hits it, if it touches the
   "is down flies into the wall on purpose, so that you both come back sooner.";
 const CONTROLS = "\n\nControls: \u2190 or A turn left, \u2192 or D turn right, \u2191 or W thrust, SPACE fire; " +
   "M sound on or off.";
+const OWN = ["participant", "key", "worker", "workerId", "watch", "match", "role", "token", "obs", "sig"]; // not the link's
 const KEYMAP = {
   ArrowLeft: "left", KeyA: "left", ArrowRight: "right", KeyD: "right",
   ArrowUp: "thrust", KeyW: "thrust", Space: "fire",
@@ -170,18 +171,48 @@ const handlers = {
     show("Something went wrong", m.text);
   },
   done(m) {
-    tsf.phase = "done";
-    localStorage.removeItem("tsf-participant");
-    show("The end", m.code ? `${m.text}\n\nYour completion code: ${m.code}` : m.text);
+    farewell("The end", m.code ? `${m.text}\n\nYour completion code: ${m.code}` : m.text, m.redirect);
+  },
+  check(m) {  // an attention check: one button per option, the question says which
+    tsf.phase = "check";
+    show("A quick check", m.text);
+    const buttons = document.createElement("div");
+    for (const option of m.options) {
+      const button = document.createElement("button");
+      button.textContent = option;
+      button.className = "answer";
+      button.addEventListener("click", () => {
+        send({ type: "answer", answer: option });
+        tsf.phase = "answered";
+        show("Thank you", "Setting up\u2026");
+      });
+      buttons.append(button, " ");
+    }
+    text.append("\n\n", buttons);
+  },
+  screened(m) {
+    farewell("Thank you", m.text, m.redirect);
   },
 };
+
+// The study is over for this participant: say so, and go back to the platform's address if given.
+function farewell(heading, body, redirect) {
+  tsf.phase = "done";
+  localStorage.removeItem("tsf-participant");
+  if (!redirect) return show(heading, body);
+  show(heading, `${body}\n\nTaking you back to the study's site in 5 seconds\u2026`, "Go back now",
+    () => location.assign(redirect));
+  setTimeout(() => location.assign(redirect), 5000);
+}
 
 function connect() {
   const scheme = location.protocol === "https:" ? "wss://" : "ws://";
   socket = new WebSocket(scheme + location.host + "/ws");
   socket.onopen = () => {
     if (params.has("watch")) {
-      send({ type: "watch" });
+      // the study's dashboard names the match, and its token comes in the fragment (never sent in a request)
+      const token = new URLSearchParams(location.hash.slice(1)).get("token");
+      send(params.has("match") ? { type: "watch", match: params.get("match"), ...(token ? { token } : {}) } : { type: "watch" });
     } else if (params.has("token")) {
       // ?obs=1: the seat's observation values too (a scripted player's, bench/human.py)
       send({ type: "join", role: params.get("role") || "", token: params.get("token"),
@@ -193,9 +224,12 @@ function connect() {
       // and its signature when the study signs its links.
       const worker = params.get("worker") || params.get("workerId") || params.get("PROLIFIC_PID");
       const sig = params.get("sig");
+      // The link's other parameters (a platform's study and session ids: the study's config names them).
+      const link = Object.fromEntries([...params].filter(([k, v]) => v && !OWN.includes(k))
+        .slice(0, 6).map(([k, v]) => [k.slice(0, 64), v.slice(0, 64)]));
       send(participant ? { type: "hello", participant, key: params.get("key") || saved.key || "-" } :
-        worker ? { type: "hello", worker: worker.slice(0, 64), ...(sig ? { sig: sig.slice(0, 64) } : {}) } :
-        { type: "hello" });
+        { type: "hello", ...(worker ? { worker: worker.slice(0, 64) } : {}),
+          ...(sig ? { sig: sig.slice(0, 64) } : {}), link });
     }
   };
   socket.onmessage = (event) => {

@@ -10,6 +10,8 @@ any worker process:
     switch(B5,B7)      plays B5 until SWITCH_AT, then B7 (a partner who changes style mid-game)
     human(B5)          B5 played by a simulated hand: reaction delay, held keys, lapses, slips
     human(B1,B5)       the same, drifting from B1's style to B5's over a session (human_like.py)
+    human(B5,skill=novice)  a first-time player (skill: novice, typical (the default), practised,
+                       or a number in [0, 1]); input_ms=40 adds the screen and keyboard's delay
     circle(radius=150,speed=3)  a scripted rule with other settings (any of its constructor's
                        numbers): a hand-written partner whose style no library policy has
     package.module:attr  your own partner: an object with the policy protocol's key, role, view,
@@ -174,10 +176,22 @@ def make_partner(name: str, role: str) -> Partner:
     if call and call[1] in WRAPPERS:
         return WRAPPERS[call[1]](make_partner(call[2], role))
     if call and call[1] == "human":
-        return HumanLike(*(make_partner(a, role) for a in _split_arguments(call[2], 1)))
+        arguments = _split_arguments(call[2])
+        settings = [a for a in arguments if "=" in a and "(" not in a]
+        inner = [make_partner(a, role) for a in arguments if a not in settings]
+        if not 1 <= len(inner) <= 2:
+            raise UsageError(
+                "--partner", name, "human(...) plays one or two partners (and skill=, input_ms=)"
+            )
+        try:
+            return HumanLike.from_arguments(inner, settings)
+        except ValueError as error:
+            raise UsageError("--partner", name, str(error)) from None
     if call and call[1] == "switch":
-        first, second = _split_arguments(call[2])
-        return Switching(make_partner(first, role), make_partner(second, role))
+        arguments = _split_arguments(call[2])
+        if len(arguments) != 2:
+            raise ValueError(f"switch({call[2]}) needs two partners")
+        return Switching(*(make_partner(a, role) for a in arguments))
     if call and call[1] in SCRIPTED:
         return _scripted(name, call[1], call[2], role)
     return policy_for(name, role, "--partner")  # also a .zip or module:attr (services/agent/outside.py)
@@ -204,17 +218,15 @@ def _scripted(name: str, rule: str, arguments: str, role: str) -> Partner:
     return partner
 
 
-def _split_arguments(text: str, fewest: int = 2) -> tuple[str, ...]:
-    """The top-level, comma-separated arguments of switch(...) or human(...), which may nest:
-    two, or one when `fewest` is 1."""
-    depth = 0
+def _split_arguments(text: str) -> list[str]:
+    """The top-level, comma-separated arguments of switch(...) or human(...), which may nest."""
+    depth, start, out = 0, 0, []
     for i, char in enumerate(text):
         depth += {"(": 1, ")": -1}.get(char, 0)
         if char == "," and depth == 0:
-            return text[:i].strip(), text[i + 1 :].strip()
-    if fewest == 1:
-        return (text.strip(),)
-    raise ValueError(f"switch({text}) needs two partners")
+            out.append(text[start:i].strip())
+            start = i + 1
+    return [*out, text[start:].strip()]
 
 
 def group_of(name: str) -> str:

@@ -45,20 +45,20 @@ from shared.game import N_ACTIONS, GameConfig, join_action, split_action
 
 FRAME_MS = 1000.0 / 30.0
 SESSION_TRIALS = 3  # the study plays three one-minute trials with the same partner
-SKILLS = {"novice": 0.0, "typical": 0.5, "practised": 1.0}
+SKILLS = {"novice": 0.0, "typical": 0.65, "practised": 1.0}  # typical: calibrated (docs/humans.md)
 # A trait as (first-time player, practised player); skill s in [0, 1] lies between, linearly.
-RT_MU = (260.0, 200.0)  # ms: the ex-Gaussian's mu, the person's mean
+RT_MU = (260.0, 190.0)  # ms: the ex-Gaussian's mu, the person's mean
 RT_MU_PERSON_SD, RT_MU_GAME_SD = 25.0, 15.0  # ms: between people, between one person's games
 RT_SIGMA, RT_TAU = 25.0, 50.0  # ms: its Gaussian spread and exponential tail
 FORESIGHT = (0.0, 1.0)  # the fraction of the lag over which the fortress is foreseen (ours)
 FORESIGHT_SD = 0.15  # between people (ours)
-LAPSES_PER_MINUTE = ((1.0, 6.0), (0.3, 3.0))  # a person's rate, log-uniform in this range
+LAPSES_PER_MINUTE = ((1.0, 6.0), (0.2, 1.0))  # a person's rate, log-uniform in this range
 LAPSE_MS, LAPSE_TAIL_MS = 500.0, 400.0
-SLIP = ((0.04, 0.08), (0.02, 0.05))  # a person's chance that a decision's key comes out wrong
+SLIP = ((0.04, 0.08), (0.01, 0.03))  # a person's chance that a decision's key comes out wrong
 LEARNING = 0.5  # power-law exponent: trial i keeps (i + 1) ** -LEARNING of the gap to practised
-HOLD_MIN = 3  # frames: the shortest key press or release (about 0.1 s)
+HOLD_MS = (100.0, 67.0)  # the shortest key press or release
 LOOK_MIN = 2  # frames between looks at the least
-LOOK_MS = (270.0, 100.0)  # ms between looks on average (ours: calibrated)
+LOOK_MS = (270.0, 67.0)  # ms between looks on average (ours: calibrated)
 LONGEST_LAG = 24  # frames (0.8 s)
 HISTORY = 64  # frames of states kept: the longest lag plus the longest run between looks
 _STREAMS = dict(
@@ -162,7 +162,8 @@ class HumanLike:
         self.ring = np.zeros((n, HISTORY, ob.TIME + 1), np.float32)
         self.keys = np.zeros((n, HISTORY), np.int64)  # the actions pressed, for the forward model
         self.held = np.zeros(n, np.int64)
-        self.since_change = np.full((n, 3), HOLD_MIN, np.int64)  # frames each key has been as it is
+        self.hold = np.rint(between(HOLD_MS, skill) / FRAME_MS).astype(np.int64)  # frames
+        self.since_change = np.zeros((n, 3), np.int64) + self.hold[:, None]  # frames each key is as it is
         self.seen_at = np.zeros(n, np.int64)  # the frame whose state the person last took in
         self.look_left = np.zeros(n, np.int64)  # frames to the next look
         self.lapse_left = np.zeros(n, np.int64)
@@ -205,14 +206,14 @@ class HumanLike:
     def _press(self, lanes: np.ndarray, u: dict[str, np.ndarray], t: int) -> None:
         """The keys of `lanes` this frame: the policy's choice on the state the person expects now
         (the last look, moved on by their forward model), each key changed only once it has been
-        held HOLD_MIN frames, and a change pressed wrong with the person's slip rate."""
+        held the person's shortest press, and a change pressed wrong with the person's slip rate."""
         age = t - self.seen_at[lanes]
         seen = self.ring[lanes, self.seen_at[lanes] % HISTORY]
         foreseen = np.rint(self.foresight[lanes] * age).astype(np.int64)
         expected = predict(seen, age, foreseen, self.keys[lanes], t, self.rules)
         chosen = sample(self._probs(expected, lanes, u["style"][lanes]), u["action"][lanes])
         wanted, now = np.array(split_action(chosen)), np.array(split_action(self.held[lanes]))
-        change = (wanted != now) & (self.since_change[lanes].T >= HOLD_MIN)
+        change = (wanted != now) & (self.hold[lanes] <= self.since_change[lanes].T)
         # a slip: the turn goes the third way, a thrust or fire press is missed
         wrong = np.array([3 - now[0] - wanted[0], now[1], now[2]])
         pressed = np.where(

@@ -47,7 +47,7 @@ def teams(skill: str, table: Table) -> dict[str, list[tuple[str, str]]]:
 
 
 def calibration(
-    skills: list[str] = list(SKILLS), seeds: int = 12, config: GameConfig | None = None
+    skills: tuple[str, ...] = tuple(SKILLS), seeds: int = 12, config: GameConfig | None = None
 ) -> list[Row]:
     """Every group at every skill, over game seeds 0..seeds-1 (seeds // 3 people, three trials
     each), all games in one batch."""

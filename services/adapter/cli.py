@@ -201,3 +201,40 @@ def calibrate_adapter(
     for role, thresholds in result["thresholds"].items():
         console.print(f"{role}: " + ", ".join(f"T={t}: {v:.2f}" for t, v in thresholds.items()))
     console.print(f"written to {write_calibration(result, out)}")
+
+
+humans_commands = typer.Typer(no_args_is_help=True, help="Stand-ins for people: human-like partners.")
+commands.add_typer(humans_commands, name="humans")
+
+
+@humans_commands.callback()
+def humans_command() -> None:
+    """Stand-ins for people: human-like partners (docs/humans.md)."""
+
+
+@humans_commands.command("fit")
+def humans_fit(
+    recordings: list[Path] = typer.Argument(
+        ..., help="Recordings (.tsflog) of people; study sidecars beside them.", exists=True, dir_okay=False
+    ),
+    role: Seat = typer.Option(..., help="The person's seat."),
+    out: Path = output(..., "Directory the stand-ins are written into.", directory=True),
+) -> None:
+    """Fit a stand-in per participant: the likeliest library policy and the skill whose simulated
+    stand-ins come nearest the participant's keys and score. Play one as humans:OUT@PARTICIPANT."""
+    import shlex
+    import sys
+
+    from services.adapter.humans import fit, write
+
+    fitted = fit(recordings, role)
+    path = write(out, role, fitted, shlex.join(["tsf", *sys.argv[1:]]))
+    for name, person in fitted.items():
+        s = person["statistics"]
+        console.print(
+            f"{name}: {person['partner']} ({len(person['recordings'])} recordings; "
+            f"{s['kills_per_minute']:.2f} kills/min, {s['key_changes_per_s']:.1f} key changes/s, "
+            f"shortest press {s['hold_ms']:.0f} ms, "
+            f"response {s['response_ms']:.0f} ms)"
+        )
+    console.print(f"written to {path}; play one as humans:{out}@PARTICIPANT")

@@ -145,10 +145,12 @@ def play_games(
 
 
 def play_teams(
-    teams: list[tuple[str, str]], seeds: list[int], config: GameConfig | None = None
-) -> np.ndarray:
-    """The kills/min of games of (bait partner, shooter partner) by name, one per team and seed,
-    as the lanes of one batch: both seats played by partners (stand-ins, library keys, wrappers)."""
+    teams: list[tuple[str, str]], seeds: list[int], config: GameConfig | None = None, record: bool = False
+) -> np.ndarray | tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The (teams, seeds) kills/min of games of (bait partner, shooter partner) by name, one per
+    team and seed, as the lanes of one batch: both seats played by partners (stand-ins, library
+    keys, wrappers). With `record`, also the (teams, seeds, frames, 2) actions, bait first, and
+    the (teams, seeds, frames + 1) flags of the states in which the fortress has just fired (opened)."""
     from services.adapter.partner_lanes import Partners  # bulk play only: numba loads with it
     from services.sim.batch import BatchGame
     from services.sim.batch_observation import observe as observe_lanes
@@ -158,13 +160,21 @@ def play_teams(
     seats = {
         role: Partners([team[i] for team in teams for _ in seeds], role, keys) for i, role in enumerate(ROLES)
     }
+    played = np.zeros((len(keys), batch.config.frames, 2), np.int64) if record else None
+    opened = np.zeros((len(keys), batch.config.frames + 1), bool)
     while not batch.done[0]:
         frame = int(batch.state.frame[0])
         bait, shooter = (
             seat.act(cache(partial(observe_lanes, batch, r)), frame) for r, seat in seats.items()
         )
+        if played is not None:
+            played[:, frame] = np.stack([bait, shooter], axis=1)
         batch.step(bait, shooter)
-    return batch.kills_per_minute().reshape(len(teams), len(seeds))
+        opened[:, frame + 1] = batch.state.vulnerable == batch.config.vulnerable_frames
+    kills = batch.kills_per_minute().reshape(len(teams), len(seeds))
+    if played is None:
+        return kills
+    return kills, played.reshape(len(teams), len(seeds), -1, 2), opened.reshape(len(teams), len(seeds), -1)
 
 
 def batches(items: list, workers: int, lanes: int = LANES) -> list[list]:

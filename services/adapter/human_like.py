@@ -5,20 +5,21 @@ over a session, and `human(B5,skill=novice)` (or `typical`, the default, `practi
 in [0, 1]) sets how practised the person is. docs/humans.md cites the numbers and says which are
 ours and how they were calibrated:
 
-- **Delay with anticipation.** A decision reads the state of `lag` frames ago (an ex-Gaussian
-  reaction time, plus `input_ms`, the extra delay of the screen and keyboard a person plays
-  through), and acts on that state predicted forward by a fraction `anticipation` of the lag: the
-  person's forward model moves their own ship by the keys they pressed since, coasts the partner,
-  the shells and the missiles, and runs the fortress's turn, fire cadence and opening (the game's
-  own rules, engine.steer and engine.fortress_turn). A person fires into an opening they expect.
-- **Held keys.** A decision is held for at least HOLD_MIN frames plus a geometric run (intermittent
-  control), then the person decides again.
-- **Lapses.** At a decision the person may lapse: the keys stay as they are for 0.5 s plus a tail.
-- **Slips.** A decision's key may come out wrong (one of turn, thrust, fire).
+- **Looks and delay.** The person looks now and then (every LOOK_MS on average) and takes in the
+  state of a reaction time ago (ex-Gaussian), plus `input_ms`, the delay of the screen and keys
+  they play through.
+- **Anticipation.** Between looks they act on that state moved to now by a forward model (the
+  game's own rules, engine.steer and engine.fortress_turn): their own ship by the keys they
+  pressed since, the partner, shells and missiles coasting, and over the foreseen part of the lag
+  the fortress turning and firing when aimed and due: a person fires into an opening they expect.
+- **Held keys.** Every frame the policy chooses on the predicted state, and each key (turn,
+  thrust, fire) changes only once held the person's shortest press (intermittent control).
+- **Lapses.** At a look the person may lapse: the keys stay as they are for 0.5 s plus a tail.
+- **Slips.** A key change may come out wrong (the turn the third way, a press missed).
 - **Skill and learning.** Every trait lies between a first-time player's value (skill 0) and a
   practised player's (skill 1); over a session's SESSION_TRIALS trials the gap to practised
   shrinks as a power law of practice.
-- **Drift.** With two policies, each decision follows the second with probability w, which grows
+- **Drift.** With two policies, each frame follows the second with probability w, which grows
   from 0 to 1 over the session.
 
 Every draw is counter-based (sampling.lane_uniforms, keyed by the game's seed, a stream and the
@@ -61,7 +62,7 @@ LEARNING = 0.5  # power-law exponent: trial i keeps (i + 1) ** -LEARNING of the 
 HOLD_MS = (100.0, 67.0)  # the shortest key press or release
 LOOK_MIN = 2  # frames between looks at the least
 LOOK_MS = (270.0, 67.0)  # ms between looks on average (ours: calibrated)
-LONGEST_LAG = 24  # frames (0.8 s)
+LONGEST_LAG = 30  # frames (1 s)
 HISTORY = 64  # frames of states kept: the longest lag plus the longest run between looks
 _STREAMS = dict(
     zip(
@@ -110,7 +111,7 @@ class HumanLike:
         inner = [p.key for p in (first, second) if p is not None]
         self.key = f"human({','.join(inner + settings)})"
         self.role = first.role
-        c = config or GameConfig()
+        c = config or GameConfig()  # the rules the person's forward model knows
         self.rules = np.array(
             [c.ship_turn, c.ship_thrust, c.ship_drag, c.ship_max_speed, c.fortress_turn]
             + [c.fortress_aim_tolerance, c.fortress_fire_interval, c.vulnerable_frames, c.frames],
@@ -131,8 +132,8 @@ class HumanLike:
                 values[name] = parse_skill(text) if name == "skill" else float(text)
             except ValueError as error:
                 raise ValueError(str(error) if name == "skill" else f"input_ms={text} is no number") from None
-            if name == "input_ms" and not 0.0 <= values[name] <= 500.0:
-                raise ValueError(f"input_ms={text} is outside [0, 500]")
+            if name == "input_ms" and not 0.0 <= values[name] <= 300.0:
+                raise ValueError(f"input_ms={text} is outside [0, 300]")
         return cls(*inner, **values)
 
     def reset(self, seed: int | None = None) -> None:

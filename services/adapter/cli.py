@@ -12,7 +12,18 @@ from rich.table import Table
 
 from services.adapter.core import WINDOWS, AdapterConfig
 from services.agent.library import policy_for
-from services.options import GAMES, RAY, WORKERS, Seat, Strategies, bus_options, console, number, output
+from services.options import (
+    GAMES,
+    PEOPLE_RECORDINGS,
+    RAY,
+    WORKERS,
+    Seat,
+    Strategies,
+    bus_options,
+    console,
+    number,
+    output,
+)
 from shared.bus import BusConfig, stop_on_signals
 from shared.errors import UsageError
 from shared.game import FPS, ROLES, Range, other
@@ -203,20 +214,18 @@ def calibrate_adapter(
     console.print(f"written to {write_calibration(result, out)}")
 
 
-humans_commands = typer.Typer(no_args_is_help=True, help="Stand-ins for people: human-like partners.")
+humans_commands = typer.Typer(no_args_is_help=True, help="Stand-ins for people (docs/humans.md).")
 commands.add_typer(humans_commands, name="humans")
 
 
 @humans_commands.callback()
 def humans_command() -> None:
-    """Stand-ins for people: human-like partners (docs/humans.md)."""
+    """Stand-ins for people: human-like partners fitted from recordings (docs/humans.md)."""
 
 
 @humans_commands.command("fit")
 def humans_fit(
-    recordings: list[Path] = typer.Argument(
-        ..., help="Recordings (.tsflog) of people; study sidecars beside them.", exists=True, dir_okay=False
-    ),
+    recordings: list[Path] = PEOPLE_RECORDINGS,
     role: Seat = typer.Option(..., help="The person's seat."),
     out: Path = output(..., "Directory the stand-ins are written into.", directory=True),
 ) -> None:

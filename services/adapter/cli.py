@@ -86,7 +86,8 @@ def eval_command(
     partners_from: Path | None = typer.Option(
         None,
         help="A study's recordings: one proxy per participant of the partners' seat (trained into "
-        "OUT/proxies, or loaded from there) as the partners, reported per participant and pooled.",
+        "OUT/proxies, or loaded from there) as the partners, reported per participant and pooled; "
+        "or a directory of `tsf humans fit`: each participant's fitted stand-in.",
     ),
     identify_seeds: int = number(3, GAMES, "Games per library partner for identification."),
     identify: bool = typer.Option(True, help="Measure identification accuracy."),
@@ -123,8 +124,10 @@ def eval_command(
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
 
     from services.adapter import figures, identification, results, team
-    from services.adapter.partners import SWITCH_AT, check_partner, population
+    from services.adapter.human_like import STAND_INS
+    from services.adapter.partners import SWITCH_AT, check_partner, fitted_people, population
     from services.agent import library
+    from services.agent.outside import HUMANS
     from services.jobs.engine import on_workers, open_engine
 
     if role not in ROLES:
@@ -134,12 +137,16 @@ def eval_command(
     if partners_from is not None:
         if partner:
             raise UsageError("--partners-from", partners_from, "give --partner or --partners-from, not both")
-        from services.proxy.study import study_partners
+        if (partners_from / STAND_INS).is_file():
+            people = {name: f"{HUMANS}{partners_from}@{name}" for name in fitted_people(partners_from)[1]}
+            console.print(f"partners: fitted stand-ins of {', '.join(people)}")
+        else:
+            from services.proxy.study import study_partners
 
-        people, excluded = study_partners(partners_from, other(role), out / "proxies")
-        for line in excluded:
-            console.print(f"excluded {line}")
-        console.print(f"partners: proxies of {', '.join(people)}")
+            people, excluded = study_partners(partners_from, other(role), out / "proxies")
+            for line in excluded:
+                console.print(f"excluded {line}")
+            console.print(f"partners: proxies of {', '.join(people)}")
         partners = list(people.values())
     for name in dict.fromkeys(partners):  # every partner built and asked once, before any worker starts
         check_partner(name, other(role))

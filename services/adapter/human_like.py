@@ -46,7 +46,6 @@ from shared.game import N_ACTIONS, GameConfig, join_action, split_action
 
 FRAME_MS = 1000.0 / 30.0
 SESSION_TRIALS = 3  # the study plays three one-minute trials with the same partner
-HUMANS = "humans:"  # a fitted stand-in: humans:DIR or humans:DIR@PARTICIPANT (`tsf humans fit`)
 STAND_INS = "stand_ins.json"  # what `tsf humans fit` writes into DIR
 SKILLS = {"novice": 0.0, "typical": 0.65, "practised": 1.0}  # typical: calibrated (docs/humans.md)
 # A trait as (first-time player, practised player); skill s in [0, 1] lies between, linearly.

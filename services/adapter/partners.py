@@ -37,10 +37,10 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from services.adapter.human_like import HUMANS, STAND_INS, HumanLike
+from services.adapter.human_like import STAND_INS, HumanLike
 from services.agent import library
 from services.agent.library import policy_for
-from services.agent.outside import PROXY
+from services.agent.outside import HUMANS, PROXY
 from services.agent.scripted import SCRIPTED
 from services.sim.engine import Game
 from services.sim.observation import as_observation, world_values
@@ -217,17 +217,23 @@ def make_partner(name: str, role: str) -> Partner:
     return policy_for(name, role, "--partner")  # also a .zip or module:attr (services/agent/outside.py)
 
 
+def fitted_people(directory: Path, name: str = "") -> tuple[str, dict[str, dict]]:
+    """The seat and the participants' fits of a directory `tsf humans fit` wrote; a UsageError
+    naming `name` (the partner, else the directory) when there is none."""
+    path = Path(directory) / STAND_INS
+    try:
+        fitted = json.loads(path.read_text())
+        return fitted["role"], dict(fitted["people"])
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        problem = f"no stand-ins of `tsf humans fit` in {path} ({error})"
+        raise UsageError("--partner" if name else "--partners-from", name or directory, problem) from None
+
+
 def _fitted(name: str, role: str) -> Partner:
     """`humans:DIR` (a directory of one participant) or `humans:DIR@PARTICIPANT`, written by
     `tsf humans fit`: that participant's fitted human(...), under this name."""
     directory, _, who = name.removeprefix(HUMANS).partition("@")
-    path = Path(directory) / STAND_INS
-    try:
-        fitted = json.loads(path.read_text())
-        people = fitted["people"]
-        role_played = fitted["role"]
-    except (OSError, ValueError, KeyError, TypeError) as error:
-        raise UsageError("--partner", name, f"no stand-ins of `tsf humans fit` in {path} ({error})") from None
+    role_played, people = fitted_people(Path(directory), name)
     if role_played != role:
         raise UsageError("--partner", name, f"its people played the {role_played} seat, not the {role}")
     who = who or (next(iter(people)) if len(people) == 1 else "")

@@ -236,15 +236,20 @@ class HumanLike:
         return probs
 
 
+def in_view(world: np.ndarray, view: str) -> np.ndarray:
+    """World-view rows as a policy of `view` reads them."""
+    if view != "role":
+        return world
+    from services.sim.batch_observation import to_role_view  # numba: bulk play loads it anyway
+
+    rows = world.astype(np.float64)
+    to_role_view(rows)
+    return rows.astype(np.float32)
+
+
 def _inner_probs(inner, world: np.ndarray) -> np.ndarray:
     """An inner policy's distributions over world-view rows, handed to it in its own view."""
-    seen = world
-    if inner.view == "role":
-        from services.sim.batch_observation import to_role_view  # numba: bulk play loads it anyway
-
-        rows = world.astype(np.float64)
-        to_role_view(rows)
-        seen = rows.astype(np.float32)
+    seen = in_view(world, inner.view)
     if hasattr(inner, "probs") or hasattr(inner, "probs_batch"):
         return batch_probs(inner, seen)
     return np.eye(N_ACTIONS)[[inner.act(o) for o in seen]]  # a plug-in that only acts

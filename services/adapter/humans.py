@@ -1,5 +1,6 @@
-"""The stand-ins' calibration: how human-like partners of each skill score, in pairs and with
-library teammates, against the study's human pairs (about 2.6 kills/min; docs/humans.md).
+"""Stand-ins for people measured and fitted (docs/humans.md): the calibration, how human-like
+partners of each skill score in pairs and with library teammates against the study's human pairs
+(about 2.6 kills/min); and `tsf humans fit`, a stand-in per participant from recordings.
 
 Three groups of teams per skill, each bait policy paired as the shipped table pairs it:
 - **pairs**: `human(Bk)` with `human(S)`, S the table's best shooter for Bk, both of that skill;
@@ -17,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from services.adapter.evaluate import play_teams
-from services.adapter.human_like import FRAME_MS, SKILLS, STAND_INS
+from services.adapter.human_like import FRAME_MS, SKILLS, STAND_INS, in_view
 from services.agent import library
 from services.proxy.data import pairs, person_seats, study_record
 from services.recorder.recording import load
@@ -152,19 +153,12 @@ def read_trial(path: Path, role: str) -> Trial:
 
 def likeliest_policy(trials: list[Trial], role: str) -> str:
     """The library policy of `role` under which the person's actions (while alive) are likeliest."""
-    from services.sim.batch_observation import to_role_view
-
     obs = np.concatenate([t.alive_obs for t in trials])
     actions = np.concatenate([t.alive_actions for t in trials])
     scores = {}
     for key in library.keys(role):
         policy = library.load(key)
-        seen = obs
-        if policy.view == "role":
-            rows = obs.astype(np.float64)
-            to_role_view(rows)
-            seen = rows.astype(np.float32)
-        probs = batch_probs(policy, seen)[np.arange(len(actions)), actions]
+        probs = batch_probs(policy, in_view(obs, policy.view))[np.arange(len(actions)), actions]
         scores[key] = float(np.mean(np.log(np.maximum(probs, 1e-12))))
     return max(scores, key=scores.get)
 

@@ -132,7 +132,7 @@ def test_batched_adaptive_games_decide_as_the_scalar_adapter_on_the_same_play() 
         assert outcome.guarded == (adapter is not None and adapter.guarded)
     best = s.payoff.ours[s.payoff.best_response(s.payoff.partners.index("B3"))]  # the table's answer to B3
     assert sum(o.switches for o in played) > 4 and played[0].timeline[0][1:] == ("B3", best)
-    assert [o.switches for o in played[5:]] == [3, 2]  # under the guard's doubling dwell
+    assert [o.switches for o in played[5:]] == [1, 2]  # under the guard's doubling dwell
 
 
 def test_teams_of_partners_play_both_seats_as_the_batched_pair_games() -> None:

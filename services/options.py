@@ -86,6 +86,12 @@ def output(
     return typer.Option(default, *names, callback=check, help=help)
 
 
+# The RECORDINGS argument of the commands that learn from recorded people (proxy train, humans fit).
+PEOPLE_RECORDINGS = typer.Argument(
+    ..., help="Recordings (.tsflog) of people; study sidecars beside them.", exists=True, dir_okay=False
+)
+
+
 # Enumerated options: Literal types, so that --help lists the choices and click refuses the rest.
 Seat = Literal[ROLES]
 Strategy = Literal[STRATEGIES]

@@ -92,7 +92,9 @@ def test_a_job_that_breaks_the_contract_is_refused_at_once_not_left_to_time_out(
 def test_in_process_run_names_the_missing_plugin(name):
     from services.jobs.kinds import import_plugins, plugins_in
 
-    assert plugins_in([f"noisy({name})", "B1", "my.zip", "human(proxy:/study/proxies/p0)"]) == (name,)
+    assert plugins_in(
+        [f"noisy({name})", "B1", "my.zip", "human(proxy:/study/proxies/p0)", "humans:/s@p0"]
+    ) == (name,)
     assert import_plugins([name]).startswith(f"cannot import plug-in {name}: ModuleNotFoundError")
     assert import_plugins(["services.adapter.partners_test:Constant"]) == ""
     assert sys.modules.get("no_such_module") is None

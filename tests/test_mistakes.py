@@ -240,6 +240,13 @@ MISTAKES = [
         "tsf eval: " + refused("--role", "pilot", SEATS),
     ),
     ("eval --window x", 2, "Invalid value for '--window'"),
+    (
+        "eval --partner human(B5,skill=expert) --out {tmp}/e",
+        2,
+        "tsf eval: --partner human(B5,skill=expert): skill=expert is not one of novice, typical, practised",
+    ),
+    ("humans fit {done} --role bait --out {tmp}/h", 2, "{done}: no person played the bait seat"),
+    ("humans fit {garbage} --role bait --out {tmp}/h", 1, "unreadable recording"),
     ("eval --strategy nope", 2, "Invalid value for '--strategy'"),
     ("eval --strategy-window 0", 2, "Invalid value for '--strategy-window'"),
     ("calibrate-adapter --workers -1", 2, "Invalid value for '--workers'"),

@@ -12,7 +12,18 @@ from rich.table import Table
 
 from services.adapter.core import WINDOWS, AdapterConfig
 from services.agent.library import policy_for
-from services.options import GAMES, RAY, WORKERS, Seat, Strategies, bus_options, console, number, output
+from services.options import (
+    GAMES,
+    PEOPLE_RECORDINGS,
+    RAY,
+    WORKERS,
+    Seat,
+    Strategies,
+    bus_options,
+    console,
+    number,
+    output,
+)
 from shared.bus import BusConfig, stop_on_signals
 from shared.errors import UsageError
 from shared.game import FPS, ROLES, Range, other
@@ -75,7 +86,8 @@ def eval_command(
     partners_from: Path | None = typer.Option(
         None,
         help="A study's recordings: one proxy per participant of the partners' seat (trained into "
-        "OUT/proxies, or loaded from there) as the partners, reported per participant and pooled.",
+        "OUT/proxies, or loaded from there) as the partners, reported per participant and pooled; "
+        "or a directory of `tsf humans fit`: each participant's fitted stand-in.",
     ),
     identify_seeds: int = number(3, GAMES, "Games per library partner for identification."),
     identify: bool = typer.Option(True, help="Measure identification accuracy."),
@@ -112,8 +124,10 @@ def eval_command(
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
 
     from services.adapter import figures, identification, results, team
-    from services.adapter.partners import SWITCH_AT, check_partner, population
+    from services.adapter.human_like import STAND_INS
+    from services.adapter.partners import SWITCH_AT, check_partner, fitted_people, population
     from services.agent import library
+    from services.agent.outside import HUMANS
     from services.jobs.engine import on_workers, open_engine
 
     if role not in ROLES:
@@ -123,12 +137,16 @@ def eval_command(
     if partners_from is not None:
         if partner:
             raise UsageError("--partners-from", partners_from, "give --partner or --partners-from, not both")
-        from services.proxy.study import study_partners
+        if (partners_from / STAND_INS).is_file():
+            people = {name: f"{HUMANS}{partners_from}@{name}" for name in fitted_people(partners_from)[1]}
+            console.print(f"partners: fitted stand-ins of {', '.join(people)}")
+        else:
+            from services.proxy.study import study_partners
 
-        people, excluded = study_partners(partners_from, other(role), out / "proxies")
-        for line in excluded:
-            console.print(f"excluded {line}")
-        console.print(f"partners: proxies of {', '.join(people)}")
+            people, excluded = study_partners(partners_from, other(role), out / "proxies")
+            for line in excluded:
+                console.print(f"excluded {line}")
+            console.print(f"partners: proxies of {', '.join(people)}")
         partners = list(people.values())
     for name in dict.fromkeys(partners):  # every partner built and asked once, before any worker starts
         check_partner(name, other(role))
@@ -204,3 +222,38 @@ def calibrate_adapter(
     for role, thresholds in result["thresholds"].items():
         console.print(f"{role}: " + ", ".join(f"T={t}: {v:.2f}" for t, v in thresholds.items()))
     console.print(f"written to {write_calibration(result, out)}")
+
+
+humans_commands = typer.Typer(no_args_is_help=True, help="Stand-ins for people (docs/humans.md).")
+commands.add_typer(humans_commands, name="humans")
+
+
+@humans_commands.callback()
+def humans_command() -> None:
+    """Stand-ins for people: human-like partners fitted from recordings (docs/humans.md)."""
+
+
+@humans_commands.command("fit")
+def humans_fit(
+    recordings: list[Path] = PEOPLE_RECORDINGS,
+    role: Seat = typer.Option(..., help="The person's seat."),
+    out: Path = output(..., "Directory the stand-ins are written into.", directory=True),
+) -> None:
+    """Fit a stand-in per participant: the likeliest library policy and the skill whose simulated
+    stand-ins come nearest the participant's keys and score. Play one as humans:OUT@PARTICIPANT."""
+    import shlex
+    import sys
+
+    from services.adapter.humans import fit, write
+
+    fitted = fit(recordings, role)
+    path = write(out, role, fitted, shlex.join(["tsf", *sys.argv[1:]]))
+    for name, person in fitted.items():
+        s = person["statistics"]
+        console.print(
+            f"{name}: {person['partner']} ({len(person['recordings'])} recordings; "
+            f"{s['kills_per_minute']:.2f} kills/min, {s['key_changes_per_s']:.1f} key changes/s, "
+            f"shortest press {s['hold_ms']:.0f} ms, "
+            f"response {s['response_ms']:.0f} ms)"
+        )
+    console.print(f"written to {path}; play one as humans:{out}@PARTICIPANT")

@@ -40,7 +40,7 @@ from services.sim.engine import Game
 from services.sim.observation import observe, world_values
 from services.sim.play import policy_seed, switch_seed
 from services.table.table import DEFAULT_TABLE
-from shared.game import GameConfig, Policy, bait_first, other
+from shared.game import ROLES, GameConfig, Policy, bait_first, other
 
 LANES = 1024  # games per batch at most
 
@@ -142,6 +142,39 @@ def play_games(
         if record:
             outcomes[lane].scores, outcomes[lane].pairs = scores[lane], pairs[lane]
     return outcomes
+
+
+def play_teams(
+    teams: list[tuple[str, str]], seeds: list[int], config: GameConfig | None = None, record: bool = False
+) -> np.ndarray | tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The (teams, seeds) kills/min of games of (bait partner, shooter partner) by name, one per
+    team and seed, as the lanes of one batch: both seats played by partners (stand-ins, library
+    keys, wrappers). With `record`, also the (teams, seeds, frames, 2) actions, bait first, and
+    the (teams, seeds, frames + 1) flags of the states in which the fortress has just fired (opened)."""
+    from services.adapter.partner_lanes import Partners  # bulk play only: numba loads with it
+    from services.sim.batch import BatchGame
+    from services.sim.batch_observation import observe as observe_lanes
+
+    keys = np.array([seed for _ in teams for seed in seeds], np.int64)
+    batch = BatchGame(len(keys), config, keys)
+    seats = {
+        role: Partners([team[i] for team in teams for _ in seeds], role, keys) for i, role in enumerate(ROLES)
+    }
+    played = np.zeros((len(keys), batch.config.frames, 2), np.int64) if record else None
+    opened = np.zeros((len(keys), batch.config.frames + 1), bool)
+    while not batch.done[0]:
+        frame = int(batch.state.frame[0])
+        bait, shooter = (
+            seat.act(cache(partial(observe_lanes, batch, r)), frame) for r, seat in seats.items()
+        )
+        if played is not None:
+            played[:, frame] = np.stack([bait, shooter], axis=1)
+        batch.step(bait, shooter)
+        opened[:, frame + 1] = batch.state.vulnerable == batch.config.vulnerable_frames
+    kills = batch.kills_per_minute().reshape(len(teams), len(seeds))
+    if played is None:
+        return kills
+    return kills, played.reshape(len(teams), len(seeds), -1, 2), opened.reshape(len(teams), len(seeds), -1)
 
 
 def batches(items: list, workers: int, lanes: int = LANES) -> list[list]:

@@ -10,10 +10,12 @@ import pytest
 from scipy import stats
 
 from services.adapter.core import AdapterConfig
-from services.adapter.evaluate import batches, play_games, play_partner, setup
+from services.adapter.evaluate import batches, play_games, play_partner, play_teams, setup
 from services.adapter.identification import follow_lag, windowed
 from services.adapter.partners import make_partner
 from services.adapter.team import compare, holm, paired_tests, variants
+from services.agent import library
+from services.sim.batch_play import play_batch
 from services.sim.engine import Game
 from services.sim.observation import observe, world_values
 from services.sim.sampling import lane_uniforms, sample
@@ -130,7 +132,18 @@ def test_batched_adaptive_games_decide_as_the_scalar_adapter_on_the_same_play() 
         assert outcome.guarded == (adapter is not None and adapter.guarded)
     best = s.payoff.ours[s.payoff.best_response(s.payoff.partners.index("B3"))]  # the table's answer to B3
     assert sum(o.switches for o in played) > 4 and played[0].timeline[0][1:] == ("B3", best)
-    assert [o.switches for o in played[5:]] == [3, 2]  # under the guard's doubling dwell
+    assert [o.switches for o in played[5:]] == [1, 2]  # under the guard's doubling dwell
+
+
+def test_teams_of_partners_play_both_seats_as_the_batched_pair_games() -> None:
+    """Library keys on both seats draw as play_batch's seats do, so the games are the same;
+    recorded actions and openings come back per team and seed."""
+    frames = GameConfig(frames=300)
+    kills, actions, opened = play_teams([("B5", "S4"), ("human(B5)", "S4")], [0, 1], frames, record=True)
+    pair = play_batch(library.load("B5"), library.load("S4"), [0, 1], frames)
+    assert kills[0].tolist() == [r.kills_per_minute for r in pair]
+    assert actions.shape == (2, 2, 300, 2) and opened.shape == (2, 2, 301)
+    assert opened[0].any() and (actions[1, :, :, 0] != actions[0, :, :, 0]).any()
 
 
 def test_batches_cover_every_game_once_in_order() -> None:

@@ -1,95 +1,174 @@
-"""Human-like partners: a library or plug-in policy played by a simulated hand.
+"""Human-like partners: a library or plug-in policy played by a simulated person at the keys.
 
-`human(B5)` plays B5's choices as a person at a keyboard would, and `human(B1,B5)` drifts from
-B1's style to B5's over a session. The numbers come from published reaction-time and keypress
-data (docs/adapter.md, "Human-like partners", cites them):
+`human(B5)` plays B5's choices as a person would, `human(B1,B5)` drifts from B1's style to B5's
+over a session, and `human(B5,skill=novice)` (or `typical`, the default, `practised`, or a number
+in [0, 1]) sets how practised the person is. docs/humans.md cites the numbers and says which are
+ours and how they were calibrated:
 
-- **Reaction delay.** Each decision reads the state of `lag` frames ago, with lag drawn from an
-  ex-Gaussian (mu, sigma, tau): the person's mu is drawn once per person, shifted once per game,
-  and sigma and tau spread each decision.
-- **Held keys.** A decision is held for at least HOLD_MIN frames (a key press lasts about 0.1 s)
-  plus a geometric run, then the person decides again.
-- **Lapses.** At a decision the person may lapse: the keys stay as they are for 0.5 s plus an
-  exponential tail (the vigilance literature's lapse, a response slower than 0.5 s).
-- **Motor noise.** A decision may slip: one of the three keys (turn, thrust, fire) comes out wrong.
-- **Drift.** With two policies, each decision follows the second with probability w, which grows
-  from 0 to 1 over a session of SESSION_TRIALS one-minute trials.
+- **Looks and delay.** The person looks now and then (every LOOK_MS on average) and takes in the
+  state of a reaction time ago (ex-Gaussian), plus `input_ms`, the delay of the screen and keys
+  they play through.
+- **Anticipation.** Between looks they act on that state moved to now by a forward model (the
+  game's own rules, engine.steer and engine.fortress_turn): their own ship by the keys they
+  pressed since, the partner, shells and missiles coasting, and over the foreseen part of the lag
+  the fortress turning and firing when aimed and due: a person fires into an opening they expect.
+- **Held keys.** Every frame the policy chooses on the predicted state, and each key (turn,
+  thrust, fire) changes only once held the person's shortest press (intermittent control).
+- **Lapses.** At a look the person may lapse: the keys stay as they are for 0.5 s plus a tail.
+- **Slips.** A key change may come out wrong (the turn the third way, a press missed).
+- **Skill and learning.** Every trait lies between a first-time player's value (skill 0) and a
+  practised player's (skill 1); over a session's SESSION_TRIALS trials the gap to practised
+  shrinks as a power law of practice.
+- **Drift.** With two policies, each frame follows the second with probability w, which grows
+  from 0 to 1 over the session.
 
 Every draw is counter-based (sampling.lane_uniforms, keyed by the game's seed, a stream and the
-frame), so a game is a function of its seed, and `act` (one game) and `act_lanes` (n games at
-once, the batched form) give every lane the same actions. A session is SESSION_TRIALS consecutive
-game seeds: game s is trial s % SESSION_TRIALS of person s // SESSION_TRIALS, whose traits are
-drawn from the person's number only (the partner is reset with play.policy_seed of the game's
-seed, and reads the game's back).
+frame), so a game is a function of its seed, and one game (`act`) is one lane of many
+(`act_lanes`). A session is SESSION_TRIALS consecutive game seeds: game s is trial
+s % SESSION_TRIALS of person s // SESSION_TRIALS, whose traits are drawn from the person's number
+only (the partner is reset with play.policy_seed of the game's seed, and reads the game's back).
+The hand reads the world view and hands each inner policy the predicted state in its own view.
 """
 
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 
 from services.sim import observation as ob
+from services.sim.engine import fortress_turn, steer
+from services.sim.jit import compiled
 from services.sim.play import game_seed, policy_seed
 from services.sim.sampling import batch_probs, lane_uniforms, sample
-from shared.game import N_ACTIONS, N_FIRE, N_THRUST, N_TURN, join_action, split_action
+from shared.game import N_ACTIONS, GameConfig, join_action, split_action
 
 FRAME_MS = 1000.0 / 30.0
 SESSION_TRIALS = 3  # the study plays three one-minute trials with the same partner
-RT_MU, RT_MU_PERSON_SD, RT_MU_GAME_SD = 200.0, 25.0, 15.0  # ms: the ex-Gaussian's mu
+STAND_INS = "stand_ins.json"  # what `tsf humans fit` writes into DIR
+SKILLS = {"novice": 0.0, "typical": 0.65, "practised": 1.0}  # typical: calibrated (docs/humans.md)
+# A trait as (first-time player, practised player); skill s in [0, 1] lies between, linearly.
+RT_MU = (260.0, 190.0)  # ms: the ex-Gaussian's mu, the person's mean
+RT_MU_PERSON_SD, RT_MU_GAME_SD = 25.0, 15.0  # ms: between people, between one person's games
 RT_SIGMA, RT_TAU = 25.0, 50.0  # ms: its Gaussian spread and exponential tail
-HISTORY = 36  # frames of states kept (1.2 s): the longest lag
-HOLD_MIN, HOLD_EXTRA = 3, 2.0  # frames: the shortest key press, the mean extra run
-LAPSES_PER_MINUTE = (0.3, 3.0)  # a person's lapse rate is drawn log-uniformly in this range
+FORESIGHT = (0.0, 1.0)  # the fraction of the lag over which the fortress is foreseen (ours)
+FORESIGHT_SD = 0.15  # between people (ours)
+LAPSES_PER_MINUTE = ((1.0, 6.0), (0.2, 1.0))  # a person's rate, log-uniform in this range
 LAPSE_MS, LAPSE_TAIL_MS = 500.0, 400.0
-SLIP = (0.02, 0.05)  # a person's chance that a decision's key comes out wrong
+SLIP = ((0.04, 0.08), (0.01, 0.03))  # a person's chance that a decision's key comes out wrong
+LEARNING = 0.5  # power-law exponent: trial i keeps (i + 1) ** -LEARNING of the gap to practised
+HOLD_MS = (100.0, 67.0)  # the shortest key press or release
+LOOK_MIN = 2  # frames between looks at the least
+LOOK_MS = (270.0, 67.0)  # ms between looks on average (ours: calibrated)
+LONGEST_LAG = 30  # frames (1 s)
+HISTORY = 64  # frames of states kept: the longest lag plus the longest run between looks
 _STREAMS = dict(
     zip(
-        ("lapse", "lapse_len", "n1", "n2", "tail", "style", "action", "slip", "key", "hold"),
-        range(40, 50),
+        ("lapse", "lapse_len", "n1", "n2", "tail", "style", "action", "slip", "look"),
+        range(40, 49),
         strict=True,
     )
 )
+_HEADS = np.array([split_action(a)[:2] for a in range(N_ACTIONS)], np.int64)  # turn, thrust
+_SETTING = re.compile(r"^(skill|input_ms)\s*=\s*(.+)$")
+
+
+def between(trait: tuple, skill: np.ndarray) -> np.ndarray:
+    """A trait's value at each skill: the novice's at 0, the practised player's at 1."""
+    low, high = (np.asarray(v, np.float64) for v in trait)
+    s = np.asarray(skill, np.float64).reshape(-1, *([1] * low.ndim))
+    return low + (high - low) * s
+
+
+def parse_skill(text: str) -> float:
+    """A skill by name (SKILLS) or as a number in [0, 1]; ValueError naming what is accepted."""
+    if text in SKILLS:
+        return SKILLS[text]
+    try:
+        skill = float(text)
+    except ValueError:
+        skill = -1.0
+    if not 0.0 <= skill <= 1.0:
+        raise ValueError(f"skill={text} is not one of {', '.join(SKILLS)} or a number in [0, 1]")
+    return skill
 
 
 class HumanLike:
-    """A policy (or two, drifting) played by a simulated hand; see the module docstring."""
+    """A policy (or two, drifting) played by a simulated person; see the module docstring."""
 
-    def __init__(self, first, second=None) -> None:
-        if second is not None and (first.role != second.role or first.view != second.view):
-            raise ValueError(f"human({first.key},{second.key}): both must share role and observation view")
-        self.first, self.second = first, second
-        self.key = f"human({first.key})" if second is None else f"human({first.key},{second.key})"
-        self.role, self.view = first.role, first.view
+    view = "world"
+
+    def __init__(
+        self, first, second=None, skill: float = SKILLS["typical"], input_ms: float = 0.0, config=None
+    ) -> None:
+        if second is not None and first.role != second.role:
+            raise ValueError(f"human({first.key},{second.key}): both must share a role")
+        self.first, self.second, self.skill, self.input_ms = first, second, float(skill), float(input_ms)
+        settings = [] if skill == SKILLS["typical"] else [f"skill={_skill_name(skill)}"]
+        settings += [f"input_ms={input_ms:g}"] if input_ms else []
+        inner = [p.key for p in (first, second) if p is not None]
+        self.key = f"human({','.join(inner + settings)})"
+        self.role = first.role
+        c = config or GameConfig()  # the rules the person's forward model knows
+        self.rules = np.array(
+            [c.ship_turn, c.ship_thrust, c.ship_drag, c.ship_max_speed, c.fortress_turn]
+            + [c.fortress_aim_tolerance, c.fortress_fire_interval, c.vulnerable_frames, c.frames],
+            np.float64,
+        )
         self.reset()
+
+    @classmethod
+    def from_arguments(cls, inner: list, settings: list[str]) -> HumanLike:
+        """human(...)'s partners and its `skill=...` and `input_ms=...` settings."""
+        values: dict[str, float] = {}
+        for item in settings:
+            match = _SETTING.match(item)
+            if not match:
+                raise ValueError(f"{item!r} is not skill=LEVEL or input_ms=NUMBER")
+            name, text = match[1], match[2].strip()
+            try:
+                values[name] = parse_skill(text) if name == "skill" else float(text)
+            except ValueError as error:
+                raise ValueError(str(error) if name == "skill" else f"input_ms={text} is no number") from None
+            if name == "input_ms" and not 0.0 <= values[name] <= 300.0:
+                raise ValueError(f"input_ms={text} is outside [0, 300]")
+        return cls(*inner, **values)
 
     def reset(self, seed: int | None = None) -> None:
         self.reset_lanes([policy_seed(0, self.role) if seed is None else seed])
 
     def reset_lanes(self, seeds: list[int]) -> None:
         """Start one game per seed, the seed its seat resets its partner with (play.policy_seed of
-        the game's seed): the person's traits, drawn from the person of the game's seed, and this
-        game's reaction delay."""
+        the game's seed): the person's traits, drawn from the person of the game's seed, this
+        trial's skill (practice) and this game's reaction delay."""
         n = len(seeds)
         self.seeds = np.asarray(seeds, np.int64)
         for inner in (self.first, self.second):
             if inner is not None:
                 inner.reset(int(seeds[0]))
         played = np.array([max(0, game_seed(int(s), self.role)) for s in seeds], np.int64)
+        self.trial = played % SESSION_TRIALS
+        skill = 1.0 - (1.0 - self.skill) * (self.trial + 1.0) ** -LEARNING
         people = [np.random.default_rng([int(g) // SESSION_TRIALS, 17]) for g in played]
         games = [np.random.default_rng([int(s), 29]) for s in seeds]
-        low, high = np.log(LAPSES_PER_MINUTE)
-        traits = np.array(
-            [[r.normal(RT_MU, RT_MU_PERSON_SD), r.uniform(low, high), r.uniform(*SLIP)] for r in people]
-        )
-        self.mu = np.clip(traits[:, 0] + [g.normal(0.0, RT_MU_GAME_SD) for g in games], 120.0, 400.0)
-        # a lapse can start at any decision; decisions come every HOLD_MIN + HOLD_EXTRA frames
-        per_decision = np.exp(traits[:, 1]) / (60.0 * 30.0) * (HOLD_MIN + HOLD_EXTRA)
-        self.lapse, self.slip = per_decision, traits[:, 2]
-        self.trial = played % SESSION_TRIALS
+        # the person's draws: reaction mu, lapse rate, slip rate, foresight
+        draws = np.array([[r.normal(), r.uniform(), r.uniform(), r.normal()] for r in people])
+        mu = between(RT_MU, skill) + RT_MU_PERSON_SD * draws[:, 0]
+        self.mu = np.clip(mu + [g.normal(0.0, RT_MU_GAME_SD) for g in games], 120.0, 450.0)
+        lapses = np.exp(_pick(np.log(between(LAPSES_PER_MINUTE, skill)), draws[:, 1]))
+        self.look = between(LOOK_MS, skill) / FRAME_MS  # frames between looks, on average
+        self.lapse = lapses / (60.0 * 30.0) * self.look  # a lapse can start at any look
+        self.slip = _pick(between(SLIP, skill), draws[:, 2])
+        self.foresight = np.clip(between(FORESIGHT, skill) + FORESIGHT_SD * draws[:, 3], 0.0, 1.0)
         self.ring = np.zeros((n, HISTORY, ob.TIME + 1), np.float32)
+        self.keys = np.zeros((n, HISTORY), np.int64)  # the actions pressed, for the forward model
         self.held = np.zeros(n, np.int64)
-        self.hold_left = np.zeros(n, np.int64)
+        self.hold = np.rint(between(HOLD_MS, skill) / FRAME_MS).astype(np.int64)  # frames
+        self.since_change = np.zeros((n, 3), np.int64) + self.hold[:, None]  # frames each key is as it is
+        self.seen_at = np.zeros(n, np.int64)  # the frame whose state the person last took in
+        self.look_left = np.zeros(n, np.int64)  # frames to the next look
+        self.lapse_left = np.zeros(n, np.int64)
         self.t = 0
 
     def act(self, obs: np.ndarray) -> int:
@@ -97,62 +176,152 @@ class HumanLike:
         return int(self.act_lanes(obs[None])[0])
 
     def act_lanes(self, observations: np.ndarray) -> np.ndarray:
-        """One action per lane for this frame's (n, 64) observations (the batched form)."""
-        t = self.t
+        """One action per lane for this frame's (n, 64) world-view observations: a new look at a
+        sampling moment (or a lapse), then every key the policy wants on the predicted state
+        changed if it has been held long enough."""
+        t, lanes = self.t, np.arange(len(self.seeds))
         self.ring[:, t % HISTORY] = observations
         self.t += 1
-        busy = self.hold_left > 0
-        self.hold_left[busy] -= 1
         u = {name: lane_uniforms(self.seeds, stream, t) for name, stream in _STREAMS.items()}
-        lapse = ~busy & (u["lapse"] < self.lapse)
+        self.since_change += 1
+        lapsing = self.lapse_left > 0
+        self.lapse_left[lapsing] -= 1
+        look = ~lapsing & (self.look_left <= 0)
+        self.look_left[~lapsing] -= 1
+        lapse = look & (u["lapse"] < self.lapse)
         lapse_frames = (LAPSE_MS - LAPSE_TAIL_MS * np.log1p(-u["lapse_len"])) / FRAME_MS
-        self.hold_left[lapse] = np.rint(lapse_frames[lapse]).astype(np.int64)
-        decide = np.flatnonzero(~busy & ~lapse)
-        if len(decide):
-            self._decide(decide, u, t)
+        self.lapse_left[lapse] = np.rint(lapse_frames[lapse]).astype(np.int64)
+        look &= ~lapse
+        normal = np.sqrt(-2.0 * np.log1p(-u["n1"])) * np.cos(2.0 * math.pi * u["n2"])
+        lag_ms = self.mu + self.input_ms + RT_SIGMA * normal - RT_TAU * np.log1p(-u["tail"])
+        lag = np.clip(np.rint(lag_ms / FRAME_MS).astype(np.int64), 0, LONGEST_LAG)
+        self.seen_at[look] = np.maximum(t - lag[look], 0)
+        extra = np.maximum(self.look - LOOK_MIN, 1e-9)
+        runs = np.floor(np.log1p(-u["look"]) / np.log(extra / (1.0 + extra))).astype(np.int64)
+        self.look_left[look] = np.minimum(LOOK_MIN + runs[look], HISTORY - LONGEST_LAG - 1)
+        active = lanes[~(lapsing | lapse)]
+        if len(active):
+            self._press(active, u, t)
+        self.keys[:, t % HISTORY] = self.held
         return self.held.copy()
 
-    def _decide(self, lanes: np.ndarray, u: dict[str, np.ndarray], t: int) -> None:
-        normal = np.sqrt(-2.0 * np.log1p(-u["n1"])) * np.cos(2.0 * math.pi * u["n2"])
-        lag_ms = self.mu + RT_SIGMA * normal - RT_TAU * np.log1p(-u["tail"])
-        lag = np.clip(np.rint(lag_ms / FRAME_MS).astype(np.int64), 0, min(t, HISTORY - 1))
-        seen = self.ring[np.arange(len(self.seeds)), (t - lag) % HISTORY][lanes]
-        probs = self._probs(seen, lanes, u["style"][lanes])
-        actions = sample(probs, u["action"][lanes])
-        slipped = u["slip"][lanes] < self.slip[lanes]
-        actions[slipped] = [
-            _slip(a, k) for a, k in zip(actions[slipped], u["key"][lanes][slipped], strict=True)
-        ]
-        self.held[lanes] = actions
-        extra = np.floor(np.log1p(-u["hold"][lanes]) / math.log(HOLD_EXTRA / (1.0 + HOLD_EXTRA)))
-        self.hold_left[lanes] = HOLD_MIN - 1 + extra.astype(np.int64)
+    def _press(self, lanes: np.ndarray, u: dict[str, np.ndarray], t: int) -> None:
+        """The keys of `lanes` this frame: the policy's choice on the state the person expects now
+        (the last look, moved on by their forward model), each key changed only once it has been
+        held the person's shortest press, and a change pressed wrong with the person's slip rate."""
+        age = t - self.seen_at[lanes]
+        seen = self.ring[lanes, self.seen_at[lanes] % HISTORY]
+        foreseen = np.rint(self.foresight[lanes] * age).astype(np.int64)
+        expected = predict(seen, age, foreseen, self.keys[lanes], t, self.rules)
+        chosen = sample(self._probs(expected, lanes, u["style"][lanes]), u["action"][lanes])
+        wanted, now = np.array(split_action(chosen)), np.array(split_action(self.held[lanes]))
+        change = (wanted != now) & (self.hold[lanes] <= self.since_change[lanes].T)
+        # a slip: the turn goes the third way, a thrust or fire press is missed
+        wrong = np.array([3 - now[0] - wanted[0], now[1], now[2]])
+        pressed = np.where(
+            change & (u["slip"][lanes] < self.slip[lanes]), wrong, np.where(change, wanted, now)
+        )
+        self.since_change[lanes] = np.where(pressed != now, 0, self.since_change[lanes].T).T
+        self.held[lanes] = join_action(*pressed)
 
-    def _probs(self, seen: np.ndarray, lanes: np.ndarray, style: np.ndarray) -> np.ndarray:
+    def _probs(self, expected: np.ndarray, lanes: np.ndarray, style: np.ndarray) -> np.ndarray:
         """The (rows, 12) distributions the person decides from: the first policy's, or, drifting,
         the second's with probability w (the session's progress)."""
-        probs = self._inner_probs(self.first, seen)
+        probs = _inner_probs(self.first, expected)
         if self.second is not None:
-            progress = (self.trial[lanes] + 1.0 - seen[:, ob.TIME]) / SESSION_TRIALS
+            progress = (self.trial[lanes] + 1.0 - expected[:, ob.TIME]) / SESSION_TRIALS
             second = style < progress
             if second.any():
-                probs[second] = self._inner_probs(self.second, seen[second])
+                probs[second] = _inner_probs(self.second, expected[second])
         return probs
 
-    @staticmethod
-    def _inner_probs(inner, seen: np.ndarray) -> np.ndarray:
-        if hasattr(inner, "probs") or hasattr(inner, "probs_batch"):
-            return batch_probs(inner, seen)
-        return np.eye(N_ACTIONS)[[inner.act(o) for o in seen]]  # a plug-in that only acts
+
+def in_view(world: np.ndarray, view: str) -> np.ndarray:
+    """World-view rows as a policy of `view` reads them."""
+    if view != "role":
+        return world
+    from services.sim.batch_observation import to_role_view  # numba: bulk play loads it anyway
+
+    rows = world.astype(np.float64)
+    to_role_view(rows)
+    return rows.astype(np.float32)
 
 
-def _slip(action: int, draw: float) -> int:
-    """The action with one key (chosen by `draw`) pressed wrong."""
-    turn, thrust, fire = split_action(int(action))
-    key = min(int(draw * 4), 3)
-    if key <= 1:  # turn: the other two choices, equally likely
-        turn = (turn + 1 + key) % N_TURN
-    elif key == 2:
-        thrust = (thrust + 1) % N_THRUST
-    else:
-        fire = (fire + 1) % N_FIRE
-    return join_action(turn, thrust, fire)
+def _inner_probs(inner, world: np.ndarray) -> np.ndarray:
+    """An inner policy's distributions over world-view rows, handed to it in its own view."""
+    seen = in_view(world, inner.view)
+    if hasattr(inner, "probs") or hasattr(inner, "probs_batch"):
+        return batch_probs(inner, seen)
+    return np.eye(N_ACTIONS)[[inner.act(o) for o in seen]]  # a plug-in that only acts
+
+
+def predict(
+    seen: np.ndarray, lag: np.ndarray, foreseen: np.ndarray, keys: np.ndarray, t: int, rules: np.ndarray
+) -> np.ndarray:
+    """World-view rows seen `lag` frames before frame t, moved on to frame t by the game's rules
+    (`rules`: HumanLike.rules): the person's own ship by the keys pressed since (`keys`, each
+    lane's ring of pressed actions), the partner, shells and missiles coasting; and over the first
+    `foreseen` of those frames the fortress turning toward its target and firing (opening its rear)
+    when aimed and due (beyond them it is left as last seen)."""
+    out = seen.astype(np.float64)
+    _predict(out, np.asarray(lag, np.int64), np.asarray(foreseen, np.int64), keys, t, _HEADS, rules)
+    return out.astype(np.float32)
+
+
+@compiled
+def _predict(out, lag, foreseen, keys, t, heads, rules):
+    ship_turn, thrust, drag, cap, f_turn = rules[0], rules[1], rules[2], rules[3], rules[4]
+    tolerance, interval, window, frames = rules[5], rules[6], rules[7], rules[8]
+    p, v = ob.POSITION_SCALE, ob.VELOCITY_SCALE
+    history = keys.shape[1]
+    for i in range(out.shape[0]):
+        row, n = out[i], lag[i]
+        if n <= 0:
+            continue
+        heading = math.degrees(math.atan2(row[ob.SELF + ob.SIN], row[ob.SELF + ob.COS])) % 360.0
+        vx, vy = row[ob.SELF + ob.VX] * v, row[ob.SELF + ob.VY] * v
+        vulnerable = row[ob.FORTRESS + ob.F_VULNERABLE] * window
+        since = row[ob.FORTRESS + ob.F_SINCE_SHELL] * interval
+        facing = math.degrees(math.atan2(row[ob.FORTRESS + ob.F_SIN], row[ob.FORTRESS + ob.F_COS]))
+        target = ob.SELF if row[ob.FORTRESS + ob.F_LOCK_SELF] > 0.5 else -1
+        target = ob.PARTNER if row[ob.FORTRESS + ob.F_LOCK_PARTNER] > 0.5 else target
+        for k in range(n):
+            if row[ob.SELF + ob.ALIVE] > 0.5:
+                turn, push = heads[keys[i, (t - lag[i] + k) % history]]
+                heading, vx, vy, cos_h, sin_h = steer(
+                    heading, vx, vy, turn, push, ship_turn, thrust, drag, cap
+                )
+                row[ob.SELF + ob.X] += vx / p
+                row[ob.SELF + ob.Y] += vy / p
+                row[ob.SELF + ob.COS], row[ob.SELF + ob.SIN] = cos_h, sin_h
+            row[ob.PARTNER + ob.X] += row[ob.PARTNER + ob.VX] * v / p
+            row[ob.PARTNER + ob.Y] += row[ob.PARTNER + ob.VY] * v / p
+            for j in range(ob.N_SHELLS + ob.N_MISSILES):
+                at = ob.SHELLS + j * ob.PROJECTILE_SIZE
+                if row[at + 4] > 0.5:
+                    row[at + ob.X] += row[at + ob.VX] * v / p
+                    row[at + ob.Y] += row[at + ob.VY] * v / p
+            if row[ob.FORTRESS + ob.F_ALIVE] < 0.5 or target < 0 or k >= foreseen[i]:
+                continue
+            since += 1.0
+            vulnerable = max(vulnerable - 1.0, 0.0)
+            bearing = math.degrees(math.atan2(row[target + ob.Y], row[target + ob.X]))
+            step, error = fortress_turn(facing, bearing, f_turn)
+            facing = (facing + step) % 360.0
+            if abs(error - step) <= tolerance and since >= interval:
+                since, vulnerable = 0.0, window
+        rad = math.radians(facing)
+        row[ob.FORTRESS + ob.F_COS], row[ob.FORTRESS + ob.F_SIN] = math.cos(rad), math.sin(rad)
+        row[ob.FORTRESS + ob.F_VULNERABLE] = vulnerable / window
+        row[ob.FORTRESS + ob.F_SINCE_SHELL] = min(since / interval, 1.0)
+        row[ob.SELF + ob.VX], row[ob.SELF + ob.VY] = vx / v, vy / v
+        row[ob.TIME] = max(row[ob.TIME] - n / frames, 0.0)
+
+
+def _pick(bounds: np.ndarray, draw: np.ndarray) -> np.ndarray:
+    """Per lane, the point `draw` (in [0, 1]) of the way from bounds[:, 0] to bounds[:, 1]."""
+    return bounds[:, 0] + (bounds[:, 1] - bounds[:, 0]) * draw
+
+
+def _skill_name(skill: float) -> str:
+    return next((name for name, value in SKILLS.items() if value == skill), f"{skill:g}")

@@ -1,16 +1,19 @@
-"""Human-like partners: seeded, the same in one game or in lanes, and as slow and sticky as a hand."""
+"""Human-like partners: seeded, one game is one lane, keys held as a hand holds them, a forward
+model that knows the game, and skill and practice where the grammar names them."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from services.adapter.human_like import HOLD_MIN, SESSION_TRIALS, HumanLike
+from services.adapter.human_like import SESSION_TRIALS, SKILLS, HumanLike, predict
 from services.adapter.partners import group_of, make_partner, population
 from services.agent import library
 from services.sim.engine import Game
 from services.sim.observation import observe
 from services.sim.play import policy_seed
+from shared.errors import UsageError
+from shared.game import split_action
 
 SEEDS = [3, 4, 5]
 
@@ -43,30 +46,78 @@ def test_lanes_act_as_single_games_and_a_seed_repeats_its_game():
     assert (other != together).any()
 
 
-def test_keys_are_held_for_at_least_the_shortest_press():
-    together, _ = play("human(B5)", SEEDS)
-    for lane in together.T:
-        changes = np.flatnonzero(np.diff(lane)) + 1
-        runs = np.diff(np.concatenate([[0], changes, [len(lane)]]))
-        assert runs[1:-1].min() >= HOLD_MIN  # the first and last runs are cut by the game's ends
-        assert 3.0 < runs.mean() < 30.0  # held, but not frozen
+def test_each_key_is_held_at_least_the_persons_shortest_press():
+    partner = make_partner("human(B5,skill=novice)", "bait")
+    partner.reset_lanes(SEEDS)
+    together, _ = play("human(B5,skill=novice)", SEEDS)
+    for lane, hold in zip(together.T, partner.hold, strict=True):
+        for key in split_action(lane):
+            changes = np.flatnonzero(np.diff(key)) + 1
+            runs = np.diff(np.concatenate([[0], changes, [len(key)]]))
+            assert runs[1:-1].min() >= hold == 3  # the first and last runs are cut by the game's ends
+        assert 2.0 < np.mean(np.diff(lane) != 0) ** -1 < 30.0  # held, but not frozen
 
 
-def test_traits_are_a_persons_and_the_delay_a_games():
+def test_traits_are_a_persons_the_delay_a_games_and_practice_helps():
     partner = make_partner("human(B5)", "bait")
     games = list(range(SESSION_TRIALS + 1))  # one person's trials, and the next person's first
     partner.reset_lanes([policy_seed(game, "bait") for game in games])
     assert partner.trial.tolist() == [0, 1, 2, 0]
-    assert len(set(partner.slip[:SESSION_TRIALS])) == 1 and partner.slip[SESSION_TRIALS] != partner.slip[0]
+    assert len(set(partner.slip[:SESSION_TRIALS])) == SESSION_TRIALS  # practice lowers it
+    assert partner.slip[0] > partner.slip[1] > partner.slip[2]
+    assert partner.look[0] > partner.look[2] and partner.slip[SESSION_TRIALS] != partner.slip[0]
     assert len(set(partner.mu[:SESSION_TRIALS])) == SESSION_TRIALS  # drawn per game
-    assert (partner.mu >= 120.0).all() and (partner.mu <= 400.0).all()
+    assert (partner.mu >= 120.0).all() and (partner.mu <= 450.0).all()
+    novice, practised = (make_partner(f"human(B5,skill={s})", "bait") for s in ("novice", "practised"))
+    for p in (novice, practised):
+        p.reset_lanes([policy_seed(g, "bait") for g in range(30)])
+    assert novice.mu.mean() > practised.mu.mean() + 40.0 and novice.look.mean() > practised.look.mean()
+    assert novice.foresight.mean() < 0.3 < 0.8 < practised.foresight.mean()
+
+
+def test_the_forward_model_moves_the_own_ship_by_its_keys_and_foresees_the_fortress():
+    """Predicted from the state `lag` frames ago and the keys pressed since, the own ship is where
+    it is now, and the fortress's facing and opening are as they are (it has one target here)."""
+    game, bait, shooter = Game(None, 1), library.load("B5"), library.load("S4")
+    bait.reset(1)
+    shooter.reset(2)
+    states, keys = [], np.zeros((1, 64), np.int64)
+    lag, checked = 9, 0
+    for t in range(600):
+        states.append(observe(game, "shooter", "world"))
+        if t >= lag and states[t - lag][16 + 2] > 0.5 and states[t][16 + 2] > 0.5:  # the fortress up
+            rules = HumanLike(shooter).rules
+            expected = predict(states[t - lag][None], np.array([lag]), np.array([lag]), keys, t, rules)[0]
+            assert np.allclose(expected[:6], states[t][:6], atol=1e-5)
+            assert np.allclose(expected[16:20], states[t][16:20], atol=0.06) or states[t][16 + 5] > 0.5
+            checked += 1
+        action = shooter.act(observe(game, "shooter", shooter.view))
+        keys[0, t % 64] = action
+        game.step(bait.act(observe(game, "bait", bait.view)), action)
+    assert checked > 300
 
 
 def test_grammar_population_and_group():
     assert isinstance(make_partner("human(B1,B5)", "bait"), HumanLike)
     assert make_partner("human(noisy(B5))", "bait").key == "human(noisy(B5))"
-    assert group_of("human(B5)") == "human-like"
+    practised = make_partner("human(B1,B5, skill=practised, input_ms=40)", "bait")
+    assert practised.skill == SKILLS["practised"] and practised.input_ms == 40.0
+    assert practised.key == "human(B1,B5,skill=practised,input_ms=40)"
+    assert make_partner(practised.key, "bait").key == practised.key
+    assert make_partner("human(B5,skill=0.3)", "bait").key == "human(B5,skill=0.3)"
+    assert make_partner("human(B5,skill=typical)", "bait").key == "human(B5)"
+    assert group_of("human(B5,skill=novice)") == "human-like"
     humans = population("bait")["human-like"]
-    assert "human(B9)" in humans and any("," in h for h in humans)
-    with pytest.raises(ValueError, match="share role"):
+    assert {"human(B1,skill=novice)", "human(B2)", "human(B3,skill=practised)"} <= set(humans)
+    assert any(h.count(",") == 2 for h in humans)  # a drifting person, with a skill
+    for wrong, problem in [
+        ("human(B5,skill=expert)", "novice, typical, practised"),
+        ("human(B5,skill=2)", "number in"),
+        ("human(B5,input_ms=-1)", "outside"),
+        ("human(B5,speed=3)", "skill=LEVEL"),
+        ("human(B1,B2,B3)", "one or two"),
+    ]:
+        with pytest.raises(UsageError, match=problem):
+            make_partner(wrong, "bait")
+    with pytest.raises(ValueError, match="share a role"):
         HumanLike(library.load("B5"), library.load("S5"))

@@ -5,17 +5,22 @@ any worker process:
 
     B5                 a library (or scripted) policy as it is
     noisy(B5)          plays a uniformly random action with probability NOISE per frame
-    delayed(B5)        acts on the state of DELAY frames ago (a reaction time of 0.2 s)
+    delayed(B5)        acts on the state of DELAY frames ago (a reaction time of 0.2 s);
+                       delayed(B5,frames=2) of 2 frames ago
     sticky(B5)         repeats its previous action with probability STICKY (keys held too long)
     switch(B5,B7)      plays B5 until SWITCH_AT, then B7 (a partner who changes style mid-game)
     human(B5)          B5 played by a simulated hand: reaction delay, held keys, lapses, slips
     human(B1,B5)       the same, drifting from B1's style to B5's over a session (human_like.py)
+    human(B5,skill=novice)  a first-time player (skill: novice, typical (the default), practised,
+                       or a number in [0, 1]); input_ms=40 adds the screen and keyboard's delay
     circle(radius=150,speed=3)  a scripted rule with other settings (any of its constructor's
                        numbers): a hand-written partner whose style no library policy has
     package.module:attr  your own partner: an object with the policy protocol's key, role, view,
                          reset(seed) and act(obs), or a callable that returns a new one
     my_bait.zip          a model trained with Stable-Baselines3 (services/agent/outside.py)
     proxy:DIR            a proxy cloned from recorded people (`tsf proxy train`, services/proxy)
+    humans:DIR@NAME      participant NAME's stand-in fitted from recordings (`tsf humans fit`;
+                         humans:DIR when DIR holds one participant)
 
 Wrappers nest: `noisy(switch(B5,B7))`.
 """
@@ -23,17 +28,19 @@ Wrappers nest: `noisy(switch(B5,B7))`.
 from __future__ import annotations
 
 import inspect
+import json
 import random
 import re
 from collections import deque
+from pathlib import Path
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from services.adapter.human_like import HumanLike
+from services.adapter.human_like import STAND_INS, HumanLike
 from services.agent import library
 from services.agent.library import policy_for
-from services.agent.outside import PROXY
+from services.agent.outside import HUMANS, PROXY
 from services.agent.scripted import SCRIPTED
 from services.sim.engine import Game
 from services.sim.observation import as_observation, world_values
@@ -84,7 +91,9 @@ class Noisy(Wrapper):
 
 class Delayed(Wrapper):
     def __init__(self, inner: Partner, delay: int = DELAY) -> None:
-        super().__init__(inner, f"delayed({inner.key})")
+        super().__init__(
+            inner, f"delayed({inner.key})" if delay == DELAY else f"delayed({inner.key},frames={delay})"
+        )
         self.delay = delay
         self.seen: deque[np.ndarray] = deque(maxlen=delay + 1)
 
@@ -170,17 +179,69 @@ _CALL = re.compile(r"^(\w+)\((.*)\)$")
 
 def make_partner(name: str, role: str) -> Partner:
     """A fresh partner of `role` by name (see the module docstring for the grammar)."""
+    if name.startswith(HUMANS):
+        return _fitted(name, role)
     call = _CALL.match(name)
     if call and call[1] in WRAPPERS:
+        inner, *settings = _split_arguments(call[2])
+        if call[1] == "delayed" and settings:
+            frames = settings[0].partition("=")[2].strip()
+            if (
+                len(settings) > 1
+                or not settings[0].startswith("frames=")
+                or not frames.isdigit()
+                or int(frames) > 60
+            ):
+                raise UsageError("--partner", name, "delayed(...) takes one setting, frames=N (0 to 60)")
+            return Delayed(make_partner(inner, role), int(frames))
         return WRAPPERS[call[1]](make_partner(call[2], role))
     if call and call[1] == "human":
-        return HumanLike(*(make_partner(a, role) for a in _split_arguments(call[2], 1)))
+        arguments = _split_arguments(call[2])
+        settings = [a for a in arguments if "=" in a and "(" not in a]
+        inner = [make_partner(a, role) for a in arguments if a not in settings]
+        if not 1 <= len(inner) <= 2:
+            raise UsageError(
+                "--partner", name, "human(...) plays one or two partners (and skill=, input_ms=)"
+            )
+        try:
+            return HumanLike.from_arguments(inner, settings)
+        except ValueError as error:
+            raise UsageError("--partner", name, str(error)) from None
     if call and call[1] == "switch":
-        first, second = _split_arguments(call[2])
-        return Switching(make_partner(first, role), make_partner(second, role))
+        arguments = _split_arguments(call[2])
+        if len(arguments) != 2:
+            raise ValueError(f"switch({call[2]}) needs two partners")
+        return Switching(*(make_partner(a, role) for a in arguments))
     if call and call[1] in SCRIPTED:
         return _scripted(name, call[1], call[2], role)
     return policy_for(name, role, "--partner")  # also a .zip or module:attr (services/agent/outside.py)
+
+
+def fitted_people(directory: Path, name: str = "") -> tuple[str, dict[str, dict]]:
+    """The seat and the participants' fits of a directory `tsf humans fit` wrote; a UsageError
+    naming `name` (the partner, else the directory) when there is none."""
+    path = Path(directory) / STAND_INS
+    try:
+        fitted = json.loads(path.read_text())
+        return fitted["role"], dict(fitted["people"])
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        problem = f"no stand-ins of `tsf humans fit` in {path} ({error})"
+        raise UsageError("--partner" if name else "--partners-from", name or directory, problem) from None
+
+
+def _fitted(name: str, role: str) -> Partner:
+    """`humans:DIR` (a directory of one participant) or `humans:DIR@PARTICIPANT`, written by
+    `tsf humans fit`: that participant's fitted human(...), under this name."""
+    directory, _, who = name.removeprefix(HUMANS).partition("@")
+    role_played, people = fitted_people(Path(directory), name)
+    if role_played != role:
+        raise UsageError("--partner", name, f"its people played the {role_played} seat, not the {role}")
+    who = who or (next(iter(people)) if len(people) == 1 else "")
+    if who not in people:
+        raise UsageError("--partner", name, "name one participant: humans:DIR@NAME", sorted(people))
+    partner = make_partner(people[who]["partner"], role)
+    partner.key = name
+    return partner
 
 
 def _scripted(name: str, rule: str, arguments: str, role: str) -> Partner:
@@ -204,23 +265,23 @@ def _scripted(name: str, rule: str, arguments: str, role: str) -> Partner:
     return partner
 
 
-def _split_arguments(text: str, fewest: int = 2) -> tuple[str, ...]:
-    """The top-level, comma-separated arguments of switch(...) or human(...), which may nest:
-    two, or one when `fewest` is 1."""
-    depth = 0
+def _split_arguments(text: str) -> list[str]:
+    """The top-level, comma-separated arguments of switch(...) or human(...), which may nest."""
+    depth, start, out = 0, 0, []
     for i, char in enumerate(text):
         depth += {"(": 1, ")": -1}.get(char, 0)
         if char == "," and depth == 0:
-            return text[:i].strip(), text[i + 1 :].strip()
-    if fewest == 1:
-        return (text.strip(),)
-    raise ValueError(f"switch({text}) needs two partners")
+            out.append(text[start:i].strip())
+            start = i + 1
+    return [*out, text[start:].strip()]
 
 
 def group_of(name: str) -> str:
     """A partner's group in the population: its outer wrapper, library, a proxy, or outside."""
     if name.startswith(PROXY):
         return "proxy"
+    if name.startswith(HUMANS):
+        return "fitted"
     call = _CALL.match(name)
     if call:
         return {
@@ -240,11 +301,21 @@ OUTSIDE = {
 }
 
 
+POPULATION_SKILLS = ("novice", "typical", "practised")
+
+
+def _person(inner: str, i: int) -> str:
+    """The i-th human-like partner of the population: `inner` played at the i-th skill in turn."""
+    skill = POPULATION_SKILLS[i % len(POPULATION_SKILLS)]
+    return f"human({inner})" if skill == "typical" else f"human({inner},skill={skill})"
+
+
 def population(role: str) -> dict[str, list[str]]:
     """The default evaluation population of partners of `role`, by group: every library policy,
     its noisy, delayed and sticky stand-ins, switchers between library policies of different
-    families, human-like partners (every library policy played by a simulated hand, and hands that
-    drift between the switchers' styles over a session), and partners outside the library: random,
+    families, human-like partners (every library policy played by a simulated person, and people
+    who drift between the switchers' styles over a session, at the skills of POPULATION_SKILLS in
+    turn), and partners outside the library: random,
     and the scripted rule of the seat at its defaults and at four other settings (`OUTSIDE`)."""
     keys = library.keys(role)
     half = len(keys) // 2
@@ -257,6 +328,7 @@ def population(role: str) -> dict[str, list[str]]:
         "delayed": [f"delayed({k})" for k in keys],
         "sticky": [f"sticky({k})" for k in keys],
         "switching": switches,
-        "human-like": [f"human({k})" for k in keys] + [f"human{s[len('switch') :]}" for s in switches[:half]],
+        "human-like": [_person(k, i) for i, k in enumerate(keys)]
+        + [_person(s[len("switch(") : -1], i) for i, s in enumerate(switches[:half])],
         "outside": outside,
     }

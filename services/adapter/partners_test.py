@@ -80,6 +80,11 @@ def test_delayed_acts_on_the_state_of_delay_frames_ago() -> None:
     actions = [partner.act(obs) for obs in observations(20)]
     assert actions[: DELAY + 1] == [0] * (DELAY + 1)
     assert actions[DELAY + 1 :] == [(t - DELAY) % N_ACTIONS for t in range(DELAY + 1, 20)]
+    two = make_partner("delayed(B5,frames=2)", "bait")
+    assert (two.delay, two.key) == (2, "delayed(B5,frames=2)")
+    assert make_partner("delayed(B5,frames=6)", "bait").key == "delayed(B5)"
+    with pytest.raises(UsageError, match="frames=N"):
+        make_partner("delayed(B5,frames=-1)", "bait")
 
 
 def test_sticky_repeats_its_last_action() -> None:

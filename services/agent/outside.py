@@ -37,6 +37,7 @@ if TYPE_CHECKING:
 ACTIVATIONS = {"Tanh": "tanh", "ReLU": "relu"}  # torch module name: library.Network's name
 KEY = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
 PROXY = "proxy:"  # a proxy's key: proxy:DIR (services/agent/proxy.py)
+HUMANS = "humans:"  # stand-ins fitted by `tsf humans fit`: humans:DIR@NAME (services/adapter/humans.py)
 NAME = re.compile(POLICY_NAME)
 
 
@@ -61,7 +62,7 @@ def is_outside(key: str) -> bool:
 
 def is_plugin(key: str) -> bool:
     """Whether a policy key is a `module:attr` object, the one kind a worker must import."""
-    return is_outside(key) and not key.endswith(".zip") and not key.startswith(PROXY)
+    return is_outside(key) and not key.endswith(".zip") and not key.startswith((PROXY, HUMANS))
 
 
 def load(key: str, role: str, option: str = "--policy", view: str = "world") -> Policy:

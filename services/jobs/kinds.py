@@ -74,7 +74,8 @@ def failure_line(error: BaseException) -> str:
 
 def plugins_in(names: Iterable[str]) -> tuple[str, ...]:
     """The `module:attr` plug-ins among partner or policy names (inside wrappers too:
-    noisy(my_lab.partners:Alice)); a proxy (`proxy:DIR`) is a directory, not a plug-in."""
+    noisy(my_lab.partners:Alice)); a proxy (`proxy:DIR`) or fitted stand-ins (`humans:DIR@NAME`)
+    are a directory, not a plug-in."""
     found = []
     for name in names:
         for part in name.replace("(", ",").replace(")", ",").split(","):

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from services.options import Seat, console, number, output
+from services.options import PEOPLE_RECORDINGS, Seat, console, number, output
 from services.proxy import trainer
 from services.proxy.data import HISTORY
 from shared.game import SEEDS, Range
@@ -26,9 +26,7 @@ def proxy_command() -> None:
 
 @proxy_commands.command("train")
 def train_command(
-    recordings: list[Path] = typer.Argument(
-        ..., help="Recordings (.tsflog) of people; study sidecars beside them.", exists=True, dir_okay=False
-    ),
+    recordings: list[Path] = PEOPLE_RECORDINGS,
     role: Seat = typer.Option(..., help="The person's seat to clone."),
     out: Path = output(..., "Directory the proxy is written into.", directory=True),
     held_out: float = number(0.25, SHARE, "Share of the participants held out (at least one)."),

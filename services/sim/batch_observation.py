@@ -31,7 +31,7 @@ def observe(batch: BatchGame, role: str, view: str = "world") -> np.ndarray:
         batch.state, ROLES.index(role), c.vulnerable_frames, c.fortress_fire_interval, c.frames, values
     )
     if view == "role":
-        _to_role_view(values)
+        to_role_view(values)
     return values.astype(np.float32)
 
 
@@ -107,7 +107,7 @@ def _projectiles(group, count, cx, cy, picks, out):
 
 
 @njit
-def _to_role_view(values):
+def to_role_view(values):
     """observation.to_role_view on every row, in place."""
     for i in range(values.shape[0]):
         rot = math.pi / 2 - math.atan2(values[i, ob.SELF + ob.Y], values[i, ob.SELF + ob.X])

@@ -1,0 +1,245 @@
+"""Stand-ins for people measured and fitted (docs/humans.md): the calibration, how human-like
+partners of each skill score in pairs and with library teammates against the study's human pairs
+(about 2.6 kills/min); and `tsf humans fit`, a stand-in per participant from recordings.
+
+Three groups of teams per skill, each bait policy paired as the shipped table pairs it:
+- **pairs**: `human(Bk)` with `human(S)`, S the table's best shooter for Bk, both of that skill;
+- **bait stand-in**: `human(Bk)` with that library shooter S itself;
+- **shooter stand-in**: `human(Sj)` with the table's best library bait for Sj.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from services.adapter.evaluate import play_teams
+from services.adapter.human_like import FRAME_MS, SKILLS, STAND_INS, in_view
+from services.agent import library
+from services.proxy.data import pairs, person_seats, study_record
+from services.recorder.recording import load
+from services.sim import observation as ob
+from services.sim.sampling import batch_probs
+from services.table.table import Table
+from shared.errors import Failure, UsageError
+from shared.game import ROLES, GameConfig, other, split_action
+
+GROUPS = ("pairs", "bait stand-in", "shooter stand-in")
+STUDY_PAIRS = 2.6  # kills/min: the original study's human-human teams
+
+
+@dataclass(frozen=True)
+class Row:
+    """One group at one skill: mean kills/min over its teams and seeds, its standard error."""
+
+    skill: str
+    group: str
+    mean: float
+    stderr: float
+    games: int
+
+
+def teams(skill: str, table: Table) -> dict[str, list[tuple[str, str]]]:
+    """The (bait, shooter) partner names of every group at `skill` (a SKILLS name or a number)."""
+    person = "" if skill == "typical" else f",skill={skill}"
+    baits, shooters = library.keys("bait"), library.keys("shooter")
+    best = {b: table.best_shooter(b) for b in baits}
+    return {
+        "pairs": [(f"human({b}{person})", f"human({best[b]}{person})") for b in baits],
+        "bait stand-in": [(f"human({b}{person})", best[b]) for b in baits],
+        "shooter stand-in": [(table.best_bait(s), f"human({s}{person})") for s in shooters],
+    }
+
+
+def calibration(
+    skills: tuple[str, ...] = tuple(SKILLS), seeds: int = 12, config: GameConfig | None = None
+) -> list[Row]:
+    """Every group at every skill, over game seeds 0..seeds-1 (seeds // 3 people, three trials
+    each), all games in one batch."""
+    table = Table.load()
+    plan = [
+        (skill, group, team) for skill in skills for group, ts in teams(skill, table).items() for team in ts
+    ]
+    kills = play_teams([team for *_, team in plan], list(range(seeds)), config)
+    rows = []
+    for skill in skills:
+        for group in GROUPS:
+            scores = np.concatenate(
+                [k for (s, g, _), k in zip(plan, kills, strict=True) if (s, g) == (skill, group)]
+            )
+            rows.append(
+                Row(
+                    skill,
+                    group,
+                    float(scores.mean()),
+                    float(scores.std(ddof=1) / np.sqrt(len(scores))),
+                    len(scores),
+                )
+            )
+    return rows
+
+
+# ---------------------------------------------------------------- stand-ins fitted from recordings
+
+FIT_SKILLS = np.linspace(0.0, 1.0, 6)  # the skills simulated; the fit interpolates between them
+FIT_SEEDS = 12  # simulated games per skill and person
+FROZEN = 15  # frames (0.5 s) without a key change: a lapse, or a long hold
+STATISTICS = ("key_changes_per_s", "frozen_share", "response_ms", "fires_per_s", "kills_per_minute")
+
+
+def statistics(actions: np.ndarray, opened: np.ndarray, kills_per_minute: float) -> dict[str, float]:
+    """What a person's keys say about them, over one game's actions (frames,) and the frames at
+    which the fortress opened (fired a shell): key changes per second, the share of frames in runs
+    of FROZEN frames or more without a change, the median frames from an opening to the next key
+    change (as ms), fire presses per second, and the game's kills/min; and the shortest key run
+    (5th percentile, ms), the person's shortest press."""
+    keys = np.array(split_action(actions))  # (3, frames)
+    changed = (np.diff(keys, axis=1) != 0).any(axis=0)
+    when = np.flatnonzero(changed) + 1
+    bounds = np.concatenate([[0], when, [len(actions)]])
+    runs = np.diff(bounds)
+    per_key = [np.diff(np.flatnonzero(np.diff(k) != 0)) for k in keys]
+    inner = np.concatenate(per_key) if any(len(r) for r in per_key) else np.array([len(actions)])
+    after = np.searchsorted(when, opened, side="right")
+    latency = [when[i] - f for i, f in zip(after, opened, strict=True) if i < len(when)]
+    seconds = len(actions) / 30.0
+    return {
+        "key_changes_per_s": len(when) / seconds,
+        "frozen_share": float(runs[runs >= FROZEN].sum() / len(actions)),
+        "response_ms": float(np.median(latency) * FRAME_MS) if latency else 1000.0,
+        "fires_per_s": float(np.sum(np.diff(keys[2]) == 1) / seconds),
+        "kills_per_minute": float(kills_per_minute),
+        "hold_ms": float(np.percentile(inner, 5) * FRAME_MS),
+    }
+
+
+@dataclass(frozen=True)
+class Trial:
+    """What the fit reads of one recorded trial: the person's actions, the fortress's openings,
+    the score, the agent in the other seat, and the person's world-view observations and actions
+    while alive (for the policy's likelihood)."""
+
+    actions: np.ndarray
+    opened: np.ndarray
+    kills_per_minute: float
+    agent: str
+    seed: int
+    alive_obs: np.ndarray
+    alive_actions: np.ndarray
+
+
+def read_trial(path: Path, role: str) -> Trial:
+    """One recording of a person's `role` (proxy.data's rules for whose seat it is)."""
+    recording = load(path)
+    if problems := recording.problems():
+        raise Failure(f"{path}: damaged recording ({'; '.join(problems)}); nothing fitted")
+    record = study_record(path)
+    if role not in person_seats(recording, record):
+        raise UsageError("RECORDINGS", path, f"no person played the {role} seat; nothing fitted")
+    states = sorted(recording.states, key=lambda s: s.frame)
+    seat = ROLES.index(role)
+    actions = np.array([s.applied[seat] for s in states[1:]], np.int64)
+    vulnerable = np.array([s.obs[role][ob.FORTRESS + ob.F_VULNERABLE] for s in states[:-1]])
+    opened = np.flatnonzero(np.diff(vulnerable) > 0.5) + 1
+    obs, alive_actions, _ = pairs(recording, role)
+    agent = record.get("agent") or recording.start.policies.get(other(role), "")
+    summary = recording.summary
+    return Trial(actions, opened, summary.kills_per_minute, agent, recording.start.seed, obs, alive_actions)
+
+
+def likeliest_policy(trials: list[Trial], role: str) -> str:
+    """The library policy of `role` under which the person's actions (while alive) are likeliest."""
+    obs = np.concatenate([t.alive_obs for t in trials])
+    actions = np.concatenate([t.alive_actions for t in trials])
+    scores = {}
+    for key in library.keys(role):
+        policy = library.load(key)
+        probs = batch_probs(policy, in_view(obs, policy.view))[np.arange(len(actions)), actions]
+        scores[key] = float(np.mean(np.log(np.maximum(probs, 1e-12))))
+    return max(scores, key=scores.get)
+
+
+def simulated(people: dict[str, tuple[str, str]], role: str, seeds: int = FIT_SEEDS) -> dict[str, np.ndarray]:
+    """For each person (policy, agent), the (FIT_SKILLS, STATISTICS) means and standard deviations
+    of stand-ins of that policy at each skill, playing with that agent."""
+    teams = []
+    for policy, agent in people.values():
+        for skill in FIT_SKILLS:
+            person = f"human({policy},skill={skill:g})"
+            teams.append((person, agent) if role == "bait" else (agent, person))
+    kills, played, opened = play_teams(teams, list(range(seeds)), record=True)
+    seat = ROLES.index(role)
+    out = {}
+    for p, name in enumerate(people):
+        table = np.zeros((len(FIT_SKILLS), 2, len(STATISTICS)))
+        for j in range(len(FIT_SKILLS)):
+            row = p * len(FIT_SKILLS) + j
+            games = [
+                statistics(played[row, g, :, seat], np.flatnonzero(opened[row, g]), kills[row, g])
+                for g in range(seeds)
+            ]
+            values = np.array([[game[k] for k in STATISTICS] for game in games])
+            table[j] = values.mean(axis=0), values.std(axis=0, ddof=1)
+        out[name] = table
+    return out
+
+
+def fit(paths: list[Path], role: str) -> dict[str, dict]:
+    """Each participant's stand-in, from their recordings of `role`: the likeliest library policy,
+    and the skill whose simulated stand-ins (that policy, with the participant's agent) come
+    nearest the participant's statistics (in standard errors of the participant's mean, at skills
+    interpolated between FIT_SKILLS); with the statistics, the shortest press and the partner name."""
+    if role not in ROLES:
+        raise UsageError("--role", role, "not a seat", ROLES)
+    if not paths:
+        raise UsageError("RECORDINGS", "(none)", "give at least one recording")
+    trials: dict[str, list[tuple[Path, Trial]]] = {}
+    for path in map(Path, paths):
+        try:
+            trial = read_trial(path, role)
+        except UsageError:
+            raise
+        except (OSError, ValueError) as error:
+            raise Failure(f"{path}: unreadable recording ({error}); nothing fitted") from None
+        participant = str(study_record(path).get("participant") or path.name.removesuffix(".tsflog"))
+        trials.setdefault(participant, []).append((path, trial))
+    people = {}
+    for name, own in trials.items():
+        agents = Counter(t.agent for _, t in own)
+        people[name] = (likeliest_policy([t for _, t in own], role), agents.most_common(1)[0][0])
+    simulation = simulated(people, role)
+    fine = np.linspace(0.0, 1.0, 51)
+    out = {}
+    for name, own in trials.items():
+        games = [statistics(t.actions, t.opened, t.kills_per_minute) for _, t in own]
+        observed = {k: float(np.mean([g[k] for g in games])) for k in (*STATISTICS, "hold_ms")}
+        means, spreads = simulation[name][:, 0], simulation[name][:, 1]
+        at = [np.interp(fine, FIT_SKILLS, means[:, k]) for k in range(len(STATISTICS))]
+        sd = [
+            np.interp(fine, FIT_SKILLS, spreads[:, k]) / np.sqrt(len(games)) + 1e-9
+            for k in range(len(STATISTICS))
+        ]
+        distance = sum(((observed[k] - at[i]) / sd[i]) ** 2 for i, k in enumerate(STATISTICS))
+        skill = float(fine[int(np.argmin(distance))])
+        policy, agent = people[name]
+        out[name] = {
+            "partner": f"human({policy},skill={skill:g})",
+            "policy": policy,
+            "skill": skill,
+            "agent": agent,
+            "statistics": observed,
+            "recordings": [str(p) for p, _ in own],
+        }
+    return out
+
+
+def write(directory: Path, role: str, fitted: dict[str, dict], command: str) -> Path:
+    """DIR/stand_ins.json: the role, each participant's fit, and the command that made it."""
+    directory.mkdir(parents=True, exist_ok=True)
+    path = directory / STAND_INS
+    path.write_text(json.dumps({"role": role, "people": fitted, "command": command}, indent=1) + "\n")
+    return path

@@ -1,0 +1,76 @@
+"""Stand-ins fitted from recordings: the statistics read off keys, the fit's recovery of a known
+stand-in's policy and skill, and `humans:DIR` as a partner."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from services.adapter.humans import FROZEN, fit, statistics, write
+from services.adapter.partners import group_of, make_partner
+from services.proxy.synthetic import record_trial, trial_seed
+from shared.errors import UsageError
+from shared.game import join_action
+
+
+def test_statistics_read_presses_runs_and_responses_off_the_keys():
+    turn = np.repeat([0, 1, 0, 2, 0, 0], [30, 3, 27, 5, 30, 30])  # presses of 3 and 5 frames
+    fire = np.zeros(125, np.int64)
+    fire[[40, 41, 90, 91]] = 1
+    actions = join_action(turn, 0, fire)
+    s = statistics(actions, np.array([35, 85]), 2.0)
+    assert s["hold_ms"] == pytest.approx(np.percentile([3, 27, 5, 2, 48, 2], 5) * 1000 / 30)
+    assert s["key_changes_per_s"] == pytest.approx(8 / (125 / 30))
+    assert s["fires_per_s"] == pytest.approx(2 / (125 / 30))
+    assert s["response_ms"] == pytest.approx(np.median([5, 5]) * 1000 / 30)  # 35 -> 40, 85 -> 90
+    runs = [30, 3, 7, 2, 18, 5, 25, 2, 33]  # between changes of any key
+    assert s["frozen_share"] == pytest.approx(sum(r for r in runs if r >= FROZEN) / 125)
+    assert s["kills_per_minute"] == 2.0
+
+
+def test_a_fitted_stand_in_plays_as_humans_dir(tmp_path: Path):
+    person = {"partner": "human(B5,skill=0.4)", "policy": "B5", "skill": 0.4}
+    write(tmp_path, "bait", {"ann": person, "bob": person}, "tsf humans fit ...")
+    ann = make_partner(f"humans:{tmp_path}@ann", "bait")
+    assert ann.key == f"humans:{tmp_path}@ann" and ann.skill == 0.4
+    assert group_of(ann.key) == "fitted"
+    for name, problem in [
+        (f"humans:{tmp_path}", "name one participant"),
+        (f"humans:{tmp_path}@cid", "name one participant"),
+        (f"humans:{tmp_path / 'none'}", "no stand-ins"),
+    ]:
+        with pytest.raises(UsageError, match=problem):
+            make_partner(name, "bait")
+    with pytest.raises(UsageError, match="the bait seat, not the shooter"):
+        make_partner(f"humans:{tmp_path}@ann", "shooter")
+
+
+@pytest.mark.slow
+def test_fit_recovers_a_known_stand_ins_policy_and_skill(tmp_path: Path):
+    """Three trials each of a near-novice and a near-practised human(B5) with S4, recorded as a
+    study records them, fitted back: B5, and each skill within RECOVERY."""
+    recovery = 0.2
+    truth = {"early": 0.1, "late": 0.9}
+    paths = [
+        record_trial(
+            tmp_path / f"{name}-{t}.tsflog",
+            f"human(B5,skill={skill})",
+            "bait",
+            "S4",
+            trial_seed(100, i, t),
+            name,
+        )  # fmt: skip
+        for i, (name, skill) in enumerate(truth.items())
+        for t in range(3)
+    ]
+    fitted = fit(paths, "bait")
+    for name, skill in truth.items():
+        assert fitted[name]["policy"] == "B5"
+        assert abs(fitted[name]["skill"] - skill) <= recovery, fitted[name]
+    write(tmp_path / "out", "bait", fitted, "test")
+    assert json.loads((tmp_path / "out" / "stand_ins.json").read_text())["people"].keys() == truth.keys()
+    with pytest.raises(UsageError, match="no person played the shooter seat"):
+        fit(paths[:1], "shooter")

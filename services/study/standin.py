@@ -33,6 +33,8 @@ class StandInReport:
     queued: int = 0  # the furthest place in the queue it was shown
     first_frames: list[float] = field(default_factory=list)  # seconds from each Ready to its first frame
     waits: list[float] = field(default_factory=list)  # seconds each trial waited in the queue (if it did)
+    # seconds to each trial's offer: the first from the consent, each next one from the trial's end before it
+    offers: list[float] = field(default_factory=list)
     again: int = 0  # trials offered again after a failed attempt
 
 
@@ -60,7 +62,7 @@ async def stand_in(
     hello.update({"worker": worker} if worker else {})
     if resume:
         hello.update(participant=resume[0], key=resume[1])
-    policy, held, ready, queued = None, None, None, 0.0
+    policy, held, ready, queued, since = None, None, None, 0.0, time.monotonic()
     socket = url.replace("http", "ws", 1).rstrip("/") + "/ws"
     local = {"local_addr": (address, 0)} if address else {}
     async with websockets.connect(socket, ssl=ssl, **local) as ws:
@@ -71,12 +73,14 @@ async def stand_in(
             if kind == "consent":
                 report.consent = message["text"]
                 await ws.send(json.dumps({"type": "consent"}))
+                since = time.monotonic()
             elif kind == "participant":
                 report.participant, report.key = message["participant"], message["key"]
             elif kind == "queue":
                 report.queued = max(report.queued, message["place"])
                 queued = queued or time.monotonic()
             elif kind == "trial":
+                report.offers.append(time.monotonic() - since)
                 if queued:
                     report.waits.append(time.monotonic() - queued)
                     queued = 0.0
@@ -102,6 +106,7 @@ async def stand_in(
                     await ws.send(json.dumps({"type": "keys", **keys}))
             elif kind == "end":
                 report.kills.append(message["kills"])
+                since = time.monotonic()
             elif kind == "done":
                 report.done, report.end, report.code = True, message["text"], message.get("code", "")
                 return report

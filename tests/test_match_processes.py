@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -13,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+from services.launch import AGENT_NICE, RECORDER_NICE, SIM_RAISE
 from services.recorder.log import read_log
 from services.recorder.recording import load, replay
 
@@ -103,6 +105,38 @@ def test_matches_started_together_get_their_own_recordings_and_an_id_is_never_re
     assert (tmp_path / f"{taken}.tables.replaced-1" / f"{taken}.states.parquet").exists()
     recording = load(paths[0])
     assert recording.problems() == [] and recording.starts == 1 and replay(recording) == []
+
+
+def nice(pid: int, task: int | None = None) -> int:
+    """A process's (or one of its threads') nice value, field 19 of its stat in /proc."""
+    stat = Path("/proc") / str(pid) / (f"task/{task}/stat" if task else "stat")
+    return int(stat.read_text().rsplit(")", 1)[1].split()[16])
+
+
+def may_raise_priority() -> bool:
+    """Whether this process has CAP_SYS_NICE (root's, unless a container takes it away)."""
+    status = Path("/proc/self/status").read_text()
+    return bool(int(re.search(r"CapEff:\s*([0-9a-f]+)", status).group(1), 16) >> 23 & 1)
+
+
+def test_the_sim_plays_above_its_matchs_other_processes(tsf_match, tmp_path, wait_until):
+    """Frames on time: at its first frame the sim raises every thread of its own SIM_RAISE steps
+    (where permitted), the agents and the adapter run AGENT_NICE steps below the launcher and the
+    recorder RECORDER_NICE below, from their start-up on (services/launch.py)."""
+    match = tsf_match("--duration", "60", "--match", "niced", "--adaptive", "shooter")
+    log = tmp_path / "niced.tsflog"
+    assert wait_until(lambda: recorded(log) > 20, timeout=60)  # past the first frame
+    base = nice(match.pid)
+    sim = base - SIM_RAISE if may_raise_priority() else base
+    expected = {"sim": sim, "agent": base + AGENT_NICE, "adapter": base + AGENT_NICE}
+    expected["recorder"] = min(19, base + RECORDER_NICE)
+    started = {pid: command.split()[3] for pid, command in children(match.pid).items()}
+    assert sorted(started.values()) == ["adapter", "agent", "agent", "recorder", "sim"]
+    for pid, service in started.items():
+        threads = [int(task.name) for task in (Path("/proc") / str(pid) / "task").iterdir()]
+        assert {nice(pid, task) for task in threads} == {expected[service]}, service
+    match.terminate()
+    assert match.wait(30) == 1
 
 
 SIGNALS = [signal.SIGTERM, signal.SIGHUP, signal.SIGINT, signal.SIGKILL]

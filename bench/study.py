@@ -53,7 +53,7 @@ from pathlib import Path
 from services.human.gateway import Web
 from services.recorder.recording import load
 from services.study.core import StudyConfig, Variant
-from services.study.runner import Serving, run_study
+from services.study.runner import SERVING, Serving, run_study
 from services.study.standin import StandInReport, stand_in
 from shared.bus import BusConfig, free_endpoint
 
@@ -132,17 +132,22 @@ def spread(values: list[float]) -> str:
     return f"p50 {quantile(values, 50):.1f} s, p99 {quantile(values, 99):.1f} s" if values else "none"
 
 
-def load_test(counts: list[int], trials: int, seconds: float, adaptive: bool = False) -> None:
+def load_test(
+    counts: list[int], trials: int, seconds: float, adaptive: bool = False, starting: int = SERVING.starting
+) -> None:
     variant = Variant("a", adapter=ADAPTIVE) if adaptive else Variant("s", "B5", "S5")
     config = StudyConfig("bench", (variant,), trials=trials, trial_seconds=seconds)
     served = 0
-    print(f"load: everyone arrives at once, {trials} trial(s) of {seconds:g} s each, a match for each")
+    print(
+        f"load: everyone arrives at once, {trials} trial(s) of {seconds:g} s each, a match for each, "
+        f"{starting} starting at once"
+    )
     for count in counts:
         load = os.getloadavg()[0]
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         memory = Memory()
         reports, attempts, jitters = serve(
-            config, Serving(max_matches=count, test_token=TOKEN), [0.0] * count
+            config, Serving(max_matches=count, test_token=TOKEN, starting=starting), [0.0] * count
         )
         memory.stop.set()
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -252,6 +257,9 @@ def main() -> None:
         help="arrival test: again with a second match host, in a network namespace (root) or a process",
     )
     parser.add_argument("--adaptive", action="store_true", help="load test: an adaptive variant")
+    parser.add_argument(
+        "--starting", type=int, default=SERVING.starting, help="load test: matches starting up at once"
+    )
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     if args.second_host:
@@ -265,7 +273,7 @@ def main() -> None:
     elif args.arrivals:
         arrival_test(args.arrivals, args.over, args.trial_seconds, args.max_matches, args.seed)
     else:
-        load_test(args.counts, args.trials, args.trial_seconds, args.adaptive)
+        load_test(args.counts, args.trials, args.trial_seconds, args.adaptive, args.starting)
 
 
 if __name__ == "__main__":

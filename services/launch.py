@@ -32,12 +32,12 @@ from shared.game import ROLES
 from shared.messages import AdapterStatus, State, Summary
 
 HUMAN = "human"  # a seat's policy key for a person: no agent is started, a gateway plays it
-# Priorities, in nice steps from the launcher's: the sim's frames come first (it raises itself at its
-# first frame, where permitted; its start-up runs at the launcher's), then the agents' answers and
-# the adapter's switches, and last the recorder, which drains a queue. So every start-up runs below
-# the live sims, and one match's start does not take another's frames (where the sim may not raise
-# itself, only the sims' own start-ups still compete with them).
-SIM_RAISE, AGENT_NICE, RECORDER_NICE = 5, 5, 10
+# Priorities, in nice steps from the launcher's: the sim raises itself at its first frame (where
+# permitted; its start-up runs at the launcher's), so every start-up runs below the live sims and
+# one match's start does not take another's frames. The recorder, which drains a queue, runs below
+# the rest. Agents and adapter stay at the launcher's: below it, other work on the machine starved
+# them (the adapter of a 1.5-s trial sent no report at load 15-20).
+SIM_RAISE, RECORDER_NICE = 5, 10
 
 
 @dataclass(frozen=True)
@@ -151,8 +151,7 @@ def run_match(
         recorder = service_command("recorder", peer_bus, *match, "--out", str(plan.directory))
         processes.start("recorder", recorder, nice=RECORDER_NICE)
         if plan.adapter is not None:
-            adapter = service_command("adapter", peer_bus, *match, *plan.adapter.to_args())
-            processes.start("adapter", adapter, nice=AGENT_NICE)
+            processes.start("adapter", service_command("adapter", peer_bus, *match, *plan.adapter.to_args()))
         for role, policy in policies.items():
             if policy == HUMAN:
                 continue
@@ -161,7 +160,6 @@ def run_match(
                 service_command(
                     "agent", peer_bus, *match, "--role", role, "--policy", policy, "--seed", str(plan.seed)
                 ),
-                nice=AGENT_NICE,
             )
         with (
             session(watcher_bus(endpoint, plan.low_latency)) as z,

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from services.launch import AGENT_NICE, RECORDER_NICE, SIM_RAISE
+from services.launch import RECORDER_NICE, SIM_RAISE
 from services.recorder.log import read_log
 from services.recorder.recording import load, replay
 
@@ -121,14 +121,14 @@ def may_raise_priority() -> bool:
 
 def test_the_sim_plays_above_its_matchs_other_processes(tsf_match, tmp_path, wait_until):
     """Frames on time: at its first frame the sim raises every thread of its own SIM_RAISE steps
-    (where permitted), the agents and the adapter run AGENT_NICE steps below the launcher and the
-    recorder RECORDER_NICE below, from their start-up on (services/launch.py)."""
+    above the launcher (where permitted), above every start-up; the recorder runs RECORDER_NICE
+    below, the agents and the adapter at the launcher's priority (services/launch.py)."""
     match = tsf_match("--duration", "60", "--match", "niced", "--adaptive", "shooter")
     log = tmp_path / "niced.tsflog"
     assert wait_until(lambda: recorded(log) > 20, timeout=60)  # past the first frame
     base = nice(match.pid)
     sim = base - SIM_RAISE if may_raise_priority() else base
-    expected = {"sim": sim, "agent": base + AGENT_NICE, "adapter": base + AGENT_NICE}
+    expected = {"sim": sim, "agent": base, "adapter": base}
     expected["recorder"] = min(19, base + RECORDER_NICE)
     started = {pid: command.split()[3] for pid, command in children(match.pid).items()}
     assert sorted(started.values()) == ["adapter", "agent", "agent", "recorder", "sim"]

@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextlib
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -137,6 +138,21 @@ def test_the_sim_plays_above_its_matchs_other_processes(tsf_match, tmp_path, wai
         assert {nice(pid, task) for task in threads} == {expected[service]}, service
     match.terminate()
     assert match.wait(30) == 1
+
+
+@pytest.mark.skipif(not (may_raise_priority() and shutil.which("setpriv")), reason="needs root and setpriv")
+def test_a_sim_not_permitted_to_raise_its_priority_keeps_it_and_says_so_once():
+    """As in a container without CAP_SYS_NICE (dropped here by setpriv): no error, one log line."""
+    script = (
+        "import logging, os, threading, time; logging.basicConfig(level=logging.INFO)\n"
+        "from services.sim.service import _raise_priority\n"
+        "threading.Thread(target=time.sleep, args=(1,)).start()\n"
+        "_raise_priority(5); print(os.getpriority(os.PRIO_PROCESS, 0))\n"
+    )
+    drop = ["setpriv", "--inh-caps=-sys_nice", "--bounding-set=-sys_nice"]
+    done = subprocess.run([*drop, sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and int(done.stdout) == os.getpriority(os.PRIO_PROCESS, 0)
+    assert done.stderr.count("not permitted to raise the priority") == 1, done.stderr
 
 
 SIGNALS = [signal.SIGTERM, signal.SIGHUP, signal.SIGINT, signal.SIGKILL]

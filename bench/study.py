@@ -5,8 +5,10 @@ Stand-ins (services/study/standin.py) take part in a study served here (`run_stu
 page's WebSocket protocol, each playing `--trials` trials of `--trial-seconds`.
 
 Load: for each count of participants, all arrive together with a match for each; reported are
-the trials done of all (done = the recording read back complete), the worst tick jitter p99 of
-the matches' sims, Ready-to-first-frame p50/p99 over all trials, and what one participant costs:
+the trials done of all (done = the recording read back complete), the worst and median tick
+jitter p99 of the matches' sims and how many are over 5 ms, Ready-to-first-frame p50/p99 over all
+trials, the waits before the offers (consent to the first, each trial's end to the next; more
+than one `--trials` for the latter), the load average, and what one participant costs:
 CPU seconds of the match processes per second of play, and the resident memory of one match's
 processes (peak over the run, divided by the matches then running). The most participants served
 is the largest count with every trial done and tick jitter p99 <= 5 ms.
@@ -23,7 +25,7 @@ namespace's own loopback). `--second-host process` runs it as a plain process on
 root needed). Both hosts share this machine's CPUs: the figure shows the slots adding up and the
 protocol's cost, not a second machine's CPU.
 
-    nice .venv/bin/python bench/study.py [--counts 1 2 4 8] [--trial-seconds 10]
+    nice .venv/bin/python bench/study.py [--counts 1 2 4 8] [--trial-seconds 10] [--trials 2] [--adaptive]
     nice .venv/bin/python bench/study.py --arrivals 20 --over 120 --trial-seconds 5 --max-matches 4
     nice .venv/bin/python bench/study.py --arrivals 16 --over 60 --trial-seconds 5 --max-matches 2 \
         --second-host netns
@@ -51,13 +53,14 @@ from pathlib import Path
 from services.human.gateway import Web
 from services.recorder.recording import load
 from services.study.core import StudyConfig, Variant
-from services.study.runner import Serving, run_study
+from services.study.runner import SERVING, Serving, run_study
 from services.study.standin import StandInReport, stand_in
 from shared.bus import BusConfig, free_endpoint
 
 TOKEN = "bench"
 HOST_SECRET = b"the-bench-host-secret"  # shared by the server and its match host
 JITTER_MS = 5.0
+ADAPTIVE = "adaptive-T400-bayes-dwell-ood-guard"
 
 
 def quantile(values: list[float], q: int) -> float:
@@ -126,15 +129,26 @@ def serve(
     return reports, [a for a, _ in attempts], jitters
 
 
-def load_test(counts: list[int], trials: int, seconds: float) -> None:
-    config = StudyConfig("bench", (Variant("s", "B5", "S5"),), trials=trials, trial_seconds=seconds)
+def spread(values: list[float]) -> str:
+    return f"p50 {quantile(values, 50):.1f} s, p99 {quantile(values, 99):.1f} s" if values else "none"
+
+
+def load_test(
+    counts: list[int], trials: int, seconds: float, adaptive: bool = False, starting: int = SERVING.starting
+) -> None:
+    variant = Variant("a", adapter=ADAPTIVE) if adaptive else Variant("s", "B5", "S5")
+    config = StudyConfig("bench", (variant,), trials=trials, trial_seconds=seconds)
     served = 0
-    print(f"load: everyone arrives at once, {trials} trial(s) of {seconds:g} s each, a match for each")
+    print(
+        f"load: everyone arrives at once, {trials} trial(s) of {seconds:g} s each, a match for each, "
+        f"{starting} starting at once"
+    )
     for count in counts:
+        load = os.getloadavg()[0]
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         memory = Memory()
         reports, attempts, jitters = serve(
-            config, Serving(max_matches=count, test_token=TOKEN), [0.0] * count
+            config, Serving(max_matches=count, test_token=TOKEN, starting=starting), [0.0] * count
         )
         memory.stop.set()
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -147,9 +161,16 @@ def load_test(counts: list[int], trials: int, seconds: float) -> None:
             served = max(served, count)
         print(
             f"  {count:3d} participants: trials done {done}/{count * trials} ({len(attempts)} attempts); "
-            f"tick jitter p99 worst {jitter:.1f} ms; Ready-to-first-frame p50 {quantile(first, 50):.3f} s, "
+            f"tick jitter p99 worst {jitter:.1f} ms, median {statistics.median(jitters or [jitter]):.1f} ms, "
+            f"{sum(j > JITTER_MS for j in jitters)} matches over {JITTER_MS:g} ms; "
+            f"Ready-to-first-frame p50 {quantile(first, 50):.3f} s, "
             f"p99 {quantile(first, 99):.3f} s; per participant {cpu / (count * trials * seconds):.2f} CPU s "
             f"per s of play, {memory.peak_per_match / 2**20:.0f} MiB"
+        )
+        print(
+            f"       consent to first offer {spread([r.offers[0] for r in reports if r.offers])}; "
+            f"trial end to next offer {spread([o for r in reports for o in r.offers[1:]])}; "
+            f"load average {load:.1f} at the start, {os.getloadavg()[0]:.1f} at the end"
         )
     print(f"most participants served with every trial done and tick jitter p99 <= {JITTER_MS:g} ms: {served}")
 
@@ -239,6 +260,10 @@ def main() -> None:
         choices=("netns", "process"),
         help="arrival test: again with a second match host, in a network namespace (root) or a process",
     )
+    parser.add_argument("--adaptive", action="store_true", help="load test: an adaptive variant")
+    parser.add_argument(
+        "--starting", type=int, default=SERVING.starting, help="load test: matches starting up at once"
+    )
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     if args.second_host:
@@ -252,7 +277,7 @@ def main() -> None:
     elif args.arrivals:
         arrival_test(args.arrivals, args.over, args.trial_seconds, args.max_matches, args.seed)
     else:
-        load_test(args.counts, args.trials, args.trial_seconds)
+        load_test(args.counts, args.trials, args.trial_seconds, args.adaptive, args.starting)
 
 
 if __name__ == "__main__":

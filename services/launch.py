@@ -32,6 +32,12 @@ from shared.game import ROLES
 from shared.messages import AdapterStatus, State, Summary
 
 HUMAN = "human"  # a seat's policy key for a person: no agent is started, a gateway plays it
+# Priorities, in nice steps from the launcher's: the sim raises itself at its first frame (where
+# permitted; its start-up runs at the launcher's), so every start-up runs below the live sims and
+# one match's start does not take another's frames. The recorder, which drains a queue, runs below
+# the rest. Agents and adapter stay at the launcher's: below it, other work on the machine starved
+# them (the adapter of a 1.5-s trial sent no report at load 15-20).
+SIM_RAISE, RECORDER_NICE = 5, 10
 
 
 @dataclass(frozen=True)
@@ -139,10 +145,11 @@ def run_match(
                 "--sim-mode", plan.mode, "--bait", recorded["bait"], "--shooter", recorded["shooter"],
                 "--wait-recorder", str(plan.wait_services), "--wait-players", str(plan.wait_players),
                 "--wait-adapter", str(plan.wait_services) if plan.adapter else "0",
+                "--priority", str(SIM_RAISE),
             ),
         )  # fmt: skip
         recorder = service_command("recorder", peer_bus, *match, "--out", str(plan.directory))
-        processes.start("recorder", recorder, nice=10)  # it drains a queue: latency is not its job
+        processes.start("recorder", recorder, nice=RECORDER_NICE)
         if plan.adapter is not None:
             processes.start("adapter", service_command("adapter", peer_bus, *match, *plan.adapter.to_args()))
         for role, policy in policies.items():

@@ -34,6 +34,7 @@ WORKERS = Range(0, 256)  # processes started on this machine (0: the command's d
 SLOTS = Range(1, 1024)  # matches a match host runs at once (shared.messages.HostStatus)
 SECONDS = Range(0.0, 24 * 3600.0)  # a wait: at most a day
 PORTS = Range(0, 65535)
+PRIORITY = Range(0, 39)  # nice steps a process may raise itself by (from 19 to -20)
 
 
 def number(default: object, limits: Range, help: str) -> Any:

@@ -7,6 +7,10 @@ covered by the kernel: each child asks Linux for SIGTERM when its parent dies (p
 PR_SET_PDEATHSIG) as its first act, and ends at once if the parent is already gone. The signal
 comes when the thread that started the child ends, so launchers start children from a thread that
 outlives them (run_match waits for its children).
+
+Priorities are relative to the launcher's own: a child is started `nice` steps below it (and the
+sim raises itself some steps above, services/sim/service.py), so a launcher run under `nice`
+keeps the order of its processes, shifted.
 """
 
 from __future__ import annotations
@@ -49,12 +53,13 @@ class Processes:
         self.ended: set[str] = set()  # the children still running at exit, which this ended
 
     def start(self, name: str, command: list[str], nice: int = 0) -> subprocess.Popen:
-        """Start a child; `nice` > 0 lowers its CPU priority (for work off the latency path)."""
+        """Start a child; `nice` > 0 steps below this thread's priority (for work off the latency
+        path; its threads inherit it)."""
         child = self.children[name] = subprocess.Popen(
             command, stdin=subprocess.DEVNULL, env={**os.environ, PARENT: str(os.getpid())}
         )
         if nice:  # set from here: a preexec_fn is unsafe in a process with threads (the study server)
-            os.setpriority(os.PRIO_PROCESS, child.pid, nice)
+            os.setpriority(os.PRIO_PROCESS, child.pid, min(19, os.getpriority(os.PRIO_PROCESS, 0) + nice))
         return child
 
     def wait(self, name: str, timeout: float) -> int | None:

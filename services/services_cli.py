@@ -11,6 +11,7 @@ import typer
 
 from services.adapter.core import AdapterConfig
 from services.options import (
+    PRIORITY,
     SECONDS,
     AdapterFactory,
     Connect,
@@ -52,6 +53,7 @@ def sim(
     wait_players: float = number(10.0, SECONDS, "Seconds to wait for both seats before starting."),
     wait_recorder: float = number(0.0, SECONDS, "Seconds to wait for a recorder before starting."),
     wait_adapter: float = number(0.0, SECONDS, "Seconds to wait for an adapter before starting."),
+    priority: int = number(0, PRIORITY, "Nice steps to raise the sim's priority by at its first frame."),
     *,
     bus: BusConfig,
 ) -> None:
@@ -61,7 +63,7 @@ def sim(
     config = GameConfig(frames=game_frames(duration, frames))
     summary = run_sim(
         bus, match, seed, config, mode, {"bait": bait, "shooter": shooter},
-        stop_on_signals(), wait_players, wait_recorder, wait_adapter=wait_adapter,
+        stop_on_signals(), wait_players, wait_recorder, wait_adapter=wait_adapter, priority=priority,
     )  # fmt: skip
     logging.getLogger("tsf.sim").info(
         "match %s over: %d kills in %d frames; timing %s", match, summary.kills, summary.frame, summary.timing

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -13,6 +15,7 @@ from pathlib import Path
 
 import pytest
 
+from services.launch import RECORDER_NICE, SIM_RAISE
 from services.recorder.log import read_log
 from services.recorder.recording import load, replay
 
@@ -103,6 +106,53 @@ def test_matches_started_together_get_their_own_recordings_and_an_id_is_never_re
     assert (tmp_path / f"{taken}.tables.replaced-1" / f"{taken}.states.parquet").exists()
     recording = load(paths[0])
     assert recording.problems() == [] and recording.starts == 1 and replay(recording) == []
+
+
+def nice(pid: int, task: int | None = None) -> int:
+    """A process's (or one of its threads') nice value, field 19 of its stat in /proc."""
+    stat = Path("/proc") / str(pid) / (f"task/{task}/stat" if task else "stat")
+    return int(stat.read_text().rsplit(")", 1)[1].split()[16])
+
+
+def may_raise_priority() -> bool:
+    """Whether this process has CAP_SYS_NICE (root's, unless a container takes it away)."""
+    status = Path("/proc/self/status").read_text()
+    return bool(int(re.search(r"CapEff:\s*([0-9a-f]+)", status).group(1), 16) >> 23 & 1)
+
+
+def test_the_sim_plays_above_its_matchs_other_processes(tsf_match, tmp_path, wait_until):
+    """Frames on time: at its first frame the sim raises every thread of its own SIM_RAISE steps
+    above the launcher (where permitted), above every start-up; the recorder runs RECORDER_NICE
+    below, the agents and the adapter at the launcher's priority (services/launch.py)."""
+    match = tsf_match("--duration", "60", "--match", "niced", "--adaptive", "shooter")
+    log = tmp_path / "niced.tsflog"
+    assert wait_until(lambda: recorded(log) > 20, timeout=60)  # past the first frame
+    base = nice(match.pid)
+    sim = base - SIM_RAISE if may_raise_priority() else base
+    expected = {"sim": sim, "agent": base, "adapter": base}
+    expected["recorder"] = min(19, base + RECORDER_NICE)
+    started = {pid: command.split()[3] for pid, command in children(match.pid).items()}
+    assert sorted(started.values()) == ["adapter", "agent", "agent", "recorder", "sim"]
+    for pid, service in started.items():
+        threads = [int(task.name) for task in (Path("/proc") / str(pid) / "task").iterdir()]
+        assert {nice(pid, task) for task in threads} == {expected[service]}, service
+    match.terminate()
+    assert match.wait(30) == 1
+
+
+@pytest.mark.skipif(not (may_raise_priority() and shutil.which("setpriv")), reason="needs root and setpriv")
+def test_a_sim_not_permitted_to_raise_its_priority_keeps_it_and_says_so_once():
+    """As in a container without CAP_SYS_NICE (dropped here by setpriv): no error, one log line."""
+    script = (
+        "import logging, os, threading, time; logging.basicConfig(level=logging.INFO)\n"
+        "from services.sim.service import _raise_priority\n"
+        "threading.Thread(target=time.sleep, args=(1,)).start()\n"
+        "_raise_priority(5); print(os.getpriority(os.PRIO_PROCESS, 0))\n"
+    )
+    drop = ["setpriv", "--inh-caps=-sys_nice", "--bounding-set=-sys_nice"]
+    done = subprocess.run([*drop, sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and int(done.stdout) == os.getpriority(os.PRIO_PROCESS, 0)
+    assert done.stderr.count("not permitted to raise the priority") == 1, done.stderr
 
 
 SIGNALS = [signal.SIGTERM, signal.SIGHUP, signal.SIGINT, signal.SIGKILL]

@@ -16,7 +16,7 @@ from services.recorder.service import recording_path, run_recorder
 from services.sim.engine import Game
 from services.sim.match import start_message, state_message, summary_message
 from shared import keys
-from shared.bus import BusConfig
+from shared.bus import BusConfig, session
 from shared.errors import Failure, UsageError
 from shared.game import ROLES, GameConfig
 from shared.messages import Action, GameEvent, PolicySwitch
@@ -89,6 +89,27 @@ def test_the_recorder_is_ready_only_once_it_sees_both_seats(bus, tap, background
     assert wait_until(lambda: recorded.is_alive("recorder"))
     for token in (bait, shooter):
         token.undeclare()
+
+
+def test_a_client_of_the_sims_router_is_ready_at_once_and_records_the_first_actions(
+    endpoint, tap, background, wait_until, tmp_path
+):
+    """run_match's topology: the sim is the router, everything else its client. The recorder's token
+    comes before any seat's player (a study offers the trial on it, before the person's Ready), and
+    a seat that joins later still reaches it with its first action: every action passes the router."""
+    with session(BusConfig("router", (endpoint,))) as router:
+        recorded = tap(router, MATCH)
+        client = BusConfig("client", (), (endpoint,))
+        future = background(run_recorder, client, MATCH, tmp_path, wait_seats=30.0)
+        assert wait_until(lambda: recorded.is_alive("recorder"), timeout=10.0)  # not the 30 s for the seats
+        with session(client) as seat, seat.liveliness().declare_token(keys.alive(MATCH, "human", "bait")):
+            first = Action(match=MATCH, frame=0, sender="human/bait", role="bait", action=3)
+            seat.put(keys.action(MATCH, "bait"), first.encode())  # at once, as a Ready does
+            match = FakeMatch(router)
+            match.start()
+            match.summary()
+            path = future.result(timeout=10)
+    assert [a for _, a in load(path).actions] == [first]
 
 
 def test_everything_valid_exactly_once_a_gap_for_the_hole_and_no_garbage(recorder):

@@ -42,10 +42,14 @@ def run_recorder(
     torn tail; the log of a finished match (one with a summary) is never appended to (UsageError),
     and a second start of the id ends the recording before it is written (Failure): one log, one match.
 
-    Its liveliness token (which the sim waits for) is declared once both seats' players are seen,
-    or after `wait_seats` seconds: a peer learns of the others over gossip after the sim has seen
-    it, so a token declared at once could start the match before the seats' first actions reach
-    this recorder."""
+    Its liveliness token (which the sim waits for) says that the seats' first actions will reach
+    it. A client (run_match's topology: the sim is the router) declares it as soon as it has
+    subscribed: every action passes the router, which has the subscription before the token
+    (declared in order on the one link), so the token can come long before the seats' players do,
+    and a study can offer the trial without waiting for a person's Ready. A peer declares it once
+    both seats' players are seen, or after `wait_seats` seconds: it learns of the other peers over
+    gossip after the sim has seen them, so a token declared at once could start the match before
+    the seats' first actions reach this recorder."""
     stop = stop or threading.Event()
     path = recording_path(directory, match)
     if path.exists() and any(r.key == keys.summary(match) for r in read_log(path)[0]):
@@ -93,7 +97,8 @@ def run_recorder(
         drainer = threading.Thread(target=drain, args=(writer, GapTracker(last), started), daemon=True)
         drainer.start()
         with session(bus) as z, z.declare_subscriber(keys.everything(match), on_sample):
-            _wait_for_seats(z, match, wait_seats, stop)
+            if bus.mode != "client":
+                _wait_for_seats(z, match, wait_seats, stop)
             with z.liveliness().declare_token(keys.alive(match, "recorder")):
                 until_stopped(stop)
                 time.sleep(0.5)  # actions still in flight after the summary (they come over other links)

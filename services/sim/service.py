@@ -9,7 +9,9 @@ can never stall the sim.
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import os
 import statistics
 import threading
 import time
@@ -41,12 +43,14 @@ def run_sim(
     wait_recorder: float = 0.0,
     step_timeout: float = 1.0,
     wait_adapter: float = 0.0,
+    priority: int = 0,
 ) -> Summary:
     """Play one match on the bus and return its summary (also published on the summary key).
 
     Waits up to `wait_players` seconds for both seats and up to `wait_recorder` for a recorder
     before the first frame (and `wait_adapter` for an adapter, in adaptive matches); a seat still
-    empty then plays no-op until its player arrives."""
+    empty then plays no-op until its player arrives. At the first frame it raises its priority by
+    `priority` nice steps (in every thread; where permitted), above start-ups and bulk work."""
     if mode not in MODES:
         raise UsageError("--sim-mode", mode, "unknown", MODES)
     stop = stop or threading.Event()
@@ -108,6 +112,7 @@ def run_sim(
             ticks: list[float] = []
             applied = (0, 0)
             period = 1.0 / game.config.fps
+            _raise_priority(priority)
             start = time.monotonic()
             while True:
                 sent[game.frame] = time.perf_counter_ns()
@@ -137,6 +142,25 @@ def run_sim(
             z.put(keys.summary(match), summary.encode())
             time.sleep(0.2)  # let the last puts leave before the session closes
             return summary
+
+
+def _raise_priority(steps: int) -> None:
+    """Take `steps` nice steps above this thread's priority, in every thread of this process (Linux
+    keeps a nice value per thread). False where it is not permitted (it needs CAP_SYS_NICE: root
+    can, a container may not): the threads keep their priority, and it says so in one log line."""
+    if steps <= 0:
+        return
+    nice = max(-20, os.getpriority(os.PRIO_PROCESS, 0) - steps)
+    try:
+        threads = [int(task) for task in os.listdir("/proc/self/task")]
+    except OSError:  # no /proc: this thread alone
+        threads = [0]
+    try:
+        for thread in threads:
+            with contextlib.suppress(ProcessLookupError):  # a thread that has just ended
+                os.setpriority(os.PRIO_PROCESS, thread, nice)
+    except PermissionError:
+        log.info("not permitted to raise the priority to nice %d (needs CAP_SYS_NICE): it stays", nice)
 
 
 def _timing(trips: list[float], ticks: list[float], period: float) -> dict[str, float]:

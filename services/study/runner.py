@@ -95,7 +95,7 @@ class Serving:
     # every client has the proxy's address), so that one client cannot drain the ids of all
     arrivals_per_address: float = 0.1
     ready_timeout: float = 120.0  # seconds an offered trial waits for Ready; then its match and slot go
-    starting: int = 2  # matches starting up at once (until their sim listens)
+    starting: int = 2  # matches starting up at once (until their processes are up; each starts 3-4)
     hosts: BusConfig | None = None  # the router where match hosts offer their slots; None: local only
     # A signed link's secret: new participants need a worker id and its signature (`sig`, the
     # HMAC-SHA256 of the id with this secret, shared.secret.signature); b"": links are not signed.

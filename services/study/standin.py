@@ -36,6 +36,8 @@ class StandInReport:
     queued: int = 0  # the furthest place in the queue it was shown
     first_frames: list[float] = field(default_factory=list)  # seconds from each Ready to its first frame
     waits: list[float] = field(default_factory=list)  # seconds each trial waited in the queue (if it did)
+    # seconds to each trial's offer: the first from the consent, each next one from the trial's end before it
+    offers: list[float] = field(default_factory=list)
     again: int = 0  # trials offered again after a failed attempt
     set_ups: int = 0  # `wait` messages: a game being set up, said before each trial
 
@@ -71,7 +73,7 @@ async def stand_in(
     hello.update({"link": link} if link else {})
     if resume:
         hello.update(participant=resume[0], key=resume[1])
-    policy, held, ready, queued = None, None, None, 0.0
+    policy, held, ready, queued, since = None, None, None, 0.0, time.monotonic()
     socket = url.replace("http", "ws", 1).rstrip("/") + "/ws"
     local = {"local_addr": (address, 0)} if address else {}
     async with websockets.connect(socket, ssl=ssl, **local) as ws:
@@ -82,6 +84,7 @@ async def stand_in(
             if kind == "consent":
                 report.consent = message["text"]
                 await ws.send(json.dumps({"type": "consent"}))
+                since = time.monotonic()
             elif kind == "participant":
                 report.participant, report.key = message["participant"], message["key"]
             elif kind == "check":
@@ -93,6 +96,7 @@ async def stand_in(
                 report.queued = max(report.queued, message["place"])
                 queued = queued or time.monotonic()
             elif kind == "trial":
+                report.offers.append(time.monotonic() - since)
                 if queued:
                     report.waits.append(time.monotonic() - queued)
                     queued = 0.0
@@ -120,6 +124,7 @@ async def stand_in(
                 report.set_ups += 1
             elif kind == "end":
                 report.kills.append(message["kills"])
+                since = time.monotonic()
             elif kind == "done":
                 report.done, report.end, report.code = True, message["text"], message.get("code", "")
                 report.redirect = message.get("redirect", "")

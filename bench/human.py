@@ -24,9 +24,9 @@ from urllib.parse import parse_qs, urlsplit
 import websockets
 
 from services.human.play import play_with_people
-from services.launch import HUMAN, MatchPlan
 from services.recorder.recording import load
-from shared.game import FPS
+from services.runtime.launch import MatchPlan
+from shared.game import FPS, HUMAN
 
 
 async def browser(link: str) -> int:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import socket
 from pathlib import Path
 
 import typer
@@ -54,9 +56,9 @@ def match_command(
 ) -> None:
     """Start a complete match on this machine: sim, two agents and the recorder as processes (and
     with --adaptive, the adapter, set by the adapter options)."""
-    from services.launch import MatchPlan, new_match_id, run_match
     from services.recorder.export import export
     from services.recorder.recording import load
+    from services.runtime.launch import MatchPlan, new_match_id, run_match
 
     if adaptive and adaptive not in ROLES:
         raise UsageError("--adaptive", adaptive, "not a seat", ROLES)
@@ -121,9 +123,10 @@ def play_command(
     adapter: AdapterFactory,
 ) -> None:
     """Play a match from a browser, with an agent or another person; prints the link(s) to open."""
-    from services.agent.library import check_seat
+    from services.agent.seats import check_seat
     from services.human.play import play_with_people
-    from services.launch import HUMAN, MatchPlan, new_match_id
+    from services.runtime.launch import MatchPlan, new_match_id
+    from shared.game import HUMAN
 
     if role not in ROLES:
         raise typer.BadParameter("role is bait or shooter")
@@ -236,9 +239,6 @@ def match_host_command(
 ) -> None:
     """Run the matches a study server offers over the router (`--connect` the study's router), up to
     --slots at once; their recordings go back to the server, hash checked."""
-    import os
-    import socket
-
     from services.study.host import run_match_host
 
     name = host_id or f"{socket.gethostname()}-{os.getpid()}".replace(".", "-")

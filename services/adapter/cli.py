@@ -11,7 +11,7 @@ import typer
 from rich.table import Table
 
 from services.adapter.core import WINDOWS, AdapterConfig
-from services.agent.library import policy_for
+from services.agent.seats import policy_for
 from services.options import GAMES, RAY, WORKERS, Seat, Strategies, bus_options, console, number, output
 from shared.bus import BusConfig, stop_on_signals
 from shared.errors import UsageError
@@ -31,7 +31,7 @@ def diversity(
 ) -> None:
     """The library's CEM matrices: mean log-probability of policy i's actions under policy j."""
     from services.adapter.cem import cem_matrix
-    from services.agent import library
+    from services.agent import library, networks
 
     partners = {  # both checked before the first matrix
         "bait": policy_for(bait_partner, "shooter", "--bait-partner"),
@@ -39,7 +39,7 @@ def diversity(
     }
     for role, partner in (("bait", bait_partner), ("shooter", shooter_partner)):
         keys = library.keys(role)
-        m = cem_matrix([library.load(k) for k in keys], partners[role], list(range(games)))
+        m = cem_matrix([networks.load(k) for k in keys], partners[role], list(range(games)))
         table = Table(title=f"{role}s with {partner}: mean log-probability of row's actions under column")
         for column in ("", *keys):
             table.add_column(column)

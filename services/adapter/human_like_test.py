@@ -7,7 +7,7 @@ import pytest
 
 from services.adapter.human_like import HOLD_MIN, SESSION_TRIALS, HumanLike
 from services.adapter.partners import group_of, make_partner, population
-from services.agent import library
+from services.agent import networks
 from services.sim.engine import Game
 from services.sim.observation import observe
 from services.sim.play import policy_seed
@@ -22,7 +22,7 @@ def play(partner_name: str, seeds: list[int], frames: int = 450) -> tuple[np.nda
     singles = [make_partner(partner_name, "bait") for _ in seeds]
     for partner, seed in zip(singles, seeds, strict=True):
         partner.reset(seed)
-    games, shooter = [Game(None, s) for s in seeds], library.load("S5")
+    games, shooter = [Game(None, s) for s in seeds], networks.load("S5")
     shooter.reset(0)
     together, alone = [], []
     for _ in range(frames):
@@ -69,4 +69,4 @@ def test_grammar_population_and_group():
     humans = population("bait")["human-like"]
     assert "human(B9)" in humans and any("," in h for h in humans)
     with pytest.raises(ValueError, match="share role"):
-        HumanLike(library.load("B5"), library.load("S5"))
+        HumanLike(networks.load("B5"), networks.load("S5"))

@@ -32,9 +32,9 @@ import numpy as np
 
 from services.adapter.human_like import HumanLike
 from services.agent import library
-from services.agent.library import policy_for
-from services.agent.outside import PROXY
+from services.agent.proxy import PROXY
 from services.agent.scripted import SCRIPTED
+from services.agent.seats import policy_for
 from services.sim.engine import Game
 from services.sim.observation import as_observation, world_values
 from shared.errors import Failure, UsageError

@@ -11,6 +11,7 @@ from services.adapter.core import (
     AdapterConfig,
 )
 from services.adapter.partners import group_of
+from services.agent import library
 from services.provenance import lines as provenance_lines
 from services.provenance import provenance
 
@@ -123,7 +124,7 @@ def write_results(
             "",
             *_group_tests(comparison),
         ]
-    made = provenance()
+    made = provenance(**library.provenance_hashes())
     (out / "provenance.json").write_text(json.dumps(made, indent=1) + "\n")
     lines += ["## Provenance", "", *(f"- {line}" for line in provenance_lines(made)), ""]
     path = out / "summary.md"

@@ -16,7 +16,7 @@ from pathlib import Path
 import zenoh
 
 from services.adapter.core import Adapter, AdapterConfig, Pairing, Payoff, Scorer
-from services.agent import library
+from services.agent import networks
 from services.table.table import DEFAULT_TABLE
 from shared import keys
 from shared.bus import BusConfig, Drops, session, stop_on_summary, subscribe
@@ -30,7 +30,7 @@ RESEND_FRAMES = 30  # ask again if the agent still plays another policy this man
 def build(config: AdapterConfig, table: Path = DEFAULT_TABLE) -> tuple[Adapter, Scorer]:
     """The core for one adaptive seat: the table's view from that seat and the partner's library."""
     payoff = Payoff.load(config.role, table)
-    return config.build(payoff), Scorer([library.load(k) for k in payoff.partners])
+    return config.build(payoff), Scorer([networks.load(k) for k in payoff.partners])
 
 
 def run_adapter(

@@ -12,9 +12,11 @@ import importlib
 from collections.abc import Callable, Iterable
 from typing import Any
 
+from services.agent import library
 from services.agent.outside import is_plugin
 from services.jobs.core import Hashes, Spec
 from shared.errors import Failure, UsageError
+from shared.game import GameConfig
 
 Progress = Callable[[int, int], None]  # (values done, values in all)
 Runner = Callable[[list[Spec], Progress | None], list[list]]  # (jobs, progress) -> values
@@ -49,9 +51,6 @@ def in_process(todo: list[Spec], progress: Callable[[int, int], None] | None = N
 
 def hashes() -> Hashes:
     """The library and rules of this process."""
-    from services.agent import library
-    from shared.game import GameConfig
-
     return Hashes(library.manifest_hash(), GameConfig().hash())
 
 

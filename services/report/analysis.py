@@ -32,7 +32,7 @@ from scipy import stats
 
 from services.adapter import cem
 from services.adapter.core import AdapterConfig
-from services.agent import library
+from services.agent import library, networks
 from services.report.load import Match
 from services.table.table import Table
 from shared.game import FPS, ROLES, GameConfig, Policy, other
@@ -120,7 +120,7 @@ def log_probs(stream: pd.DataFrame, policies: list[Policy]) -> np.ndarray:
 
 
 def library_policies(role: str, config: GameConfig) -> dict[str, Policy]:
-    return {key: library.load(key, config) for key in library.keys(role)}
+    return {key: networks.load(key, config) for key in library.keys(role)}
 
 
 def partner_vectors(matches: list[Match], partner_role: str | None = None) -> pd.DataFrame:
@@ -153,7 +153,7 @@ def reference_vectors(role: str, table: Table, games: int, config: GameConfig) -
     each policy of policy i's own actions over `games` games with the reference partner (the CEM
     matrix of docs/library.md)."""
     policies = library_policies(role, config)
-    partner = library.load(reference_partner(table, role), config)
+    partner = networks.load(reference_partner(table, role), config)
     matrix = cem.cem_matrix(list(policies.values()), partner, list(range(games)), config)
     return pd.DataFrame(matrix, index=list(policies), columns=list(policies))
 

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from services.agent import library
 from services.provenance import provenance
 from services.report import analysis, figures
 from services.report.html import Section, write_html
@@ -69,7 +70,7 @@ def build_report(
     curves = analysis.curves(trial_match, seat) if seat else pd.DataFrame()
 
     report = Report(out / "report.html", problems=problems, matches=len(matches))
-    report.provenance = provenance(config, table_path)
+    report.provenance = provenance(**library.provenance_hashes(table_path), config=config)
     report.data = {
         "table": pd.DataFrame(
             [

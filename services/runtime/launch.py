@@ -19,19 +19,17 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from services.adapter.core import AdapterConfig
-from services.agent.library import check_seat
 from services.agent.outside import record_name
-from services.processes import Processes
+from services.agent.seats import check_seat
 from services.recorder.log import make_way
 from services.recorder.recording import load
 from services.recorder.service import recording_path
+from services.runtime.processes import Processes
 from shared import keys
 from shared.bus import BusConfig, free_endpoint, session, subscribe
 from shared.errors import Failure
-from shared.game import ROLES
+from shared.game import HUMAN, ROLES
 from shared.messages import AdapterStatus, State, Summary
-
-HUMAN = "human"  # a seat's policy key for a person: no agent is started, a gateway plays it
 
 
 @dataclass(frozen=True)

@@ -123,7 +123,7 @@ def play_command(
     adapter: AdapterFactory,
 ) -> None:
     """Play a match from a browser, with an agent or another person; prints the link(s) to open."""
-    from services.agent.seats import check_seat
+    from services.adapter.seat import check_live
     from services.human.play import play_with_people
     from services.runtime.launch import MatchPlan, new_match_id
     from shared.game import HUMAN
@@ -135,8 +135,7 @@ def play_command(
     if partner == "adaptive":
         seats["adapter"] = adapter(role=partner_role, seed=seed)
     else:
-        if partner != HUMAN:
-            check_seat(partner, partner_role, "--partner")  # before anyone opens the page
+        check_live(partner, partner_role, "--partner")  # before anyone opens the page
         seats[partner_role] = partner
     plan = MatchPlan(
         match or new_match_id(), seed, game_frames(duration, frames), "realtime", directory=out,

@@ -13,11 +13,13 @@ from services.adapter.core import AdapterConfig
 from services.adapter.evaluate import batches, play_games, play_partner, setup
 from services.adapter.identification import follow_lag, windowed
 from services.adapter.partners import make_partner
+from services.adapter.seat import SeatSpec
 from services.adapter.team import compare, holm, paired_tests, variants
 from services.sim.engine import Game
 from services.sim.observation import observe, world_values
 from services.sim.sampling import lane_uniforms, sample
 from services.table.table import DEFAULT_TABLE, Table
+from shared.errors import UsageError
 from shared.game import GameConfig
 
 
@@ -40,7 +42,9 @@ def test_variant_names_round_trip() -> None:
     names = variants([150, 400], ["cem", "bayes"])
     assert names == ["adaptive-T150-cem", "adaptive-T400-cem", "adaptive-T400-bayes"]
     assert AdapterConfig.parse("adaptive-T400-bayes", role="bait") == AdapterConfig("bait", 400, "bayes")
-    assert AdapterConfig.parse("S5", role="shooter") is None
+    assert SeatSpec.parse("S5").adaptive("shooter") is None  # a static policy's key
+    with pytest.raises(UsageError):
+        AdapterConfig.parse("S5", role="shooter")
 
 
 def test_adaptive_game_switches_to_the_best_response_and_is_deterministic() -> None:

@@ -22,17 +22,15 @@ Wrappers nest: `noisy(switch(B5,B7))`.
 
 from __future__ import annotations
 
-import inspect
 import random
-import re
 from collections import deque
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
 from services.adapter.human_like import HumanLike
+from services.adapter.seat import ADAPTIVE_KIND, KEY, PERSON, PROXY_KIND, RULE, SeatSpec
 from services.agent import library
-from services.agent.proxy import PROXY
 from services.agent.scripted import SCRIPTED
 from services.agent.seats import policy_for
 from services.sim.engine import Game
@@ -165,72 +163,42 @@ def check_partner(name: str, role: str, option: str = "--partner") -> None:
 
 
 WRAPPERS = {"noisy": Noisy, "delayed": Delayed, "sticky": Sticky}
-_CALL = re.compile(r"^(\w+)\((.*)\)$")
 
 
 def make_partner(name: str, role: str) -> Partner:
     """A fresh partner of `role` by name (see the module docstring for the grammar)."""
-    call = _CALL.match(name)
-    if call and call[1] in WRAPPERS:
-        return WRAPPERS[call[1]](make_partner(call[2], role))
-    if call and call[1] == "human":
-        return HumanLike(*(make_partner(a, role) for a in _split_arguments(call[2], 1)))
-    if call and call[1] == "switch":
-        first, second = _split_arguments(call[2])
-        return Switching(make_partner(first, role), make_partner(second, role))
-    if call and call[1] in SCRIPTED:
-        return _scripted(name, call[1], call[2], role)
-    return policy_for(name, role, "--partner")  # also a .zip or module:attr (services/agent/outside.py)
+    return build(SeatSpec.parse(name, "--partner"), role)
 
 
-def _scripted(name: str, rule: str, arguments: str, role: str) -> Partner:
-    """A scripted rule with other settings, `rule(setting=number, ...)`, named by `name`."""
-    kind = SCRIPTED[rule]
-    settings = [s for s in inspect.signature(kind).parameters if s not in ("epsilon", "config")]
-    if kind.role != role:
-        raise UsageError("--partner", name, f"{rule} plays the {kind.role} seat, not the {role} seat")
-    values = {}
-    for item in filter(None, (a.strip() for a in arguments.split(","))):
-        setting, _, number = (part.strip() for part in item.partition("="))
-        try:
-            if setting not in settings:
-                raise ValueError(setting)
-            values[setting] = float(number)
-        except ValueError:
-            problem = f"{item!r} is not SETTING=NUMBER for a setting of {rule}"
-            raise UsageError("--partner", name, problem, settings) from None
-    partner = kind(**values)
-    partner.key = name
-    return partner
-
-
-def _split_arguments(text: str, fewest: int = 2) -> tuple[str, ...]:
-    """The top-level, comma-separated arguments of switch(...) or human(...), which may nest:
-    two, or one when `fewest` is 1."""
-    depth = 0
-    for i, char in enumerate(text):
-        depth += {"(": 1, ")": -1}.get(char, 0)
-        if char == "," and depth == 0:
-            return text[:i].strip(), text[i + 1 :].strip()
-    if fewest == 1:
-        return (text.strip(),)
-    raise ValueError(f"switch({text}) needs two partners")
+def build(spec: SeatSpec, role: str, option: str = "--partner") -> Partner:
+    """What plays `role`'s seat as `spec` says, fresh: a policy, or a partner made of policies. A
+    person or an adaptive agent is no partner (UsageError): a gateway or the adapter plays them."""
+    if spec.kind in WRAPPERS:
+        return WRAPPERS[spec.kind](build(spec.inner[0], role, option))
+    if spec.kind == "human":
+        return HumanLike(*(build(inner, role, option) for inner in spec.inner))
+    if spec.kind == "switch":
+        return Switching(build(spec.inner[0], role, option), build(spec.inner[1], role, option))
+    if spec.kind == RULE:
+        kind = SCRIPTED[spec.key]
+        if kind.role != role:
+            raise UsageError(option, str(spec), f"{spec.key} plays the {kind.role} seat, not the {role} seat")
+        partner = kind(**dict(spec.settings))
+        partner.key = str(spec)
+        return partner
+    if spec.kind in (PERSON, ADAPTIVE_KIND):
+        raise UsageError(option, str(spec), "a person or an adaptive agent, not a policy")
+    return policy_for(spec.key, role, option)  # a key, a .zip, a module:attr, a proxy:DIR
 
 
 def group_of(name: str) -> str:
     """A partner's group in the population: its outer wrapper, library, a proxy, or outside."""
-    if name.startswith(PROXY):
+    spec = SeatSpec.parse(name)
+    if spec.kind == PROXY_KIND:
         return "proxy"
-    call = _CALL.match(name)
-    if call:
-        return {
-            "noisy": "noisy",
-            "delayed": "delayed",
-            "sticky": "sticky",
-            "switch": "switching",
-            "human": "human-like",
-        }.get(call[1], "outside")
-    return "library" if name in library.registry() else "outside"
+    if spec.kind in ("noisy", "delayed", "sticky", "switch", "human"):
+        return {"switch": "switching", "human": "human-like"}.get(spec.kind, spec.kind)
+    return "library" if spec.kind == KEY and name in library.registry() else "outside"
 
 
 # Hand-written partners of each seat: its scripted rule, smaller and larger, slower and faster.

@@ -58,11 +58,6 @@ def is_outside(key: str) -> bool:
     return key.endswith(".zip") or ":" in key
 
 
-def is_plugin(key: str) -> bool:
-    """Whether a policy key is a `module:attr` object, the one kind a worker must import."""
-    return is_outside(key) and not key.endswith(".zip") and not key.startswith(PROXY)
-
-
 def load(key: str, role: str, option: str = "--policy", view: str = "world") -> Policy:
     """The policy a `.zip` or `module:attr` key names, checked to play `role` (UsageError if not);
     a `.zip` plays whichever seat it is given."""

@@ -12,8 +12,8 @@ import importlib
 from collections.abc import Callable, Iterable
 from typing import Any
 
+from services.adapter.seat import SeatSpec
 from services.agent import library
-from services.agent.outside import is_plugin
 from services.jobs.core import Hashes, Spec
 from shared.errors import Failure, UsageError
 from shared.game import GameConfig
@@ -74,13 +74,7 @@ def failure_line(error: BaseException) -> str:
 def plugins_in(names: Iterable[str]) -> tuple[str, ...]:
     """The `module:attr` plug-ins among partner or policy names (inside wrappers too:
     noisy(my_lab.partners:Alice)); a proxy (`proxy:DIR`) is a directory, not a plug-in."""
-    found = []
-    for name in names:
-        for part in name.replace("(", ",").replace(")", ",").split(","):
-            part = part.strip()
-            if is_plugin(part):
-                found.append(part)
-    return tuple(dict.fromkeys(found))
+    return tuple(dict.fromkeys(plugin for name in names for plugin in SeatSpec.parse(name).plugins))
 
 
 def import_plugins(names: Iterable[str]) -> str:

@@ -32,6 +32,7 @@ from scipy import stats
 
 from services.adapter import cem
 from services.adapter.core import AdapterConfig
+from services.adapter.seat import ADAPTIVE_KIND, SeatSpec
 from services.agent import library, networks
 from services.report.load import Match
 from services.table.table import Table
@@ -61,7 +62,8 @@ def adaptive_seat(match: Match) -> str | None:
     adapter = match.tables["adapter"]
     if not adapter.empty:
         return str(adapter["role"].iloc[0])
-    return next((r for r in ROLES if AdapterConfig.parse(match.policies[r]) is not None), None)
+    named = {r: match.policies[r] for r in ROLES if match.policies[r]}  # a person's seat may name nothing
+    return next((r for r, name in named.items() if SeatSpec.parse(name).kind == ADAPTIVE_KIND), None)
 
 
 def person_seats(match: Match) -> list[str]:

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import zenoh
 
-from services.adapter.core import AdapterConfig
+from services.adapter.seat import SeatSpec
 from services.agent import library
 from services.recorder.service import recording_path
 from services.runtime.launch import MatchPlan, run_match
@@ -65,7 +65,9 @@ def plan_of(offer: MatchOffer, directory: Path, router: BusConfig) -> MatchPlan:
     if offer.adapter:
         empty = [role for role in ROLES if not seats[role]]
         adapter = (
-            AdapterConfig.parse(offer.adapter, role=empty[0], seed=offer.seed) if len(empty) == 1 else None
+            SeatSpec.parse(offer.adapter, "adapter").adaptive(empty[0], offer.seed)
+            if len(empty) == 1
+            else None
         )
         if not adapter:
             raise UsageError("adapter", offer.adapter, "not an adaptive agent for the one empty seat")

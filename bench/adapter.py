@@ -21,8 +21,8 @@ from services.adapter.core import STRATEGIES, AdapterConfig
 from services.adapter.evaluate import play_partner
 from services.adapter.partners import make_partner
 from services.adapter.service import build, run_adapter
-from services.launch import service_command
-from services.processes import Processes
+from services.runtime.launch import service_command
+from services.runtime.processes import Processes
 from shared.bus import BusConfig, free_endpoint
 from shared.game import FPS, other
 

@@ -12,8 +12,8 @@ import argparse
 import tempfile
 from pathlib import Path
 
-from services.launch import MatchPlan, run_match
 from services.recorder.recording import load
+from services.runtime.launch import MatchPlan, run_match
 from shared.game import FPS
 
 

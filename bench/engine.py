@@ -23,8 +23,8 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from services.agent.library import policy_for
 from services.agent.scripted import CircleBait, MirrorShooter
+from services.agent.seats import policy_for
 from services.sim.batch import BatchGame
 from services.sim.batch_play import play_batch
 from services.sim.engine import Game

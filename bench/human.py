@@ -38,14 +38,14 @@ from urllib.parse import parse_qs, urlsplit
 
 import websockets
 
-from services.agent.library import policy_for
+from services.agent.seats import policy_for
 from services.human.core import action_keys
 from services.human.play import play_with_people
-from services.launch import HUMAN, MatchPlan
 from services.recorder.recording import load
+from services.runtime.launch import MatchPlan
 from services.sim.observation import as_observation
 from services.sim.play import play, summarize
-from shared.game import FPS, GameConfig
+from shared.game import FPS, HUMAN, GameConfig
 
 
 async def browser(link: str) -> int:

@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from services.agent import library
+from services.agent import library, networks
 from services.agent.scripted import CircleBait, MirrorShooter
 from services.sim.observation import as_observation, world_values
 from services.sim.play import play
@@ -56,7 +56,7 @@ def main() -> None:
 
 
 def report(role: str, states: list[list[float]], repeat: int) -> None:
-    policies = [library.load(k) for k in library.keys(role)]
+    policies = [networks.load(k) for k in library.keys(role)]
     obs = {p.key: as_observation(states[0], p.view) for p in policies}
     batches = {p.key: np.stack([as_observation(s, p.view) for s in states]) for p in policies}
     print(f"{role}s ({len(policies)} policies)")

@@ -32,7 +32,7 @@ from services.adapter.cem import log_probs, rollout
 from services.adapter.evaluate import play_games
 from services.adapter.identification import windowed
 from services.adapter.partners import make_partner
-from services.agent import library
+from services.agent import library, networks, seats
 from services.proxy.data import extract
 from services.proxy.synthetic import record_trial, trial_seed
 from services.proxy.train import Settings, train
@@ -59,10 +59,10 @@ def held_out_loglik(paths: list[Path], proxy_dir: Path, source: str) -> tuple[fl
     record = json.loads((proxy_dir / "manifest.json").read_text())
     data = extract(paths, "bait")
     rows = data.rows(record["split"]["held_out"])
-    proxy = library.policy_for(f"proxy:{proxy_dir}", "bait")
+    proxy = seats.policy_for(f"proxy:{proxy_dir}", "bait")
     actions = data.actions[rows]
     ours = np.log(proxy.probs_given(data.obs[rows], data.previous[rows])[np.arange(len(rows)), actions])
-    theirs = log_probs([library.load(source)], data.obs[rows].astype(np.float64), actions)[:, 0]
+    theirs = log_probs([networks.load(source)], data.obs[rows].astype(np.float64), actions)[:, 0]
     return float(ours.mean()), float(theirs.mean()), len(rows)
 
 
@@ -70,10 +70,10 @@ def identify(partner_name: str, source: str, games: int) -> tuple[str, float]:
     """The library bait the CEM finds most like the partner over `games` games with S5, and the
     share of WINDOW-frame windows whose best score is `source`."""
     baits = library.keys("bait")
-    policies = [library.load(k) for k in baits]
+    policies = [networks.load(k) for k in baits]
     means, hits, windows = np.zeros(len(baits)), 0, 0
     for seed in range(games):
-        states, actions = rollout(make_partner(partner_name, "bait"), library.load(AGENT), 1000 + seed)
+        states, actions = rollout(make_partner(partner_name, "bait"), networks.load(AGENT), 1000 + seed)
         scores = log_probs(policies, states, actions)
         means += scores.mean(axis=0) / games
         best = windowed(scores, WINDOW).argmax(axis=1)

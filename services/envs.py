@@ -5,7 +5,7 @@
     env(), raw_env(), parallel_env()                               both seats (PettingZoo)
 
 A partner is anything a seat can play (a library or scripted key, an SB3 `.zip`, a `module:attr`;
-services/agent/library.py `policy_for`) or a policy object; the batched form also takes a list
+services/agent/seats.py `policy_for`) or a policy object; the batched form also takes a list
 (each game draws one). Importing the `services` package registers the id, and pyproject.toml names
 `register` under the `gymnasium.envs` entry point for tools that load plugins. Entry points are
 strings, so registering imports nothing but gymnasium.
@@ -14,6 +14,8 @@ strings, so registering imports nothing but gymnasium.
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
+
+from shared.game import ROLES, check_role
 
 if TYPE_CHECKING:
     from pettingzoo import AECEnv
@@ -36,8 +38,7 @@ def register() -> None:
 
 
 def _partner(partner: Any, role: str) -> Policy:
-    from services.agent.library import policy_for
-    from shared.game import ROLES, check_role
+    from services.agent.seats import policy_for
 
     check_role(role)
     other = ROLES[1 - ROLES.index(role)]

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import socket
 from pathlib import Path
 
 import typer
@@ -75,9 +77,9 @@ def match_command(
 ) -> None:
     """Start a complete match on this machine: sim, two agents and the recorder as processes (and
     with --adaptive, the adapter, set by the adapter options)."""
-    from services.launch import MatchPlan, new_match_id, run_match
     from services.recorder.export import export
     from services.recorder.recording import load
+    from services.runtime.launch import MatchPlan, new_match_id, run_match
 
     if adaptive and adaptive not in ROLES:
         raise UsageError("--adaptive", adaptive, "not a seat", ROLES)
@@ -144,9 +146,10 @@ def play_command(
     adapter: AdapterFactory,
 ) -> None:
     """Play a match from a browser, with an agent or another person; prints the link(s) to open."""
-    from services.agent.library import check_seat
+    from services.adapter.seat import check_live
     from services.human.play import play_with_people
-    from services.launch import HUMAN, MatchPlan, new_match_id
+    from services.runtime.launch import MatchPlan, new_match_id
+    from shared.game import HUMAN
 
     if role not in ROLES:
         raise typer.BadParameter("role is bait or shooter")
@@ -155,8 +158,7 @@ def play_command(
     if partner == "adaptive":
         seats["adapter"] = adapter(role=partner_role, seed=seed)
     else:
-        if partner != HUMAN:
-            check_seat(partner, partner_role, "--partner")  # before anyone opens the page
+        check_live(partner, partner_role, "--partner")  # before anyone opens the page
         seats[partner_role] = partner
     plan = MatchPlan(
         match or new_match_id(), seed, game_frames(duration, frames), "realtime", directory=out,
@@ -300,9 +302,6 @@ def match_host_command(
 ) -> None:
     """Run the matches a study server offers over the router (`--connect` the study's router), up to
     --slots at once; their recordings go back to the server, hash checked."""
-    import os
-    import socket
-
     from services.study.host import run_match_host
 
     name = host_id or f"{socket.gethostname()}-{os.getpid()}".replace(".", "-")

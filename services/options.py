@@ -136,7 +136,7 @@ def game_frames(duration: float | None, frames: int | None) -> int:
 
 def keys_help(role: str | None, what: str) -> str:
     """An option's help that lists the policy keys of its seat (or of both), as `tsf keys` does."""
-    from services.agent.library import seat_keys
+    from services.agent.seats import seat_keys
 
     roles = [role] if role else list(ROLES)
     try:

@@ -9,7 +9,7 @@ import click
 import pytest
 import typer
 
-from services.agent.library import seat_keys
+from services.agent.seats import seat_keys
 from services.cli import app
 from services.entry import run
 from services.options import setup_logging

@@ -5,8 +5,11 @@ behind it.
     date      when (UTC, ISO 8601)
     version   the project's version (its installed metadata), or "unknown"
     commit    the git commit of the checkout the code runs from ("+dirty" with local changes), or "unknown"
-    library   the policy libraries' manifest hash (services/agent/library.py)
+    library   the policy libraries' manifest hash (services/agent/library.py: provenance_hashes)
     table     the self-play table's file hash, or "none"
+
+The caller hands it the library's and the table's hashes: this module stands below the packages
+that know what a library or a table is.
     config    the game rules' hash (GameConfig.hash)
     command   the command line
 """
@@ -78,24 +81,17 @@ def file_hash(path: Path | None) -> str:
 
 
 def provenance(
-    config: GameConfig | None = None, table: Path | str | None = None, command: list[str] | None = None
+    library: str, table: str, config: GameConfig | None = None, command: list[str] | None = None
 ) -> dict[str, str]:
-    """The record of FIELDS for an artifact made now with these rules and this table file (default:
-    the library's; a string is taken as the table's name as it is)."""
-    from services.agent import library
-    from services.table.table import DEFAULT_TABLE
-
-    try:
-        manifest = library.manifest_hash()
-    except (OSError, ValueError):
-        manifest = "unknown"
+    """The record of FIELDS for an artifact made now with this library and table (their hashes, or
+    names such as "self") and these rules."""
     argv = command or _command or sys.argv
     return {
         "date": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
         "version": project_version(),
         "commit": commit(),
-        "library": manifest,
-        "table": table if isinstance(table, str) else file_hash(DEFAULT_TABLE if table is None else table),
+        "library": library,
+        "table": table,
         "config": (config or GameConfig()).hash(),
         "command": shlex.join(["tsf", *argv[1:]] if Path(argv[0]).name == "tsf" else argv),
     }

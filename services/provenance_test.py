@@ -9,7 +9,7 @@ from shared.game import GameConfig
 
 def test_the_record_names_version_commit_hashes_and_the_command_line():
     provenance.set_command(["report", "a.tsflog", "--out", "r"])
-    record = provenance.provenance(GameConfig(frames=60))
+    record = provenance.provenance(**library.provenance_hashes(), config=GameConfig(frames=60))
     assert tuple(record) == provenance.FIELDS
     head = subprocess.run(
         ["git", "-C", str(provenance.ROOT), "rev-parse", "HEAD"], capture_output=True, text=True
@@ -51,7 +51,7 @@ def test_an_eval_summary_names_what_made_it(tmp_path):
 def test_a_process_started_by_a_tsf_command_names_that_command(monkeypatch):
     monkeypatch.setenv(provenance.COMMAND, "1 tsf match --duration 2")  # another process's
     provenance.set_command(["recorder", "--match", "m"])
-    assert provenance.provenance()["command"] == "tsf match --duration 2"
+    assert provenance.provenance("l", "t")["command"] == "tsf match --duration 2"
     monkeypatch.delenv(provenance.COMMAND)
     provenance.set_command(["recorder", "--match", "m"])
-    assert provenance.provenance()["command"] == "tsf recorder --match m"
+    assert provenance.provenance("l", "t")["command"] == "tsf recorder --match m"

@@ -9,7 +9,7 @@ from typing import Annotated
 
 import typer
 
-from services.adapter.core import AdapterConfig
+from services.adapter.seat import SeatSpec
 from services.options import (
     PRIORITY,
     SECONDS,
@@ -88,7 +88,7 @@ def agent(
     """Run an agent service that plays one seat."""
     from services.agent.service import run_agent
 
-    adaptive = AdapterConfig.parse(policy, role=role, seed=seed)
+    adaptive = SeatSpec.parse(policy, "--policy").adaptive(role, seed)
     run_agent(bus, match, role, adaptive.initial_policy() if adaptive else policy, seed, stop_on_signals())
 
 

@@ -14,7 +14,7 @@ from contextlib import ExitStack
 import pytest
 import zenoh
 
-from services.launch import service_command
+from services.runtime.launch import service_command
 from shared import keys
 from shared.bus import BusConfig, free_endpoint, session
 from shared.messages import Message, MessageError, decode_any

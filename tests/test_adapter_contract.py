@@ -12,7 +12,7 @@ import zenoh
 
 from services.adapter.core import AdapterConfig, Scorer
 from services.adapter.service import run_adapter
-from services.agent import library
+from services.agent import library, networks
 from services.agent.service import run_agent
 from services.sim.engine import Game
 from services.sim.match import state_message
@@ -71,7 +71,7 @@ def test_malformed_partner_actions_are_dropped_and_never_averaged(bus, tap, back
     config = AdapterConfig("shooter", window=50, strategy="cem", warmup=1000)
     adapter = background(run_adapter, bus.config(), match, config)
     assert wait_until(lambda: recorded.is_alive("adapter"), timeout=10)
-    game, partner = Game(GameConfig(frames=60), 2), library.load("B5")
+    game, partner = Game(GameConfig(frames=60), 2), networks.load("B5")
     partner.reset(policy_seed(2, "bait"))
     bait_key = keys.action(match, "bait")
     valid: list[tuple[list[float], int]] = []
@@ -117,7 +117,7 @@ def test_malformed_partner_actions_are_dropped_and_never_averaged(bus, tap, back
         drops.counts["undecodable"] >= 11 and drops.counts["mismatch"] == 20 and drops.counts["range"] == 10
     )
     last = [s for s in recorded.of(AdapterStatus, keys.adapter(match)) if s.filled == 40][-1]
-    scorer = Scorer([library.load(k) for k in library.keys("bait")])
+    scorer = Scorer([networks.load(k) for k in library.keys("bait")])
     expected = np.mean([scorer(v, a) for v, a in valid], axis=0)
     np.testing.assert_allclose([last.scores[k] for k in scorer.keys], expected, rtol=1e-9)
 

@@ -9,7 +9,7 @@ import msgpack
 import pytest
 import zenoh
 
-from services.agent.library import policy_for
+from services.agent.seats import policy_for
 from services.agent.service import run_agent
 from services.sim.engine import Game
 from services.sim.match import state_message, summary_message

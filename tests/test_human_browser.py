@@ -14,10 +14,10 @@ from conftest import CHROMIUM, wait_in_page
 from services.human.core import SeatBook
 from services.human.gateway import Gateway, Web, seat_handler
 from services.human.play import play_with_people, seat_links
-from services.launch import HUMAN, MatchPlan, run_match
 from services.recorder.recording import load
 from services.recorder.replay import republish
-from shared.game import GameConfig
+from services.runtime.launch import MatchPlan, run_match
+from shared.game import HUMAN, GameConfig
 from shared.messages import Action
 
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is not installed")

@@ -20,11 +20,11 @@ from services.agent.service import run_agent
 from services.human.core import SeatBook
 from services.human.gateway import REFUSED, Gateway, Web, seat_handler
 from services.human.play import play_with_people
-from services.launch import HUMAN, MatchPlan
 from services.recorder.recording import load
+from services.runtime.launch import MatchPlan
 from services.sim.service import run_sim
 from shared import keys
-from shared.game import GameConfig
+from shared.game import HUMAN, GameConfig
 from shared.messages import Action, State, Summary
 
 MATCH = "human"

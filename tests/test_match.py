@@ -10,9 +10,9 @@ from collections import Counter
 import pytest
 
 from services.agent.scripted import CircleBait, MirrorShooter
-from services.launch import MatchPlan, run_match
 from services.recorder.recording import load, replay
 from services.recorder.service import recording_path
+from services.runtime.launch import MatchPlan, run_match
 from services.sim.play import play
 from shared.game import ROLES, GameConfig
 from shared.messages import State, Summary

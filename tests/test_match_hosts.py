@@ -21,8 +21,8 @@ import pytest
 import zenoh
 from conftest import STAND_IN_TOKEN, wait_until
 
-from services.launch import HUMAN, MatchPlan
 from services.recorder.recording import load
+from services.runtime.launch import MatchPlan
 from services.study.core import StudyConfig, Variant
 from services.study.host import Host, offer_of, sha256
 from services.study.remote import Remote
@@ -31,6 +31,7 @@ from services.study.standin import stand_in
 from shared import keys
 from shared.bus import BusConfig, free_endpoint, session
 from shared.errors import Failure
+from shared.game import HUMAN
 from shared.messages import (
     HostStatus,
     MatchAnswer,

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import pytest
 
-from services.launch import RECORDER_NICE, SIM_RAISE
 from services.recorder.log import read_log
 from services.recorder.recording import load, replay
+from services.runtime.launch import RECORDER_NICE, SIM_RAISE
 
 SHORT = ("--lockstep", "--duration", "0.3")  # 9 frames
 
@@ -168,7 +168,7 @@ def ended(process: subprocess.Popen, sig: signal.Signals, line: str) -> bool:
 @pytest.mark.parametrize("sig", SIGNALS, ids=lambda s: s.name)
 def test_a_signal_ends_the_match_and_every_process_it_started(tsf_match, tmp_path, wait_until, sig):
     """SIGKILL leaves the match no time to end its processes: each asked the kernel for SIGTERM
-    when its launcher dies (services/processes.py)."""
+    when its launcher dies (services/runtime/processes.py)."""
     match = tsf_match("--duration", "60", "--match", "signalled")
     log = tmp_path / "signalled.tsflog"
     assert wait_until(lambda: recorded(log) > 20, timeout=60)  # under way

@@ -16,9 +16,9 @@ import pytest
 from PIL import Image
 
 from services.adapter.core import AdapterConfig
-from services.launch import MatchPlan, run_match
 from services.recorder.recording import load
 from services.recorder.replay import republish
+from services.runtime.launch import MatchPlan, run_match
 from shared.messages import GameEvent, Start, State, Summary
 
 FRAMES = 300

@@ -17,12 +17,11 @@ from pathlib import Path
 import pytest
 from conftest import STAND_IN_TOKEN
 
-from services.launch import HUMAN
 from services.recorder.recording import load
 from services.study.core import StudyConfig, Variant
 from services.study.runner import PROBLEM, RETRIES, Serving
 from services.study.standin import stand_in
-from shared.game import other
+from shared.game import HUMAN, other
 
 TEST = STAND_IN_TOKEN
 VARIANTS = (Variant("strong", "B5", "S5"), Variant("adaptive", adapter="adaptive-T30-cem"))

@@ -15,7 +15,7 @@ import uuid
 import pytest
 
 from services.jobs.core import Hashes, journal_line
-from services.launch import service_command
+from services.runtime.launch import service_command
 from services.table.sweep import cell_spec, journal_path, run_sweep
 from services.table.table import Table, assemble, jobs, run_job
 from shared.bus import BusConfig, free_endpoint

@@ -11,7 +11,7 @@ import typer
 from rich.table import Table
 
 from services.adapter.core import WINDOWS, AdapterConfig
-from services.agent.library import policy_for
+from services.agent.seats import policy_for
 from services.options import (
     GAMES,
     PEOPLE_RECORDINGS,
@@ -42,7 +42,7 @@ def diversity(
 ) -> None:
     """The library's CEM matrices: mean log-probability of policy i's actions under policy j."""
     from services.adapter.cem import cem_matrix
-    from services.agent import library
+    from services.agent import library, networks
 
     partners = {  # both checked before the first matrix
         "bait": policy_for(bait_partner, "shooter", "--bait-partner"),
@@ -50,7 +50,7 @@ def diversity(
     }
     for role, partner in (("bait", bait_partner), ("shooter", shooter_partner)):
         keys = library.keys(role)
-        m = cem_matrix([library.load(k) for k in keys], partners[role], list(range(games)))
+        m = cem_matrix([networks.load(k) for k in keys], partners[role], list(range(games)))
         table = Table(title=f"{role}s with {partner}: mean log-probability of row's actions under column")
         for column in ("", *keys):
             table.add_column(column)
@@ -126,8 +126,8 @@ def eval_command(
     from services.adapter import figures, identification, results, team
     from services.adapter.human_like import STAND_INS
     from services.adapter.partners import SWITCH_AT, check_partner, fitted_people, population
+    from services.adapter.seat import HUMANS
     from services.agent import library
-    from services.agent.outside import HUMANS
     from services.jobs.engine import on_workers, open_engine
 
     if role not in ROLES:

@@ -59,6 +59,23 @@ INITIAL = ("best-average", "random")
 WINDOWS = Range(1, FRAMES.high)  # T: a window longer than a game never fills
 ADAPTIVE = "adaptive-"  # how every adaptive agent's name begins
 _NAME = re.compile(rf"^{ADAPTIVE}T(\d+)-([a-z-]+)$")
+NAMED = {
+    "initial": str,
+    "warmup": int,
+    "dwell": int,
+    "hazard": float,
+    "noise": float,
+}  # in a name after T, strategy
+
+
+def setting_text(value: object) -> str:
+    """A setting as a name writes it: 150, not 150.0 (floats otherwise as Python writes them back,
+    so that reading the name gives the same number); a word after a hyphen."""
+    if isinstance(value, str):
+        return f"-{value}"
+    if isinstance(value, float) and value.is_integer() and abs(value) < 1e15:
+        return str(int(value))
+    return repr(value)
 
 
 def _option(default: object, help: str) -> Any:
@@ -116,15 +133,39 @@ class AdapterConfig:
 
     @property
     def name(self) -> str:
-        """The name a recording, a result table or a study gives this agent: adaptive-T<window>-<strategy>."""
-        return f"{ADAPTIVE}T{self.window}-{self.strategy}"
+        """The name a recording, a result table, a study or an offer gives this agent, whole:
+        adaptive-T<window>-<strategy>, then _<setting><value> for each of NAMED that is not the
+        default (_initial-random, _warmup150, _dwell20, _hazard0.01, _noise0.1). The seat and the
+        seed are where it plays, not what it is, so the name leaves them out."""
+        default = AdapterConfig()
+        extra = "".join(
+            f"_{s}{setting_text(getattr(self, s))}" for s in NAMED if getattr(self, s) != getattr(default, s)
+        )
+        return f"{ADAPTIVE}T{self.window}-{self.strategy}{extra}"
 
     @classmethod
-    def parse(cls, name: str, **fields: object) -> AdapterConfig | None:
-        """The config a name stands for (window and strategy from the name, other fields from
-        `fields`), or None for any other name (a static policy's key, a person)."""
-        found = _NAME.match(name)
-        return cls(window=int(found[1]), strategy=found[2], **fields) if found else None
+    def parse(cls, name: str, option: str = "--policy", **context: object) -> AdapterConfig:
+        """The config a name stands for (`name`'s inverse); `context` gives the seat and seed (role,
+        seed). A UsageError about `option` for a name that is not an adaptive agent's."""
+        head, *items = name.split("_")
+        found = _NAME.match(head)
+        if not found:
+            raise UsageError(
+                option, name, f"not an adaptive agent ({ADAPTIVE}T<window>-<strategy>[_<setting>...])"
+            )
+        named: dict[str, object] = {}
+        for item in items:
+            setting = next((s for s in NAMED if item.startswith(s)), None)
+            if setting is None or setting in named:
+                raise UsageError(
+                    option, name, f"{item!r} is not one setting of the adaptive agent", list(NAMED)
+                )
+            text = item.removeprefix(setting)
+            try:
+                named[setting] = text.removeprefix("-") if NAMED[setting] is str else NAMED[setting](text)
+            except ValueError:
+                raise UsageError(option, name, f"{item!r}: {setting} takes a number") from None
+        return cls(window=int(found[1]), strategy=found[2], **named, **context)
 
     def to_args(self) -> list[str]:
         """The same config as `tsf adapter` options: one per field, so that none is dropped."""

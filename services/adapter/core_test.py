@@ -12,9 +12,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from services.adapter.core import Adapter, AdapterConfig, AdapterLanes, Payoff, Scorer, Window, ood_threshold
-from services.agent import library
-from services.agent.library import policy_for
+from services.agent import library, networks
 from services.agent.library_test import empty_library
+from services.agent.seats import policy_for
 from services.sim import observation as ob
 from services.sim.engine import Game
 from services.sim.observation import world_values
@@ -147,7 +147,7 @@ def test_config_is_validated() -> None:
 
 
 def test_scorer_single_and_batched_agree_with_each_policy() -> None:
-    baits = [library.load(k) for k in library.keys("bait")]
+    baits = [networks.load(k) for k in library.keys("bait")]
     scorer = Scorer(baits)
     game, circle = Game(seed=4), policy_for("circle", "bait")
     values, actions = [], []

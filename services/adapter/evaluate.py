@@ -35,7 +35,7 @@ from services.adapter.core import (
 )
 from services.adapter.human_like import SESSION_TRIALS
 from services.adapter.partners import Partner, PartnerError, ask, make_partner
-from services.agent import library
+from services.agent import networks
 from services.sim.engine import Game
 from services.sim.observation import observe, world_values
 from services.sim.play import policy_seed, switch_seed
@@ -58,8 +58,8 @@ class Setup:
 @cache
 def setup(role: str, table: Path = DEFAULT_TABLE) -> Setup:
     payoff = Payoff.load(role, table)
-    scorer = Scorer([library.load(k) for k in payoff.partners])
-    return Setup(role, payoff, scorer, {k: library.load(k) for k in payoff.ours})
+    scorer = Scorer([networks.load(k) for k in payoff.partners])
+    return Setup(role, payoff, scorer, {k: networks.load(k) for k in payoff.ours})
 
 
 @dataclass

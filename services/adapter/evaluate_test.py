@@ -13,13 +13,15 @@ from services.adapter.core import AdapterConfig
 from services.adapter.evaluate import batches, play_games, play_partner, play_teams, setup
 from services.adapter.identification import follow_lag, windowed
 from services.adapter.partners import make_partner
+from services.adapter.seat import SeatSpec
 from services.adapter.team import compare, holm, paired_tests, variants
-from services.agent import library
+from services.agent import networks
 from services.sim.batch_play import play_batch
 from services.sim.engine import Game
 from services.sim.observation import observe, world_values
 from services.sim.sampling import lane_uniforms, sample
 from services.table.table import DEFAULT_TABLE, Table
+from shared.errors import UsageError
 from shared.game import GameConfig
 
 
@@ -42,7 +44,9 @@ def test_variant_names_round_trip() -> None:
     names = variants([150, 400], ["cem", "bayes"])
     assert names == ["adaptive-T150-cem", "adaptive-T400-cem", "adaptive-T400-bayes"]
     assert AdapterConfig.parse("adaptive-T400-bayes", role="bait") == AdapterConfig("bait", 400, "bayes")
-    assert AdapterConfig.parse("S5", role="shooter") is None
+    assert SeatSpec.parse("S5").adaptive("shooter") is None  # a static policy's key
+    with pytest.raises(UsageError):
+        AdapterConfig.parse("S5", role="shooter")
 
 
 def test_adaptive_game_switches_to_the_best_response_and_is_deterministic() -> None:
@@ -140,7 +144,7 @@ def test_teams_of_partners_play_both_seats_as_the_batched_pair_games() -> None:
     recorded actions and openings come back per team and seed."""
     frames = GameConfig(frames=300)
     kills, actions, opened = play_teams([("B5", "S4"), ("human(B5)", "S4")], [0, 1], frames, record=True)
-    pair = play_batch(library.load("B5"), library.load("S4"), [0, 1], frames)
+    pair = play_batch(networks.load("B5"), networks.load("S4"), [0, 1], frames)
     assert kills[0].tolist() == [r.kills_per_minute for r in pair]
     assert actions.shape == (2, 2, 300, 2) and opened.shape == (2, 2, 301)
     assert opened[0].any() and (actions[1, :, :, 0] != actions[0, :, :, 0]).any()

@@ -8,7 +8,7 @@ import pytest
 
 from services.adapter.human_like import SESSION_TRIALS, SKILLS, HumanLike, predict
 from services.adapter.partners import group_of, make_partner, population
-from services.agent import library
+from services.agent import networks
 from services.sim.engine import Game
 from services.sim.observation import observe
 from services.sim.play import policy_seed
@@ -25,7 +25,7 @@ def play(partner_name: str, seeds: list[int], frames: int = 450) -> tuple[np.nda
     singles = [make_partner(partner_name, "bait") for _ in seeds]
     for partner, seed in zip(singles, seeds, strict=True):
         partner.reset(seed)
-    games, shooter = [Game(None, s) for s in seeds], library.load("S5")
+    games, shooter = [Game(None, s) for s in seeds], networks.load("S5")
     shooter.reset(0)
     together, alone = [], []
     for _ in range(frames):
@@ -78,7 +78,7 @@ def test_traits_are_a_persons_the_delay_a_games_and_practice_helps():
 def test_the_forward_model_moves_the_own_ship_by_its_keys_and_foresees_the_fortress():
     """Predicted from the state `lag` frames ago and the keys pressed since, the own ship is where
     it is now, and the fortress's facing and opening are as they are (it has one target here)."""
-    game, bait, shooter = Game(None, 1), library.load("B5"), library.load("S4")
+    game, bait, shooter = Game(None, 1), networks.load("B5"), networks.load("S4")
     bait.reset(1)
     shooter.reset(2)
     states, keys = [], np.zeros((1, 64), np.int64)
@@ -120,4 +120,4 @@ def test_grammar_population_and_group():
         with pytest.raises(UsageError, match=problem):
             make_partner(wrong, "bait")
     with pytest.raises(ValueError, match="share a role"):
-        HumanLike(library.load("B5"), library.load("S5"))
+        HumanLike(networks.load("B5"), networks.load("S5"))

@@ -19,7 +19,7 @@ import numpy as np
 
 from services.adapter.evaluate import play_teams
 from services.adapter.human_like import FRAME_MS, SKILLS, STAND_INS, in_view
-from services.agent import library
+from services.agent import library, networks
 from services.proxy.data import pairs, person_seats, study_record
 from services.recorder.recording import load
 from services.sim import observation as ob
@@ -157,7 +157,7 @@ def likeliest_policy(trials: list[Trial], role: str) -> str:
     actions = np.concatenate([t.alive_actions for t in trials])
     scores = {}
     for key in library.keys(role):
-        policy = library.load(key)
+        policy = networks.load(key)
         probs = batch_probs(policy, in_view(obs, policy.view))[np.arange(len(actions)), actions]
         scores[key] = float(np.mean(np.log(np.maximum(probs, 1e-12))))
     return max(scores, key=scores.get)

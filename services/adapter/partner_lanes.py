@@ -38,7 +38,7 @@ from services.adapter.partners import (
     ask,
     make_partner,
 )
-from services.agent.library import LearnedPolicy
+from services.agent.networks import LearnedPolicy
 from services.agent.policy import RulePolicy, UniformPolicy
 from services.sim.batch_play import act_lanes
 from services.sim.play import policy_seed

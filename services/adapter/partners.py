@@ -27,10 +27,8 @@ Wrappers nest: `noisy(switch(B5,B7))`.
 
 from __future__ import annotations
 
-import inspect
 import json
 import random
-import re
 from collections import deque
 from pathlib import Path
 from typing import Protocol, runtime_checkable
@@ -38,10 +36,10 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from services.adapter.human_like import STAND_INS, HumanLike
+from services.adapter.seat import ADAPTIVE_KIND, FITTED, HUMANS, KEY, PERSON, PROXY_KIND, RULE, SeatSpec
 from services.agent import library
-from services.agent.library import policy_for
-from services.agent.outside import HUMANS, PROXY
 from services.agent.scripted import SCRIPTED
+from services.agent.seats import policy_for
 from services.sim.engine import Game
 from services.sim.observation import as_observation, world_values
 from shared.errors import Failure, UsageError
@@ -174,47 +172,43 @@ def check_partner(name: str, role: str, option: str = "--partner") -> None:
 
 
 WRAPPERS = {"noisy": Noisy, "delayed": Delayed, "sticky": Sticky}
-_CALL = re.compile(r"^(\w+)\((.*)\)$")
 
 
 def make_partner(name: str, role: str) -> Partner:
     """A fresh partner of `role` by name (see the module docstring for the grammar)."""
-    if name.startswith(HUMANS):
-        return _fitted(name, role)
-    call = _CALL.match(name)
-    if call and call[1] in WRAPPERS:
-        inner, *settings = _split_arguments(call[2])
-        if call[1] == "delayed" and settings:
-            frames = settings[0].partition("=")[2].strip()
-            if (
-                len(settings) > 1
-                or not settings[0].startswith("frames=")
-                or not frames.isdigit()
-                or int(frames) > 60
-            ):
-                raise UsageError("--partner", name, "delayed(...) takes one setting, frames=N (0 to 60)")
-            return Delayed(make_partner(inner, role), int(frames))
-        return WRAPPERS[call[1]](make_partner(call[2], role))
-    if call and call[1] == "human":
-        arguments = _split_arguments(call[2])
-        settings = [a for a in arguments if "=" in a and "(" not in a]
-        inner = [make_partner(a, role) for a in arguments if a not in settings]
-        if not 1 <= len(inner) <= 2:
-            raise UsageError(
-                "--partner", name, "human(...) plays one or two partners (and skill=, input_ms=)"
-            )
+    return build(SeatSpec.parse(name, "--partner"), role)
+
+
+def build(spec: SeatSpec, role: str, option: str = "--partner") -> Partner:
+    """What plays `role`'s seat as `spec` says, fresh: a policy, or a partner made of policies. A
+    person or an adaptive agent is no partner (UsageError): a gateway or the adapter plays them."""
+    if spec.kind == "delayed" and spec.settings:
+        (setting, frames), *more = spec.settings
+        if more or setting != "frames" or not frames.isdigit() or int(frames) > 60:
+            raise UsageError(option, str(spec), "delayed(...) takes one setting, frames=N (0 to 60)")
+        return Delayed(build(spec.inner[0], role, option), int(frames))
+    if spec.kind in WRAPPERS:
+        return WRAPPERS[spec.kind](build(spec.inner[0], role, option))
+    if spec.kind == "human":
+        inner = [build(partner, role, option) for partner in spec.inner]
         try:
-            return HumanLike.from_arguments(inner, settings)
+            return HumanLike.from_arguments(inner, [f"{name}={value}" for name, value in spec.settings])
         except ValueError as error:
-            raise UsageError("--partner", name, str(error)) from None
-    if call and call[1] == "switch":
-        arguments = _split_arguments(call[2])
-        if len(arguments) != 2:
-            raise ValueError(f"switch({call[2]}) needs two partners")
-        return Switching(*(make_partner(a, role) for a in arguments))
-    if call and call[1] in SCRIPTED:
-        return _scripted(name, call[1], call[2], role)
-    return policy_for(name, role, "--partner")  # also a .zip or module:attr (services/agent/outside.py)
+            raise UsageError(option, str(spec), str(error)) from None
+    if spec.kind == "switch":
+        return Switching(build(spec.inner[0], role, option), build(spec.inner[1], role, option))
+    if spec.kind == FITTED:
+        return _fitted(spec.key, role)
+    if spec.kind == RULE:
+        kind = SCRIPTED[spec.key]
+        if kind.role != role:
+            raise UsageError(option, str(spec), f"{spec.key} plays the {kind.role} seat, not the {role} seat")
+        partner = kind(**dict(spec.settings))
+        partner.key = str(spec)
+        return partner
+    if spec.kind in (PERSON, ADAPTIVE_KIND):
+        raise UsageError(option, str(spec), "a person or an adaptive agent, not a policy")
+    return policy_for(spec.key, role, option)  # a key, a .zip, a module:attr, a proxy:DIR
 
 
 def fitted_people(directory: Path, name: str = "") -> tuple[str, dict[str, dict]]:
@@ -244,54 +238,16 @@ def _fitted(name: str, role: str) -> Partner:
     return partner
 
 
-def _scripted(name: str, rule: str, arguments: str, role: str) -> Partner:
-    """A scripted rule with other settings, `rule(setting=number, ...)`, named by `name`."""
-    kind = SCRIPTED[rule]
-    settings = [s for s in inspect.signature(kind).parameters if s not in ("epsilon", "config")]
-    if kind.role != role:
-        raise UsageError("--partner", name, f"{rule} plays the {kind.role} seat, not the {role} seat")
-    values = {}
-    for item in filter(None, (a.strip() for a in arguments.split(","))):
-        setting, _, number = (part.strip() for part in item.partition("="))
-        try:
-            if setting not in settings:
-                raise ValueError(setting)
-            values[setting] = float(number)
-        except ValueError:
-            problem = f"{item!r} is not SETTING=NUMBER for a setting of {rule}"
-            raise UsageError("--partner", name, problem, settings) from None
-    partner = kind(**values)
-    partner.key = name
-    return partner
-
-
-def _split_arguments(text: str) -> list[str]:
-    """The top-level, comma-separated arguments of switch(...) or human(...), which may nest."""
-    depth, start, out = 0, 0, []
-    for i, char in enumerate(text):
-        depth += {"(": 1, ")": -1}.get(char, 0)
-        if char == "," and depth == 0:
-            out.append(text[start:i].strip())
-            start = i + 1
-    return [*out, text[start:].strip()]
-
-
 def group_of(name: str) -> str:
     """A partner's group in the population: its outer wrapper, library, a proxy, or outside."""
-    if name.startswith(PROXY):
+    spec = SeatSpec.parse(name)
+    if spec.kind == PROXY_KIND:
         return "proxy"
-    if name.startswith(HUMANS):
+    if spec.kind == FITTED:
         return "fitted"
-    call = _CALL.match(name)
-    if call:
-        return {
-            "noisy": "noisy",
-            "delayed": "delayed",
-            "sticky": "sticky",
-            "switch": "switching",
-            "human": "human-like",
-        }.get(call[1], "outside")
-    return "library" if name in library.registry() else "outside"
+    if spec.kind in ("noisy", "delayed", "sticky", "switch", "human"):
+        return {"switch": "switching", "human": "human-like"}.get(spec.kind, spec.kind)
+    return "library" if spec.kind == KEY and name in library.registry() else "outside"
 
 
 # Hand-written partners of each seat: its scripted rule, smaller and larger, slower and faster.

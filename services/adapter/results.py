@@ -7,10 +7,9 @@ import json
 from collections.abc import Iterable
 from pathlib import Path
 
-from services.adapter.core import (
-    AdapterConfig,
-)
 from services.adapter.partners import group_of
+from services.adapter.seat import ADAPTIVE_KIND, SeatSpec
+from services.agent import library
 from services.provenance import lines as provenance_lines
 from services.provenance import provenance
 
@@ -24,7 +23,7 @@ def _csv(path: Path, header: list[str], rows: Iterable[Iterable]) -> None:
 
 def _group_table(comparison: dict) -> list[str]:
     groups = list(comparison["per_group"])
-    agents = sorted(comparison["agents"], key=lambda a: (AdapterConfig.parse(a) is not None, a))
+    agents = sorted(comparison["agents"], key=lambda a: (SeatSpec.parse(a).kind == ADAPTIVE_KIND, a))
     rows = [
         f"| {a} | " + " | ".join(f"{comparison['per_group'][g][a]['mean']:.2f}" for g in groups) + " |"
         for a in agents
@@ -123,7 +122,7 @@ def write_results(
             "",
             *_group_tests(comparison),
         ]
-    made = provenance()
+    made = provenance(**library.provenance_hashes())
     (out / "provenance.json").write_text(json.dumps(made, indent=1) + "\n")
     lines += ["## Provenance", "", *(f"- {line}" for line in provenance_lines(made)), ""]
     path = out / "summary.md"

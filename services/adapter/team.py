@@ -15,6 +15,7 @@ from services.adapter.core import (
 from services.adapter.evaluate import batches, play_games, play_partner, play_session
 from services.adapter.human_like import SESSION_TRIALS
 from services.adapter.partners import group_of, make_partner
+from services.adapter.seat import ADAPTIVE_KIND, SeatSpec
 from services.jobs.core import Spec, spec
 from services.jobs.kinds import Runner, in_process, plugins_in
 from shared.game import check_role, other
@@ -36,7 +37,7 @@ JOB_GAMES = 256  # games of a team or identification job (the lanes of one batch
 
 def _team_batch(games: list[tuple[str, str, int]], role: str) -> list[list]:
     """Each game's [kills/min, switches, guarded]."""
-    agents = [AdapterConfig.parse(agent, role=role) or agent for _, agent, _ in games]
+    agents = [SeatSpec.parse(agent, "--agent").adaptive(role) or agent for _, agent, _ in games]
     played = play_games([(p, a, seed) for (p, _, seed), a in zip(games, agents, strict=True)], role)
     return [[o.kills_per_minute, o.switches, int(o.guarded)] for o in played]
 
@@ -117,7 +118,7 @@ def paired_tests(diff: np.ndarray, margin: float = MARGIN) -> dict:
 
 def _session_games(partner: str, agent: str, person: int, role: str) -> list[list]:
     """Each trial's [seed, kills/min, switches, guarded]."""
-    config = AdapterConfig.parse(agent, role=role)
+    config = SeatSpec.parse(agent, "--agent").adaptive(role)
     seeds = [person * SESSION_TRIALS + trial for trial in range(SESSION_TRIALS)]
     if config is None:
         outcomes = [play_partner(make_partner(partner, other(role)), agent, seed, role) for seed in seeds]
@@ -182,7 +183,7 @@ def compare(rows: list[dict]) -> dict:
         grid.setdefault(r["agent"], {})[(r["partner"], r["seed"])] = r["kills_per_minute"]
     values = {a: np.array([g[u] for u in units]) for a, g in grid.items()}
     agents = {a: _summary(v) for a, v in values.items()}
-    statics = [a for a in values if AdapterConfig.parse(a) is None]
+    statics = [a for a in values if SeatSpec.parse(a).kind != ADAPTIVE_KIND]
     best = max(statics, key=lambda a: agents[a]["mean"])
     partners = sorted({u[0] for u in units})
 
@@ -191,7 +192,7 @@ def compare(rows: list[dict]) -> dict:
 
     tests = {}
     for a in values:
-        if AdapterConfig.parse(a) is None:
+        if SeatSpec.parse(a).kind != ADAPTIVE_KIND:
             continue
         diff = values[a] - values[best]
         by_partner = partner_means(a) - partner_means(best)

@@ -13,7 +13,7 @@ from services.adapter.cem import log_probs
 from services.adapter.evaluate import play_partner
 from services.adapter.identification import windowed
 from services.adapter.partners import make_partner
-from services.agent import library
+from services.agent import library, networks
 from services.jobs.core import spec
 from services.jobs.kinds import Progress, Runner, in_process
 from shared.game import ROLES, GameConfig, other
@@ -21,7 +21,7 @@ from shared.game import ROLES, GameConfig, other
 
 def _self_scores(key: str, teammate: str, seed: int) -> np.ndarray:
     """log pi(a | s) of a library policy's own actions over one game with `teammate`."""
-    policy = library.load(key)
+    policy = networks.load(key)
     partner_role = other(policy.role)
     outcome = play_partner(make_partner(key, policy.role), teammate, seed, partner_role, record=True)
     return log_probs([policy], outcome.values, outcome.actions)[:, 0]

@@ -6,7 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from services.agent.library import LearnedPolicy, keys, policy_for
+from services.agent.library import keys
+from services.agent.networks import LearnedPolicy
+from services.agent.seats import policy_for
 from services.sim.engine import Game
 from services.sim.observation import observe
 from services.sim.play import play

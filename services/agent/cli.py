@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import enum
+import time
 from pathlib import Path
 
 import typer
 from rich.table import Table
 
 from services.agent.calibration import calibrate
-from services.agent.library import policy_for
+from services.agent.seats import policy_for
 from services.options import GAMES, Duration, Frames, Seat, console, game_frames, keys_help, number, output
 from services.sim.observation import VIEWS
 from services.sim.play import play, summarize
@@ -89,8 +90,6 @@ def train(
 ) -> None:
     """Train library policies by their registry recipes into a library directory (needs the
     `train` extra). A run stopped part way resumes from its last checkpoint in RUNS/KEY."""
-    import time
-
     from services.agent import library
 
     if bool(keys) == all_:
@@ -165,7 +164,7 @@ def library_add(
 ) -> None:
     """Export an SB3 model into a library of yours: numpy weights, registry and manifest entries with
     hashes and provenance. List the directory in TSF_LIBRARY to play its keys everywhere."""
-    from services.agent.outside import add
+    from services.agent.train import add
 
     entry = add(key, model, role.value, library_dir, view.value, partner, games)
     console.print(f"{key}: {library_dir / entry['file']} sha256 {entry['sha256'][:12]}")

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from services.agent import library
+from services.agent import library, networks, seats
 from services.sim.engine import Game
 from services.sim.observation import observe
 from shared.errors import UsageError
@@ -38,7 +38,7 @@ def test_registry_names_the_papers_library():
 
 @pytest.mark.parametrize("key", KEYS)
 def test_policy_conforms_and_never_gives_zero(key):
-    policy = library.load(key)
+    policy = networks.load(key)
     recipe = library.registry()[key]
     assert isinstance(policy, Policy)
     assert (policy.key, policy.role) == (key, recipe.role) and policy.view in ("world", "role")
@@ -53,7 +53,7 @@ def test_policy_conforms_and_never_gives_zero(key):
 
 @pytest.mark.parametrize("key", ["B1", "B5", "S1", "S4"])
 def test_act_samples_the_distribution_probs_reports(key):
-    policy = library.load(key)
+    policy = networks.load(key)
     obs = observations(policy.role, policy.view)[5]
     p = policy.probs(obs)
     policy.reset(1)
@@ -64,7 +64,7 @@ def test_act_samples_the_distribution_probs_reports(key):
 
 
 def test_same_seed_same_actions():
-    a, b = library.load("B5"), library.load("B5")
+    a, b = networks.load("B5"), networks.load("B5")
     obs = observations("bait", "role")
     a.reset(11)
     b.reset(11)
@@ -72,8 +72,8 @@ def test_same_seed_same_actions():
 
 
 def test_policy_for_resolves_library_and_scripted_keys():
-    assert library.policy_for("S5", "shooter").key == "S5"
-    assert library.policy_for("circle", "bait").key == "circle"
+    assert seats.policy_for("S5", "shooter").key == "S5"
+    assert seats.policy_for("circle", "bait").key == "circle"
 
 
 BAITS = "B1, B2, B3, B4, B5, B6, B7, B8, B9, circle, idle, random"
@@ -98,9 +98,9 @@ def test_a_key_that_cannot_play_the_seat_is_named_with_every_key_that_can(
     key: str, role: str, option: str, line: str
 ) -> None:
     with pytest.raises(UsageError) as refused:
-        library.policy_for(key, role, option)
+        seats.policy_for(key, role, option)
     assert str(refused.value).startswith(line)
-    assert library.seat_keys("shooter")[-3:] == ["mirror", "idle", "random"]
+    assert seats.seat_keys("shooter")[-3:] == ["mirror", "idle", "random"]
 
 
 def copy_library(tmp_path: Path) -> Path:
@@ -119,7 +119,7 @@ def test_a_copy_is_the_shipped_library_but_its_table_and_is_never_overwritten(tm
     root = copy_library(tmp_path)
     assert library.manifest_hash(root) == library.manifest_hash()
     keys = library.keys()
-    assert [library.load(k, root=root).key for k in keys] == keys
+    assert [networks.load(k, root=root).key for k in keys] == keys
     assert not (root / "table.json").exists()  # a retrained policy would make it stale
     (root / "manifest.json").write_text("{}")
     library.copy(root)  # an existing library is left as it is: `tsf train` adds to it
@@ -133,21 +133,21 @@ def test_tampered_weights_are_refused(tmp_path):
     data[-100] ^= 1
     path.write_bytes(bytes(data))
     with pytest.raises(ValueError, match="does not match its manifest hash"):
-        library.load("B2", root=root)
+        networks.load("B2", root=root)
 
 
 def test_untrained_policy_says_how_to_train_it(tmp_path):
     root = copy_library(tmp_path)
     (root / "manifest.json").write_text(json.dumps({}))
     with pytest.raises(FileNotFoundError, match=f"run `tsf train B3 --out {root}`"):
-        library.load("B3", root=root)
+        networks.load("B3", root=root)
 
 
 def test_weights_never_unpickle(tmp_path):
     path = tmp_path / "evil.npz"
     np.savez(path, w0=np.array([object()], dtype=object), meta=np.frombuffer(b"{}", np.uint8))
     with pytest.raises(ValueError, match="allow_pickle"):
-        library.Network.load(path)
+        networks.Network.load(path)
 
 
 def test_manifest_records_every_learned_policy():

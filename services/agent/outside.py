@@ -7,11 +7,12 @@
                            that returns a new one
     proxy:DIR              a proxy cloned from recorded people by `tsf proxy train` (services/proxy)
 
-A `.zip` is read with SB3 (the `train` extra) and played as numpy arrays (library.JointPolicy): the
-network's distribution over the 12 actions with library.FLOOR mixed in is what `probs` reports and
+A `.zip` is read with SB3 (the `train` extra) and played as numpy arrays (networks.JointPolicy): the
+network's distribution over the 12 actions with networks.FLOOR mixed in is what `probs` reports and
 what `act` draws from, so the adapter's likelihoods are exact. It reads the observation view it
-was trained on ("world", RoleEnv's default, unless told). `add` writes one into a library directory
-of your own (weights, registry and manifest entries); TSF_LIBRARY then makes its key a library key.
+was trained on ("world", RoleEnv's default, unless told). `train.add` writes one into a library
+directory of your own (weights, registry and manifest entries); TSF_LIBRARY then makes its key a
+library key.
 """
 
 from __future__ import annotations
@@ -21,23 +22,20 @@ import json
 import re
 import zipfile
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
+from services.agent import proxy
+from services.agent.library import PROXY_FAMILY
+from services.agent.networks import JointPolicy, Network
+from services.agent.proxy import PROXY
 from services.sim.observation import VIEWS
 from shared.errors import UsageError
-from shared.game import N_ACTIONS, OBS_SIZE, ROLES
+from shared.game import N_ACTIONS, OBS_SIZE, ROLES, Policy
 from shared.messages import POLICY_NAME
 
-if TYPE_CHECKING:
-    from services.agent.library import JointPolicy
-    from shared.game import Policy
-
-ACTIVATIONS = {"Tanh": "tanh", "ReLU": "relu"}  # torch module name: library.Network's name
+ACTIVATIONS = {"Tanh": "tanh", "ReLU": "relu"}  # torch module name: networks.Network's name
 KEY = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
-PROXY = "proxy:"  # a proxy's key: proxy:DIR (services/agent/proxy.py)
-HUMANS = "humans:"  # stand-ins fitted by `tsf humans fit`: humans:DIR@NAME (services/adapter/humans.py)
 NAME = re.compile(POLICY_NAME)
 
 
@@ -60,19 +58,12 @@ def is_outside(key: str) -> bool:
     return key.endswith(".zip") or ":" in key
 
 
-def is_plugin(key: str) -> bool:
-    """Whether a policy key is a `module:attr` object, the one kind a worker must import."""
-    return is_outside(key) and not key.endswith(".zip") and not key.startswith((PROXY, HUMANS))
-
-
 def load(key: str, role: str, option: str = "--policy", view: str = "world") -> Policy:
     """The policy a `.zip` or `module:attr` key names, checked to play `role` (UsageError if not);
     a `.zip` plays whichever seat it is given."""
     if key.endswith(".zip"):
         return zip_policy(Path(key), role, view, option)
     if key.startswith(PROXY):
-        from services.agent import proxy
-
         return proxy.load(Path(key.removeprefix(PROXY)), role, record_name(key), option)
     policy = _object(key, option)
     if policy.role != role:
@@ -99,14 +90,12 @@ def _is_policy(thing: object) -> bool:
 
 
 def network_arrays(path: Path, meta: dict, option: str = "MODEL") -> dict[str, np.ndarray]:
-    """An SB3 actor-critic model's policy network as library.Network arrays, with `meta` plus its
+    """An SB3 actor-critic model's policy network as networks.Network arrays, with `meta` plus its
     activation and policy class. Refused (UsageError) unless it maps the 64-value observation to the
     12 actions through a feed-forward network."""
     try:
         from stable_baselines3.common.policies import ActorCriticPolicy
         from stable_baselines3.common.save_util import load_from_zip_file
-
-        from services.agent.train import linear_arrays
     except ModuleNotFoundError as error:
         raise UsageError(option, path, f"reading a model needs the `train` extra ({error})") from None
     if not path.is_file():
@@ -136,9 +125,6 @@ def network_arrays(path: Path, meta: dict, option: str = "MODEL") -> dict[str, n
 def proxy_arrays(directory: Path, key: str, role: str) -> tuple[dict[str, np.ndarray], str, str]:
     """A proxy's arrays for a library (with `key` and its policy class in the metadata), its family
     and view; refused (UsageError) unless it is a proxy of `role`."""
-    from services.agent import proxy
-    from services.agent.library import PROXY_FAMILY
-
     proxy.manifest(directory, "MODEL")
     with np.load(directory / proxy.WEIGHTS, allow_pickle=False) as data:
         arrays = {name: data[name] for name in data.files}
@@ -159,79 +145,29 @@ def proxy_arrays(directory: Path, key: str, role: str) -> tuple[dict[str, np.nda
 
 def zip_policy(path: Path, role: str, view: str = "world", option: str = "--policy") -> JointPolicy:
     """An SB3 `.zip` as a numpy policy of `role` reading the `view` observation."""
-    from services.agent.library import JointPolicy, Network
-
-    _check(role, view)
+    check_view(role, view)
     arrays = network_arrays(path, {}, option)
     meta = json.loads(bytes(arrays.pop("meta")).decode())
     return JointPolicy(record_name(str(path)), role, view, Network(arrays, meta["activation"]))
 
 
-def _check(role: str, view: str) -> None:
+def check_view(role: str, view: str) -> None:
+    """Refuse (UsageError) a seat or an observation view that is not one."""
     if role not in ROLES:
         raise UsageError("--role", role, "not a seat", ROLES)
     if view not in VIEWS:
         raise UsageError("--view", view, "not an observation view", VIEWS)
 
 
-def add(
-    key: str, model: Path, role: str, directory: Path, view: str = "world", partner: str = "", games: int = 10
-) -> dict:
-    """Export an SB3 model, or a proxy directory (services/proxy), into the library at `directory`
-    (created if need be, never the shipped one): weights/KEY.npz, a registry entry and a manifest
-    entry with hashes and provenance, scored with `partner` (default: envs.DEFAULT_PARTNER) over
-    `games` games. Returns the manifest entry."""
-    from services import envs
-    from services.agent import library
-    from services.agent.scripted import scripted_keys
-    from services.agent.train import record_entry, team_score
-    from services.provenance import provenance
+def linear_arrays(layers: list, meta: dict) -> dict[str, np.ndarray]:
+    """The linear layers among `layers` as arrays w0, b0, ... plus `meta` as JSON (networks.Network);
+    torch modules: the `train` extra, loaded by the caller."""
+    import torch as th  # the `train` extra
 
-    _check(role, view)
-    directory = Path(directory)
-    if directory.resolve() == library.LIBRARY.resolve():
-        raise UsageError("--library", directory, "is the shipped library; give a directory of your own")
-    if not KEY.match(key):
-        raise UsageError("KEY", key, "a key is a letter, then letters, digits, - and _")
-    taken = [*library.registry(), *scripted_keys("bait"), *scripted_keys("shooter")]
-    if (directory / "registry.toml").exists():
-        taken += list(library.registry(directory))
-    if key in taken:
-        raise UsageError("KEY", key, "is a policy key already")
-    source = Path(model)
-    if source.is_dir():  # a proxy (services/proxy): its network as it is, its own view
-        arrays, family, view = proxy_arrays(source, key, role)
-        source = source / "proxy.npz"
-    else:
-        arrays, family = (
-            network_arrays(Path(model), {"key": key, "role": role, "view": view}),
-            library.OUTSIDE,
-        )
-    meta = json.loads(bytes(arrays["meta"]).decode())
-    path = directory / "weights" / f"{key}.npz"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    np.savez(path, **arrays)
-    description = f"{meta['policy_class']} from {Path(model).name}"
-    fields = {
-        "role": role,
-        "family": family,
-        "view": view,
-        "features": "all",
-        "description": description,
-    }
-    with open(directory / "registry.toml", "a") as f:  # JSON strings are TOML basic strings
-        f.write(f"\n[{key}]\n" + "".join(f"{name} = {json.dumps(value)}\n" for name, value in fields.items()))
-    library._registry.cache_clear()
-    entry = {
-        "file": str(path.relative_to(directory)),
-        "sha256": library.file_hash(path),
-        "algorithm": meta["policy_class"],
-        "source": {"file": str(Path(model).resolve()), "sha256": library.file_hash(source)},
-        "provenance": provenance(),
-    }
-    record_entry(directory, key, entry)
-    if games:
-        mate = library.load(partner or envs.DEFAULT_PARTNER[role])
-        entry["score"] = team_score(library.load(key, root=directory), mate, range(games))
-        record_entry(directory, key, entry)
-    return entry
+    linear = [m for m in layers if isinstance(m, th.nn.Linear)]
+    arrays = {}
+    for i, m in enumerate(linear):
+        arrays[f"w{i}"] = m.weight.detach().cpu().numpy().astype(np.float32)
+        arrays[f"b{i}"] = m.bias.detach().cpu().numpy().astype(np.float32)
+    arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
+    return arrays

@@ -16,8 +16,9 @@ import torch as th  # noqa: E402
 from stable_baselines3 import PPO  # noqa: E402
 
 from services.agent import library, outside
-from services.agent.library import FLOOR, policy_for
+from services.agent.networks import FLOOR
 from services.agent.player import Player
+from services.agent.seats import policy_for
 from services.cli import app
 from services.entry import run
 from services.sim.engine import Game

@@ -5,7 +5,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 
-from services.agent.library import policy_for
+from services.agent.seats import policy_for
 from services.sim.observation import as_observation
 from services.sim.play import policy_seed, switch_seed
 from shared.game import NOOP, Policy, checked_action

@@ -7,8 +7,8 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from services.agent.library import policy_for
 from services.agent.player import Player
+from services.agent.seats import policy_for
 from services.sim.engine import Game
 from services.sim.match import state_message
 from services.sim.play import policy_seed

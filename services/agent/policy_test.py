@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from services.agent import library
+from services.agent import library, networks
 from services.agent.policy import end_round_batch, end_round_choice, rule_probs, stalled
 from services.agent.scripted import CircleBait, Idle, MirrorShooter
 from services.sim import observation as ob
@@ -48,7 +48,7 @@ def _best_partner(key: str) -> str:
     "key", [pytest.param(k, marks=[] if k in ("B5", "S5") else pytest.mark.slow) for k in KEYS]
 )
 def test_a_partner_who_dies_early_still_scores_with_every_library_policy(key):
-    policy, partner = library.load(key), Novice(library.load(_best_partner(key)))
+    policy, partner = networks.load(key), Novice(networks.load(_best_partner(key)))
     pair = (partner, policy) if policy.role == "shooter" else (policy, partner)
     results = play_batch(*pair, SEEDS)
     assert all(sum(r.counters[partner.role]["deaths"].values()) >= 1 for r in results)  # it did die early
@@ -74,7 +74,13 @@ def test_stalled_rows_play_the_end_round_rule_in_probs_and_in_bulk(view):
         for o, c in zip(obs[mask], choices[mask], strict=True)
     )
     ending = rule_probs(choices[mask], 0.01)
-    for policy in [library.load("B5"), library.load("S1"), library.load("S5"), CircleBait(), MirrorShooter()]:
+    for policy in [
+        networks.load("B5"),
+        networks.load("S1"),
+        networks.load("S5"),
+        CircleBait(),
+        MirrorShooter(),
+    ]:
         if policy.view != view:
             continue
         batch = policy.probs_batch(obs)

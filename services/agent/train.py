@@ -32,9 +32,13 @@ from stable_baselines3 import A2C, DQN, PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv
 
-from services.agent import library
-from services.agent.library import FEATURES, HEAD_SIZES, HEADS, LIBRARY, Recipe
-from services.agent.scripted import CircleBait, MirrorShooter
+from services import envs
+from services.agent import library, networks
+from services.agent.library import FEATURES, LIBRARY, Recipe
+from services.agent.networks import HEAD_SIZES, HEADS
+from services.agent.outside import KEY, check_view, linear_arrays, network_arrays, proxy_arrays
+from services.agent.scripted import CircleBait, MirrorShooter, scripted_keys
+from services.provenance import provenance
 from services.sim.batch import BatchGame
 from services.sim.batch_observation import observe
 from services.sim.batch_play import play_batch
@@ -132,7 +136,7 @@ class RecipeVecEnv(VecEnv):
     ) -> None:
         self.recipe = recipe
         self.config = config or GameConfig()
-        partners = [library.load(k, self.config, root) for k in recipe.partners]
+        partners = [networks.load(k, self.config, root) for k in recipe.partners]
         weights, reward = dict(recipe.weights), REWARDS[recipe.reward]
         self.env = RoleVectorEnv(
             n_envs,
@@ -165,7 +169,7 @@ class RecipeVecEnv(VecEnv):
 
     def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict]]:
         heads = dict(zip(self.recipe.learned, self.actions.T, strict=True))
-        heads |= library.rule_heads_batch(self.recipe, self.obs, self.config)
+        heads |= networks.rule_heads_batch(self.recipe, self.obs, self.config)
         action = join_action(*(heads[h] for h in HEADS))
         self.obs, rewards, terminated, truncated, infos = self.env.step(action)
         self.returns += rewards
@@ -354,28 +358,17 @@ def export(model, recipe: Recipe) -> dict[str, np.ndarray]:  # noqa: ANN001 - an
     return linear_arrays(layers, {"activation": activation, "key": recipe.key, "algorithm": recipe.algorithm})
 
 
-def linear_arrays(layers: list[th.nn.Module], meta: dict) -> dict[str, np.ndarray]:
-    """The linear layers among `layers` as arrays w0, b0, ... plus `meta` as JSON (library.Network)."""
-    linear = [m for m in layers if isinstance(m, th.nn.Linear)]
-    arrays = {}
-    for i, m in enumerate(linear):
-        arrays[f"w{i}"] = m.weight.detach().cpu().numpy().astype(np.float32)
-        arrays[f"b{i}"] = m.bias.detach().cpu().numpy().astype(np.float32)
-    arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
-    return arrays
-
-
 # --- a training run: curve, checkpoints, manifest ------------------------------------------------
 
 EVAL_SEEDS = range(10_000, 10_016)  # the curve's games: seeds that no table or test plays
 CURVE = ("steps", "seconds", "kills_per_minute", "stderr", "mean_return")
 
 
-def policy_of(model, recipe: Recipe, config: GameConfig | None = None) -> library.LearnedPolicy:  # noqa: ANN001
+def policy_of(model, recipe: Recipe, config: GameConfig | None = None) -> networks.LearnedPolicy:  # noqa: ANN001
     """The model as the library plays it: the exported arrays, in numpy."""
     arrays = export(model, recipe)
     meta = json.loads(bytes(arrays.pop("meta")).decode())
-    return library.LearnedPolicy(recipe, library.Network(arrays, meta["activation"]), config)
+    return networks.LearnedPolicy(recipe, networks.Network(arrays, meta["activation"]), config)
 
 
 def team_score(policy: Policy, partner: Policy, seeds: range, config: GameConfig | None = None) -> dict:
@@ -500,7 +493,7 @@ def train(
         model = make_model(recipe, seed, settings["hyperparameters"], root=out)
         agreement = warm_start_fit(model, recipe) if warm_start else None
         state = settings | {"steps": 0, "seconds": 0.0, "agreement": agreement}
-    partner = library.load(recipe.partners[0], root=out)
+    partner = networks.load(recipe.partners[0], root=out)
     run = Run(run_dir, recipe, partner, every, state)
     if state["steps"] < steps:
         model.learn(steps - state["steps"], callback=run, progress_bar=progress, reset_num_timesteps=False)
@@ -526,7 +519,7 @@ def train(
         "versions": {p: version(p) for p in ("stable-baselines3", "sb3-contrib", "torch", "numpy")},
     }
     if score_games:  # on seeds the selection did not see
-        chosen = library.LearnedPolicy(recipe, library.Network.load(path)[0])
+        chosen = networks.LearnedPolicy(recipe, networks.Network.load(path)[0])
         entry["score"] = team_score(chosen, partner, range(score_games))
     record_entry(out, key, entry)
     return entry
@@ -579,3 +572,60 @@ def record_entry(out: Path, key: str, entry: dict) -> None:
         entries = json.loads(path.read_text()) if path.exists() else {}
         entries[key] = entry
         path.write_text(json.dumps(entries, indent=2, sort_keys=True) + "\n")
+
+
+def add(
+    key: str, model: Path, role: str, directory: Path, view: str = "world", partner: str = "", games: int = 10
+) -> dict:
+    """Export an SB3 model, or a proxy directory (services/proxy), into the library at `directory`
+    (created if need be, never the shipped one): weights/KEY.npz, a registry entry and a manifest
+    entry with hashes and provenance, scored with `partner` (default: envs.DEFAULT_PARTNER) over
+    `games` games. Returns the manifest entry."""
+    check_view(role, view)
+    directory = Path(directory)
+    if directory.resolve() == library.LIBRARY.resolve():
+        raise UsageError("--library", directory, "is the shipped library; give a directory of your own")
+    if not KEY.match(key):
+        raise UsageError("KEY", key, "a key is a letter, then letters, digits, - and _")
+    taken = [*library.registry(), *scripted_keys("bait"), *scripted_keys("shooter")]
+    if (directory / "registry.toml").exists():
+        taken += list(library.registry(directory))
+    if key in taken:
+        raise UsageError("KEY", key, "is a policy key already")
+    source = Path(model)
+    if source.is_dir():  # a proxy (services/proxy): its network as it is, its own view
+        arrays, family, view = proxy_arrays(source, key, role)
+        source = source / "proxy.npz"
+    else:
+        arrays, family = (
+            network_arrays(Path(model), {"key": key, "role": role, "view": view}),
+            library.OUTSIDE,
+        )
+    meta = json.loads(bytes(arrays["meta"]).decode())
+    path = directory / "weights" / f"{key}.npz"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savez(path, **arrays)
+    description = f"{meta['policy_class']} from {Path(model).name}"
+    fields = {
+        "role": role,
+        "family": family,
+        "view": view,
+        "features": "all",
+        "description": description,
+    }
+    with open(directory / "registry.toml", "a") as f:  # JSON strings are TOML basic strings
+        f.write(f"\n[{key}]\n" + "".join(f"{name} = {json.dumps(value)}\n" for name, value in fields.items()))
+    library._registry.cache_clear()
+    entry = {
+        "file": str(path.relative_to(directory)),
+        "sha256": library.file_hash(path),
+        "algorithm": meta["policy_class"],
+        "source": {"file": str(Path(model).resolve()), "sha256": library.file_hash(source)},
+        "provenance": provenance(**library.provenance_hashes()),
+    }
+    record_entry(directory, key, entry)
+    if games:
+        mate = networks.load(partner or envs.DEFAULT_PARTNER[role])
+        entry["score"] = team_score(networks.load(key, root=directory), mate, range(games))
+        record_entry(directory, key, entry)
+    return entry

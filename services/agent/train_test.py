@@ -12,7 +12,7 @@ pytest.importorskip("stable_baselines3", reason="the `train` extra is not instal
 
 import torch as th  # noqa: E402
 
-from services.agent import library  # noqa: E402
+from services.agent import library, networks, seats  # noqa: E402
 from services.agent.library_test import observations  # noqa: E402
 from services.agent.train import HYPERPARAMETERS, make_model, prepare, train  # noqa: E402
 from shared.errors import UsageError  # noqa: E402
@@ -25,7 +25,7 @@ def test_smoke_training_exports_a_loadable_policy(tmp_path, key):
     entry = train(key, root, steps=300, seed=0, run_dir=tmp_path / "runs", progress=False, score_games=1)
     assert entry["steps"] >= 300 and entry["score"]["games"] == 1 and entry["warm_start"] is None
     assert (tmp_path / "runs" / key / "curve.png").exists()
-    policy = library.load(key, root=root)
+    policy = networks.load(key, root=root)
     p = policy.probs(observations(policy.role, policy.view)[0])
     assert p.min() > 0 and p.sum() == pytest.approx(1.0)
 
@@ -62,7 +62,7 @@ def test_numpy_network_matches_torch(tmp_path, key):
     model = make_model(recipe, seed=0)
     arrays = export(model, recipe)
     arrays.pop("meta")
-    network = library.Network(arrays, "relu" if recipe.algorithm == "DQN" else "tanh")
+    network = networks.Network(arrays, "relu" if recipe.algorithm == "DQN" else "tanh")
     features = np.stack(observations(recipe.role, recipe.view))[:, library.FEATURES[recipe.features]]
     with th.no_grad():
         x = th.as_tensor(features)
@@ -79,7 +79,7 @@ def test_drawing_fire_pays_the_frames_the_fortress_opens_to_the_shooter_and_kill
     from services.sim.batch_observation import observe
     from services.sim.sampling import batch_act, lane_uniforms
 
-    bait, shooter = library.policy_for("circle", "bait"), library.policy_for("mirror", "shooter")
+    bait, shooter = seats.policy_for("circle", "bait"), seats.policy_for("mirror", "shooter")
     batch = BatchGame(8, seeds=list(range(8)))
     paid = kills = 0.0
     for _ in range(1800):

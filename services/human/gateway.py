@@ -45,10 +45,9 @@ from services.human.core import (
     setup,
     view,
 )
-from services.launch import HUMAN
 from shared import keys
 from shared.bus import BusConfig, Drops, session, subscribe, until_stopped
-from shared.game import GameConfig
+from shared.game import HUMAN, GameConfig
 from shared.messages import Action, GameEvent, Message, MessageError, Start, State, Summary
 
 log = logging.getLogger("tsf.human")

@@ -10,9 +10,9 @@ from pathlib import Path
 
 from services.human.core import SeatBook
 from services.human.gateway import Gateway, Web, seat_handler
-from services.launch import HUMAN, MatchPlan, run_match
+from services.runtime.launch import MatchPlan, run_match
 from shared.bus import BusConfig, free_endpoint
-from shared.game import ROLES
+from shared.game import HUMAN, ROLES
 from shared.messages import State, Summary
 
 

@@ -27,7 +27,7 @@ import zenoh
 from services.jobs import kinds
 from services.jobs.core import Coordinator, JournalFile, Spec, check
 from services.jobs.kinds import Progress
-from services.processes import Processes
+from services.runtime.processes import Processes
 from shared import keys
 from shared.bus import BusConfig, Drops, free_endpoint, session, subscribe
 from shared.errors import Failure, UsageError

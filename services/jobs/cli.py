@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import logging
+import os
+import socket
+import sys
 
 import typer
 
@@ -25,12 +28,8 @@ def worker(
 ) -> None:
     """Run a worker: plays the jobs a coordinator hands it (table cells, evaluation games), until
     the coordinator is gone."""
-    import os
-    import socket
-    import sys
-
     from services.jobs.bus import run_worker
-    from services.processes import Processes
+    from services.runtime.processes import Processes
 
     name = worker_id or f"{socket.gethostname()}-{os.getpid()}".replace(".", "-")
     stop = stop_on_signals()

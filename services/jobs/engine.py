@@ -11,8 +11,10 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Protocol
 
+from services.jobs.bus import Coordination, with_local_workers
 from services.jobs.core import Spec
 from services.jobs.kinds import Progress, Runner
+from services.jobs.ray_engine import OnRay
 from shared.bus import BusConfig
 from shared.errors import Failure
 
@@ -50,13 +52,9 @@ def open_engine(
     """The Ray cluster at `ray` when one is named; else a zenoh coordinator on `bus` for `sweep`,
     with `workers` local worker processes (ended on exit) beside any reached through the bus."""
     if ray:
-        from services.jobs.ray_engine import OnRay
-
         with OnRay(ray, journal, stop) as engine:
             yield engine
         return
-    from services.jobs.bus import Coordination, with_local_workers
-
     with (
         with_local_workers(bus, sweep, workers) as coordinator_bus,
         Coordination(coordinator_bus, sweep, journal, stop, job_timeout, per_worker) as coordination,

@@ -12,9 +12,11 @@ import importlib
 from collections.abc import Callable, Iterable
 from typing import Any
 
-from services.agent.outside import is_plugin
+from services.adapter.seat import SeatSpec
+from services.agent import library
 from services.jobs.core import Hashes, Spec
 from shared.errors import Failure, UsageError
+from shared.game import GameConfig
 
 Progress = Callable[[int, int], None]  # (values done, values in all)
 Runner = Callable[[list[Spec], Progress | None], list[list]]  # (jobs, progress) -> values
@@ -49,9 +51,6 @@ def in_process(todo: list[Spec], progress: Callable[[int, int], None] | None = N
 
 def hashes() -> Hashes:
     """The library and rules of this process."""
-    from services.agent import library
-    from shared.game import GameConfig
-
     return Hashes(library.manifest_hash(), GameConfig().hash())
 
 
@@ -76,13 +75,7 @@ def plugins_in(names: Iterable[str]) -> tuple[str, ...]:
     """The `module:attr` plug-ins among partner or policy names (inside wrappers too:
     noisy(my_lab.partners:Alice)); a proxy (`proxy:DIR`) or fitted stand-ins (`humans:DIR@NAME`)
     are a directory, not a plug-in."""
-    found = []
-    for name in names:
-        for part in name.replace("(", ",").replace(")", ",").split(","):
-            part = part.strip()
-            if is_plugin(part):
-                found.append(part)
-    return tuple(dict.fromkeys(found))
+    return tuple(dict.fromkeys(plugin for name in names for plugin in SeatSpec.parse(name).plugins))
 
 
 def import_plugins(names: Iterable[str]) -> str:

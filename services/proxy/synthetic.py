@@ -21,12 +21,11 @@ from pathlib import Path
 
 from services.adapter.partners import make_partner
 from services.agent.player import Player
-from services.launch import HUMAN
 from services.recorder.log import LogWriter
 from services.sim.engine import Game
 from services.sim.match import event_messages, start_message, state_message, summary_message
 from shared import keys
-from shared.game import ROLES, GameConfig, other
+from shared.game import HUMAN, ROLES, GameConfig, other
 
 
 def trial_seed(base: int, participant: int, trial: int) -> int:

@@ -11,15 +11,17 @@ from __future__ import annotations
 
 import csv
 import math
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 import torch as th
 
-from services.agent.library import FLOOR, HEAD_SIZES, HEADS
-from services.agent.proxy import inputs
-from services.proxy.data import HISTORY, Dataset, Split
+from services.agent import library
+from services.agent.networks import FLOOR, HEAD_SIZES, HEADS, inputs
+from services.agent.proxy import save
+from services.provenance import provenance
+from services.proxy.data import HISTORY, Dataset, Split, extract, split
 from shared.game import N_ACTIONS, N_FIRE, N_THRUST, OBS_SIZE
 
 SIZES = [HEAD_SIZES[h] for h in HEADS]
@@ -112,7 +114,7 @@ def fit(data: Dataset, split: Split, settings: Settings | None = None) -> Fitted
 
 
 def arrays(model: th.nn.Sequential) -> dict[str, np.ndarray]:
-    """The linear layers as library.Network arrays w0, b0, ... (float32)."""
+    """The linear layers as networks.Network arrays w0, b0, ... (float32)."""
     linear = [m for m in model if isinstance(m, th.nn.Linear)]
     out = {}
     for i, m in enumerate(linear):
@@ -158,12 +160,6 @@ def train(
     """`tsf proxy train`: extract, split by participant (or, `by` "recording", by recording: one
     person's proxy), fit, and write the proxy into `out` (proxy.npz, manifest.json, curve.csv,
     curve.png). Returns the manifest."""
-    from dataclasses import asdict
-
-    from services.agent.proxy import save
-    from services.provenance import provenance
-    from services.proxy.data import extract, split
-
     s = settings or Settings()
     data = extract(paths, role, by)
     parts = split(data, held_out, s.seed)
@@ -184,7 +180,7 @@ def train(
             "epochs": len(fitted.curve),
         },
         "settings": asdict(s),
-        "provenance": provenance(),
+        "provenance": provenance(**library.provenance_hashes()),
     }
     record["command"] = record["provenance"]["command"]
     meta = {

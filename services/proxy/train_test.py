@@ -14,9 +14,10 @@ pytest.importorskip("torch", reason="the `train` extra is not installed")
 import torch as th  # noqa: E402
 
 from services.adapter.partners import make_partner  # noqa: E402
-from services.agent import library, outside  # noqa: E402
-from services.agent.library import policy_for  # noqa: E402
-from services.agent.proxy import ProxyPolicy, inputs  # noqa: E402
+from services.agent import library, networks  # noqa: E402
+from services.agent import train as agent_train  # noqa: E402
+from services.agent.networks import ProxyPolicy, inputs  # noqa: E402
+from services.agent.seats import policy_for  # noqa: E402
 from services.cli import app  # noqa: E402
 from services.entry import run  # noqa: E402
 from services.proxy import train  # noqa: E402
@@ -92,7 +93,7 @@ def test_numpy_probs_are_the_torch_softmax(proxy, tmp_path):
         remembering.probs(obs[1]), remembering.probs_given(obs[1:2], np.array([[first, 0]]))[0]
     )
     with pytest.raises(UsageError, match="reads its own last actions"):
-        outside.add("HELD", held, "bait", tmp_path / "lib", games=0)
+        agent_train.add("HELD", held, "bait", tmp_path / "lib", games=0)
 
 
 def test_a_proxy_plays_as_a_key_and_as_a_partner(proxy, capsys):
@@ -117,7 +118,7 @@ def test_a_proxy_joins_a_library_as_a_users_model_does(proxy, tmp_path, monkeypa
     assert run(app, args) == 0
     monkeypatch.setenv("TSF_LIBRARY", str(mine))
     library._registry.cache_clear()
-    joined, direct = library.load("MYPROXY"), policy_for(f"proxy:{out}", "bait")
+    joined, direct = networks.load("MYPROXY"), policy_for(f"proxy:{out}", "bait")
     assert isinstance(joined, ProxyPolicy) and library.registry()["MYPROXY"].family == "proxy"
     obs = np.random.default_rng(0).normal(size=(20, 64)).astype(np.float32)
     np.testing.assert_array_equal(joined.probs_batch(obs), direct.probs_batch(obs))

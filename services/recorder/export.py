@@ -15,6 +15,7 @@ from pathlib import Path
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from services.agent import library
 from services.provenance import FIELDS, provenance, read_sidecar
 from services.recorder.recording import Recording
 from shared.game import ROLES, GameConfig
@@ -177,7 +178,9 @@ def rows_of(recording: Recording, name: str) -> dict[str, list[dict]]:
 def _match(recording: Recording, name: str) -> dict:
     start, summary = recording.start, recording.summary
     row: dict = {"match": name, "clean": recording.clean, "missing_frames": recording.missing_frames}
-    row["exported_by"] = provenance(GameConfig.from_dict(start.config) if start else None)
+    row["exported_by"] = provenance(
+        **library.provenance_hashes(), config=GameConfig.from_dict(start.config) if start else None
+    )
     row["recorded_by"] = read_sidecar(recording.path)  # null for a log without one
     if start:
         row |= {"seed": start.seed, "mode": start.mode, "config": start.config, "policies": start.policies}

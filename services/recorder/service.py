@@ -15,6 +15,8 @@ from pathlib import Path
 
 import zenoh
 
+from services.agent import library
+from services.provenance import provenance, sidecar
 from services.recorder.log import GapTracker, LogWriter, read_log
 from shared import keys
 from shared.bus import BusConfig, Drops, session, until_stopped
@@ -126,10 +128,8 @@ def _wait_for_seats(z: zenoh.Session, match: str, timeout: float, stop: threadin
 
 def _write_provenance(path: Path, start: Start) -> None:
     """Name what made the recording beside it (services/provenance.py), with the match's rules."""
-    from services.provenance import provenance, sidecar
-
     try:
-        record = provenance(GameConfig.from_dict(start.config))
+        record = provenance(**library.provenance_hashes(), config=GameConfig.from_dict(start.config))
         sidecar(path).write_text(json.dumps(record, indent=1) + "\n")
     except (OSError, ValueError) as error:  # the log matters more than its label
         log.warning("could not write the provenance of %s: %s", path, error)

@@ -37,7 +37,8 @@ from scipy import stats
 
 from services.adapter import cem
 from services.adapter.core import AdapterConfig
-from services.agent import library
+from services.adapter.seat import ADAPTIVE_KIND, SeatSpec
+from services.agent import library, networks
 from services.report.load import Match
 from services.table.table import Table
 from shared.game import FPS, ROLES, GameConfig, Policy, other
@@ -69,7 +70,8 @@ def adaptive_seat(match: Match) -> str | None:
     adapter = match.tables["adapter"]
     if not adapter.empty:
         return str(adapter["role"].iloc[0])
-    return next((r for r in ROLES if AdapterConfig.parse(match.policies[r]) is not None), None)
+    named = {r: match.policies[r] for r in ROLES if match.policies[r]}  # a person's seat may name nothing
+    return next((r for r, name in named.items() if SeatSpec.parse(name).kind == ADAPTIVE_KIND), None)
 
 
 def person_seats(match: Match) -> list[str]:
@@ -137,7 +139,7 @@ def log_probs(stream: pd.DataFrame, policies: list[Policy]) -> np.ndarray:
 
 
 def library_policies(role: str, config: GameConfig) -> dict[str, Policy]:
-    return {key: library.load(key, config) for key in library.keys(role)}
+    return {key: networks.load(key, config) for key in library.keys(role)}
 
 
 def partner_vectors(matches: list[Match], partner_role: str | None = None) -> pd.DataFrame:
@@ -170,7 +172,7 @@ def reference_vectors(role: str, table: Table, games: int, config: GameConfig) -
     each policy of policy i's own actions over `games` games with the reference partner (the CEM
     matrix of docs/library.md)."""
     policies = library_policies(role, config)
-    partner = library.load(reference_partner(table, role), config)
+    partner = networks.load(reference_partner(table, role), config)
     matrix = cem.cem_matrix(list(policies.values()), partner, list(range(games)), config)
     return pd.DataFrame(matrix, index=list(policies), columns=list(policies))
 

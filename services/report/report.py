@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from services.agent import library
 from services.provenance import provenance
 from services.report import analysis, figures
 from services.report.html import Section, write_html
@@ -73,7 +74,7 @@ def build_report(
     report = Report(
         out / "report.html", problems=problems, matches=len(matches), left_out=analysis.left_out_lines(left)
     )
-    report.provenance = provenance(config, table_path)
+    report.provenance = provenance(**library.provenance_hashes(table_path), config=config)
     report.data = {
         "table": pd.DataFrame(
             [

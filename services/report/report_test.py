@@ -18,7 +18,7 @@ from PIL import Image
 from scipy import stats
 
 from services.adapter.cem import log_probs
-from services.agent import library
+from services.agent import library, networks
 from services.plots import legibility, save
 from services.provenance import FIELDS
 from services.recorder.recording import Recording, load
@@ -191,7 +191,7 @@ def test_similarity_vectors_and_performance(built: tuple[Report, dict[str, Path]
         states, actions = stream(recording, row.partner_role)
         assert row.frames == len(actions) == FRAMES
         for key in library.keys(row.partner_role)[:3]:  # a few judges per seat keep the test quick
-            direct = log_probs([library.load(key, config)], states, actions).mean()
+            direct = log_probs([networks.load(key, config)], states, actions).mean()
             assert getattr(row, key) == pytest.approx(direct, rel=1e-9)
         others = library.keys("shooter" if row.partner_role == "bait" else "bait")
         assert all(math.isnan(getattr(row, key)) for key in others)
@@ -325,7 +325,7 @@ def test_adapter_timeline_and_curves(built: tuple[Report, dict[str, Path], Path]
     states, actions = stream(recording, role)
     key = library.keys(role)[0]
     mine = curves[curves["policy"] == key]
-    direct = log_probs([library.load(key, GameConfig(frames=FRAMES))], states, actions)[:, 0]
+    direct = log_probs([networks.load(key, GameConfig(frames=FRAMES))], states, actions)[:, 0]
     assert mine["log_prob"].to_numpy() == pytest.approx(direct)
     assert mine["smoothed"].iloc[40] == pytest.approx(direct[11:41].mean())
     ends = sorted(e.frame for e in recording.events if e.kind in ("kill", "reset"))

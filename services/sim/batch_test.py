@@ -12,7 +12,8 @@ import random
 import numpy as np
 import pytest
 
-from services.agent.library import keys, policy_for
+from services.agent.library import keys
+from services.agent.seats import policy_for
 from services.sim import observation as ob
 from services.sim.batch import BatchGame, Rules, _point_distance
 from services.sim.batch_observation import observe

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from services.agent.library import policy_for
+from services.agent.seats import policy_for
 from services.sim import observation as ob
 from services.sim.engine import Game
 from services.sim.vec_env import RoleVectorEnv

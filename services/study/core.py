@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from services.adapter.core import AdapterConfig
+from services.adapter.seat import SeatSpec
 from services.study.crowd import FAILS, Crowd
 from shared.errors import UsageError
 from shared.game import DURATION, FPS, ROLES, SEEDS, other
@@ -55,12 +56,16 @@ class Variant:
     adapter: str = ""
 
     def __post_init__(self) -> None:
-        if self.adapter and self.adaptive(ROLES[0], 0) is None:
+        try:
+            adaptive = self.adaptive(ROLES[0], 0) is not None
+        except ValueError:
+            adaptive = False
+        if self.adapter and not adaptive:
             raise ValueError(f"variant {self.name}: {self.adapter!r} names no adaptive agent")
 
     def adaptive(self, agent_role: str, seed: int) -> AdapterConfig | None:
         """The adaptive agent this variant plays in `agent_role`'s seat, or None for a static one."""
-        return AdapterConfig.parse(self.adapter, role=agent_role, seed=seed)
+        return SeatSpec.parse(self.adapter, "adapter").adaptive(agent_role, seed) if self.adapter else None
 
     def plan(self, agent_role: str, seed: int) -> dict:
         """The MatchPlan fields that put this variant in `agent_role`'s seat in a game of `seed`."""

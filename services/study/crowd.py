@@ -15,16 +15,13 @@ from __future__ import annotations
 import csv
 import io
 import random
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 from urllib.parse import quote, urlsplit
 
 from services.recorder.recording import load
 from services.recorder.service import recording_path
-
-if TYPE_CHECKING:
-    from services.study.core import Study
 
 BONUSES = "bonuses.csv"  # in the study's directory
 FAILS = 2  # failed attention checks that screen a participant out (Prolific's minimum)
@@ -116,21 +113,21 @@ def bonus_file(rows: list[tuple[str, float]]) -> str:
     return out.getvalue()
 
 
-def write_bonuses(study: Study) -> Path | None:
-    """Each participant's bonus under the config's rule, from the summaries of their completed
-    trials' recordings, written to `<study>/bonuses.csv` under the platform's participant id (the
-    study's own where the link gave none); None if the study pays no bonus."""
-    rule = study.config.crowd.bonus
+def write_bonuses(rule: Bonus | None, participants: Iterable, directory: Path) -> Path | None:
+    """Each participant's bonus under `rule`, from the summaries of their completed trials'
+    recordings, written to `<directory>/bonuses.csv` under the platform's participant id (the
+    study's own where the link gave none); None if the study pays no bonus. `participants` are the
+    study's (core.Participant: this module sits below the core, which reads its config)."""
     if rule is None:
         return None
     rows = []
-    for participant in study.participants.values():
+    for participant in participants:
         trials = []
         for attempt in participant.attempts:
             if attempt["status"] == "done":
-                summary = load(recording_path(study.directory / "recordings", attempt["match"])).summary
+                summary = load(recording_path(directory / "recordings", attempt["match"])).summary
                 trials.append((summary.kills, summary.points) if summary else (0, 0))
         rows.append((participant.worker or participant.id, rule.amount(trials)))
-    path = study.directory / BONUSES
+    path = directory / BONUSES
     path.write_text(bonus_file(rows))
     return path

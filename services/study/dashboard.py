@@ -27,7 +27,7 @@ import zenoh
 from websockets.asyncio.server import ServerConnection
 
 from services.human.gateway import Gateway, Web, receive_first, refuse, watch
-from services.launch import watcher_bus
+from services.runtime.launch import watcher_bus
 from services.study.core import Admission, Study
 from shared.secret import same_secret
 

@@ -4,7 +4,7 @@ A match host is a `tsf` process on a machine of its own, connected to the study'
 holds a liveliness token (`tsf/host/<host>/alive`) and puts its slots every second; a study server
 offers it a match (MatchOffer, a query), which it accepts while it has a free slot, the same
 library and the same rules. Each accepted match is started here as any match is
-(services/launch.run_match: sim, agent, adapter, recorder as processes), with one difference: its
+(services/runtime/launch.run_match: sim, agent, adapter, recorder as processes), with one difference: its
 sim, the match's router, also connects to the study's router, so the participant's seat, bridged
 by the study server, reaches it over the router under the match's own keys. When the match ends
 the host puts MatchDone with its recording's size and sha256, and serves the recording in chunks
@@ -21,10 +21,10 @@ from pathlib import Path
 
 import zenoh
 
-from services.adapter.core import AdapterConfig
+from services.adapter.seat import SeatSpec
 from services.agent import library
-from services.launch import MatchPlan, run_match
 from services.recorder.service import recording_path
+from services.runtime.launch import MatchPlan, run_match
 from shared import keys
 from shared.bus import BusConfig, Drops, subscribe, why
 from shared.errors import Failure, UsageError
@@ -69,7 +69,9 @@ def plan_of(offer: MatchOffer, directory: Path, router: BusConfig) -> MatchPlan:
     if offer.adapter:
         empty = [role for role in ROLES if not seats[role]]
         adapter = (
-            AdapterConfig.parse(offer.adapter, role=empty[0], seed=offer.seed) if len(empty) == 1 else None
+            SeatSpec.parse(offer.adapter, "adapter").adaptive(empty[0], offer.seed)
+            if len(empty) == 1
+            else None
         )
         if not adapter:
             raise UsageError("adapter", offer.adapter, "not an adaptive agent for the one empty seat")

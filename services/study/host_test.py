@@ -10,10 +10,11 @@ from pathlib import Path
 import pytest
 
 from services.adapter.core import AdapterConfig
-from services.launch import HUMAN, MatchPlan
+from services.runtime.launch import MatchPlan
 from services.study.host import Host, offer_of, plan_of, sha256
 from shared import keys
 from shared.bus import BusConfig
+from shared.game import HUMAN
 from shared.messages import (
     CHUNK,
     MatchOffer,

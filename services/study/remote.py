@@ -24,8 +24,8 @@ from pathlib import Path
 
 import zenoh
 
-from services.launch import MatchPlan
 from services.recorder.service import recording_path
+from services.runtime.launch import MatchPlan
 from services.study.host import offer_of
 from shared import keys
 from shared.bus import BusConfig, Drops, subscribe, why

@@ -1,5 +1,5 @@
 """`tsf study`: the study's front door on the human gateway. Each participant's socket stays open
-across all their trials; each trial is a match of its own (services/launch.run_match: sim, agent,
+across all their trials; each trial is a match of its own (services/runtime/launch.run_match: sim, agent,
 adapter for adaptive variants, recorder), the participant's seat bridged from this process.
 
 Many participants play at once, each match on its own: its sim is the match's zenoh router on a
@@ -52,16 +52,16 @@ from websockets.protocol import State
 
 from services.human.core import BadInput, Controls, PerAddress, RateLimit
 from services.human.gateway import Bridge, Gateway, Handler, Outbox, Web, receive_first, refuse
-from services.launch import HUMAN, MatchPlan, match_buses, run_match
 from services.recorder.recording import load
 from services.recorder.service import recording_path
+from services.runtime.launch import MatchPlan, match_buses, run_match
 from services.study.core import SET_UP, Admission, Participant, Study, StudyConfig, Trial, worker_id
 from services.study.crowd import FAILS, attention_check, write_bonuses
 from services.study.dashboard import Dashboard, overview
 from services.study.remote import Remote
 from shared import keys
 from shared.bus import BusConfig, free_endpoint, until_stopped
-from shared.game import FPS, other
+from shared.game import FPS, HUMAN, other
 from shared.secret import same_secret, signature
 
 log = logging.getLogger("tsf.study")
@@ -648,6 +648,7 @@ def run_study(
         if remote is not None:
             remote.close()
         study.close()
-        if (bonuses := write_bonuses(study)) is not None:
+        bonuses = write_bonuses(study.config.crowd.bonus, study.participants.values(), study.directory)
+        if bonuses is not None:
             log.info("bonuses written to %s", bonuses)
     return study

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import websockets
 
-from services.agent.library import policy_for
+from services.agent.seats import policy_for
 from services.human.core import action_keys
 from services.sim.observation import as_observation
 

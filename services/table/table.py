@@ -14,7 +14,7 @@ import statistics
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from services.agent import library
+from services.agent import library, networks
 from services.provenance import provenance
 from shared.game import SEEDS, GameConfig
 
@@ -68,8 +68,8 @@ def run_jobs(todo: list[Job], config: GameConfig | None = None) -> list[list[flo
     lanes = [(baits.index(job.bait), shooters.index(job.shooter), seed) for job in todo for seed in job.seeds]
     bait_of, shooter_of, seeds = (list(column) for column in zip(*lanes, strict=True))
     played = play_pairs(
-        [library.load(k, config) for k in baits],
-        [library.load(k, config) for k in shooters],
+        [networks.load(k, config) for k in baits],
+        [networks.load(k, config) for k in shooters],
         bait_of, shooter_of, seeds, config,
     )  # fmt: skip
     out, start = [], 0
@@ -133,7 +133,7 @@ class Table:
             "mean": {b: {s: round(self.mean(b, s), 6) for s in self.shooters} for b in self.baits},
             "stderr": {b: {s: round(self.stderr(b, s), 6) for s in self.shooters} for b in self.baits},
             "results": self.results,
-            "provenance": provenance(table="self") | {"library": self.library, "config": self.config},
+            "provenance": provenance(self.library, "self") | {"config": self.config},
         }
         path.write_text(json.dumps(record, indent=1) + "\n")
 

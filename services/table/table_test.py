@@ -8,7 +8,7 @@ import math
 
 import pytest
 
-from services.agent import library
+from services.agent import library, networks
 from services.sim.batch_play import play_batch
 from services.sim.play import play, summarize
 from services.table.table import StaleTable, Table, assemble, jobs, run_job, run_jobs
@@ -27,7 +27,7 @@ def test_jobs_cover_every_pair_and_seed_once():
 def test_a_job_is_its_games_whatever_batch_they_are_played_in():
     job = jobs(["B5"], ["S5"], games=2, chunk=2)[0]
     alone = [
-        play_batch(library.load("B5"), library.load("S5"), [seed])[0].kills_per_minute for seed in (0, 1)
+        play_batch(networks.load("B5"), networks.load("S5"), [seed])[0].kills_per_minute for seed in (0, 1)
     ]
     assert run_job(job) == alone == run_job(job)
 
@@ -36,7 +36,7 @@ def test_a_job_is_its_games_whatever_batch_they_are_played_in():
 def test_batched_games_agree_with_scalar_games_in_distribution():
     """Batched sampling draws other random streams than the scalar policies: same mean kills/min
     within three standard errors of the difference, over 100 games of a competent pair."""
-    bait, shooter = library.load("B5"), library.load("S5")
+    bait, shooter = networks.load("B5"), networks.load("S5")
     batched = summarize(play_batch(bait, shooter, list(range(100))))
     scalar = summarize([play(bait, shooter, seed) for seed in range(100)])
     assert abs(batched.mean - scalar.mean) < 3 * math.hypot(batched.stderr, scalar.stderr)

@@ -10,6 +10,7 @@ wedged sessions when many peers came and went) is not used.
 
 from __future__ import annotations
 
+import re
 import secrets
 import sys
 import threading
@@ -19,19 +20,18 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from services.adapter.core import AdapterConfig
-from services.agent.library import check_seat
+from services.adapter.seat import check_live
 from services.agent.outside import record_name
-from services.processes import Processes
 from services.recorder.log import make_way
 from services.recorder.recording import load
 from services.recorder.service import recording_path
+from services.runtime.processes import Processes
 from shared import keys
 from shared.bus import BusConfig, free_endpoint, session, subscribe
-from shared.errors import Failure
-from shared.game import ROLES
-from shared.messages import AdapterStatus, State, Summary
+from shared.errors import Failure, UsageError
+from shared.game import HUMAN, ROLES
+from shared.messages import POLICY_NAME, AdapterStatus, State, Summary
 
-HUMAN = "human"  # a seat's policy key for a person: no agent is started, a gateway plays it
 # Priorities, in nice steps from the launcher's: the sim raises itself at its first frame (where
 # permitted; its start-up runs at the launcher's), so every start-up runs below the live sims and
 # one match's start does not take another's frames. The recorder, which drains a queue, runs below
@@ -63,10 +63,14 @@ class MatchPlan:
         are checked here, or the adapter would stop with them once the match had begun)."""
         keys.check_match(self.match)
         for role in ROLES:
-            if getattr(self, role) != HUMAN and (self.adapter is None or role != self.adapter.role):
-                check_seat(getattr(self, role), role, f"--{role}")
+            if self.adapter is None or role != self.adapter.role:
+                check_live(getattr(self, role), role, f"--{role}")
         if self.adapter is not None:
             self.adapter.threshold()
+            if not re.fullmatch(POLICY_NAME, self.adapter.name):  # what the Start record names the seat
+                raise UsageError(
+                    "--adaptive", self.adapter.name, "a name longer than a recording's 64 characters"
+                )
 
     def policies(self) -> dict[str, str]:
         """Each seat's starting policy key; an adaptive seat starts with the adapter's initial policy."""

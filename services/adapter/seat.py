@@ -1,0 +1,172 @@
+"""What plays a seat, as one value: `SeatSpec`, read from its name once (`parse`) and named back
+(`str`), the two inverses; partners.build turns one into what plays.
+
+    B5, S1, circle, random   a key: a library policy or a scripted one (services/agent/seats.py)
+    circle(radius=150)       a scripted rule with other settings (any of its constructor's numbers)
+    my_bait.zip              an SB3 model (services/agent/outside.py)
+    package.module:attr      a plug-in: your own policy object, or a callable that returns one
+    proxy:DIR                a proxy cloned from recorded people (services/proxy)
+    humans:DIR@NAME          participant NAME's stand-in fitted by `tsf humans fit`
+    human                    a person (no agent plays the seat; a gateway does)
+    adaptive-T400-bayes-dwell-ood-guard   the adaptive agent, with every setting of its
+                             AdapterConfig that is not the default: _initial-random, _warmup150,
+                             _dwell20, _hazard0.01, _noise0.1 (AdapterConfig.name and .parse)
+    noisy(X), delayed(X), sticky(X), switch(X,Y), human(X), human(X,Y)   wrappers (partners.py);
+                             delayed(X,frames=N) and human(X,skill=...,input_ms=...) with settings
+
+The adaptive agent's seat and seed come from where it plays (the seat it is given, the match's
+seed), so its name carries the other seven settings. Old names read as before: every name a
+recording, study config or result table holds parses to the same seat.
+"""
+
+from __future__ import annotations
+
+import inspect
+import re
+from collections.abc import Iterator
+from dataclasses import dataclass, replace
+
+from services.adapter.core import ADAPTIVE, AdapterConfig, setting_text
+from services.agent.outside import is_outside
+from services.agent.proxy import PROXY
+from services.agent.scripted import SCRIPTED
+from services.agent.seats import check_seat
+from shared.errors import UsageError
+from shared.game import HUMAN
+
+KEY, RULE, ZIP, PLUGIN, PROXY_KIND, FITTED, PERSON, ADAPTIVE_KIND = (
+    "key",
+    "rule",
+    "zip",
+    "plugin",
+    "proxy",
+    "fitted",
+    "person",
+    "adaptive",
+)
+HUMANS = "humans:"  # stand-ins fitted by `tsf humans fit`: humans:DIR@NAME (services/adapter/humans.py)
+WRAPPERS = {
+    "noisy": (1,),
+    "delayed": (1,),
+    "sticky": (1,),
+    "switch": (2,),
+    "human": (1, 2),
+}  # partners each takes
+WRAPPER_SETTINGS = {"delayed": ("frames",), "human": ("skill", "input_ms")}  # their values: partners.build
+KINDS = (KEY, RULE, ZIP, PLUGIN, PROXY_KIND, FITTED, PERSON, ADAPTIVE_KIND, *WRAPPERS)
+_CALL = re.compile(r"^(\w+)\((.*)\)$")
+
+
+@dataclass(frozen=True)
+class SeatSpec:
+    """One seat's player: its kind (KINDS), and what that kind needs. `key` is a key, a rule's name,
+    a .zip path, a module:attr, a proxy:DIR or humans:DIR@NAME; `settings` a rule's numbers or a
+    wrapper's settings as written; `inner` a wrapper's partners; `adapter` the adaptive agent's
+    whole config."""
+
+    kind: str
+    key: str = ""
+    settings: tuple[tuple[str, float | str], ...] = ()
+    inner: tuple[SeatSpec, ...] = ()
+    adapter: AdapterConfig | None = None
+
+    @classmethod
+    def parse(cls, name: str, option: str = "--partner") -> SeatSpec:
+        """The seat a name stands for; a UsageError about `option` for a name that is none."""
+        name = name.strip()
+        if name == HUMAN:
+            return cls(PERSON)
+        if name.startswith(ADAPTIVE):
+            return cls(ADAPTIVE_KIND, adapter=AdapterConfig.parse(name, option))
+        call = _CALL.match(name)
+        if call and call[1] in WRAPPERS:
+            parts = arguments(call[2])
+            settings = [part for part in parts if "=" in part and "(" not in part]
+            parts = [part for part in parts if part not in settings]
+            if len(parts) not in WRAPPERS[call[1]]:
+                counts = " or ".join(("one", "two")[n - 1] for n in WRAPPERS[call[1]])
+                raise UsageError(option, name, f"{call[1]}(...) needs {counts} partners, not {len(parts)}")
+            named = tuple(tuple(part.strip() for part in s.partition("=")[::2]) for s in settings)
+            if named and call[1] not in WRAPPER_SETTINGS:
+                raise UsageError(option, name, f"{call[1]}(...) takes no settings")
+            return cls(call[1], settings=named, inner=tuple(cls.parse(part, option) for part in parts))
+        if call and call[1] in SCRIPTED:
+            return cls(RULE, call[1], rule_settings(name, call[1], call[2], option))
+        if name.endswith(".zip"):
+            return cls(ZIP, name)
+        if name.startswith(PROXY):
+            return cls(PROXY_KIND, name)
+        if name.startswith(HUMANS):
+            return cls(FITTED, name)
+        if is_outside(name):
+            return cls(PLUGIN, name)
+        if not name:
+            raise UsageError(option, name, "no seat named")
+        return cls(KEY, name)
+
+    def __str__(self) -> str:
+        if self.kind == PERSON:
+            return HUMAN
+        if self.kind == ADAPTIVE_KIND:
+            return self.adapter.name
+        if self.kind in WRAPPERS:
+            settings = (f"{setting}={value}" for setting, value in self.settings)
+            return f"{self.kind}({','.join([*map(str, self.inner), *settings])})"
+        if self.kind == RULE:
+            return f"{self.key}({','.join(f'{s}={setting_text(v)}' for s, v in self.settings)})"
+        return self.key
+
+    def adaptive(self, role: str, seed: int = 0) -> AdapterConfig | None:
+        """The adaptive agent it names, in `role`'s seat of a game of `seed`; None for any other."""
+        return replace(self.adapter, role=role, seed=seed) if self.adapter else None
+
+    def walk(self) -> Iterator[SeatSpec]:
+        """This spec and every spec inside it."""
+        yield self
+        for spec in self.inner:
+            yield from spec.walk()
+
+    @property
+    def plugins(self) -> tuple[str, ...]:
+        """The `module:attr` plug-ins it names, inside wrappers too: what a worker must import."""
+        return tuple(dict.fromkeys(s.key for s in self.walk() if s.kind == PLUGIN))
+
+
+def check_live(name: str, role: str, option: str) -> SeatSpec:
+    """The spec of a live match's seat, refused (UsageError) where nothing can play it live: a
+    person, or a policy by key (library, scripted, .zip, plug-in, proxy; loaded to see which seat it
+    plays). Partners made of policies (wrappers, rules with other settings) play in bulk only, and
+    the adaptive agent takes its seat through the adapter."""
+    spec = SeatSpec.parse(name, option)
+    if spec.kind in (KEY, ZIP, PLUGIN, PROXY_KIND):
+        check_seat(spec.key, role, option)
+    elif spec.kind != PERSON:
+        raise UsageError(option, name, "plays in bulk evaluations only, not in a live match")
+    return spec
+
+
+def arguments(text: str) -> list[str]:
+    """The top-level, comma-separated arguments of a wrapper, which may nest."""
+    depth, start, out = 0, 0, []
+    for i, char in enumerate(text):
+        depth += {"(": 1, ")": -1}.get(char, 0)
+        if char == "," and depth == 0:
+            out.append(text[start:i].strip())
+            start = i + 1
+    return [*out, text[start:].strip()]
+
+
+def rule_settings(name: str, rule: str, text: str, option: str) -> tuple[tuple[str, float], ...]:
+    """A scripted rule's `setting=number, ...`, each a number its constructor takes."""
+    settings = [s for s in inspect.signature(SCRIPTED[rule]).parameters if s not in ("epsilon", "config")]
+    values = []
+    for item in filter(None, (a.strip() for a in text.split(","))):
+        setting, _, value = (part.strip() for part in item.partition("="))
+        try:
+            if setting not in settings:
+                raise ValueError(setting)
+            values.append((setting, float(value)))
+        except ValueError:
+            problem = f"{item!r} is not SETTING=NUMBER for a setting of {rule}"
+            raise UsageError(option, name, problem, settings) from None
+    return tuple(values)

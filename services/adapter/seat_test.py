@@ -1,0 +1,113 @@
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from services.adapter.core import INITIAL, STRATEGIES, WINDOWS, AdapterConfig
+from services.adapter.partners import make_partner, population
+from services.adapter.seat import KEY, PERSON, PLUGIN, PROXY_KIND, RULE, ZIP, SeatSpec, check_live
+from services.jobs.kinds import plugins_in
+from services.runtime.launch import MatchPlan
+from shared.errors import UsageError
+from shared.game import FRAMES, HUMAN, ROLES
+
+probability = st.floats(0.0, 1.0, exclude_max=True, allow_nan=False)
+frames = st.integers(0, FRAMES.high)
+adapters = st.builds(
+    AdapterConfig,
+    window=st.integers(WINDOWS.low, WINDOWS.high),
+    strategy=st.sampled_from(STRATEGIES),
+    initial=st.sampled_from(INITIAL),
+    warmup=frames,
+    dwell=frames,
+    hazard=probability,
+    noise=probability,
+)
+numbers = st.floats(allow_nan=False, allow_infinity=False)
+leaves = st.one_of(
+    st.sampled_from(["B1", "B5", "S7", "circle", "mirror", "idle", "random"]).map(lambda k: SeatSpec(KEY, k)),
+    st.from_regex(r"\A[a-z][a-z0-9_/]{0,12}\.zip\Z").map(lambda k: SeatSpec(ZIP, k)),
+    st.from_regex(r"\A[a-z][a-z0-9_.]{0,8}:[A-Za-z][A-Za-z0-9_]{0,8}\Z").map(lambda k: SeatSpec(PLUGIN, k)),
+    st.from_regex(r"\Aproxy:[a-z0-9_/]{1,12}\Z").map(lambda k: SeatSpec(PROXY_KIND, k)),
+    st.lists(
+        st.tuples(st.sampled_from(["radius", "speed"]), numbers), max_size=2, unique_by=lambda s: s[0]
+    ).map(lambda s: SeatSpec(RULE, "circle", tuple(s))),
+)
+partners = st.recursive(
+    leaves,
+    lambda inner: st.one_of(
+        st.tuples(st.sampled_from(["noisy", "delayed", "sticky"]), inner).map(
+            lambda w: SeatSpec(w[0], inner=(w[1],))
+        ),
+        st.tuples(inner, inner).map(lambda pair: SeatSpec("switch", inner=pair)),
+        st.lists(inner, min_size=1, max_size=2).map(lambda hands: SeatSpec("human", inner=tuple(hands))),
+    ),
+    max_leaves=5,
+)
+specs = st.one_of(
+    partners, st.just(SeatSpec(PERSON)), adapters.map(lambda a: SeatSpec("adaptive", adapter=a))
+)
+
+
+@given(specs)
+def test_parse_and_str_are_inverses(spec):
+    assert SeatSpec.parse(str(spec)) == spec
+    assert str(SeatSpec.parse(str(spec))) == str(spec)
+
+
+@given(adapters)
+def test_the_adaptive_name_carries_the_whole_config_but_seat_and_seed(config):
+    assert AdapterConfig.parse(config.name) == config
+    assert SeatSpec.parse(config.name).adaptive("bait", 7) == AdapterConfig(
+        **{**config.__dict__, "role": "bait", "seed": 7}
+    )
+
+
+def test_old_names_read_as_before():
+    assert AdapterConfig.parse("adaptive-T400-bayes", role="bait") == AdapterConfig("bait", 400, "bayes")
+    assert AdapterConfig().name == "adaptive-T400-bayes-dwell-ood-guard"  # the default's name is unchanged
+    assert AdapterConfig(noise=0.1, initial="random", dwell=20).name == (
+        "adaptive-T400-bayes-dwell-ood-guard_initial-random_dwell20_noise0.1"
+    )
+    for role in ROLES:
+        for name in (name for group in population(role).values() for name in group):
+            assert str(SeatSpec.parse(name)) == name
+            assert make_partner(name, role).key == name
+    assert SeatSpec.parse(HUMAN).kind == PERSON and SeatSpec.parse("S5").adaptive("shooter") is None
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        "adaptive-T400-nonsense",
+        "adaptive-T400-cem_noise",
+        "adaptive-T400-cem_colour3",
+        "switch(B5)",
+        "circle(size=3)",
+    ],
+)
+def test_a_name_that_is_no_seat_is_one_usage_error(name):
+    with pytest.raises(UsageError):  # about --partner, or the adapter's own option (--strategy)
+        SeatSpec.parse(name)
+
+
+def test_plugins_are_found_inside_wrappers_and_a_live_seat_is_a_person_or_a_key():
+    assert SeatSpec.parse("noisy(switch(B5,my.mod:Alice))").plugins == ("my.mod:Alice",)
+    assert plugins_in(["human(proxy:/p0)", "a.zip", "sticky(b.c:D)", "b.c:D"]) == ("b.c:D",)
+    assert (
+        check_live(HUMAN, "bait", "--bait").kind == PERSON and check_live("B5", "bait", "--bait").kind == KEY
+    )
+    for name in ("noisy(B5)", "circle(radius=100)", "adaptive-T400-cem"):
+        with pytest.raises(UsageError, match="bulk evaluations only"):
+            check_live(name, "bait", "--bait")
+
+
+def test_a_live_match_refuses_an_adaptive_name_no_recording_can_hold():
+    config = AdapterConfig(
+        window=108000, strategy="bayes-dwell-ood-guard-memory", hazard=0.123456789, noise=0.1234567
+    )
+    with pytest.raises(UsageError, match="64 characters"):
+        MatchPlan("m", adapter=config)
+    assert (
+        MatchPlan("m", adapter=AdapterConfig(noise=0.1)).adapter.name
+        == "adaptive-T400-bayes-dwell-ood-guard_noise0.1"
+    )

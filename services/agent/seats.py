@@ -1,0 +1,44 @@
+"""What plays a seat: a policy by key, and the check that a key can play a seat.
+
+A key is a library policy (B1-B9, S1-S7, and those of TSF_LIBRARY: networks.py), a scripted one
+(scripted.py), or a policy from outside the library: an SB3 `.zip`, a `module:attr` or a
+`proxy:DIR` (outside.py).
+"""
+
+from __future__ import annotations
+
+from services.agent import library, outside
+from services.agent.networks import load
+from services.agent.scripted import scripted_keys, scripted_policy
+from shared.errors import UsageError
+from shared.game import ROLES, Policy
+
+
+def seat_keys(role: str) -> list[str]:
+    """Every key that can play `role`'s seat: the library's policies of that role, then the scripted ones."""
+    return [*library.keys(role), *scripted_keys(role)]
+
+
+def check_seat(key: str, role: str, option: str = "--policy") -> None:
+    """Refuse (UsageError) a seat that is not one, or a key that cannot play it: the line names the
+    option, the value and every key that can. A policy from outside (outside.py) is loaded to see
+    which seat it plays."""
+    if role not in ROLES:
+        raise UsageError("--role", role, "not a seat", ROLES)
+    if outside.is_outside(key):
+        outside.load(key, role, option)
+        return
+    if key not in seat_keys(role):
+        other = [r for r in ROLES if key in seat_keys(r)]
+        problem = f"plays the {other[0]} seat, not the {role}" if other else f"no policy of the {role} seat"
+        raise UsageError(option, key, problem, seat_keys(role))
+
+
+def policy_for(key: str, role: str, option: str = "--policy") -> Policy:
+    """Any policy a seat can play, by key: a library policy (B1-B9, S1-S7, and those of TSF_LIBRARY),
+    a scripted one, an SB3 `.zip` or a `module:attr` (outside.py); a key that cannot play the seat is
+    a UsageError about `option` (check_seat)."""
+    if outside.is_outside(key):
+        return outside.load(key, role, option)
+    check_seat(key, role, option)
+    return load(key) if key in library.registry() else scripted_policy(key, role)

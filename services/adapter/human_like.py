@@ -7,7 +7,7 @@ ours and how they were calibrated:
 
 - **Looks and delay.** The person looks now and then (every LOOK_MS on average) and takes in the
   state of a reaction time ago (ex-Gaussian), plus `input_ms`, the delay of the screen and keys
-  they play through.
+  they play through: by default the study's page (PAGE_INPUT_MS), `input_ms=0` for none.
 - **Anticipation.** Between looks they act on that state moved to now by a forward model (the
   game's own rules, engine.steer and engine.fortress_turn): their own ship by the keys they
   pressed since, the partner, shells and missiles coasting, and over the foreseen part of the lag
@@ -48,6 +48,9 @@ FRAME_MS = 1000.0 / 30.0
 SESSION_TRIALS = 3  # the study plays three one-minute trials with the same partner
 STAND_INS = "stand_ins.json"  # what `tsf humans fit` writes into DIR
 SKILLS = {"novice": 0.0, "typical": 0.65, "practised": 1.0}  # typical: calibrated (docs/humans.md)
+# What the study's page adds to a person's delay: a key is seen 2 frames later there (median 53-62
+# ms, docs/human.md), 1 frame in process (an action chosen on frame t shows in t + 1); so 1 frame.
+PAGE_INPUT_MS = 33.0
 # A trait as (first-time player, practised player); skill s in [0, 1] lies between, linearly.
 RT_MU = (260.0, 190.0)  # ms: the ex-Gaussian's mu, the person's mean
 RT_MU_PERSON_SD, RT_MU_GAME_SD = 25.0, 15.0  # ms: between people, between one person's games
@@ -100,13 +103,18 @@ class HumanLike:
     view = "world"
 
     def __init__(
-        self, first, second=None, skill: float = SKILLS["typical"], input_ms: float = 0.0, config=None
+        self,
+        first,
+        second=None,
+        skill: float = SKILLS["typical"],
+        input_ms: float = PAGE_INPUT_MS,
+        config=None,
     ) -> None:
         if second is not None and first.role != second.role:
             raise ValueError(f"human({first.key},{second.key}): both must share a role")
         self.first, self.second, self.skill, self.input_ms = first, second, float(skill), float(input_ms)
         settings = [] if skill == SKILLS["typical"] else [f"skill={_skill_name(skill)}"]
-        settings += [f"input_ms={input_ms:g}"] if input_ms else []
+        settings += [f"input_ms={input_ms:g}"] if input_ms != PAGE_INPUT_MS else []
         inner = [p.key for p in (first, second) if p is not None]
         self.key = f"human({','.join(inner + settings)})"
         self.role = first.role

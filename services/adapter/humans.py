@@ -146,7 +146,8 @@ def read_trial(path: Path, role: str) -> Trial:
     vulnerable = np.array([s.obs[role][ob.FORTRESS + ob.F_VULNERABLE] for s in states[:-1]])
     opened = np.flatnonzero(np.diff(vulnerable) > 0.5) + 1
     obs, alive_actions, _ = pairs(recording, role)
-    agent = record.get("agent") or recording.start.policies.get(other(role), "")
+    # what played the other seat; a study's sidecar names only the label the participant saw
+    agent = recording.start.policies.get(other(role)) or record.get("agent", "")
     summary = recording.summary
     return Trial(actions, opened, summary.kills_per_minute, agent, recording.start.seed, obs, alive_actions)
 

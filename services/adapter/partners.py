@@ -12,7 +12,8 @@ any worker process:
     human(B5)          B5 played by a simulated hand: reaction delay, held keys, lapses, slips
     human(B1,B5)       the same, drifting from B1's style to B5's over a session (human_like.py)
     human(B5,skill=novice)  a first-time player (skill: novice, typical (the default), practised,
-                       or a number in [0, 1]); input_ms=40 adds the screen and keyboard's delay
+                       or a number in [0, 1]); input_ms=N: the screen and keys' delay (default:
+                       the study page's, 33; input_ms=0 for none)
     circle(radius=150,speed=3)  a scripted rule with other settings (any of its constructor's
                        numbers): a hand-written partner whose style no library policy has
     package.module:attr  your own partner: an object with the policy protocol's key, role, view,

@@ -10,9 +10,10 @@ from dataclasses import dataclass, field
 
 import websockets
 
-from services.agent.seats import policy_for
+from services.adapter.partners import make_partner
 from services.human.core import action_keys
 from services.sim.observation import as_observation
+from services.sim.play import policy_seed
 
 
 @dataclass
@@ -56,8 +57,10 @@ async def stand_in(
     link: dict[str, str] | None = None,
     attentive: bool = True,
 ) -> StandInReport:
-    """Take part in the study served at `url` (the page's address), playing each role with a policy
-    key (default: the scripted circle bait and mirror shooter). `resume` = (participant, key) comes
+    """Take part in the study served at `url` (the page's address), playing each role with a partner
+    by name (services/adapter/partners.py: a policy key, or `human(B5,input_ms=0)`, a stand-in
+    person whose screen is the page itself; default: the scripted circle bait and mirror shooter),
+    its trial k reset as in game seed `seed` + k - 1. `resume` = (participant, key) comes
     back as an earlier participant; `leave_after` > 0 drops the connection after that many frames,
     as a participant who walks away. `test` is the server's test token (Serving.test_token),
     without which it gets no observation values to play from; `worker` a crowd-sourcing worker
@@ -103,8 +106,8 @@ async def stand_in(
                 report.again += message.get("again", False)
                 report.role = message["role"]
                 report.agents.append(message["agent"])
-                policy = policy_for(policies[report.role], report.role)
-                policy.reset(seed + len(report.agents))
+                policy = make_partner(policies[report.role], report.role)
+                policy.reset(policy_seed(seed + len(report.agents) - 1, report.role))
                 await ws.send(json.dumps({"type": "ready"}))
                 ready = time.monotonic()
             elif kind == "state":

@@ -61,6 +61,9 @@ _SHELLS2 = list(range(ob.SHELLS, ob.SHELLS + 2 * ob.PROJECTILE_SIZE))
 _UP = [ob.FORTRESS + ob.F_ALIVE]
 _PARTNER = [ob.PARTNER + f for f in (ob.X, ob.Y, ob.VX, ob.VY)]
 _FORTRESS = [ob.FORTRESS + f for f in (ob.F_COS, ob.F_SIN, ob.F_ALIVE, ob.F_VULNERABLE)]
+# Rule thrust heads by the role that plays it unless a recipe names the other as its thrust_rule:
+# "speed-cap" thrusts while under the recipe's speed cap, "mirror" as the mirror shooter capped at it.
+THRUST_RULES = {"bait": "speed-cap", "shooter": "mirror"}
 FEATURES: dict[str, list[int]] = {
     "self+shells": _SELF + _SHELLS2 + _UP,
     "self+shells+partner": _SELF + _SHELLS2 + _UP + _PARTNER,
@@ -84,6 +87,7 @@ class Recipe:
     reward: str = ""
     weights: dict[str, float] = field(default_factory=dict)  # reward term weights
     speed_cap: float = 0.0  # px/frame, the thrust rule's cap
+    thrust_rule: str = ""  # a rule thrust head's rule (THRUST_RULES); "" for the role's own
     temperature: float = 0.0  # DQN: softmax temperature over Q values
     steps: int = 0
     seed: int = 0
@@ -140,6 +144,9 @@ def _registry(root: Path) -> dict[str, Recipe]:
             raise ValueError(f"registry entry {key}: unknown role {recipe.role!r}")
         if recipe.algorithm and recipe.features not in FEATURES:
             raise ValueError(f"registry entry {key}: unknown feature set {recipe.features!r}")
+        if recipe.thrust_rule not in ("", *THRUST_RULES.values()):
+            rule, expected = recipe.thrust_rule, sorted(THRUST_RULES.values())
+            raise ValueError(f"registry entry {key}: unknown thrust_rule {rule!r}; expected {expected}")
         recipes[key] = recipe
     return recipes
 
@@ -202,43 +209,45 @@ def speed(obs: np.ndarray) -> float:
     return math.hypot(float(obs[ob.SELF + ob.VX]), float(obs[ob.SELF + ob.VY])) * ob.VELOCITY_SCALE
 
 
+def speed_capped(recipe: Recipe) -> bool:
+    """Whether the recipe's rule thrust is the speed cap (a bait's own rule, the study's RL
+    shooters' by their description) rather than the mirror shooter's (a shooter's own)."""
+    return (recipe.thrust_rule or THRUST_RULES[recipe.role]) == "speed-cap"
+
+
 def rule_heads(recipe: Recipe, obs: np.ndarray, config: GameConfig) -> dict[str, int]:
     """The rule's choice for every head the network does not choose.
 
-    A bait thrusts while under the recipe's speed cap and never fires. A shooter thrusts as the
-    mirror shooter with the recipe's speed cap would (toward the point opposite the bait, holding
-    once there) and fires when the shot is good (scripted.good_shot). Shooter rules read the
+    Thrust: while under the recipe's speed cap (speed_capped), or as the mirror shooter with the
+    recipe's speed cap would (toward the point opposite the bait, holding once there). Fire: never
+    for a bait; a shooter fires when the shot is good (scripted.good_shot). Shooter rules read the
     world view."""
     out = {}
-    if recipe.role == "bait":
-        if "thrust" not in recipe.learned:
-            out["thrust"] = int(speed(obs) < recipe.speed_cap)
-        if "fire" not in recipe.learned:
-            out["fire"] = 0
-        return out
     if "thrust" not in recipe.learned:
-        out["thrust"] = _mirror(recipe.speed_cap, config).choose(obs)[1]
+        if speed_capped(recipe):
+            out["thrust"] = int(speed(obs) < recipe.speed_cap)
+        else:
+            out["thrust"] = _mirror(recipe.speed_cap, config).choose(obs)[1]
     if "fire" not in recipe.learned:
-        out["fire"] = int(good_shot(obs, config, 4.0, 40.0))
+        out["fire"] = 0 if recipe.role == "bait" else int(good_shot(obs, config, 4.0, 40.0))
     return out
 
 
 def rule_heads_batch(recipe: Recipe, observations: np.ndarray, config: GameConfig) -> dict[str, np.ndarray]:
     """rule_heads() of every row: each head's (rows,) choices."""
-    rows, out = len(observations), {}
-    if recipe.role == "bait":
-        if "thrust" not in recipe.learned:
-            v = observations[:, [ob.SELF + ob.VX, ob.SELF + ob.VY]].astype(np.float64)
-            out["thrust"] = (np.hypot(v[:, 0], v[:, 1]) * ob.VELOCITY_SCALE < recipe.speed_cap).astype(
-                np.int64
-            )
-        if "fire" not in recipe.learned:
-            out["fire"] = np.zeros(rows, np.int64)
-        return out
+    out = {}
     if "thrust" not in recipe.learned:
-        out["thrust"] = _mirror(recipe.speed_cap, config).choose_batch(observations)[:, 1]
+        if speed_capped(recipe):
+            v = observations[:, [ob.SELF + ob.VX, ob.SELF + ob.VY]].astype(np.float64)
+            capped = np.hypot(v[:, 0], v[:, 1]) * ob.VELOCITY_SCALE < recipe.speed_cap
+            out["thrust"] = capped.astype(np.int64)
+        else:
+            out["thrust"] = _mirror(recipe.speed_cap, config).choose_batch(observations)[:, 1]
     if "fire" not in recipe.learned:
-        out["fire"] = good_shot_batch(observations, config, 4.0, 40.0).astype(np.int64)
+        if recipe.role == "bait":
+            out["fire"] = np.zeros(len(observations), np.int64)
+        else:
+            out["fire"] = good_shot_batch(observations, config, 4.0, 40.0).astype(np.int64)
     return out
 
 

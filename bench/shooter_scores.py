@@ -1,7 +1,7 @@
 """Shooters of a library of one's own beside the shipped ones of the same keys: kills/min (± s.e.)
 with every shipped bait on the table's seeds (0-19, so the shipped rows are the table's), and how
-fast each shooter moves (mean px/frame over the frames it is alive). docs/library.md compares the
-speed-cap try of S1-S3 with it.
+fast each shooter moves (mean px/frame over the frames it is alive), how often it dies (per game,
+by cause) and fires. docs/library.md compares the speed-cap try of S1-S3 with it.
 
     .venv/bin/python bench/shooter_scores.py DIR S1 [S2 ...] [--games 20]
 """
@@ -19,8 +19,9 @@ from services.sim.batch_play import Seat, results
 from services.sim.play import summarize
 
 
-def scores(shooter, baits: list[str], games: int) -> tuple[list, float]:  # noqa: ANN001 - a Policy
-    """(each bait's Summary, the shooter's mean speed): one batch, a lane per bait and seed."""
+def scores(shooter, baits: list[str], games: int) -> tuple[list, float, list]:  # noqa: ANN001 - a Policy
+    """(each bait's Summary, the shooter's mean speed, every game's result): one batch, a lane per
+    bait and seed."""
     seeds = list(range(games)) * len(baits)
     bait_of = np.repeat(np.arange(len(baits)), games)
     batch = BatchGame(len(seeds), None, seeds)
@@ -35,7 +36,16 @@ def scores(shooter, baits: list[str], games: int) -> tuple[list, float]:  # noqa
         moved += float(np.hypot(s.vx[alive, 1], s.vy[alive, 1]).sum())
         frames += int(alive.sum())
     played = results(batch, seeds)
-    return [summarize(played[i * games : (i + 1) * games]) for i in range(len(baits))], moved / max(frames, 1)
+    summaries = [summarize(played[i * games : (i + 1) * games]) for i in range(len(baits))]
+    return summaries, moved / max(frames, 1), played
+
+
+def habits(played: list) -> str:
+    """The shooter's deaths per game by cause and missiles fired per game."""
+    shooter = [r.counters["shooter"] for r in played]
+    deaths = {cause: sum(c["deaths"][cause] for c in shooter) / len(played) for cause in shooter[0]["deaths"]}
+    fired = sum(c["missiles_fired"] for c in shooter) / len(played)
+    return ", ".join([*(f"{cause} {n:.1f}" for cause, n in deaths.items()), f"fired {fired:.1f}"])
 
 
 def main() -> None:
@@ -45,15 +55,17 @@ def main() -> None:
     parser.add_argument("--games", type=int, default=20)
     args = parser.parse_args()
     baits = library.keys("bait")
-    print(f"| shooter | library | speed px/frame | {' | '.join(baits)} | best |")
-    print(f"| --- | --- | --- | {' | '.join('---' for _ in baits)} | --- |")
+    print(f"| shooter | library | speed px/frame | {' | '.join(baits)} | best | its deaths, shots a game |")
+    print(f"| --- | --- | --- | {' | '.join('---' for _ in baits)} | --- | --- |")
     for key in args.keys:
         for name, root in (("shipped", library.LIBRARY), ("tried", args.library)):
-            summaries, speed = scores(library.load(key, root=root), baits, args.games)
+            summaries, speed, played = scores(library.load(key, root=root), baits, args.games)
             cells = [f"{s.mean:.2f} ± {s.stderr:.2f}" for s in summaries]
             best = max(range(len(baits)), key=lambda i: summaries[i].mean)
             cells.append(f"{baits[best]} {summaries[best].mean:.2f}")
-            print(f"| {key} | {name} | {speed:.2f} | {' | '.join(cells)} |")
+            print(
+                f"| {key} | {name} | {speed:.2f} | {' | '.join(cells)} |  <!-- per game: {habits(played)} -->"
+            )
 
 
 if __name__ == "__main__":

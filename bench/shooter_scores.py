@@ -63,9 +63,7 @@ def main() -> None:
             cells = [f"{s.mean:.2f} ± {s.stderr:.2f}" for s in summaries]
             best = max(range(len(baits)), key=lambda i: summaries[i].mean)
             cells.append(f"{baits[best]} {summaries[best].mean:.2f}")
-            print(
-                f"| {key} | {name} | {speed:.2f} | {' | '.join(cells)} |  <!-- per game: {habits(played)} -->"
-            )
+            print(f"| {key} | {name} | {speed:.2f} | {' | '.join(cells)} | {habits(played)} |")
 
 
 if __name__ == "__main__":

@@ -39,6 +39,9 @@ _SHELLS2 = list(range(ob.SHELLS, ob.SHELLS + 2 * ob.PROJECTILE_SIZE))
 _UP = [ob.FORTRESS + ob.F_ALIVE]
 _PARTNER = [ob.PARTNER + f for f in (ob.X, ob.Y, ob.VX, ob.VY)]
 _FORTRESS = [ob.FORTRESS + f for f in (ob.F_COS, ob.F_SIN, ob.F_ALIVE, ob.F_VULNERABLE)]
+# Rule thrust heads by the role that plays it unless a recipe names the other as its thrust_rule:
+# "speed-cap" thrusts while under the recipe's speed cap, "mirror" as the mirror shooter capped at it.
+THRUST_RULES = {"bait": "speed-cap", "shooter": "mirror"}
 FEATURES: dict[str, list[int]] = {
     "self+shells": _SELF + _SHELLS2 + _UP,
     "self+shells+partner": _SELF + _SHELLS2 + _UP + _PARTNER,
@@ -62,6 +65,7 @@ class Recipe:
     reward: str = ""
     weights: dict[str, float] = field(default_factory=dict)  # reward term weights
     speed_cap: float = 0.0  # px/frame, the thrust rule's cap
+    thrust_rule: str = ""  # a rule thrust head's rule (THRUST_RULES); "" for the role's own
     temperature: float = 0.0  # DQN: softmax temperature over Q values
     steps: int = 0
     seed: int = 0
@@ -118,6 +122,9 @@ def _registry(root: Path) -> dict[str, Recipe]:
             raise ValueError(f"registry entry {key}: unknown role {recipe.role!r}")
         if recipe.algorithm and recipe.features not in FEATURES:
             raise ValueError(f"registry entry {key}: unknown feature set {recipe.features!r}")
+        if recipe.thrust_rule not in ("", *THRUST_RULES.values()):
+            rule, expected = recipe.thrust_rule, sorted(THRUST_RULES.values())
+            raise ValueError(f"registry entry {key}: unknown thrust_rule {rule!r}; expected {expected}")
         recipes[key] = recipe
     return recipes
 

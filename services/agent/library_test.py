@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -101,6 +102,34 @@ def test_a_key_that_cannot_play_the_seat_is_named_with_every_key_that_can(
         seats.policy_for(key, role, option)
     assert str(refused.value).startswith(line)
     assert seats.seat_keys("shooter")[-3:] == ["mirror", "idle", "random"]
+
+
+def test_a_shooter_recipe_can_thrust_by_the_baits_speed_cap():
+    """The study's RL shooters differ in max speed: thrust_rule = "speed-cap" gives a shooter's
+    thrust head the baits' rule (thrust while under the cap), its fire head unchanged."""
+    config, mirror = GameConfig(), library.registry()["S1"]
+    capped = replace(mirror, thrust_rule="speed-cap")
+    rows = np.array(observations("shooter", "world", 80))
+    under = np.array([networks.speed(o) < capped.speed_cap for o in rows])
+    assert under.any() and not under.all()
+    batch = networks.rule_heads_batch(capped, rows, config)
+    assert np.array_equal(batch["thrust"], under.astype(np.int64))
+    assert [networks.rule_heads(capped, o, config) for o in rows] == [
+        {"thrust": int(t), "fire": int(f)} for t, f in zip(batch["thrust"], batch["fire"], strict=True)
+    ]
+    mirrored = networks.rule_heads_batch(mirror, rows, config)
+    assert np.array_equal(batch["fire"], mirrored["fire"])
+    assert not np.array_equal(batch["thrust"], mirrored["thrust"])  # the role's own rule differs
+
+
+def test_an_unknown_thrust_rule_is_named(tmp_path):
+    root = copy_library(tmp_path)
+    registry = root / "registry.toml"
+    registry.write_text(
+        registry.read_text().replace("speed_cap = 3.0", 'speed_cap = 3.0\nthrust_rule = "cap"', 1)
+    )
+    with pytest.raises(ValueError, match="unknown thrust_rule 'cap'; expected \\['mirror', 'speed-cap'\\]"):
+        library.registry(root)
 
 
 def copy_library(tmp_path: Path) -> Path:

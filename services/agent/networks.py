@@ -19,7 +19,16 @@ from pathlib import Path
 
 import numpy as np
 
-from services.agent.library import FEATURES, OUTSIDE, PROXY_FAMILY, Recipe, file_hash, manifest, registry
+from services.agent.library import (
+    FEATURES,
+    OUTSIDE,
+    PROXY_FAMILY,
+    THRUST_RULES,
+    Recipe,
+    file_hash,
+    manifest,
+    registry,
+)
 from services.agent.policy import (
     RulePolicy,
     end_round_choice,
@@ -46,43 +55,45 @@ def speed(obs: np.ndarray) -> float:
     return math.hypot(float(obs[ob.SELF + ob.VX]), float(obs[ob.SELF + ob.VY])) * ob.VELOCITY_SCALE
 
 
+def speed_capped(recipe: Recipe) -> bool:
+    """Whether the recipe's rule thrust is the speed cap (a bait's own rule, the study's RL
+    shooters' by their description) rather than the mirror shooter's (a shooter's own)."""
+    return (recipe.thrust_rule or THRUST_RULES[recipe.role]) == "speed-cap"
+
+
 def rule_heads(recipe: Recipe, obs: np.ndarray, config: GameConfig) -> dict[str, int]:
     """The rule's choice for every head the network does not choose.
 
-    A bait thrusts while under the recipe's speed cap and never fires. A shooter thrusts as the
-    mirror shooter with the recipe's speed cap would (toward the point opposite the bait, holding
-    once there) and fires when the shot is good (scripted.good_shot). Shooter rules read the
+    Thrust: while under the recipe's speed cap (speed_capped), or as the mirror shooter with the
+    recipe's speed cap would (toward the point opposite the bait, holding once there). Fire: never
+    for a bait; a shooter fires when the shot is good (scripted.good_shot). Shooter rules read the
     world view."""
     out = {}
-    if recipe.role == "bait":
-        if "thrust" not in recipe.learned:
-            out["thrust"] = int(speed(obs) < recipe.speed_cap)
-        if "fire" not in recipe.learned:
-            out["fire"] = 0
-        return out
     if "thrust" not in recipe.learned:
-        out["thrust"] = _mirror(recipe.speed_cap, config).choose(obs)[1]
+        if speed_capped(recipe):
+            out["thrust"] = int(speed(obs) < recipe.speed_cap)
+        else:
+            out["thrust"] = _mirror(recipe.speed_cap, config).choose(obs)[1]
     if "fire" not in recipe.learned:
-        out["fire"] = int(good_shot(obs, config, 4.0, 40.0))
+        out["fire"] = 0 if recipe.role == "bait" else int(good_shot(obs, config, 4.0, 40.0))
     return out
 
 
 def rule_heads_batch(recipe: Recipe, observations: np.ndarray, config: GameConfig) -> dict[str, np.ndarray]:
     """rule_heads() of every row: each head's (rows,) choices."""
-    rows, out = len(observations), {}
-    if recipe.role == "bait":
-        if "thrust" not in recipe.learned:
-            v = observations[:, [ob.SELF + ob.VX, ob.SELF + ob.VY]].astype(np.float64)
-            out["thrust"] = (np.hypot(v[:, 0], v[:, 1]) * ob.VELOCITY_SCALE < recipe.speed_cap).astype(
-                np.int64
-            )
-        if "fire" not in recipe.learned:
-            out["fire"] = np.zeros(rows, np.int64)
-        return out
+    out = {}
     if "thrust" not in recipe.learned:
-        out["thrust"] = _mirror(recipe.speed_cap, config).choose_batch(observations)[:, 1]
+        if speed_capped(recipe):
+            v = observations[:, [ob.SELF + ob.VX, ob.SELF + ob.VY]].astype(np.float64)
+            capped = np.hypot(v[:, 0], v[:, 1]) * ob.VELOCITY_SCALE < recipe.speed_cap
+            out["thrust"] = capped.astype(np.int64)
+        else:
+            out["thrust"] = _mirror(recipe.speed_cap, config).choose_batch(observations)[:, 1]
     if "fire" not in recipe.learned:
-        out["fire"] = good_shot_batch(observations, config, 4.0, 40.0).astype(np.int64)
+        if recipe.role == "bait":
+            out["fire"] = np.zeros(len(observations), np.int64)
+        else:
+            out["fire"] = good_shot_batch(observations, config, 4.0, 40.0).astype(np.int64)
     return out
 
 

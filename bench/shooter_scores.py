@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from services.agent import library
+from services.agent import library, networks
 from services.sim.batch import BatchGame
 from services.sim.batch_play import Seat, results
 from services.sim.play import summarize
@@ -26,7 +26,7 @@ def scores(shooter, baits: list[str], games: int) -> tuple[list, float, list]:  
     bait_of = np.repeat(np.arange(len(baits)), games)
     batch = BatchGame(len(seeds), None, seeds)
     seats = [
-        Seat("bait", [library.load(b) for b in baits], bait_of, seeds),
+        Seat("bait", [networks.load(b) for b in baits], bait_of, seeds),
         Seat("shooter", [shooter], np.zeros(len(seeds), np.int64), seeds),
     ]
     moved, frames = 0.0, 0
@@ -59,7 +59,7 @@ def main() -> None:
     print(f"| --- | --- | --- | {' | '.join('---' for _ in baits)} | --- | --- |")
     for key in args.keys:
         for name, root in (("shipped", library.LIBRARY), ("tried", args.library)):
-            summaries, speed, played = scores(library.load(key, root=root), baits, args.games)
+            summaries, speed, played = scores(networks.load(key, root=root), baits, args.games)
             cells = [f"{s.mean:.2f} ± {s.stderr:.2f}" for s in summaries]
             best = max(range(len(baits)), key=lambda i: summaries[i].mean)
             cells.append(f"{baits[best]} {summaries[best].mean:.2f}")

@@ -60,7 +60,7 @@ BEFORE_ANY_WORKER = [  # (partner, what the line says): exit 2
     ("lab_broken:Alice", "cannot be imported (RuntimeError: broken on import)"),
     ("lab:BadKey", "its key 'bad key!' is not 1-64 of letters"),
     ("lab:AlwaysWrong", "returned 42, not an action"),
-    ("switch(B1)", "switch(B1) needs two partners"),
+    ("switch(B1)", "switch(...) needs two partners"),
 ]
 IN_A_WORKER = [  # exit 1
     ("lab:Raises", "RuntimeError: boom"),

@@ -2,7 +2,8 @@
 library of one's own, refused by the adaptive agent until its table row and thresholds are
 measured, then recognised in a live match on the bus, where the adaptive shooter plays the new
 table's best response to it. Real processes, real zenoh, real files; small numbers (2 games a
-pair, 1 calibration seed, a 20 s match) keep it to about a minute on 2 idle cores."""
+pair, 1 calibration seed, a 20 s match) keep it to about 90 s on 2 cores: marked slow to keep the
+default run under ten minutes, and run by CI as a step of its own (.ci/run)."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from pathlib import Path
 import pytest
 
 pytest.importorskip("stable_baselines3", reason="the `train` extra is not installed")
+pytestmark = pytest.mark.slow
 
 from services.agent import library  # noqa: E402
 from services.recorder.recording import load  # noqa: E402

@@ -256,4 +256,8 @@ def humans_fit(
             f"shortest press {s['hold_ms']:.0f} ms, "
             f"response {s['response_ms']:.0f} ms)"
         )
+        t = person["traits"]
+        console.print(
+            "  traits: " + ", ".join(f"{k} {'-' if v is None else f'{v:.3g}'}" for k, v in t.items())
+        )
     console.print(f"written to {path}; play one as humans:{out}@PARTICIPANT")

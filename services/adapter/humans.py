@@ -130,6 +130,9 @@ class Trial:
     seed: int
     alive_obs: np.ndarray
     alive_actions: np.ndarray
+    cues: np.ndarray  # action indices of the events that call for a response (cues_of)
+    alive: np.ndarray  # (frames,) the person's ship alive
+    vulnerable: np.ndarray  # (frames,) the fortress vulnerable
 
 
 def read_trial(path: Path, role: str) -> Trial:
@@ -143,13 +146,68 @@ def read_trial(path: Path, role: str) -> Trial:
     states = sorted(recording.states, key=lambda s: s.frame)
     seat = ROLES.index(role)
     actions = np.array([s.applied[seat] for s in states[1:]], np.int64)
+    frames = np.array([s.frame for s in states[1:]])
+    cued = [e.frame for e in recording.events if (e.kind, e.role) in cues_of(role)]
+    cues = np.unique(np.searchsorted(frames, cued))
+    alive = np.array([s.obs[role][ob.SELF + ob.ALIVE] > 0.5 for s in states[1:]])
+    open_now = np.array([s.obs[role][ob.FORTRESS + ob.F_VULNERABLE] > 0.5 for s in states[1:]])
     vulnerable = np.array([s.obs[role][ob.FORTRESS + ob.F_VULNERABLE] for s in states[:-1]])
     opened = np.flatnonzero(np.diff(vulnerable) > 0.5) + 1
     obs, alive_actions, _ = pairs(recording, role)
     # what played the other seat; a study's sidecar names only the label the participant saw
     agent = recording.start.policies.get(other(role)) or record.get("agent", "")
     summary = recording.summary
-    return Trial(actions, opened, summary.kills_per_minute, agent, recording.start.seed, obs, alive_actions)
+    return Trial(
+        actions, opened, summary.kills_per_minute, agent, recording.start.seed, obs, alive_actions,
+        cues[cues < len(actions)], alive, open_now,
+    )  # fmt: skip
+
+
+LAPSE = FROZEN  # frames (0.5 s) alive without a key change: a lapse
+KEYS = ("turn", "thrust", "fire")
+
+
+def cues_of(role: str) -> set[tuple[str, str]]:
+    """The events (kind, role) that call for the person's response: their own respawn, a shell
+    fired at them, the fortress's respawn."""
+    return {("respawn", role), ("shell", role), ("fortress_respawn", "")}
+
+
+def _ms(frames: list, percent: float) -> float | None:
+    """A percentile of frame counts, as ms; None (JSON null) when there are none."""
+    return float(np.percentile(frames, percent) * FRAME_MS) if len(frames) else None
+
+
+def traits(trials: list[Trial]) -> dict[str, float]:
+    """The traits read directly off a person's trials, pooled (docs/humans.md, Traits): reaction
+    (median ms from a cue to the next key change), each key's hold (median and p90 ms of its
+    presses), the lapse share (alive frames in runs of LAPSE or more without a key change), fire
+    presses per second and the share of them made while the fortress is vulnerable."""
+    reactions, holds, lapsed, alive, presses, open_presses, frames = [], {k: [] for k in KEYS}, 0, 0, 0, 0, 0
+    for t in trials:
+        keys = np.array(split_action(t.actions))  # (3, frames)
+        when = np.flatnonzero((np.diff(keys, axis=1) != 0).any(axis=0)) + 1
+        after = np.searchsorted(when, t.cues, side="right")
+        reactions += [when[i] - c for i, c in zip(after, t.cues, strict=True) if i < len(when)]
+        for name, key in zip(KEYS, keys, strict=True):
+            edges = np.flatnonzero(np.diff(np.concatenate([[0], key, [0]])) != 0)
+            runs = np.diff(edges)[key[edges[:-1]] != 0]  # runs of one held value
+            holds[name] += list(runs)
+        lengths = np.diff(np.concatenate([[0], when, [len(t.actions)]]))
+        run_of = np.repeat(lengths, lengths)  # each frame's run without a key change
+        lapsed += int(np.sum(t.alive & (run_of >= LAPSE)))
+        alive += int(t.alive.sum())
+        pressed = np.flatnonzero(np.diff(np.concatenate([[0], keys[2]])) == 1)
+        presses += len(pressed)
+        open_presses += int(t.vulnerable[pressed].sum())
+        frames += len(t.actions)
+    out = {"reaction_ms": _ms(reactions, 50)}
+    for name, runs in holds.items():
+        out[f"{name}_hold_median_ms"], out[f"{name}_hold_p90_ms"] = _ms(runs, 50), _ms(runs, 90)
+    out["lapse_share"] = lapsed / max(alive, 1)
+    out["fires_per_s"] = presses / (frames / 30.0)
+    out["fires_open_share"] = open_presses / presses if presses else None
+    return out
 
 
 def likeliest_policy(trials: list[Trial], role: str) -> str:
@@ -233,6 +291,7 @@ def fit(paths: list[Path], role: str) -> dict[str, dict]:
             "skill": skill,
             "agent": agent,
             "statistics": observed,
+            "traits": traits([t for _, t in own]),
             "recordings": [str(p) for p, _ in own],
         }
     return out

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from services.adapter.humans import FROZEN, fit, statistics, write
+from services.adapter.humans import FROZEN, fit, read_trial, statistics, traits, write
 from services.adapter.partners import group_of, make_partner
 from services.proxy.synthetic import record_trial, trial_seed
 from shared.errors import UsageError
@@ -29,6 +29,26 @@ def test_statistics_read_presses_runs_and_responses_off_the_keys():
     runs = [30, 3, 7, 2, 18, 5, 25, 2, 33]  # between changes of any key
     assert s["frozen_share"] == pytest.approx(sum(r for r in runs if r >= FROZEN) / 125)
     assert s["kills_per_minute"] == 2.0
+
+
+def test_traits_of_a_novice_and_a_practised_stand_in_move_the_right_way(tmp_path: Path):
+    """Two trials each of human(B5) at skill 0 and 1 with S4, recorded as a study records them:
+    the novice reacts later, lapses more, holds keys longer and fires less while the fortress is
+    vulnerable."""
+    measured = {}
+    for skill in (0, 1):
+        paths = [
+            record_trial(tmp_path / f"s{skill}-{t}.tsflog", f"human(B5,skill={skill})", "bait", "S4",
+                         trial_seed(100, 0, t), f"p{skill}")
+            for t in range(2)
+        ]  # fmt: skip
+        measured[skill] = traits([read_trial(p, "bait") for p in paths])
+    novice, practised = measured[0], measured[1]
+    assert novice["reaction_ms"] > practised["reaction_ms"]
+    assert novice["lapse_share"] > practised["lapse_share"]
+    assert novice["turn_hold_median_ms"] > practised["turn_hold_median_ms"]
+    assert novice["fires_open_share"] < practised["fires_open_share"]
+    assert novice["fires_per_s"] > 0 and practised["fires_per_s"] > 0
 
 
 def test_a_fitted_stand_in_plays_as_humans_dir(tmp_path: Path):

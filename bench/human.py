@@ -45,7 +45,7 @@ from services.recorder.recording import load
 from services.runtime.launch import MatchPlan
 from services.sim.observation import as_observation
 from services.sim.play import play, summarize
-from shared.game import FPS, HUMAN, GameConfig
+from shared.game import FPS, HUMAN, GameConfig, other
 
 
 async def browser(link: str) -> int:
@@ -87,7 +87,7 @@ def seat_page(partner: str, seconds: float, role: str = "bait"):  # noqa: ANN201
 
     links: list[dict[str, str]] = []
     ready = threading.Event()
-    seats = {role: HUMAN, "shooter" if role == "bait" else "bait": partner}
+    seats = {role: HUMAN, other(role): partner}
     with (
         tempfile.TemporaryDirectory() as directory,
         ThreadPoolExecutor(1) as pool,
@@ -227,7 +227,7 @@ def play_test(
         f"scripted {role} {policy_key} from the page ({timing}), with {partner}: "
         f"{statistics.mean(rates):.2f} kills/min (s.e. {se:.2f}) over {games} games of {seconds:.0f} s"
     )
-    seats = {role: policy_key, "shooter" if role == "bait" else "bait": partner}
+    seats = {role: policy_key, other(role): partner}
     config = GameConfig(frames=round(seconds * FPS))
     machine = summarize(
         [

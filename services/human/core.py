@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 from services.agent.policy import stalled
 from shared.errors import UsageError
-from shared.game import ROLES, GameConfig, join_action, split_action
+from shared.game import ROLES, GameConfig, join_action, other, split_action
 from shared.messages import GameEvent, State, Summary
 from shared.secret import same_secret
 
@@ -265,7 +265,7 @@ class Narrator:
 
     def __init__(self, role: str | None, partner_ends_rounds: bool, delay: int) -> None:
         self.role, self.delay = role, delay
-        self.partner = None if role is None or not partner_ends_rounds else ROLES[1 - ROLES.index(role)]
+        self.partner = None if role is None or not partner_ends_rounds else other(role)
         self.both_dead: int | None = None  # the first frame of the round's both-dead count-down
 
     def __call__(self, state: State) -> dict:

@@ -48,10 +48,8 @@ MADE_ENV = "`import services` loads envs.py: only a made env loads policies and 
 LAZY_MODULES = {  # (file, project module): an import inside a function outside the command line, and why
     ("services/adapter/evaluate.py", "services.adapter.partner_lanes"): BULK,
     ("services/adapter/evaluate.py", "services.sim.batch"): BULK,
-    ("services/adapter/evaluate.py", "services.sim.batch_observation"): BULK,
     ("services/adapter/evaluate.py", "services.sim.batch_play"): BULK,
     ("services/table/table.py", "services.sim.batch_play"): BULK + " (the table's readers never load it)",
-    ("services/adapter/human_like.py", "services.sim.batch_observation"): BULK,
     ("services/envs.py", "services.agent.seats"): MADE_ENV,
     ("services/envs.py", "services.sim.env"): MADE_ENV,
     ("services/envs.py", "services.sim.vec_env"): MADE_ENV,

@@ -88,7 +88,6 @@ def play_games(
     seats' actions, frame by frame."""
     from services.adapter.partner_lanes import Partners  # bulk play only: numba loads with it
     from services.sim.batch import BatchGame
-    from services.sim.batch_observation import observe as observe_lanes
     from services.sim.batch_play import Seat
 
     s, partner_role = setup(role), other(role)
@@ -112,7 +111,7 @@ def play_games(
     pairs = np.zeros((len(games), frames, 2), np.int64) if record else None
     while not batch.done[0]:
         frame = int(batch.state.frame[0])
-        observed = cache(partial(observe_lanes, batch, partner_role))  # each view once a frame
+        observed = cache(partial(observe, batch, partner_role))  # each view once a frame
         try:
             partner_actions = partners.act(observed, frame)
         except PartnerError as error:
@@ -153,7 +152,6 @@ def play_teams(
     the (teams, seeds, frames + 1) flags of the states in which the fortress has just fired (opened)."""
     from services.adapter.partner_lanes import Partners  # bulk play only: numba loads with it
     from services.sim.batch import BatchGame
-    from services.sim.batch_observation import observe as observe_lanes
 
     keys = np.array([seed for _ in teams for seed in seeds], np.int64)
     batch = BatchGame(len(keys), config, keys)
@@ -164,9 +162,7 @@ def play_teams(
     opened = np.zeros((len(keys), batch.config.frames + 1), bool)
     while not batch.done[0]:
         frame = int(batch.state.frame[0])
-        bait, shooter = (
-            seat.act(cache(partial(observe_lanes, batch, r)), frame) for r, seat in seats.items()
-        )
+        bait, shooter = (seat.act(cache(partial(observe, batch, r)), frame) for r, seat in seats.items())
         if played is not None:
             played[:, frame] = np.stack([bait, shooter], axis=1)
         batch.step(bait, shooter)

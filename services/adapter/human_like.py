@@ -248,10 +248,8 @@ def in_view(world: np.ndarray, view: str) -> np.ndarray:
     """World-view rows as a policy of `view` reads them."""
     if view != "role":
         return world
-    from services.sim.batch_observation import to_role_view  # numba: bulk play loads it anyway
-
     rows = world.astype(np.float64)
-    to_role_view(rows)
+    ob.to_role_view(rows)
     return rows.astype(np.float32)
 
 

@@ -40,8 +40,8 @@ from services.agent.outside import KEY, check_view, linear_arrays, network_array
 from services.agent.scripted import CircleBait, MirrorShooter, scripted_keys
 from services.provenance import provenance
 from services.sim.batch import BatchGame
-from services.sim.batch_observation import observe
 from services.sim.batch_play import play_batch
+from services.sim.observation import observe
 from services.sim.play import summarize
 from services.sim.vec_env import RoleVectorEnv
 from shared.errors import UsageError

@@ -76,7 +76,7 @@ def test_numpy_network_matches_torch(tmp_path, key):
 def test_drawing_fire_pays_the_frames_the_fortress_opens_to_the_shooter_and_kills() -> None:
     from services.agent.train import drawing_fire_reward, opening
     from services.sim.batch import BatchGame
-    from services.sim.batch_observation import observe
+    from services.sim.observation import observe
     from services.sim.sampling import batch_act, lane_uniforms
 
     bait, shooter = seats.policy_for("circle", "bait"), seats.policy_for("mirror", "shooter")

@@ -19,7 +19,7 @@ from functools import cache, partial
 import numpy as np
 
 from services.sim.batch import BatchGame
-from services.sim.batch_observation import observe
+from services.sim.observation import observe
 from services.sim.play import GameResult
 from services.sim.sampling import batch_act, lane_uniforms
 from shared.game import ROLES, GameConfig, Policy

@@ -16,7 +16,6 @@ from services.agent.library import keys
 from services.agent.seats import policy_for
 from services.sim import observation as ob
 from services.sim.batch import BatchGame, Rules, _point_distance
-from services.sim.batch_observation import observe
 from services.sim.engine import Game
 from services.sim.play import play
 from shared.game import ROLES, GameConfig
@@ -155,14 +154,15 @@ def test_a_finished_game_refuses_more_frames() -> None:
         batch.step(np.zeros(2, int), np.zeros(2, int))
 
 
-def test_observations_are_the_scalar_observations_in_both_views() -> None:
+def test_a_games_observations_are_its_lanes_in_both_views() -> None:
+    """observe runs in Python for a Game and compiled for a batch: the same values either way."""
     seeds = [11, 12]
     streams = library_streams(seeds)
     batch, games = BatchGame(2, seeds=seeds), [Game(seed=seed) for seed in seeds]
     for frame in range(streams.shape[1]):
         for role, view in itertools.product(ROLES, ob.VIEWS):
             expected = np.stack([ob.observe(game, role, view) for game in games])
-            np.testing.assert_array_equal(observe(batch, role, view), expected)
+            np.testing.assert_array_equal(ob.observe(batch, role, view), expected)
         batch.step(streams[:, frame, 0], streams[:, frame, 1])
         for lane, game in enumerate(games):
             game.step(*(int(a) for a in streams[lane, frame]))

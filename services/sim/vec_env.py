@@ -21,8 +21,8 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from services.sim.batch import BatchGame
-from services.sim.batch_observation import observe
 from services.sim.env import observation_space
+from services.sim.observation import observe
 from services.sim.sampling import batch_act, lane_uniforms
 from shared.game import N_ACTIONS, ROLES, GameConfig, Policy
 

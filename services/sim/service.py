@@ -16,6 +16,7 @@ import statistics
 import threading
 import time
 from collections import Counter
+from collections.abc import Callable
 
 import zenoh
 
@@ -31,117 +32,138 @@ log = logging.getLogger("tsf.sim")
 MODES = ("realtime", "lockstep")
 
 
-def run_sim(
-    bus: BusConfig,
-    match: str,
-    seed: int = 0,
-    config: GameConfig | None = None,
-    mode: str = "realtime",
-    policies: dict[str, str] | None = None,
-    stop: threading.Event | None = None,
-    wait_players: float = 10.0,
-    wait_recorder: float = 0.0,
-    step_timeout: float = 1.0,
-    wait_adapter: float = 0.0,
-    priority: int = 0,
-) -> Summary:
-    """Play one match on the bus and return its summary (also published on the summary key).
+def run_sim(bus: BusConfig, match: str, *args: object, **options: object) -> Summary:
+    """Play one match on the bus and return its summary: `Sim(...).play()`."""
+    return Sim(bus, match, *args, **options).play()
+
+
+class Sim:
+    """One match's sim on the bus. The fields are what the bus's callbacks share with the frame
+    loop (under `changed`); `play` runs the match.
 
     Waits up to `wait_players` seconds for both seats and up to `wait_recorder` for a recorder
     before the first frame (and `wait_adapter` for an adapter, in adaptive matches); a seat still
     empty then plays no-op until its player arrives. At the first frame it raises its priority by
     `priority` nice steps (in every thread; where permitted), above start-ups and bulk work."""
-    if mode not in MODES:
-        raise UsageError("--sim-mode", mode, "unknown", MODES)
-    stop = stop or threading.Event()
-    game = Game(config, seed)
-    seats, drops = Seats(), Drops("sim")
-    changed = threading.Condition()
-    answered_at: dict[tuple[str, int], int] = {}  # (role, frame) -> arrival time, for round trips
-    observers: Counter[str] = Counter()  # live recorder and adapter tokens
 
-    def on_action(action: Action) -> None:
-        arrived = time.perf_counter_ns()
+    def __init__(
+        self,
+        bus: BusConfig,
+        match: str,
+        seed: int = 0,
+        config: GameConfig | None = None,
+        mode: str = "realtime",
+        policies: dict[str, str] | None = None,
+        stop: threading.Event | None = None,
+        wait_players: float = 10.0,
+        wait_recorder: float = 0.0,
+        step_timeout: float = 1.0,
+        wait_adapter: float = 0.0,
+        priority: int = 0,
+    ) -> None:
+        if mode not in MODES:
+            raise UsageError("--sim-mode", mode, "unknown", MODES)
+        self.bus, self.match, self.mode = bus, match, mode
+        self.policies = {role: (policies or {}).get(role, "") for role in ROLES}  # the contract wants both
+        self.stop = stop or threading.Event()
+        self.wait_players, self.wait_recorder, self.wait_adapter = wait_players, wait_recorder, wait_adapter
+        self.step_timeout, self.priority = step_timeout, priority
+        self.game = Game(config, seed)
+        self.seats, self.drops = Seats(), Drops("sim")
+        self.changed = threading.Condition()
+        self.answered_at: dict[tuple[str, int], int] = {}  # (role, frame) -> arrival time, for round trips
+        self.observers: Counter[str] = Counter()  # live recorder and adapter tokens
+
+    def play(self) -> Summary:
+        """Play the match and return its summary (also published on the summary key)."""
+        match, seats = self.match, self.seats
+        with session(self.bus) as z:
+            fast = {"congestion_control": zenoh.CongestionControl.DROP, "express": True}
+            state_pub = z.declare_publisher(keys.state(match), priority=zenoh.Priority.REAL_TIME, **fast)
+            event_pub = z.declare_publisher(keys.event(match), **fast)
+            liveliness = z.liveliness()
+            with (
+                liveliness.declare_token(keys.alive(match, "sim")),
+                subscribe(z, keys.actions(match), seat_actions(match), self._on_action, self.drops),
+                liveliness.declare_subscriber(keys.seats_alive(match), self._on_alive, history=True),
+                liveliness.declare_subscriber(keys.alive(match, "recorder"), self._on_alive, history=True),
+                liveliness.declare_subscriber(keys.alive(match, "adapter"), self._on_alive, history=True),
+            ):
+                self._wait(lambda: all(seats.present(r) for r in ROLES), self.wait_players)
+                self._wait(lambda: self.observers["recorder"] > 0, self.wait_recorder)
+                self._wait(lambda: self.observers["adapter"] > 0, self.wait_adapter)
+                # At the states' priority: zenoh orders messages only within one priority, so a start
+                # put at the default priority could arrive after state 0.
+                start_bytes = start_message(self.game, match, "sim", self.mode, self.policies).encode()
+                z.put(keys.start(match), start_bytes, priority=zenoh.Priority.REAL_TIME)
+                timing = self._frames(state_pub, event_pub)
+                summary = summary_message(self.game, match, "sim", self.drops.counts, timing, seats.failures)
+                z.put(keys.summary(match), summary.encode())
+                time.sleep(0.2)  # let the last puts leave before the session closes
+                return summary
+
+    def _frames(self, state_pub: zenoh.Publisher, event_pub: zenoh.Publisher) -> dict[str, float]:
+        """Publish every state and play every frame, on the clock or in lockstep; the timing."""
+        game, match, seats, changed = self.game, self.match, self.seats, self.changed
+        sent: dict[int, int] = {}
+        ticks: list[float] = []
+        applied = (0, 0)
+        period = 1.0 / game.config.fps
+        _raise_priority(self.priority)
+        start = time.monotonic()
+        while True:
+            sent[game.frame] = time.perf_counter_ns()
+            state_pub.put(state_message(game, match, "sim", applied).encode())
+            with changed:
+                failed = seats.failure_events(match, "sim")
+            for event in [*event_messages(game, match, "sim"), *failed]:
+                event_pub.put(event.encode())
+            if game.done or self.stop.is_set():
+                break
+            if self.mode == "lockstep":
+                frame = game.frame
+                self._wait(lambda frame=frame: seats.answered(frame), self.step_timeout)
+            else:
+                due = start + (game.frame + 1) * period
+                delay = due - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+                ticks.append(time.monotonic())
+            with changed:
+                applied = seats.actions()
+            game.step(*applied)
         with changed:
-            if seats.offer(action):
-                answered_at.setdefault((action.role, action.frame), arrived)
-            changed.notify_all()
+            trips = [(t - sent[f]) / 1e6 for (_, f), t in self.answered_at.items() if f in sent]
+        return _timing(trips, ticks, period)
 
-    def on_alive(sample: zenoh.Sample) -> None:
+    def _on_action(self, action: Action) -> None:
+        arrived = time.perf_counter_ns()
+        with self.changed:
+            if self.seats.offer(action):
+                self.answered_at.setdefault((action.role, action.frame), arrived)
+            self.changed.notify_all()
+
+    def _on_alive(self, sample: zenoh.Sample) -> None:
         try:
             key = keys.parse(sample.key_expr)
         except ValueError:  # a token none of our services declares
             return
-        with changed:
+        with self.changed:
             if key.role:
-                (seats.arrive if sample.kind == zenoh.SampleKind.PUT else seats.leave)(key.role)
+                (self.seats.arrive if sample.kind == zenoh.SampleKind.PUT else self.seats.leave)(key.role)
             elif key.service in ("recorder", "adapter"):
-                observers[key.service] += 1 if sample.kind == zenoh.SampleKind.PUT else -1
-            changed.notify_all()
+                self.observers[key.service] += 1 if sample.kind == zenoh.SampleKind.PUT else -1
+            self.changed.notify_all()
 
-    def wait(condition, timeout: float) -> None:  # noqa: ANN001 - a predicate
+    def _wait(self, condition: Callable[[], bool], timeout: float) -> None:
+        """Until `condition` holds, `timeout` passes or the match is stopped."""
         deadline = time.monotonic() + timeout
-        with changed:
-            while not condition() and not stop.is_set():
+        with self.changed:
+            while not condition() and not self.stop.is_set():
                 left = deadline - time.monotonic()
                 if left <= 0:
                     return
-                changed.wait(min(left, 0.05))
-
-    with session(bus) as z:
-        fast = {"congestion_control": zenoh.CongestionControl.DROP, "express": True}
-        state_pub = z.declare_publisher(keys.state(match), priority=zenoh.Priority.REAL_TIME, **fast)
-        event_pub = z.declare_publisher(keys.event(match), **fast)
-        liveliness = z.liveliness()
-        with (
-            liveliness.declare_token(keys.alive(match, "sim")),
-            subscribe(z, keys.actions(match), seat_actions(match), on_action, drops),
-            liveliness.declare_subscriber(keys.seats_alive(match), on_alive, history=True),
-            liveliness.declare_subscriber(keys.alive(match, "recorder"), on_alive, history=True),
-            liveliness.declare_subscriber(keys.alive(match, "adapter"), on_alive, history=True),
-        ):
-            wait(lambda: all(seats.present(r) for r in ROLES), wait_players)
-            wait(lambda: observers["recorder"] > 0, wait_recorder)
-            wait(lambda: observers["adapter"] > 0, wait_adapter)
-            # At the states' priority: zenoh orders messages only within one priority, so a start
-            # put at the default priority could arrive after state 0.
-            named = {role: (policies or {}).get(role, "") for role in ROLES}  # the contract wants both
-            start_bytes = start_message(game, match, "sim", mode, named).encode()
-            z.put(keys.start(match), start_bytes, priority=zenoh.Priority.REAL_TIME)
-            sent: dict[int, int] = {}
-            ticks: list[float] = []
-            applied = (0, 0)
-            period = 1.0 / game.config.fps
-            _raise_priority(priority)
-            start = time.monotonic()
-            while True:
-                sent[game.frame] = time.perf_counter_ns()
-                state_pub.put(state_message(game, match, "sim", applied).encode())
-                with changed:
-                    failed = seats.failure_events(match, "sim")
-                for event in [*event_messages(game, match, "sim"), *failed]:
-                    event_pub.put(event.encode())
-                if game.done or stop.is_set():
-                    break
-                if mode == "lockstep":
-                    frame = game.frame
-                    wait(lambda frame=frame: seats.answered(frame), step_timeout)
-                else:
-                    due = start + (game.frame + 1) * period
-                    delay = due - time.monotonic()
-                    if delay > 0:
-                        time.sleep(delay)
-                    ticks.append(time.monotonic())
-                with changed:
-                    applied = seats.actions()
-                game.step(*applied)
-            with changed:
-                trips = [(t - sent[f]) / 1e6 for (_, f), t in answered_at.items() if f in sent]
-            timing = _timing(trips, ticks, period)
-            summary = summary_message(game, match, "sim", drops.counts, timing, seats.failures)
-            z.put(keys.summary(match), summary.encode())
-            time.sleep(0.2)  # let the last puts leave before the session closes
-            return summary
+                self.changed.wait(min(left, 0.05))
 
 
 def _raise_priority(steps: int) -> None:

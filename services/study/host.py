@@ -153,19 +153,57 @@ def run_match_host(
 ) -> int:
     """Serve matches until `stop`; then end the running ones. Returns the number of matches run.
     `secret` is the study's host secret."""
-    host = Host(keys.check_match(name), slots, out, secret)
-    drops = Drops(host.sender)
-    try:
-        z = zenoh.open(bus.to_zenoh())
-    except zenoh.ZError as error:
-        raise Failure(f"cannot reach the router at {', '.join(bus.connect)}: {why(error)}") from None
-    played = 0
+    return MatchHost(bus, name, slots, out, secret).serve(stop)
 
-    def put_status() -> None:
-        z.put(keys.host_status(name), host.status().encode())
 
-    def play(plan: MatchPlan, ended: threading.Event) -> None:
-        error = ""
+class MatchHost:
+    """A match host on the bus: `Host`'s bookkeeping, the session, and the callbacks that answer
+    the study server's offers, stops and recording queries."""
+
+    def __init__(self, bus: BusConfig, name: str, slots: int, out: Path, secret: bytes) -> None:
+        self.bus, self.name, self.out = bus, name, out
+        self.host = Host(keys.check_match(name), slots, out, secret)
+        self.drops = Drops(self.host.sender)
+        self.played = 0
+        try:
+            self.z = zenoh.open(bus.to_zenoh())
+        except zenoh.ZError as error:
+            raise Failure(f"cannot reach the router at {', '.join(bus.connect)}: {why(error)}") from None
+
+    def serve(self, stop: threading.Event) -> int:
+        """Serve until `stop`, end the running matches, close the session; the matches run."""
+        z, name = self.z, self.name
+        try:
+            with (
+                z.declare_queryable(keys.host_offer(name), self._on_offer),
+                z.declare_queryable(keys.host_recording(name), self._on_recording),
+                subscribe(z, keys.host_stop(name), MatchStop, self._on_stop, self.drops),
+                z.liveliness().declare_token(keys.host_alive(name)),
+            ):
+                log.info(
+                    "match host %s serves %d slots through %s",
+                    name,
+                    self.host.slots,
+                    ", ".join(self.bus.connect),
+                )
+                self._put_status()
+                while not stop.wait(1.0):
+                    self._put_status()
+                with self.host.lock:
+                    running = list(self.host.running.values())
+                for ended, _ in running:
+                    ended.set()
+                for _, thread in running:
+                    thread.join()
+        finally:
+            z.close()
+        return self.played
+
+    def _put_status(self) -> None:
+        self.z.put(keys.host_status(self.name), self.host.status().encode())
+
+    def _play(self, plan: MatchPlan, ended: threading.Event) -> None:
+        host, error = self.host, ""
         try:
             run_match(plan, stop=ended)
         except Exception as failure:  # noqa: BLE001 - a match that fails is reported, never fatal
@@ -178,30 +216,30 @@ def run_match_host(
         log.info("match %s ended%s; recording %d bytes", plan.match, f": {error}" if error else "", size)
         done = MatchDone(match=plan.match, frame=0, sender=host.sender, error=error, size=size, sha256=digest)
         done = sealed(done, host.secret)
-        if not z.is_closed():
-            z.put(keys.host_done(name), done.encode())
-            put_status()
+        if not self.z.is_closed():
+            self.z.put(keys.host_done(self.name), done.encode())
+            self._put_status()
 
-    def on_offer(query: zenoh.Query) -> None:
-        nonlocal played
+    def _on_offer(self, query: zenoh.Query) -> None:
+        host = self.host
         try:
             offer = decode(query.payload.to_bytes() if query.payload else b"", MatchOffer)
             host.check(offer)
         except MessageError as error:
-            drops.drop(keys.host_offer(name), error)
+            self.drops.drop(keys.host_offer(self.name), error)
             return
         plan, thread = None, None
         with host.lock:  # checked and taken at once: two offers never share the last slot
             try:
                 reason = host.refusal(offer)
-                plan = None if reason else plan_of(offer, out, bus)
+                plan = None if reason else plan_of(offer, self.out, self.bus)
             except ValueError as error:  # a seat this host cannot fill (UsageError)
                 reason = str(error)[:300]
             if plan is not None:
                 ended = threading.Event()
-                thread = threading.Thread(target=play, args=(plan, ended), name=f"match-{offer.match}")
+                thread = threading.Thread(target=self._play, args=(plan, ended), name=f"match-{offer.match}")
                 host.running[offer.match] = (ended, thread)
-                played += 1
+                self.played += 1
         if thread is not None:
             thread.start()
             log.info("runs match %s", offer.match)
@@ -211,47 +249,26 @@ def run_match_host(
             ),
             host.secret,
         )
-        query.reply(keys.host_offer(name), answer.encode())
-        put_status()
+        query.reply(keys.host_offer(self.name), answer.encode())
+        self._put_status()
 
-    def on_stop(message: MatchStop) -> None:
-        host.check(message)
-        with host.lock:
-            ended = host.running.get(message.match, (None,))[0]
+    def _on_stop(self, message: MatchStop) -> None:
+        self.host.check(message)
+        with self.host.lock:
+            ended = self.host.running.get(message.match, (None,))[0]
         if ended is not None:
             log.info("the study server ends match %s", message.match)
             ended.set()
 
-    def on_recording(query: zenoh.Query) -> None:
+    def _on_recording(self, query: zenoh.Query) -> None:
         try:
             parameters = query.parameters
-            chunk = host.chunk(
+            chunk = self.host.chunk(
                 str(query.key_expr), int(parameters.get("offset", "0")), parameters.get("auth")
             )
         except ValueError as error:
-            drops.drop(str(query.key_expr), error)
+            self.drops.drop(str(query.key_expr), error)
             if getattr(error, "reason", "") != "unauthenticated":  # a peer without the secret learns nothing
                 query.reply_err(str(error)[:300].encode())
             return
         query.reply(query.key_expr, chunk.encode())
-
-    try:
-        with (
-            z.declare_queryable(keys.host_offer(name), on_offer),
-            z.declare_queryable(keys.host_recording(name), on_recording),
-            subscribe(z, keys.host_stop(name), MatchStop, on_stop, drops),
-            z.liveliness().declare_token(keys.host_alive(name)),
-        ):
-            log.info("match host %s serves %d slots through %s", name, slots, ", ".join(bus.connect))
-            put_status()
-            while not stop.wait(1.0):
-                put_status()
-            with host.lock:
-                running = list(host.running.values())
-            for ended, _ in running:
-                ended.set()
-            for _, thread in running:
-                thread.join()
-    finally:
-        z.close()
-    return played

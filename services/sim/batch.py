@@ -1,7 +1,8 @@
-"""The batched engine: N independent games of TSF advanced together, as arrays.
+"""The bulk engine: N independent games of TSF advanced together, as arrays.
 
-Training, sweeps and evaluation need millions of frames; the scalar `Game` (engine.py, pymunk)
-stays the authoritative live engine, and this one plays the same games in bulk. Each lane is one
+Training, sweeps and evaluation need millions of frames; the scalar `Game` (engine.py, pymunk) is
+the live engine and the reference, and this one plays the same games in bulk (a live sim does not
+run it with one lane: docs/architecture.md, "Two engines"). Each lane is one
 game with its own seed, actions, resets, counters and events; the state is a struct of arrays and
 one numba-compiled loop advances every lane by a frame.
 

@@ -1,4 +1,5 @@
-"""The batched engine plays the scalar engine's games: per-frame state hashes and events agree.
+"""The differential test: the batched engine plays the reference engine's games (the scalar
+`Game`); per-frame state hashes and events agree.
 
 The default run checks a sample of seeded games; `-m slow` runs the full differential test
 (200 games with random actions, 50 with library policies, every frame of each)."""

@@ -1,4 +1,7 @@
-"""The TSF game engine: a pure, deterministic function of config, seed and two action streams.
+"""The live engine: one game of TSF, a pure, deterministic function of config, seed and two
+action streams. A live match's sim runs it (it needs no compiler, so a sim starts in half a
+second), and it is the reference the batched engine (batch.py, the bulk engine) is tested
+against, frame by frame (batch_test.py; docs/architecture.md, "Two engines").
 
 pymunk holds the bodies: the two ships (kinematic circles it integrates each frame) and the
 fortress, whose shield and activation hexagons are pymunk polygons on the fortress body, so they

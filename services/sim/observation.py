@@ -155,7 +155,8 @@ def _world_rows(game: Game | BatchGame, role: str) -> np.ndarray:
 def _world_values(a, me, vulnerable_frames, fire_interval, frames, out):
     """Each row of `out`: its lane's world-view observation of seat `me`."""
     p, v = 1.0 / POSITION_SCALE, 1.0 / VELOCITY_SCALE
-    picks = np.empty(max(N_SHELLS, N_MISSILES), np.int64)
+    room = max(a.shells.shape[1], a.missiles.shape[1])
+    scratch = np.empty(max(N_SHELLS, N_MISSILES), np.int64), np.empty(room), np.empty(room, np.bool_)
     for i in range(out.shape[0]):
         for block, s in ((SELF, me), (PARTNER, 1 - me)):
             h = math.radians(a.heading[i, s])
@@ -176,8 +177,8 @@ def _world_values(a, me, vulnerable_frames, fire_interval, frames, out):
         out[i, FORTRESS + F_LOCK_PARTNER] = _flag(a.lock[i] == 1 - me)
         since = a.since_shell[i] / fire_interval
         out[i, FORTRESS + F_SINCE_SHELL] = 1.0 if since > 1.0 else since  # min(since, 1.0)
-        _projectiles(a.shells, a.n_shells[i], i, a.x[i, me], a.y[i, me], picks, N_SHELLS, out, SHELLS)
-        _projectiles(a.missiles, a.n_missiles[i], i, 0.0, 0.0, picks, N_MISSILES, out, MISSILES)
+        _projectiles(a.shells, a.n_shells[i], i, a.x[i, me], a.y[i, me], N_SHELLS, scratch, out, SHELLS)
+        _projectiles(a.missiles, a.n_missiles[i], i, 0.0, 0.0, N_MISSILES, scratch, out, MISSILES)
         out[i, TIME] = 1.0 - a.frame[i] / frames
 
 
@@ -204,11 +205,12 @@ def _flag(value):
 
 
 @jitable
-def _projectiles(group, count, i, cx, cy, picks, size, out, block):
+def _projectiles(group, count, i, cx, cy, size, scratch, out, block):
     """Row i's `block` of lane i's projectiles nearest (cx, cy), up to `size`: x, y, vx, vy, present
     each; zeros after."""
     p, v = 1.0 / POSITION_SCALE, 1.0 / VELOCITY_SCALE
-    found = _nearest(group, count, i, cx, cy, picks, size)
+    found = _nearest(group, count, i, cx, cy, size, scratch)
+    picks = scratch[0]
     for j in range(size * PROJECTILE_SIZE):
         out[i, block + j] = 0.0
     for j in range(found):
@@ -221,21 +223,20 @@ def _projectiles(group, count, i, cx, cy, picks, size, out, block):
 
 
 @jitable
-def _nearest(group, count, i, cx, cy, picks, size):
-    """Into picks: the indices of lane i's up to `size` projectiles nearest (cx, cy), nearest first,
-    ties in launch order (as a stable sort orders them); returns how many."""
+def _nearest(group, count, i, cx, cy, size, scratch):
+    """Into scratch's picks: the indices of lane i's up to `size` projectiles nearest (cx, cy),
+    nearest first, ties in launch order (as a stable sort orders them); returns how many."""
+    picks, d2, taken = scratch
+    for k in range(count):
+        dx, dy = group[i, k, 0] - cx, group[i, k, 1] - cy
+        d2[k] = dx * dx + dy * dy
+        taken[k] = False
     n = min(count, size)
     for j in range(n):
-        best, best_d2 = -1, 0.0
+        best = -1
         for k in range(count):
-            taken = False
-            for q in range(j):
-                taken = taken or picks[q] == k
-            if taken:
-                continue
-            dx, dy = group[i, k, 0] - cx, group[i, k, 1] - cy
-            d2 = dx * dx + dy * dy
-            if best < 0 or d2 < best_d2:
-                best, best_d2 = k, d2
+            if not taken[k] and (best < 0 or d2[k] < d2[best]):
+                best = k
+        taken[best] = True
         picks[j] = best
     return n

@@ -90,7 +90,6 @@ def test_noisy_slips_at_its_rate_and_is_seeded() -> None:
     assert abs(np.mean(actions != 5) - 0.1 * 11 / 12) < 0.01  # a slip lands on the same action 1 time in 12
     assert set(np.unique(actions)) == set(range(N_ACTIONS))
     assert (played(f"noisy({CONSTANT})", 400, 50) == actions).all()
-    assert (played(f"noisy({CONSTANT})", 400, 50, first=0.5) == actions).all()  # draws: seed and frame
 
 
 def test_delayed_acts_on_the_state_of_delay_frames_ago() -> None:

@@ -46,7 +46,6 @@ LAZY_PACKAGES = {  # outside the command line, the packages an import inside a f
 BULK = "bulk play only: numba loads with it"
 MADE_ENV = "`import services` loads envs.py: only a made env loads policies and the engine"
 LAZY_MODULES = {  # (file, project module): an import inside a function outside the command line, and why
-    ("services/adapter/evaluate.py", "services.adapter.partner_lanes"): BULK,
     ("services/adapter/evaluate.py", "services.sim.batch"): BULK,
     ("services/adapter/evaluate.py", "services.sim.batch_play"): BULK,
     ("services/table/table.py", "services.sim.batch_play"): BULK + " (the table's readers never load it)",

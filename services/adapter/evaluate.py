@@ -2,7 +2,7 @@
 
 `play_games` plays many games of partners (services/adapter/partners.py) with our seat played by
 a static library policy or adaptively, as the lanes of one batched engine: the partners in their
-batched forms (partner_lanes.py), our seat's lanes grouped by the policy they play now, and every
+batched forms (partners.py), our seat's lanes grouped by the policy they play now, and every
 adaptive lane's update batched (`AdapterLanes`, which decides as `Adapter` does). `play_partner`
 is the same game on the scalar engine, one at a time, as a live match plays it: the reference the
 batched games are checked against, and the calibration's games. Either way the adaptive agent
@@ -34,7 +34,7 @@ from services.adapter.core import (
     Scorer,
 )
 from services.adapter.human_like import SESSION_TRIALS
-from services.adapter.partners import Partner, PartnerError, ask, make_partner
+from services.adapter.partners import Partner, PartnerError, Partners, ask, make_partner
 from services.agent import networks
 from services.sim.engine import Game
 from services.sim.observation import observe, world_values
@@ -86,7 +86,6 @@ def play_games(
     """Games of (partner name, our agent, seed), our seat `role`, as the lanes of one batch. With
     `record`, each outcome keeps the partner's scores under the library (the Scorer) and both
     seats' actions, frame by frame."""
-    from services.adapter.partner_lanes import Partners  # bulk play only: numba loads with it
     from services.sim.batch import BatchGame
     from services.sim.batch_play import Seat
 
@@ -150,7 +149,6 @@ def play_teams(
     team and seed, as the lanes of one batch: both seats played by partners (stand-ins, library
     keys, wrappers). With `record`, also the (teams, seeds, frames, 2) actions, bait first, and
     the (teams, seeds, frames + 1) flags of the states in which the fortress has just fired (opened)."""
-    from services.adapter.partner_lanes import Partners  # bulk play only: numba loads with it
     from services.sim.batch import BatchGame
 
     keys = np.array([seed for _ in teams for seed in seeds], np.int64)

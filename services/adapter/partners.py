@@ -24,37 +24,72 @@ any worker process:
                          humans:DIR when DIR holds one participant)
 
 Wrappers nest: `noisy(switch(B5,B7))`.
+
+Partners play in lanes, written once: each wrapper (noisy, delayed, sticky, switch) works on
+arrays of lanes, and a single game is one lane. `Partners` plays the lanes of a batch by name:
+partners of one shape (`shape`: the same wrappers with the same settings, nested the same way,
+whatever policies they wrap) share one batched form, and the project policies inside (library,
+scripted, random) draw from their distributions, each policy asked once a frame for all the
+lanes it plays in. So `noisy(switch(B1,B5))` and `noisy(switch(B7,B2))` share one batched form,
+and a frame costs one call per policy, not per partner. A human-like partner of project policies
+(`human(B5)`, `human(B1,B5)`) plays its own batched form, `HumanLike.act_lanes`. A partner of any
+other kind (a plug-in `module:attr`, a human-like hand on a wrapper) is played as it is: one copy
+per lane, reset and asked lane by lane.
+
+Every draw, a policy's and each wrapper's, comes from its own stream of `lane_uniforms`, keyed by
+the game's seed and the frame: a game's partner depends on its seed, never on which lanes share
+the batch. `build` makes the partner of a single game (play_partner, a stand-in, a recorded
+trial): a policy alone plays as itself (its own generator, as every scalar game plays a policy),
+and a wrapper plays as one lane of its batched form (`OneGame`), so it gives exactly the actions
+its lane gives in any batch.
 """
 
 from __future__ import annotations
 
+import copy
+import itertools
 import json
-import random
-from collections import deque
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 
 from services.adapter.human_like import STAND_INS, HumanLike
-from services.adapter.seat import ADAPTIVE_KIND, FITTED, HUMANS, KEY, PERSON, PROXY_KIND, RULE, SeatSpec
+from services.adapter.seat import (
+    ADAPTIVE_KIND,
+    FITTED,
+    HUMANS,
+    KEY,
+    PERSON,
+    PROXY_KIND,
+    RULE,
+    WRAPPERS,
+    SeatSpec,
+)
 from services.agent import library
+from services.agent.networks import LearnedPolicy
+from services.agent.policy import RulePolicy, UniformPolicy
 from services.agent.scripted import SCRIPTED
-from services.agent.seats import policy_for
+from services.agent.seats import policy_of
 from services.sim.engine import Game
 from services.sim.observation import as_observation, world_values
+from services.sim.play import game_seed, policy_seed
+from services.sim.sampling import act_lanes, lane_uniforms
 from shared.errors import Failure, UsageError
-from shared.game import N_ACTIONS, checked_action
+from shared.game import N_ACTIONS, ROLES, checked_action
 
 NOISE = 0.1
 DELAY = 6  # frames
 STICKY = 0.5
 SWITCH_AT = 900  # frame: the middle of a one-minute game
+LANE_WRAPPERS = tuple(w for w in WRAPPERS if w != "human")  # the hand has its own lanes (HumanLike)
 
 
 @runtime_checkable
 class Partner(Protocol):
-    """What a partner needs of the policy protocol: it acts, it need not report probabilities."""
+    """A single game's partner: what it needs of the policy protocol (it acts, it need not report
+    probabilities)."""
 
     key: str
     role: str
@@ -65,77 +100,14 @@ class Partner(Protocol):
     def act(self, obs: np.ndarray) -> int: ...
 
 
-class Wrapper:
-    """A partner that changes how an inner partner acts; reset seeds both."""
+class Lanes(Protocol):
+    """A partner in n lanes: reset with each lane's game seed, then one action per lane per frame."""
 
-    def __init__(self, inner: Partner, key: str) -> None:
-        self.inner, self.key = inner, key
-        self.role, self.view = inner.role, inner.view
-        self.rng = random.Random(0)
+    view: str
 
-    def reset(self, seed: int | None = None) -> None:
-        self.inner.reset(seed)
-        self.rng = random.Random(None if seed is None else seed * 7919 + 1)
+    def reset(self, keys: np.ndarray) -> None: ...
 
-
-class Noisy(Wrapper):
-    def __init__(self, inner: Partner, noise: float = NOISE) -> None:
-        super().__init__(inner, f"noisy({inner.key})")
-        self.noise = noise
-
-    def act(self, obs: np.ndarray) -> int:
-        action = self.inner.act(obs)
-        return self.rng.randrange(N_ACTIONS) if self.rng.random() < self.noise else action
-
-
-class Delayed(Wrapper):
-    def __init__(self, inner: Partner, delay: int = DELAY) -> None:
-        super().__init__(
-            inner, f"delayed({inner.key})" if delay == DELAY else f"delayed({inner.key},frames={delay})"
-        )
-        self.delay = delay
-        self.seen: deque[np.ndarray] = deque(maxlen=delay + 1)
-
-    def reset(self, seed: int | None = None) -> None:
-        super().reset(seed)
-        self.seen.clear()
-
-    def act(self, obs: np.ndarray) -> int:
-        self.seen.append(obs)
-        return self.inner.act(self.seen[0])  # the oldest kept: `delay` frames ago once full
-
-
-class Sticky(Wrapper):
-    def __init__(self, inner: Partner, sticky: float = STICKY) -> None:
-        super().__init__(inner, f"sticky({inner.key})")
-        self.sticky, self.last = sticky, 0
-
-    def reset(self, seed: int | None = None) -> None:
-        super().reset(seed)
-        self.last = 0
-
-    def act(self, obs: np.ndarray) -> int:
-        action = self.inner.act(obs)  # the inner partner keeps its own course either way
-        if self.rng.random() >= self.sticky:
-            self.last = action
-        return self.last
-
-
-class Switching(Wrapper):
-    def __init__(self, first: Partner, second: Partner, at: int = SWITCH_AT) -> None:
-        if first.role != second.role or first.view != second.view:
-            raise ValueError(f"switch({first.key},{second.key}): both must share role and observation view")
-        super().__init__(first, f"switch({first.key},{second.key})")
-        self.second, self.at, self.t = second, at, 0
-
-    def reset(self, seed: int | None = None) -> None:
-        super().reset(seed)
-        self.second.reset(None if seed is None else seed + 1)
-        self.t = 0
-
-    def act(self, obs: np.ndarray) -> int:
-        self.t += 1
-        return (self.inner if self.t <= self.at else self.second).act(obs)
+    def act(self, obs: np.ndarray, frame: int) -> np.ndarray: ...
 
 
 class PartnerError(Failure):
@@ -157,6 +129,257 @@ def ask(partner: Partner, obs: np.ndarray, frame: int, lane: int = 0) -> int:
         raise PartnerError(problem[:240], lane) from None
 
 
+class PolicyLanes:
+    """Project policies of one view, one per lane: each policy's distributions for its lanes,
+    sampled with the lanes' draws."""
+
+    def __init__(self, policies: list[Partner], stream: int) -> None:
+        self.policies = list({id(p): p for p in policies}.values())
+        self.choice = np.array([[id(q) for q in self.policies].index(id(p)) for p in policies])
+        self.view, self.stream = policies[0].view, stream
+
+    def reset(self, keys: np.ndarray) -> None:
+        self.keys = keys
+
+    def act(self, obs: np.ndarray, frame: int) -> np.ndarray:
+        uniforms = lane_uniforms(self.keys, self.stream, frame)
+        return act_lanes(self.policies, self.choice, lambda view: obs, uniforms)
+
+
+class Noisy:
+    """noisy(X): a uniformly random action with probability `noise`, lane by lane."""
+
+    def __init__(self, inner: Lanes, noise: float, streams: Iterator[int]) -> None:
+        self.inner, self.noise, self.view = inner, noise, inner.view
+        self.slip, self.pick = next(streams), next(streams)
+
+    def reset(self, keys: np.ndarray) -> None:
+        self.inner.reset(keys)
+        self.keys = keys
+
+    def act(self, obs: np.ndarray, frame: int) -> np.ndarray:
+        action = self.inner.act(obs, frame)
+        slipped = lane_uniforms(self.keys, self.slip, frame) < self.noise
+        random = (lane_uniforms(self.keys, self.pick, frame) * N_ACTIONS).astype(np.int64)
+        return np.where(slipped, random, action)
+
+
+class Delayed:
+    """delayed(X): the inner partner acts on each lane's observation of `delay` frames ago (the
+    first one until that many have been seen)."""
+
+    def __init__(self, inner: Lanes, delay: int) -> None:
+        self.inner, self.delay, self.view = inner, delay, inner.view
+
+    def reset(self, keys: np.ndarray) -> None:
+        self.inner.reset(keys)
+        self.seen: np.ndarray | None = None
+        self.t = 0
+
+    def act(self, obs: np.ndarray, frame: int) -> np.ndarray:
+        kept = self.delay + 1
+        if self.seen is None:
+            self.seen = np.empty((kept, *obs.shape), obs.dtype)
+        self.seen[self.t % kept] = obs
+        oldest = max(0, self.t - self.delay)
+        self.t += 1
+        return self.inner.act(self.seen[oldest % kept], frame)
+
+
+class Sticky:
+    """sticky(X): each lane repeats its previous action with probability `sticky` (keys held too
+    long)."""
+
+    def __init__(self, inner: Lanes, sticky: float, streams: Iterator[int]) -> None:
+        self.inner, self.sticky, self.view = inner, sticky, inner.view
+        self.stream = next(streams)
+
+    def reset(self, keys: np.ndarray) -> None:
+        self.inner.reset(keys)
+        self.keys, self.last = keys, np.zeros(len(keys), np.int64)
+
+    def act(self, obs: np.ndarray, frame: int) -> np.ndarray:
+        action = self.inner.act(obs, frame)  # the inner partner keeps its own course either way
+        self.last = np.where(lane_uniforms(self.keys, self.stream, frame) >= self.sticky, action, self.last)
+        return self.last
+
+
+class Switching:
+    """switch(X,Y): the first partner for `at` frames, then the second."""
+
+    def __init__(self, first: Lanes, second: Lanes, at: int) -> None:
+        if first.view != second.view:
+            raise ValueError("both partners of switch(...) must read the same observation view")
+        self.first, self.second, self.at, self.view = first, second, at, first.view
+
+    def reset(self, keys: np.ndarray) -> None:
+        self.first.reset(keys)
+        self.second.reset(keys)
+        self.t = 0
+
+    def act(self, obs: np.ndarray, frame: int) -> np.ndarray:
+        self.t += 1
+        return (self.first if self.t <= self.at else self.second).act(obs, frame)
+
+
+class HumanLanes:
+    """human_like.HumanLike, whose `act_lanes` is its batched form: every lane gets the actions
+    `act` gives the single game of the same seed (reset with that game's seed, `offset` added)."""
+
+    def __init__(self, partner: HumanLike, offset: int = 0) -> None:
+        self.partner, self.offset, self.view = partner, offset, partner.view
+
+    def reset(self, keys: np.ndarray) -> None:
+        seeds = [policy_seed(key, self.partner.role) + self.offset for key in keys.tolist()]
+        self.partner.reset_lanes(seeds)
+
+    def act(self, obs: np.ndarray, frame: int) -> np.ndarray:
+        return self.partner.act_lanes(obs)
+
+
+class EachLane:
+    """Any other partners, as they are: a copy per lane, reset with the single game's seed
+    (`offset` added, as a switch's second partner gets) and asked lane by lane."""
+
+    def __init__(self, partners: list[Partner], offset: int = 0) -> None:
+        self.partners, self.offset, self.view = partners, offset, partners[0].view
+
+    def reset(self, keys: np.ndarray) -> None:
+        self.copies = [copy.deepcopy(p) for p in self.partners]
+        for partner, key in zip(self.copies, keys.tolist(), strict=True):
+            partner.reset(policy_seed(key, partner.role) + self.offset)
+
+    def act(self, obs: np.ndarray, frame: int) -> np.ndarray:
+        return np.array(
+            [ask(p, row, frame, lane) for lane, (p, row) in enumerate(zip(self.copies, obs, strict=True))],
+            np.int64,
+        )
+
+
+class OneGame:
+    """A wrapper's batched form in one lane: the partner of a single game. Reset with the seed its
+    seat resets a partner with (play.policy_seed of the game's seed) and asked once a frame from
+    the game's first, it acts exactly as its lane of that game's seed in any batch."""
+
+    def __init__(self, form: Lanes, key: str, role: str) -> None:
+        self.form, self.key, self.role, self.view = form, key, role, form.view
+        self.reset()
+
+    def reset(self, seed: int | None = None) -> None:
+        game = 0 if seed is None else game_seed(seed, self.role)
+        self.form.reset(np.array([game], np.int64))
+        self.frame = 0
+
+    def act(self, obs: np.ndarray) -> int:
+        action = self.form.act(np.asarray(obs)[None], self.frame)
+        self.frame += 1
+        return int(action[0])
+
+
+Leaf = Callable[[SeatSpec], Partner]  # the partner built for one place of a name (a policy, a hand)
+
+
+def leaves(role: str, option: str = "--partner") -> Leaf:
+    """Builds each place of a parsed name once (the same spec object, the same partner): the lanes
+    of one name share their policies, as one policy answers for all its lanes."""
+    made: dict[int, tuple[SeatSpec, Partner]] = {}
+
+    def leaf(spec: SeatSpec) -> Partner:
+        if id(spec) not in made:
+            made[id(spec)] = (spec, build(spec, role, option))
+        return made[id(spec)][1]
+
+    return leaf
+
+
+# A policy whose act() draws from its probs() is played from its distributions.
+_SAMPLED = (LearnedPolicy.act, RulePolicy.act, UniformPolicy.act)
+
+
+def _sampled(partner: Partner) -> bool:
+    return getattr(type(partner), "act", None) in _SAMPLED
+
+
+def _delay(spec: SeatSpec, option: str = "--partner") -> int:
+    """delayed(...)'s frames: DELAY, or frames=N (0 to 60)."""
+    if not spec.settings:
+        return DELAY
+    (setting, frames), *more = spec.settings
+    if more or setting != "frames" or not str(frames).isdigit() or int(frames) > 60:
+        raise UsageError(option, str(spec), "delayed(...) takes one setting, frames=N (0 to 60)")
+    return int(frames)
+
+
+def shape(spec: SeatSpec, leaf: Leaf) -> tuple:
+    """What a partner's batched form depends on: its wrappers, their settings and nesting, and the
+    view of the policies inside, not which policies they are."""
+    if spec.kind in LANE_WRAPPERS:
+        setting = _delay(spec) if spec.kind == "delayed" else None
+        return (spec.kind, setting, *(shape(inner, leaf) for inner in spec.inner))
+    partner = leaf(spec)
+    if isinstance(partner, HumanLike) and all(_sampled(p) for p in (partner.first, partner.second) if p):
+        return ("human", partner.key)  # one batched form per hand on project policies (HumanLanes)
+    return ("policy" if _sampled(partner) else "other", partner.view)
+
+
+def lanes(specs: list[SeatSpec], leaf: Leaf, stream: int, streams: Iterator[int], offset: int = 0) -> Lanes:
+    """The batched form of partners of one `shape`, one spec per lane: their policies draw from
+    `stream`, every other draw of the wrappers from the next of `streams` (unique in one form)."""
+    kind, first = specs[0].kind, specs[0]
+
+    def inner(i: int, stream: int = stream, offset: int = offset) -> Lanes:
+        return lanes([spec.inner[i] for spec in specs], leaf, stream, streams, offset)
+
+    if kind == "noisy":
+        return Noisy(inner(0), NOISE, streams)
+    if kind == "delayed":
+        return Delayed(inner(0), _delay(first))
+    if kind == "sticky":
+        return Sticky(inner(0), STICKY, streams)
+    if kind == "switch":
+        second = inner(1, next(streams), offset + 1)
+        return Switching(inner(0), second, SWITCH_AT)
+    partners = [leaf(spec) for spec in specs]
+    played = shape(first, leaf)[0]
+    if played == "human":
+        return HumanLanes(partners[0], offset)
+    if played == "policy":
+        return PolicyLanes(partners, stream)
+    return EachLane(partners, offset)
+
+
+def form(specs: list[SeatSpec], role: str, leaf: Leaf) -> Lanes:
+    """The batched form of `role`'s partners `specs` (one per lane, all of one shape): its policies
+    draw from the seat's stream (batch_play: 0 and 1), its wrappers from 2 on."""
+    return lanes(specs, leaf, ROLES.index(role), itertools.count(2))
+
+
+class Partners:
+    """Every lane's partner, by name: the lanes of partners of one shape are played by one
+    batched form."""
+
+    def __init__(self, names: list[str], role: str, keys: np.ndarray) -> None:
+        specs = {name: SeatSpec.parse(name) for name in dict.fromkeys(names)}
+        leaf = leaves(role)
+        shapes = {name: shape(spec, leaf) for name, spec in specs.items()}
+        self.groups: list[tuple[np.ndarray, Lanes]] = []
+        for kind in dict.fromkeys(shapes[name] for name in names):
+            rows = np.array([lane for lane, name in enumerate(names) if shapes[name] == kind])
+            partner = form([specs[names[lane]] for lane in rows], role, leaf)
+            partner.reset(np.asarray(keys)[rows])
+            self.groups.append((rows, partner))
+
+    def act(self, observed: Callable[[str], np.ndarray], frame: int) -> np.ndarray:
+        """Every lane's action; `observed(view)`: every lane's observation of the partner's seat."""
+        out = np.empty(sum(len(rows) for rows, _ in self.groups), np.int64)
+        for rows, partner in self.groups:
+            try:
+                out[rows] = partner.act(observed(partner.view)[rows], frame)
+            except PartnerError as error:  # its lane in this batch, not in its group
+                raise PartnerError(error.problem, int(rows[error.lane])) from None
+        return out
+
+
 def check_partner(name: str, role: str, option: str = "--partner") -> None:
     """Build the partner `name` and ask it for one action on a fresh game's first state, as a run
     does before handing out any job: a mistake in the name, a plug-in that does not import, is
@@ -172,32 +395,29 @@ def check_partner(name: str, role: str, option: str = "--partner") -> None:
         raise UsageError(option, name, problem) from None
 
 
-WRAPPERS = {"noisy": Noisy, "delayed": Delayed, "sticky": Sticky}
-
-
 def make_partner(name: str, role: str) -> Partner:
     """A fresh partner of `role` by name (see the module docstring for the grammar)."""
     return build(SeatSpec.parse(name, "--partner"), role)
 
 
 def build(spec: SeatSpec, role: str, option: str = "--partner") -> Partner:
-    """What plays `role`'s seat as `spec` says, fresh: a policy, or a partner made of policies. A
-    person or an adaptive agent is no partner (UsageError): a gateway or the adapter plays them."""
-    if spec.kind == "delayed" and spec.settings:
-        (setting, frames), *more = spec.settings
-        if more or setting != "frames" or not frames.isdigit() or int(frames) > 60:
-            raise UsageError(option, str(spec), "delayed(...) takes one setting, frames=N (0 to 60)")
-        return Delayed(build(spec.inner[0], role, option), int(frames))
-    if spec.kind in WRAPPERS:
-        return WRAPPERS[spec.kind](build(spec.inner[0], role, option))
+    """What plays `role`'s seat in a single game as `spec` says, fresh: a policy, or a partner made
+    of policies (a wrapper as one lane of its batched form). A person or an adaptive agent is no
+    partner (UsageError): a gateway or the adapter plays them."""
+    if spec.kind in LANE_WRAPPERS:
+        leaf = leaves(role, option)
+        try:
+            return OneGame(form([spec], role, leaf), str(spec), role)
+        except UsageError:
+            raise
+        except ValueError as error:  # a switch of partners that read different views
+            raise UsageError(option, str(spec), str(error)) from None
     if spec.kind == "human":
         inner = [build(partner, role, option) for partner in spec.inner]
         try:
             return HumanLike.from_arguments(inner, [f"{name}={value}" for name, value in spec.settings])
         except ValueError as error:
             raise UsageError(option, str(spec), str(error)) from None
-    if spec.kind == "switch":
-        return Switching(build(spec.inner[0], role, option), build(spec.inner[1], role, option))
     if spec.kind == FITTED:
         return _fitted(spec.key, role)
     if spec.kind == RULE:
@@ -209,7 +429,7 @@ def build(spec: SeatSpec, role: str, option: str = "--partner") -> Partner:
         return partner
     if spec.kind in (PERSON, ADAPTIVE_KIND):
         raise UsageError(option, str(spec), "a person or an adaptive agent, not a policy")
-    return policy_for(spec.key, role, option)  # a key, a .zip, a module:attr, a proxy:DIR
+    return policy_of(spec.kind, spec.key, role, option)  # a key, a .zip, a module:attr, a proxy:DIR
 
 
 def fitted_people(directory: Path, name: str = "") -> tuple[str, dict[str, dict]]:
@@ -246,7 +466,7 @@ def group_of(name: str) -> str:
         return "proxy"
     if spec.kind == FITTED:
         return "fitted"
-    if spec.kind in ("noisy", "delayed", "sticky", "switch", "human"):
+    if spec.kind in WRAPPERS:
         return {"switch": "switching", "human": "human-like"}.get(spec.kind, spec.kind)
     return "library" if spec.kind == KEY and name in library.registry() else "outside"
 

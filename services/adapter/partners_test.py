@@ -1,4 +1,5 @@
-"""Partner stand-ins: the name grammar, and that each wrapper changes play as it says."""
+"""Partners: the name grammar, that each wrapper changes play as it says, and that a game's
+partner is the same whether it plays alone or among many lanes."""
 
 from __future__ import annotations
 
@@ -7,20 +8,31 @@ import re
 import numpy as np
 import pytest
 
+from services.adapter.human_like import HumanLike
 from services.adapter.partners import (
     DELAY,
     SWITCH_AT,
     Delayed,
+    EachLane,
+    HumanLanes,
     Noisy,
+    OneGame,
     Partner,
+    Partners,
+    PolicyLanes,
     Sticky,
     Switching,
     group_of,
     make_partner,
     population,
 )
+from services.sim.batch import BatchGame
+from services.sim.observation import observe
+from services.sim.play import policy_seed
 from shared.errors import UsageError
-from shared.game import N_ACTIONS
+from shared.game import N_ACTIONS, GameConfig
+
+COUNTING, CONSTANT = "services.adapter.partners_test:Counting", "services.adapter.partners_test:Constant"
 
 
 class Counting:
@@ -42,15 +54,24 @@ class Constant(Counting):
         return 5
 
 
-def observations(n: int) -> list[np.ndarray]:
-    return [np.full(64, float(t)) for t in range(n)]
+def played(name: str, lanes: int, frames: int, first: float = 0.0) -> np.ndarray:
+    """(frames, lanes) actions of `name` in lanes of game seeds 0..lanes-1; frame t's observations
+    are t + first everywhere (Counting acts on them)."""
+    partners = Partners([name] * lanes, "bait", np.arange(lanes))
+    rows = [
+        partners.act(lambda view, t=t: np.full((lanes, 64), t + first, np.float32), t) for t in range(frames)
+    ]
+    return np.array(rows)
 
 
 def test_names_build_nested_partners() -> None:
     partner = make_partner("noisy(switch(B1,delayed(B5)))", "bait")
-    assert isinstance(partner, Noisy) and isinstance(partner.inner, Switching)
-    assert partner.key == "noisy(switch(B1,delayed(B5)))"
-    assert isinstance(make_partner("sticky(mirror)", "shooter"), Sticky)
+    assert isinstance(partner, OneGame) and partner.key == "noisy(switch(B1,delayed(B5)))"
+    noisy = partner.form
+    assert isinstance(noisy, Noisy) and isinstance(noisy.inner, Switching)
+    assert isinstance(noisy.inner.first, PolicyLanes) and isinstance(noisy.inner.second, Delayed)
+    assert noisy.inner.second.delay == DELAY
+    assert isinstance(make_partner("sticky(mirror)", "shooter").form, Sticky)
     with pytest.raises(ValueError, match="plays"):
         make_partner("S1", "bait")
     with pytest.raises(ValueError, match="two partners"):
@@ -58,48 +79,89 @@ def test_names_build_nested_partners() -> None:
 
 
 def test_external_partners_by_module_path() -> None:
-    partner = make_partner("services.adapter.partners_test:Constant", "bait")
+    partner = make_partner(CONSTANT, "bait")
     assert isinstance(partner, Partner) and partner.act(np.zeros(64)) == 5
     with pytest.raises(ValueError, match="plays bait"):
-        make_partner("services.adapter.partners_test:Constant", "shooter")
+        make_partner(CONSTANT, "shooter")
 
 
 def test_noisy_slips_at_its_rate_and_is_seeded() -> None:
-    partner = Noisy(Constant())
-    partner.reset(3)
-    actions = [partner.act(np.zeros(64)) for _ in range(20_000)]
-    slipped = np.mean([a != 5 for a in actions])
-    assert abs(slipped - 0.1 * 11 / 12) < 0.01  # a slip lands on the same action 1 time in 12
-    partner.reset(3)
-    assert [partner.act(np.zeros(64)) for _ in range(100)] == actions[:100]
+    actions = played(f"noisy({CONSTANT})", 400, 50)
+    assert abs(np.mean(actions != 5) - 0.1 * 11 / 12) < 0.01  # a slip lands on the same action 1 time in 12
+    assert set(np.unique(actions)) == set(range(N_ACTIONS))
+    assert (played(f"noisy({CONSTANT})", 400, 50) == actions).all()
 
 
 def test_delayed_acts_on_the_state_of_delay_frames_ago() -> None:
-    partner = Delayed(Counting())
-    partner.reset(0)
-    actions = [partner.act(obs) for obs in observations(20)]
-    assert actions[: DELAY + 1] == [0] * (DELAY + 1)
-    assert actions[DELAY + 1 :] == [(t - DELAY) % N_ACTIONS for t in range(DELAY + 1, 20)]
+    actions = played(f"delayed({COUNTING})", 3, 20)
+    assert (actions[: DELAY + 1] == 0).all()
+    late = np.arange(DELAY + 1, 20)[:, None]
+    assert (actions[DELAY + 1 :] == (late - DELAY) % N_ACTIONS).all()
     two = make_partner("delayed(B5,frames=2)", "bait")
-    assert (two.delay, two.key) == (2, "delayed(B5,frames=2)")
-    assert make_partner("delayed(B5,frames=6)", "bait").key == "delayed(B5)"
+    assert (two.form.delay, two.key) == (2, "delayed(B5,frames=2)")
     with pytest.raises(UsageError, match="frames=N"):
         make_partner("delayed(B5,frames=-1)", "bait")
 
 
 def test_sticky_repeats_its_last_action() -> None:
-    partner = Sticky(Counting())
-    partner.reset(1)
-    actions = [partner.act(obs) for obs in observations(2000)]
-    repeated = np.mean([a == b for a, b in zip(actions, actions[1:], strict=False)])
-    assert 0.45 < repeated < 0.56
+    actions = played(f"sticky({COUNTING})", 50, 400)
+    fresh = np.arange(400)[:, None] % N_ACTIONS
+    assert 0.45 < np.mean(actions[1:] == actions[:-1]) < 0.56
+    assert np.all((actions == fresh) | (actions == np.vstack([np.zeros((1, 50), int), actions[:-1]])))
 
 
 def test_switching_changes_policy_at_its_frame() -> None:
-    partner = Switching(Counting(), Constant())
-    partner.reset(0)
-    actions = [partner.act(np.full(64, 1.0)) for _ in range(SWITCH_AT + 10)]
-    assert set(actions[:SWITCH_AT]) == {1} and set(actions[SWITCH_AT:]) == {5}
+    actions = played(f"switch({COUNTING},{CONSTANT})", 2, SWITCH_AT + 10, first=1.0)
+    assert (actions[:SWITCH_AT] == (np.arange(SWITCH_AT)[:, None] + 1) % N_ACTIONS).all()
+    assert (actions[SWITCH_AT:] == 5).all()
+    with pytest.raises(UsageError, match="same observation view"):
+        make_partner("switch(human(B1),B5)", "bait")
+
+
+def test_forms_follow_the_partner_and_plug_ins_are_played_as_they_are() -> None:
+    names = ["noisy(switch(B1,B5))", "noisy(switch(B7,B2))", "noisy(B1)", "switch(B1,B5)", "noisy(B2)"]
+    assert [len(rows) for rows, _ in Partners(names, "bait", np.arange(5)).groups] == [2, 2, 1]
+    ((_, plug_in),) = Partners([CONSTANT] * 2, "bait", np.arange(2)).groups
+    assert isinstance(plug_in, EachLane) and plug_in.copies[0] is not plug_in.copies[1]
+    ((_, hand),) = Partners(["human(B1,B5)"] * 2, "bait", np.arange(2)).groups
+    assert isinstance(hand, HumanLanes)
+    ((_, on_a_wrapper),) = Partners(["human(noisy(B4))"] * 2, "bait", np.arange(2)).groups
+    assert isinstance(on_a_wrapper, EachLane)
+
+
+MIXED = [
+    "noisy(B5)",
+    "sticky(switch(B1,B5))",
+    "delayed(circle(radius=150),frames=2)",
+    "human(B1,B5)",
+    "human(noisy(B4),skill=novice)",
+    "switch(circle,human(B3))",
+    f"noisy({CONSTANT})",
+    "noisy(B5)",
+]
+
+
+def test_a_partner_acts_the_same_in_a_single_game_as_among_many_lanes() -> None:
+    """The same partner spec played as a single game (`make_partner`: one lane of its batched
+    form, what play_partner, a stand-in and a recorded trial play) and among other partners' lanes
+    (`Partners`, an evaluation's batch) gives the same actions, exactly: every draw is its game's,
+    keyed by seed and frame. The lanes see the states of real games (the batched engine, the
+    partners under test in the bait seat), past the switches' frame."""
+    keys, frames = np.arange(20, 20 + len(MIXED)), SWITCH_AT + 30
+    game = BatchGame(len(MIXED), GameConfig(frames=frames), keys)
+    together, shooters = Partners(MIXED, "bait", keys), Partners(["S5"] * len(MIXED), "shooter", keys)
+    singles = [make_partner(name, "bait") for name in MIXED]
+    for partner, key in zip(singles, keys.tolist(), strict=True):
+        partner.reset(policy_seed(key, "bait"))
+    assert isinstance(singles[0], OneGame) and isinstance(singles[3], HumanLike)
+    many, one = [], []
+    for t in range(frames):
+        seen = {view: observe(game, "bait", view) for view in ("world", "role")}
+        many.append(together.act(seen.get, t))
+        one.append([partner.act(seen[partner.view][i]) for i, partner in enumerate(singles)])
+        game.step(many[-1], shooters.act(lambda view: observe(game, "shooter", view), t))
+    assert (np.array(many) == np.array(one)).all()
+    assert (np.array(many)[:, 0] != np.array(many)[:, 7]).any()  # two games of noisy(B5): two seeds
 
 
 def test_population_covers_every_group() -> None:

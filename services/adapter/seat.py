@@ -27,23 +27,14 @@ from collections.abc import Iterator
 from dataclasses import dataclass, replace
 
 from services.adapter.core import ADAPTIVE, AdapterConfig, setting_text
-from services.agent.outside import is_outside
-from services.agent.proxy import PROXY
+from services.agent.outside import BY_KEY, PLUGIN, PROXY_KIND, ZIP, policy_kind
 from services.agent.scripted import SCRIPTED
-from services.agent.seats import check_seat
+from services.agent.seats import check_seat, policy_of
 from shared.errors import UsageError
 from shared.game import HUMAN
 
-KEY, RULE, ZIP, PLUGIN, PROXY_KIND, FITTED, PERSON, ADAPTIVE_KIND = (
-    "key",
-    "rule",
-    "zip",
-    "plugin",
-    "proxy",
-    "fitted",
-    "person",
-    "adaptive",
-)
+KEY = BY_KEY  # a policy's kinds (KEY, ZIP, PLUGIN, PROXY_KIND) are outside.policy_kind's
+RULE, FITTED, PERSON, ADAPTIVE_KIND = "rule", "fitted", "person", "adaptive"
 HUMANS = "humans:"  # stand-ins fitted by `tsf humans fit`: humans:DIR@NAME (services/adapter/humans.py)
 WRAPPERS = {
     "noisy": (1,),
@@ -53,7 +44,8 @@ WRAPPERS = {
     "human": (1, 2),
 }  # partners each takes
 WRAPPER_SETTINGS = {"delayed": ("frames",), "human": ("skill", "input_ms")}  # their values: partners.build
-KINDS = (KEY, RULE, ZIP, PLUGIN, PROXY_KIND, FITTED, PERSON, ADAPTIVE_KIND, *WRAPPERS)
+POLICIES = (KEY, ZIP, PLUGIN, PROXY_KIND)  # a policy by its key: services/agent/seats.policy_of
+KINDS = (*POLICIES, RULE, FITTED, PERSON, ADAPTIVE_KIND, *WRAPPERS)
 _CALL = re.compile(r"^(\w+)\((.*)\)$")
 
 
@@ -92,17 +84,11 @@ class SeatSpec:
             return cls(call[1], settings=named, inner=tuple(cls.parse(part, option) for part in parts))
         if call and call[1] in SCRIPTED:
             return cls(RULE, call[1], rule_settings(name, call[1], call[2], option))
-        if name.endswith(".zip"):
-            return cls(ZIP, name)
-        if name.startswith(PROXY):
-            return cls(PROXY_KIND, name)
         if name.startswith(HUMANS):
             return cls(FITTED, name)
-        if is_outside(name):
-            return cls(PLUGIN, name)
         if not name:
             raise UsageError(option, name, "no seat named")
-        return cls(KEY, name)
+        return cls(policy_kind(name), name)
 
     def __str__(self) -> str:
         if self.kind == PERSON:
@@ -138,8 +124,10 @@ def check_live(name: str, role: str, option: str) -> SeatSpec:
     plays). Partners made of policies (wrappers, rules with other settings) play in bulk only, and
     the adaptive agent takes its seat through the adapter."""
     spec = SeatSpec.parse(name, option)
-    if spec.kind in (KEY, ZIP, PLUGIN, PROXY_KIND):
+    if spec.kind == KEY:
         check_seat(spec.key, role, option)
+    elif spec.kind in POLICIES:
+        policy_of(spec.kind, spec.key, role, option)  # loaded to see which seat it plays
     elif spec.kind != PERSON:
         raise UsageError(option, name, "plays in bulk evaluations only, not in a live match")
     return spec

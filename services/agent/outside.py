@@ -7,6 +7,10 @@
                            that returns a new one
     proxy:DIR              a proxy cloned from recorded people by `tsf proxy train` (services/proxy)
 
+`policy_kind` is the one place a policy key is classified: seats.policy_for reads a key with it,
+and SeatSpec.parse (services/adapter/seat.py) the policies inside a seat's name, keeping the kind,
+so a spec is loaded (`load`) without being classified again.
+
 A `.zip` is read with SB3 (the `train` extra) and played as numpy arrays (networks.JointPolicy): the
 network's distribution over the 12 actions with networks.FLOOR mixed in is what `probs` reports and
 what `act` draws from, so the adapter's likelihoods are exact. It reads the observation view it
@@ -37,33 +41,39 @@ from shared.messages import POLICY_NAME
 ACTIVATIONS = {"Tanh": "tanh", "ReLU": "relu"}  # torch module name: networks.Network's name
 KEY = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
 NAME = re.compile(POLICY_NAME)
+BY_KEY, ZIP, PLUGIN, PROXY_KIND = "key", "zip", "plugin", "proxy"  # what a policy key names (policy_kind)
+
+
+def policy_kind(key: str) -> str:
+    """What a policy key names: an SB3 `.zip` (ZIP), a `proxy:DIR` (PROXY_KIND), a `module:attr`
+    (PLUGIN), else a library or scripted key (BY_KEY)."""
+    if key.endswith(".zip"):
+        return ZIP
+    if key.startswith(PROXY):
+        return PROXY_KIND
+    return PLUGIN if ":" in key else BY_KEY
 
 
 def record_name(key: str) -> str:
     """How a policy key is named in messages and recordings, which take 1-64 of [A-Za-z0-9_.:-]: a
     library or scripted key as it is, a `.zip` by its file name, a `proxy:DIR` by its directory's
     name, a `module:attr` as it is where it fits, else by its attr."""
-    if not is_outside(key) or NAME.fullmatch(key):
+    kind = policy_kind(key)
+    if kind == BY_KEY or NAME.fullmatch(key):
         return key
-    if key.startswith(PROXY):
+    if kind == PROXY_KIND:
         name = PROXY + Path(key.removeprefix(PROXY)).name
     else:
-        name = Path(key).name if key.endswith(".zip") else key.rpartition(":")[2]
+        name = Path(key).name if kind == ZIP else key.rpartition(":")[2]
     return re.sub(r"[^A-Za-z0-9_.:-]", "_", name)[-32:] or "outside"
 
 
-def is_outside(key: str) -> bool:
-    """Whether a policy key names a policy from outside the library (a `.zip`, `module:attr` or
-    `proxy:DIR`)."""
-    return key.endswith(".zip") or ":" in key
-
-
-def load(key: str, role: str, option: str = "--policy", view: str = "world") -> Policy:
-    """The policy a `.zip` or `module:attr` key names, checked to play `role` (UsageError if not);
-    a `.zip` plays whichever seat it is given."""
-    if key.endswith(".zip"):
+def load(kind: str, key: str, role: str, option: str = "--policy", view: str = "world") -> Policy:
+    """The policy from outside that `key` names, of its `kind` (policy_kind: ZIP, PROXY_KIND or
+    PLUGIN), checked to play `role` (UsageError if not); a `.zip` plays whichever seat it is given."""
+    if kind == ZIP:
         return zip_policy(Path(key), role, view, option)
-    if key.startswith(PROXY):
+    if kind == PROXY_KIND:
         return proxy.load(Path(key.removeprefix(PROXY)), role, record_name(key), option)
     policy = _object(key, option)
     if policy.role != role:

@@ -2,7 +2,8 @@
 
 A key is a library policy (B1-B9, S1-S7, and those of TSF_LIBRARY: networks.py), a scripted one
 (scripted.py), or a policy from outside the library: an SB3 `.zip`, a `module:attr` or a
-`proxy:DIR` (outside.py).
+`proxy:DIR` (outside.py). `policy_for` classifies a key (outside.policy_kind) and loads it;
+`policy_of` loads a key already classified (a SeatSpec's kind and key).
 """
 
 from __future__ import annotations
@@ -20,14 +21,10 @@ def seat_keys(role: str) -> list[str]:
 
 
 def check_seat(key: str, role: str, option: str = "--policy") -> None:
-    """Refuse (UsageError) a seat that is not one, or a key that cannot play it: the line names the
-    option, the value and every key that can. A policy from outside (outside.py) is loaded to see
-    which seat it plays."""
+    """Refuse (UsageError) a seat that is not one, or a library or scripted key that cannot play it:
+    the line names the option, the value and every key that can."""
     if role not in ROLES:
         raise UsageError("--role", role, "not a seat", ROLES)
-    if outside.is_outside(key):
-        outside.load(key, role, option)
-        return
     if key not in seat_keys(role):
         other = [r for r in ROLES if key in seat_keys(r)]
         problem = f"plays the {other[0]} seat, not the {role}" if other else f"no policy of the {role} seat"
@@ -38,7 +35,12 @@ def policy_for(key: str, role: str, option: str = "--policy") -> Policy:
     """Any policy a seat can play, by key: a library policy (B1-B9, S1-S7, and those of TSF_LIBRARY),
     a scripted one, an SB3 `.zip` or a `module:attr` (outside.py); a key that cannot play the seat is
     a UsageError about `option` (check_seat)."""
-    if outside.is_outside(key):
-        return outside.load(key, role, option)
+    return policy_of(outside.policy_kind(key), key, role, option)
+
+
+def policy_of(kind: str, key: str, role: str, option: str = "--policy") -> Policy:
+    """The policy `key` names, of its `kind` (outside.policy_kind), checked to play `role`."""
+    if kind != outside.BY_KEY:
+        return outside.load(kind, key, role, option)
     check_seat(key, role, option)
     return load(key) if key in library.registry() else scripted_policy(key, role)

@@ -13,7 +13,7 @@ with the number of distinct policies, not of pairs.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from functools import cache, partial
 
 import numpy as np
@@ -21,7 +21,7 @@ import numpy as np
 from services.sim.batch import BatchGame
 from services.sim.observation import observe
 from services.sim.play import GameResult
-from services.sim.sampling import batch_act, lane_uniforms
+from services.sim.sampling import act_lanes, lane_uniforms
 from shared.game import ROLES, GameConfig, Policy
 
 
@@ -42,25 +42,6 @@ class Seat:
         """Every lane's action this frame: each policy in use asked once, for its lanes."""
         uniforms = lane_uniforms(self.keys, self.stream, batch.state.frame)
         return act_lanes(self.policies, self.choice, cache(partial(observe, batch, self.role)), uniforms)
-
-
-def act_lanes(
-    policies: Sequence[Policy],
-    choice: np.ndarray,
-    observed: Callable[[str], np.ndarray],
-    uniforms: np.ndarray,
-) -> np.ndarray:
-    """One action per lane: lane i's drawn from `policies[choice[i]]` with `uniforms[i]`, each
-    policy asked once for all its lanes; `observed(view)`: every lane's observation in that view."""
-    used = np.unique(choice)
-    if len(used) == 1:  # one policy for every lane: no gathering
-        policy = policies[used[0]]
-        return batch_act(policy, observed(policy.view), uniforms)
-    out = np.empty(len(choice), np.int64)
-    for k in used:
-        policy, lanes = policies[k], np.flatnonzero(choice == k)
-        out[lanes] = batch_act(policy, observed(policy.view)[lanes], uniforms[lanes])
-    return out
 
 
 def play_batch(

@@ -1,12 +1,15 @@
 """How a batch turns policies' distributions into actions: every lane at once, reproducibly.
 
 `batch_probs` asks a policy for all lanes' distributions in one call; `sample` draws one action
-per lane from its row; `lane_uniforms` is the counter-based generator behind the draws, keyed by
-a game's seed, a stream (the seat) and the frame, so that a batched game depends on its own seed
-only, never on which lanes share its batch or which worker plays it.
+per lane from its row (`act_lanes`: lanes of several policies, each policy asked once);
+`lane_uniforms` is the counter-based generator behind the draws, keyed by a game's seed, a stream
+(the seat) and the frame, so that a batched game depends on its own seed only, never on which
+lanes share its batch or which worker plays it.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -26,6 +29,25 @@ def batch_act(policy: Policy, observations: np.ndarray, uniforms: np.ndarray) ->
     """One action per observation, drawn from the policy's distribution with the given uniforms
     (not the policy's own per-game stream: a batch samples all its lanes at once)."""
     return sample(batch_probs(policy, observations), uniforms)
+
+
+def act_lanes(
+    policies: Sequence[Policy],
+    choice: np.ndarray,
+    observed: Callable[[str], np.ndarray],
+    uniforms: np.ndarray,
+) -> np.ndarray:
+    """One action per lane: lane i's drawn from `policies[choice[i]]` with `uniforms[i]`, each
+    policy asked once for all its lanes; `observed(view)`: every lane's observation in that view."""
+    used = np.unique(choice)
+    if len(used) == 1:  # one policy for every lane: no gathering
+        policy = policies[used[0]]
+        return batch_act(policy, observed(policy.view), uniforms)
+    out = np.empty(len(choice), np.int64)
+    for k in used:
+        policy, lanes = policies[k], np.flatnonzero(choice == k)
+        out[lanes] = batch_act(policy, observed(policy.view)[lanes], uniforms[lanes])
+    return out
 
 
 def sample(probs: np.ndarray, uniforms: np.ndarray) -> np.ndarray:

@@ -54,6 +54,7 @@ import zenoh
 from websockets.asyncio.server import ServerConnection
 from websockets.protocol import State
 
+from services.adapter.seat import PERSON, SeatSpec
 from services.human.core import BadInput, Controls, PerAddress, RateLimit
 from services.human.gateway import Bridge, Gateway, Outbox, Web, receive_first, refuse
 from services.recorder.recording import load
@@ -65,7 +66,7 @@ from services.study.dashboard import Dashboard, overview
 from services.study.remote import Remote
 from shared import keys
 from shared.bus import BusConfig, free_endpoint, until_stopped
-from shared.game import FPS, HUMAN, other
+from shared.game import FPS, other
 from shared.secret import same_secret, signature
 
 log = logging.getLogger("tsf.study")
@@ -393,7 +394,8 @@ class TrialRunner:
 
     def plan(self, trial: Trial, endpoint: str) -> MatchPlan:
         """The trial's match: the participant's seat a person's, the other the variant's agent."""
-        seats = {trial.role: HUMAN, **trial.variant.plan(other(trial.role), trial.seed)}
+        agent = other(trial.role)
+        seats = {trial.role: SeatSpec(PERSON), agent: trial.variant.seat(agent)}
         config, serving = self.study.config, self.serving
         frames, directory = (
             (self.practice_frames, self.practice) if trial.practice else (config.frames, self.recordings)

@@ -20,7 +20,6 @@ from shared.game import ROLES, SEEDS, GameConfig, Range
 commands = typer.Typer()
 STEPS = Range(1, 10**9)  # environment steps of one training
 SCORED = Range(0, GAMES.high)  # games a trained or added policy is scored over (0: not scored)
-Role = enum.Enum("Role", {r: r for r in ROLES}, type=str)
 View = enum.Enum("View", {v: v for v in VIEWS}, type=str)
 
 
@@ -152,7 +151,7 @@ def library_add(
         ...,
         help="A Stable-Baselines3 model (.zip) trained on tsf/Role-v0, or a proxy (tsf proxy train).",
     ),
-    role: Role = typer.Option(..., help="The seat it plays."),
+    role: Seat = typer.Option(..., help="The seat it plays."),
     library_dir: Path = output(
         ..., "Your library directory (created if need be).", directory=True, names=("--library",)
     ),
@@ -166,7 +165,7 @@ def library_add(
     hashes and provenance. List the directory in TSF_LIBRARY to play its keys everywhere."""
     from services.agent.train import add
 
-    entry = add(key, model, role.value, library_dir, view.value, partner, games)
+    entry = add(key, model, role, library_dir, view.value, partner, games)
     console.print(f"{key}: {library_dir / entry['file']} sha256 {entry['sha256'][:12]}")
     if entry.get("score"):
         console.print(f"  {_score_text(entry['score'])}")

@@ -18,7 +18,7 @@ from services.options import (
     Frames,
     Host,
     Port,
-    Seat,
+    Role,
     Seed,
     adapter_options,
     bus_options,
@@ -71,7 +71,7 @@ def match_command(
     overwrite: bool = typer.Option(
         False, "--overwrite", help="Reuse the id of an existing recording; the old one is renamed aside."
     ),
-    adaptive: Seat | None = typer.Option(None, help="Make this seat the adaptive agent."),
+    adaptive: Role | None = typer.Option(None, help="Make this seat the adaptive agent."),
     *,
     adapter: AdapterFactory,
 ) -> None:
@@ -132,7 +132,7 @@ def match_command(
 @commands.command("play")
 @adapter_options("role", "seed")
 def play_command(
-    role: Seat = typer.Option("bait", help="The seat you play."),
+    role: Role = typer.Option("bait", help="The seat you play."),
     partner: str = typer.Option(
         "adaptive",
         help="Who plays the other seat: `adaptive` (the adaptive agent), a policy key (see `tsf "

@@ -11,7 +11,7 @@ from rich.table import Table
 
 from services.agent.calibration import calibrate
 from services.agent.seats import policy_for
-from services.options import GAMES, Duration, Frames, Seat, console, game_frames, keys_help, number, output
+from services.options import GAMES, Duration, Frames, Role, console, game_frames, keys_help, number, output
 from services.sim.observation import VIEWS
 from services.sim.play import play, summarize
 from shared.errors import Failure, UsageError
@@ -151,7 +151,7 @@ def library_add(
         ...,
         help="A Stable-Baselines3 model (.zip) trained on tsf/Role-v0, or a proxy (tsf proxy train).",
     ),
-    role: Seat = typer.Option(..., help="The seat it plays."),
+    role: Role = typer.Option(..., help="The seat it plays."),
     library_dir: Path = output(
         ..., "Your library directory (created if need be).", directory=True, names=("--library",)
     ),
@@ -173,7 +173,7 @@ def library_add(
 
 
 @commands.command("keys")
-def keys_command(role: Seat | None = typer.Option(None, help="Only the keys of this seat.")) -> None:
+def keys_command(role: Role | None = typer.Option(None, help="Only the keys of this seat.")) -> None:
     """Every valid policy key with the seat it plays (the library's, yours in TSF_LIBRARY, the
     scripted ones), and the other forms a key can take."""
     from services.adapter.core import STRATEGIES

@@ -269,13 +269,8 @@ def main() -> None:
     links: list[dict[str, str]] = []
     ready = threading.Event()
     with tempfile.TemporaryDirectory() as directory, ThreadPoolExecutor(1) as pool:
-        plan = MatchPlan(
-            "bench-human",
-            frames=frames,
-            bait=SeatSpec.parse(HUMAN),
-            shooter=SeatSpec.parse("S5"),
-            directory=Path(directory),
-        )
+        seats = {"bait": SeatSpec.parse(HUMAN), "shooter": SeatSpec.parse("S5")}
+        plan = MatchPlan("bench-human", frames=frames, directory=Path(directory), **seats)
         running = pool.submit(
             play_with_people, plan, port=0, on_links=lambda urls: (links.append(urls), ready.set())
         )

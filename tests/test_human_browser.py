@@ -32,15 +32,8 @@ def match(tmp_path):
     """A match with a person in the bait seat and the mirror shooter: (links, the running match)."""
     links: dict[str, str] = {}
     ready = threading.Event()
-    plan = MatchPlan(
-        "browser",
-        1,
-        FRAMES,
-        bait=SeatSpec.parse(HUMAN),
-        shooter=SeatSpec.parse("mirror"),
-        directory=tmp_path,
-        wait_players=60,
-    )
+    seats = {"bait": SeatSpec.parse(HUMAN), "shooter": SeatSpec.parse("mirror")}
+    plan = MatchPlan("browser", 1, FRAMES, directory=tmp_path, wait_players=60, **seats)
 
     def on_links(urls: dict[str, str]) -> None:
         links.update(urls)

@@ -33,15 +33,8 @@ def matches(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Summary
     directory = tmp_path_factory.mktemp("bus-recordings")
     out = {}
     for bait, shooter, seed in PAIRS:
-        plan = MatchPlan(
-            f"rr-{bait}-{shooter}",
-            seed,
-            FRAMES,
-            "lockstep",
-            SeatSpec.parse(bait),
-            SeatSpec.parse(shooter),
-            directory,
-        )
+        seats = SeatSpec.parse(bait), SeatSpec.parse(shooter)
+        plan = MatchPlan(f"rr-{bait}-{shooter}", seed, FRAMES, "lockstep", *seats, directory)
         out[plan.match] = run_match(plan)
     adaptive = MatchPlan(
         ADAPTIVE,

@@ -488,14 +488,10 @@ class TrialRunner:
         """Offer the trial and play it from the participant's Ready until the match ends, they
         leave, or it runs past its limit; False (the match ended at once) if no Ready came or the
         match cannot start."""
-        ready = False
         if seat is not None:  # else the match cannot start: it fails at once
             socket.send(offer)
-            ready = bool(
-                await socket.wait_for("ready", self.serving.ready_timeout)
-            )  # a silent one frees the slot
-        if not ready:
-            stop.set()  # not started (or cannot be): ended at once
+        if seat is None or not await socket.wait_for("ready", self.serving.ready_timeout):
+            stop.set()  # not started (or cannot be): ended at once; a silent participant frees the slot
             return False
         seat.live()
         try:

@@ -19,24 +19,24 @@ from services.jobs.core import spec
 from services.jobs.kinds import hashes
 from shared import keys
 from shared.bus import BusConfig, free_endpoint, session, subscribe
-from shared.messages import SweepJob, SweepResult
+from shared.messages import JobOrder, JobResult
 
 
 def fake_worker(stack: ExitStack, endpoint: str, sweep: str, name: str, games: int) -> None:
     """A worker that answers every job at once with `games` zero values."""
     z = stack.enter_context(session(BusConfig("peer", (), (endpoint,))))
     ours = hashes()
-    publisher = z.declare_publisher(keys.sweep_result(sweep))
+    publisher = z.declare_publisher(keys.job_result(sweep))
 
-    def answer(job: SweepJob) -> None:
-        result = SweepResult(
+    def answer(job: JobOrder) -> None:
+        result = JobResult(
             match=sweep, frame=0, sender=f"worker/{name}", job=job.job, values=[0.0] * games,
             library=ours.library, config=ours.config,
         )  # fmt: skip
         publisher.put(result.encode())
 
-    stack.enter_context(subscribe(z, keys.sweep_job(sweep, name), SweepJob, answer))
-    stack.enter_context(z.liveliness().declare_token(keys.sweep_worker(sweep, name)))
+    stack.enter_context(subscribe(z, keys.job_order(sweep, name), JobOrder, answer))
+    stack.enter_context(z.liveliness().declare_token(keys.job_worker(sweep, name)))
 
 
 def jobs_per_second(n_jobs: int, n_workers: int, games: int, journal: Path) -> float:

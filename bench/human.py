@@ -38,6 +38,7 @@ from urllib.parse import parse_qs, urlsplit
 
 import websockets
 
+from services.adapter.seat import SeatSpec
 from services.agent.seats import policy_for
 from services.human.core import action_keys
 from services.human.play import play_with_people
@@ -87,7 +88,7 @@ def seat_page(partner: str, seconds: float, role: str = "bait"):  # noqa: ANN201
 
     links: list[dict[str, str]] = []
     ready = threading.Event()
-    seats = {role: HUMAN, other(role): partner}
+    seats = {role: SeatSpec.parse(HUMAN), other(role): SeatSpec.parse(partner)}
     with (
         tempfile.TemporaryDirectory() as directory,
         ThreadPoolExecutor(1) as pool,
@@ -268,7 +269,8 @@ def main() -> None:
     links: list[dict[str, str]] = []
     ready = threading.Event()
     with tempfile.TemporaryDirectory() as directory, ThreadPoolExecutor(1) as pool:
-        plan = MatchPlan("bench-human", frames=frames, bait=HUMAN, shooter="S5", directory=Path(directory))
+        seats = {"bait": SeatSpec.parse(HUMAN), "shooter": SeatSpec.parse("S5")}
+        plan = MatchPlan("bench-human", frames=frames, directory=Path(directory), **seats)
         running = pool.submit(
             play_with_people, plan, port=0, on_links=lambda urls: (links.append(urls), ready.set())
         )

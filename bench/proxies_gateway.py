@@ -37,7 +37,7 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("bench-proxies-gateway"))
     args = parser.parse_args()
     config = StudyConfig(
-        "proxies", (Variant("S5", bait="B1", shooter="S5"),), args.trials, args.seconds, 1, ("bait",)
+        "proxies", (Variant.read("S5", bait="B1", shooter="S5"),), args.trials, args.seconds, 1, ("bait",)
     )
     study_dir = args.out / "study"
     stop, urls = threading.Event(), []

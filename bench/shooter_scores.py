@@ -15,7 +15,7 @@ import numpy as np
 
 from services.agent import library, networks
 from services.sim.batch import BatchGame
-from services.sim.batch_play import Seat, results
+from services.sim.batch_play import RoleLanes, results
 from services.sim.play import summarize
 
 
@@ -26,8 +26,8 @@ def scores(shooter, baits: list[str], games: int) -> tuple[list, float, list]:  
     bait_of = np.repeat(np.arange(len(baits)), games)
     batch = BatchGame(len(seeds), None, seeds)
     seats = [
-        Seat("bait", [networks.load(b) for b in baits], bait_of, seeds),
-        Seat("shooter", [shooter], np.zeros(len(seeds), np.int64), seeds),
+        RoleLanes("bait", [networks.load(b) for b in baits], bait_of, seeds),
+        RoleLanes("shooter", [shooter], np.zeros(len(seeds), np.int64), seeds),
     ]
     moved, frames = 0.0, 0
     while not batch.done[0]:

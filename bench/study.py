@@ -136,7 +136,7 @@ def spread(values: list[float]) -> str:
 def load_test(
     counts: list[int], trials: int, seconds: float, adaptive: bool = False, starting: int = SERVING.starting
 ) -> None:
-    variant = Variant("a", adapter=ADAPTIVE) if adaptive else Variant("s", "B5", "S5")
+    variant = Variant.read("a", adapter=ADAPTIVE) if adaptive else Variant.read("s", "B5", "S5")
     config = StudyConfig("bench", (variant,), trials=trials, trial_seconds=seconds)
     served = 0
     print(
@@ -219,7 +219,7 @@ def second_host(how: str, slots: int, out: Path) -> Iterator[BusConfig]:
 def arrival_test(
     n: int, over: float, seconds: float, cap: int, seed: int, hosts: BusConfig | None = None
 ) -> None:
-    config = StudyConfig("arrive", (Variant("s", "B5", "S5"),), trials=1, trial_seconds=seconds)
+    config = StudyConfig("arrive", (Variant.read("s", "B5", "S5"),), trials=1, trial_seconds=seconds)
     rng = random.Random(seed)  # one generator: a new one per arrival gave them all the same time
     arrivals = sorted(rng.uniform(0, over) for _ in range(n))
     where = f"{cap} matches here" + (

@@ -18,7 +18,7 @@ from services.options import (
     Frames,
     Host,
     Port,
-    Seat,
+    Role,
     Seed,
     adapter_options,
     bus_options,
@@ -71,12 +71,13 @@ def match_command(
     overwrite: bool = typer.Option(
         False, "--overwrite", help="Reuse the id of an existing recording; the old one is renamed aside."
     ),
-    adaptive: Seat | None = typer.Option(None, help="Make this seat the adaptive agent."),
+    adaptive: Role | None = typer.Option(None, help="Make this seat the adaptive agent."),
     *,
     adapter: AdapterFactory,
 ) -> None:
     """Start a complete match on this machine: sim, two agents and the recorder as processes (and
     with --adaptive, the adapter, set by the adapter options)."""
+    from services.adapter.seat import SeatSpec
     from services.recorder.export import export
     from services.recorder.recording import load
     from services.runtime.launch import MatchPlan, new_match_id, run_match
@@ -84,9 +85,12 @@ def match_command(
     if adaptive and adaptive not in ROLES:
         raise UsageError("--adaptive", adaptive, "not a seat", ROLES)
     config = adapter(role=adaptive or ROLES[1], seed=seed)  # its options are checked with or without
+    seats = {"bait": SeatSpec.parse(bait, "--bait"), "shooter": SeatSpec.parse(shooter, "--shooter")}
+    if adaptive:
+        seats[adaptive] = SeatSpec.adaptive_agent(config)
     plan = MatchPlan(
         match or new_match_id(), seed, game_frames(duration, frames), "lockstep" if lockstep else "realtime",
-        bait, shooter, out, adapter=config if adaptive else None,
+        directory=out, **seats,
     )  # fmt: skip
     seats = plan.policies()
     view = {"partner": "?", "switches": 0}  # "?" until the adapter names a partner
@@ -128,7 +132,7 @@ def match_command(
 @commands.command("play")
 @adapter_options("role", "seed")
 def play_command(
-    role: Seat = typer.Option("bait", help="The seat you play."),
+    role: Role = typer.Option("bait", help="The seat you play."),
     partner: str = typer.Option(
         "adaptive",
         help="Who plays the other seat: `adaptive` (the adaptive agent), a policy key (see `tsf "
@@ -146,20 +150,19 @@ def play_command(
     adapter: AdapterFactory,
 ) -> None:
     """Play a match from a browser, with an agent or another person; prints the link(s) to open."""
-    from services.adapter.seat import check_live
+    from services.adapter.seat import PERSON, SeatSpec, check_live
     from services.human.play import play_with_people
     from services.runtime.launch import MatchPlan, new_match_id
-    from shared.game import HUMAN
 
     if role not in ROLES:
         raise typer.BadParameter("role is bait or shooter")
     partner_role = other(role)
-    seats: dict = {role: HUMAN}
+    seats = {role: SeatSpec(PERSON)}
     if partner == "adaptive":
-        seats["adapter"] = adapter(role=partner_role, seed=seed)
+        seats[partner_role] = SeatSpec.adaptive_agent(adapter(role=partner_role, seed=seed))
     else:
-        check_live(partner, partner_role, "--partner")  # before anyone opens the page
-        seats[partner_role] = partner
+        spec = SeatSpec.parse(partner, "--partner")
+        seats[partner_role] = check_live(spec, partner_role, "--partner")  # before anyone opens the page
     plan = MatchPlan(
         match or new_match_id(), seed, game_frames(duration, frames), "realtime", directory=out,
         wait_players=wait, **seats,

@@ -94,7 +94,7 @@ PEOPLE_RECORDINGS = typer.Argument(
 
 
 # Enumerated options: Literal types, so that --help lists the choices and click refuses the rest.
-Seat = Literal[ROLES]
+Role = Literal[ROLES]
 Strategy = Literal[STRATEGIES]
 Strategies = enum.StrEnum("Strategies", [(s, s) for s in STRATEGIES])  # repeatable: typer lists take Enums
 SimMode = Literal["realtime", "lockstep"]
@@ -292,7 +292,7 @@ def adapter_options(*fixed: str) -> Callable[[Callable[..., None]], Callable[...
         own = [
             p for p in inspect.signature(command, eval_str=True).parameters.values() if p.name != "adapter"
         ]
-        kinds = {"role": Seat, "strategy": Strategy}  # the enumerated fields, as choices
+        kinds = {"role": Role, "strategy": Strategy}  # the enumerated fields, as choices
         added = [
             inspect.Parameter(
                 f.name,

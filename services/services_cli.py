@@ -20,7 +20,7 @@ from services.options import (
     Host,
     Match,
     Port,
-    Seat,
+    Role,
     Seed,
     Service,
     SimMode,
@@ -74,7 +74,7 @@ def sim(
 @bus_options
 def agent(
     match: Match,
-    role: Seat = typer.Option(..., help="The seat."),
+    role: Role = typer.Option(..., help="The seat."),
     policy: str = typer.Option(
         ...,
         help=keys_help(
@@ -165,7 +165,7 @@ def router(
 def alive(
     match: Match,
     service: Service = typer.Option(..., help="The service asked about."),
-    role: Seat | None = typer.Option(None, help="The seat, for an agent or a human."),
+    role: Role | None = typer.Option(None, help="The seat, for an agent or a human."),
     connect: Connect = None,
     timeout: float = number(2.0, SECONDS, "Seconds to wait for the bus."),
 ) -> None:

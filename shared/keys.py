@@ -10,8 +10,8 @@ tsf/<match>/alive/<service>[/<role>]  liveliness tokens, one per running service
 
 tsf/sweep/<sweep>/coordinator       liveliness token of a sweep's coordinator
 tsf/sweep/<sweep>/worker/<worker>   liveliness token of a sweep worker
-tsf/sweep/<sweep>/job/<worker>      coordinator -> one worker: a SweepJob (any kind of job)
-tsf/sweep/<sweep>/result            workers -> coordinator: SweepResults
+tsf/sweep/<sweep>/job/<worker>      coordinator -> one worker: a JobOrder (any kind of job)
+tsf/sweep/<sweep>/result            workers -> coordinator: JobResults
 
 tsf/host/<host>/alive               liveliness token of a match host
 tsf/host/<host>/status              host -> study servers: HostStatus (its slots), every second
@@ -99,21 +99,21 @@ def everything(match: str) -> str:
     return f"{PREFIX}/{check_match(match)}/**"
 
 
-def sweep_worker(sweep: str, worker: str = "*") -> str:
+def job_worker(sweep: str, worker: str = "*") -> str:
     """A sweep worker's liveliness token (the default `*` matches every worker of the sweep)."""
     return f"{PREFIX}/sweep/{check_match(sweep)}/worker/{_worker(worker)}"
 
 
-def sweep_coordinator(sweep: str) -> str:
+def job_coordinator(sweep: str) -> str:
     """The coordinator's liveliness token: workers leave when it goes away."""
     return f"{PREFIX}/sweep/{check_match(sweep)}/coordinator"
 
 
-def sweep_job(sweep: str, worker: str) -> str:
+def job_order(sweep: str, worker: str) -> str:
     return f"{PREFIX}/sweep/{check_match(sweep)}/job/{_worker(worker)}"
 
 
-def sweep_result(sweep: str) -> str:
+def job_result(sweep: str) -> str:
     return f"{PREFIX}/sweep/{check_match(sweep)}/result"
 
 

@@ -356,7 +356,7 @@ def _plain(depth: int = 4) -> Check:
 
 
 @dataclass(frozen=True, kw_only=True)
-class SweepJob(Message):
+class JobOrder(Message):
     """A coordinator's job for one worker slot: one piece of a bulk computation (a table cell's
     games, a batch of evaluation games, sessions, identification runs), its `kind` saying which.
     `match` carries the sweep id; `args` are the kind's arguments; `plugins` the `module:attr`
@@ -388,7 +388,7 @@ FAULTS = ("", "worker", "job")  # whose fault a failed job is ("" for a result)
 
 
 @dataclass(frozen=True, kw_only=True)
-class SweepResult(Message):
+class JobResult(Message):
     """A worker's answer to a job: the kind's values, or why it could not run it, with whose
     `fault` that is: "worker" when this worker cannot (other library, rules or a plug-in missing:
     no more jobs of the sweep go to it, others may run it), "job" when the job itself failed and
@@ -562,7 +562,7 @@ def recording_auth(key: str, offset: str, secret: bytes) -> str:
 TYPES: dict[str, type[Message]] = {
     t.TYPE: t
     for t in (
-        Start, State, Action, PolicySwitch, GameEvent, Summary, AdapterStatus, SweepJob, SweepResult,
+        Start, State, Action, PolicySwitch, GameEvent, Summary, AdapterStatus, JobOrder, JobResult,
         HostStatus, MatchOffer, MatchAnswer, MatchStop, MatchDone, RecordingChunk,
     )
 }  # fmt: skip

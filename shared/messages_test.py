@@ -24,6 +24,8 @@ from shared.messages import (
     AdapterStatus,
     GameEvent,
     HostStatus,
+    JobOrder,
+    JobResult,
     MatchAnswer,
     MatchDone,
     MatchOffer,
@@ -35,8 +37,6 @@ from shared.messages import (
     Start,
     State,
     Summary,
-    SweepJob,
-    SweepResult,
     decode,
     decode_any,
 )
@@ -73,7 +73,7 @@ def examples() -> dict[str, Message]:
         ),
         "event": GameEvent(match=M, frame=12, sender="sim", kind="death", role="bait", detail="shell"),
         "summary": summary_message(game, M, "sim", {"range": 2, "shape": 1}, {"round_trip_ms_p50": 1.5}),
-        "sweep_job": SweepJob(
+        "sweep_job": JobOrder(
             match="table",
             frame=0,
             sender="sweep",
@@ -98,7 +98,7 @@ def examples() -> dict[str, Message]:
             belief={"B1": 0.05, "B5": 0.95},
             out_of_library=False,
         ),  # fmt: skip
-        "sweep_result": SweepResult(
+        "sweep_result": JobResult(
             match="table",
             frame=0,
             sender="worker/w1",
@@ -245,10 +245,10 @@ BAD: list[tuple[str, Callable[[], bytes], type[Message] | None, str]] = [
     ("negative seed", lambda: pack(record("start", seed=-1)), Start, "range"),
     ("seed past 2^32", lambda: pack(record("start", seed=2**32)), Start, "range"),
     ("a day-long game", lambda: pack(record("start", config=config_with(frames=2_592_000))), Start, "range"),
-    ("job of no kind", lambda: pack(record("sweep_job", kind="mine")), SweepJob, "range"),
-    ("job NaN arg", lambda: pack(record("sweep_job", args={"x": [math.nan]})), SweepJob, "range"),
-    ("job plugin path", lambda: pack(record("sweep_job", plugins=["/etc/passwd"])), SweepJob, "range"),
-    ("result of bytes", lambda: pack(record("sweep_result", values=[b"x"])), SweepResult, "range"),
+    ("job of no kind", lambda: pack(record("sweep_job", kind="mine")), JobOrder, "range"),
+    ("job NaN arg", lambda: pack(record("sweep_job", args={"x": [math.nan]})), JobOrder, "range"),
+    ("job plugin path", lambda: pack(record("sweep_job", plugins=["/etc/passwd"])), JobOrder, "range"),
+    ("result of bytes", lambda: pack(record("sweep_result", values=[b"x"])), JobResult, "range"),
     (
         "chunk over CHUNK",
         lambda: pack(record("recording_chunk", data=bytes(CHUNK + 1))),

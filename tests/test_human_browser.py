@@ -11,6 +11,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 import pytest
 from conftest import CHROMIUM, wait_in_page
 
+from services.adapter.seat import SeatSpec
 from services.human.core import SeatBook
 from services.human.gateway import Gateway, Web, seat_handler
 from services.human.play import play_with_people, seat_links
@@ -31,7 +32,8 @@ def match(tmp_path):
     """A match with a person in the bait seat and the mirror shooter: (links, the running match)."""
     links: dict[str, str] = {}
     ready = threading.Event()
-    plan = MatchPlan("browser", 1, FRAMES, bait=HUMAN, shooter="mirror", directory=tmp_path, wait_players=60)
+    seats = {"bait": SeatSpec.parse(HUMAN), "shooter": SeatSpec.parse("mirror")}
+    plan = MatchPlan("browser", 1, FRAMES, directory=tmp_path, wait_players=60, **seats)
 
     def on_links(urls: dict[str, str]) -> None:
         links.update(urls)
@@ -131,7 +133,7 @@ def test_a_wrong_seat_token_is_refused_in_the_page(browser, bus):
 def test_a_spectator_watches_a_live_replay_in_the_page(browser, bus, tap, tmp_path):
     """`tsf replay --live` into a gateway: a spectator's page draws the recorded match and its end,
     and watching puts nothing on the bus."""
-    _, recording = run_match(MatchPlan("watched", 2, 120, "lockstep", "circle", "mirror", tmp_path))
+    _, recording = run_match(MatchPlan("watched", 2, 120, "lockstep", directory=tmp_path))
     recorded = tap(bus.open(listen=True), "watched")
     with Gateway(bus.config(), seat_handler("watched", SeatBook({})), Web(port=0)) as gateway:
         page = browser.new_page()

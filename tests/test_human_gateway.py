@@ -16,6 +16,7 @@ from urllib.parse import parse_qs, urlsplit
 import pytest
 import websockets
 
+from services.adapter.seat import SeatSpec
 from services.agent.service import run_agent
 from services.human.core import SeatBook
 from services.human.gateway import REFUSED, Gateway, Web, seat_handler
@@ -182,7 +183,8 @@ def test_tsf_play_prints_the_link_and_plays_with_the_adaptive_agent(tmp_path):
 
 def test_two_people_play_one_match(tmp_path, wait_until):
     """`--partner human`: both seats from browsers, each with its own link."""
-    plan = MatchPlan("pair", 0, 60, bait=HUMAN, shooter=HUMAN, directory=tmp_path, wait_players=30)
+    person = SeatSpec.parse(HUMAN)
+    plan = MatchPlan("pair", 0, 60, bait=person, shooter=person, directory=tmp_path, wait_players=30)
     links: list[dict[str, str]] = []
     with ThreadPoolExecutor(1) as pool:
         running = pool.submit(play_with_people, plan, port=0, on_links=links.append)

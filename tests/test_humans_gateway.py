@@ -21,7 +21,7 @@ SKILLS = (0.1, 0.9)  # the stand-ins' skills, one person each
 
 @pytest.mark.slow
 def test_fit_recovers_stand_ins_who_played_through_the_gateway(tmp_path, study_server):
-    config = StudyConfig("gateway_fit", (Variant("s", "B5", "S4"),), trials=3, roles=("bait",), seed=7)
+    config = StudyConfig("gateway_fit", (Variant.read("s", "B5", "S4"),), trials=3, roles=("bait",), seed=7)
     stop, url, server = study_server(config, tmp_path, Serving(test_token=STAND_IN_TOKEN))
     try:
 

@@ -154,9 +154,9 @@ def test_a_worker_with_slots_is_one_live_worker_per_slot(bus, spawn, wait_until)
     spawn("worker", bus.config(), "--sweep", sweep, "--id", "pair", "--slots", "2")
 
     def live() -> set[str]:
-        return {str(reply.ok.key_expr) for reply in z.liveliness().get(keys.sweep_worker(sweep), timeout=2)}
+        return {str(reply.ok.key_expr) for reply in z.liveliness().get(keys.job_worker(sweep), timeout=2)}
 
-    expected = {keys.sweep_worker(sweep, "pair-0"), keys.sweep_worker(sweep, "pair-1")}
+    expected = {keys.job_worker(sweep, "pair-0"), keys.job_worker(sweep, "pair-1")}
     assert wait_until(lambda: live() == expected, 60)
 
 

@@ -21,6 +21,7 @@ import pytest
 import zenoh
 from conftest import STAND_IN_TOKEN, wait_until
 
+from services.adapter.seat import SeatSpec
 from services.recorder.recording import load
 from services.runtime.launch import MatchPlan
 from services.study.core import StudyConfig, Variant
@@ -45,6 +46,7 @@ from shared.messages import (
 
 TEST = STAND_IN_TOKEN
 SECRET = b"the-hosts-secret-0123"  # the study's host secret, shared with its hosts
+PERSON_AND_S5 = {"bait": SeatSpec.parse(HUMAN), "shooter": SeatSpec.parse("S5")}
 
 
 @pytest.fixture
@@ -79,7 +81,7 @@ def test_trials_run_on_a_match_host_and_their_recordings_come_back_whole(tmp_pat
     """A static and an adaptive agent, each in a match on the host; the participant's seat is played
     over the router, and each recording is the host's, byte for byte, complete."""
     endpoint = free_endpoint()
-    variants = (Variant("strong", "B5", "S5"), Variant("adaptive", adapter="adaptive-T30-cem"))
+    variants = (Variant.read("strong", "B5", "S5"), Variant.read("adaptive", adapter="adaptive-T30-cem"))
     config = StudyConfig("remote", variants, trials=1, trial_seconds=2.0, seed=4)
     stop, url, server = study_server(config, tmp_path / "study", hosted(endpoint))
     match_host("lab-1", endpoint)
@@ -108,7 +110,7 @@ def test_trials_run_on_a_match_host_and_their_recordings_come_back_whole(tmp_pat
 @pytest.mark.slow  # over 15 s of real processes; runs with -m slow
 def test_a_host_killed_mid_trial_leaves_the_trial_to_be_played_again(tmp_path, study_server, match_host):
     endpoint = free_endpoint()
-    config = StudyConfig("killed", (Variant("strong", "B5", "S5"),), trials=1, trial_seconds=8.0)
+    config = StudyConfig("killed", (Variant.read("strong", "B5", "S5"),), trials=1, trial_seconds=8.0)
     stop, url, server = study_server(config, tmp_path / "study", hosted(endpoint))
     first = match_host("lab-1", endpoint)
     reports = []
@@ -211,12 +213,12 @@ def test_a_peer_without_the_host_secret_can_neither_offer_slots_nor_return_a_rec
             assert wait_until(lambda: remote.hosts() == {"lab-1": 2}, timeout=60)
             assert remote.drops.counts["unauthenticated"] == 20, "every forged status counted"
             # ... which answers no offer and no recording query the secret did not seal
-            offer = offer_of(MatchPlan("mx", 0, 60, bait=HUMAN, shooter="S5"), f"host/{rogue}")
+            offer = offer_of(MatchPlan("mx", 0, 60, **PERSON_AND_S5), f"host/{rogue}")
             for payload in (offer.encode(), sealed(offer, wrong).encode()):
                 assert not [r for r in z.get(keys.host_offer("lab-1"), payload=payload, timeout=3) if r.ok]
             unsigned = f"{keys.host_recording('lab-1', 'mx')}?offset=0"
             assert not list(z.get(unsigned, timeout=3)), "not even an error"
-            plan = MatchPlan(f"m{rogue}", 0, 60, bait=HUMAN, shooter="S5", directory=tmp_path)
+            plan = MatchPlan(f"m{rogue}", 0, 60, directory=tmp_path, **PERSON_AND_S5)
             with pytest.raises(Failure, match="did not answer"):
                 remote.run(rogue, plan, threading.Event())  # its accepted answer is not taken
             assert offers and offers[0].auth, "the server's offer is sealed"

@@ -16,6 +16,7 @@ import pytest
 from PIL import Image
 
 from services.adapter.core import AdapterConfig
+from services.adapter.seat import SeatSpec
 from services.recorder.recording import load
 from services.recorder.replay import republish
 from services.runtime.launch import MatchPlan, run_match
@@ -32,17 +33,17 @@ def matches(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Summary
     directory = tmp_path_factory.mktemp("bus-recordings")
     out = {}
     for bait, shooter, seed in PAIRS:
-        plan = MatchPlan(f"rr-{bait}-{shooter}", seed, FRAMES, "lockstep", bait, shooter, directory)
+        seats = SeatSpec.parse(bait), SeatSpec.parse(shooter)
+        plan = MatchPlan(f"rr-{bait}-{shooter}", seed, FRAMES, "lockstep", *seats, directory)
         out[plan.match] = run_match(plan)
     adaptive = MatchPlan(
         ADAPTIVE,
         3,
         FRAMES,
         "lockstep",
-        "B5",
-        "S5",
+        SeatSpec.parse("B5"),
+        SeatSpec.adaptive_agent(AdapterConfig("shooter", WINDOW, "cem", seed=3)),
         directory,
-        adapter=AdapterConfig("shooter", WINDOW, "cem", seed=3),
     )
     out[adaptive.match] = run_match(adaptive)
     return out

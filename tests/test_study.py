@@ -24,7 +24,7 @@ from services.study.standin import stand_in
 from shared.game import HUMAN, other
 
 TEST = STAND_IN_TOKEN
-VARIANTS = (Variant("strong", "B5", "S5"), Variant("adaptive", adapter="adaptive-T30-cem"))
+VARIANTS = (Variant.read("strong", "B5", "S5"), Variant.read("adaptive", adapter="adaptive-T30-cem"))
 
 
 def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_until, study_server):
@@ -70,7 +70,7 @@ def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_unti
             recording = load(tmp_path / "recordings" / f"{attempt['match']}.tsflog")
             agent_role = other(participant.role)
             adaptive = variant.adaptive(agent_role, 0)
-            agent = adaptive.name if adaptive else getattr(variant, agent_role)
+            agent = adaptive.name if adaptive else str(getattr(variant, agent_role))
             assert recording.start.policies == {participant.role: HUMAN, agent_role: agent}
             assert bool(recording.adapter) == bool(variant.adapter)  # the adapter watched the person
             assert recording.summary.kills == sidecar["kills"]

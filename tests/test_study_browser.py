@@ -35,7 +35,7 @@ def tls_study(tmp_path, study_server):
          "-addext", "subjectAltName=IP:127.0.0.1", "-keyout", str(key), "-out", str(cert)],
         check=True, capture_output=True,
     )  # fmt: skip
-    config = StudyConfig("tls", (Variant("s", "B5", "S5"),), trials=1, trial_seconds=2.0, end="Thanks.")
+    config = StudyConfig("tls", (Variant.read("s", "B5", "S5"),), trials=1, trial_seconds=2.0, end="Thanks.")
     stop, url, server = study_server(config, tmp_path / "study", Serving(), Web(port=0, cert=cert, key=key))
     return url, stop, server
 

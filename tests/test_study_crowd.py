@@ -20,7 +20,7 @@ from services.study.standin import stand_in
 
 DONE = "https://app.prolific.com/submissions/complete?cc={code}"
 OUT = "https://app.prolific.com/submissions/complete?cc=SCREENED"
-VARIANTS = (Variant("a", "B5", "S5"), Variant("b", "B1", "S1"))
+VARIANTS = (Variant.read("a", "B5", "S5"), Variant.read("b", "B1", "S1"))
 STRONG = {"bait": "B5", "shooter": "S5"}  # the stand-in's policies: ones that kill
 BONUS = Bonus(per_kill=0.5, per_point=0.01, max=2.0)
 

@@ -43,7 +43,7 @@ def ask(url: str, first: dict) -> dict:
 def test_the_dashboard_shows_the_study_live_and_a_spectator_watches_a_match(tmp_path, browser, study_server):
     port = int(free_endpoint().rsplit(":", 1)[1])
     serving = Serving(test_token=STAND_IN_TOKEN, dashboard=Web(port=port), dashboard_token=TOKEN)
-    config = StudyConfig("watched", (Variant("s", "B5", "S5"),), trials=2, trial_seconds=6.0, seed=2)
+    config = StudyConfig("watched", (Variant.read("s", "B5", "S5"),), trials=2, trial_seconds=6.0, seed=2)
     stop, url, server = study_server(config, tmp_path, serving)
     board = f"http://127.0.0.1:{port}/"
     with ThreadPoolExecutor(1) as pool:

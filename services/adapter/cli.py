@@ -17,7 +17,7 @@ from services.options import (
     PEOPLE_RECORDINGS,
     RAY,
     WORKERS,
-    Seat,
+    Role,
     Strategies,
     bus_options,
     console,
@@ -68,7 +68,7 @@ def diversity(
 @commands.command("eval")
 @bus_options
 def eval_command(
-    role: Seat = typer.Option("shooter", help="The adaptive agent's seat; the partners play the other."),
+    role: Role = typer.Option("shooter", help="The adaptive agent's seat; the partners play the other."),
     seeds: int = number(5, GAMES, "Seeded one-minute games per partner and agent."),
     window: Annotated[
         list[int] | None,
@@ -236,7 +236,7 @@ def humans_command() -> None:
 @humans_commands.command("fit")
 def humans_fit(
     recordings: list[Path] = PEOPLE_RECORDINGS,
-    role: Seat = typer.Option(..., help="The person's seat."),
+    role: Role = typer.Option(..., help="The person's seat."),
     out: Path = output(..., "Directory the stand-ins are written into.", directory=True),
 ) -> None:
     """Fit a stand-in per participant: the likeliest library policy and the skill whose simulated

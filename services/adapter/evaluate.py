@@ -87,7 +87,7 @@ def play_games(
     `record`, each outcome keeps the partner's scores under the library (the Scorer) and both
     seats' actions, frame by frame."""
     from services.sim.batch import BatchGame
-    from services.sim.batch_play import Seat
+    from services.sim.batch_play import RoleLanes
 
     s, partner_role = setup(role), other(role)
     seeds = np.array([seed for *_, seed in games], np.int64)
@@ -103,7 +103,7 @@ def play_games(
         for agent, lanes in adaptive.items()
     ]
     ours = [agent if isinstance(agent, str) else s.payoff.initial(agent) for _, agent, _ in games]
-    seat = Seat(role, list(s.ours.values()), [s.payoff.ours.index(k) for k in ours], seeds)
+    seat = RoleLanes(role, list(s.ours.values()), [s.payoff.ours.index(k) for k in ours], seeds)
     outcomes = [Outcome(0.0) for _ in games]
     frames = batch.config.frames
     scores = np.zeros((len(scored), frames, len(s.payoff.partners))) if record else None

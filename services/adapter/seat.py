@@ -102,6 +102,11 @@ class SeatSpec:
             return f"{self.key}({','.join(f'{s}={setting_text(v)}' for s, v in self.settings)})"
         return self.key
 
+    @classmethod
+    def adaptive_agent(cls, config: AdapterConfig) -> SeatSpec:
+        """The seat of the adaptive agent `config`, whole (its role and seed come from where it plays)."""
+        return cls(ADAPTIVE_KIND, adapter=config)
+
     def adaptive(self, role: str, seed: int = 0) -> AdapterConfig | None:
         """The adaptive agent it names, in `role`'s seat of a game of `seed`; None for any other."""
         return replace(self.adapter, role=role, seed=seed) if self.adapter else None
@@ -118,18 +123,17 @@ class SeatSpec:
         return tuple(dict.fromkeys(s.key for s in self.walk() if s.kind == PLUGIN))
 
 
-def check_live(name: str, role: str, option: str) -> SeatSpec:
-    """The spec of a live match's seat, refused (UsageError) where nothing can play it live: a
-    person, or a policy by key (library, scripted, .zip, plug-in, proxy; loaded to see which seat it
-    plays). Partners made of policies (wrappers, rules with other settings) play in bulk only, and
-    the adaptive agent takes its seat through the adapter."""
-    spec = SeatSpec.parse(name, option)
+def check_live(spec: SeatSpec, role: str, option: str) -> SeatSpec:
+    """`spec`, refused (UsageError) where nothing can play it live in `role`'s seat: a person, or a
+    policy by key (library, scripted, .zip, plug-in, proxy; loaded to see which seat it plays).
+    Partners made of policies (wrappers, rules with other settings) play in bulk only, and the
+    adaptive agent takes its seat through the adapter (MatchPlan)."""
     if spec.kind == KEY:
         check_seat(spec.key, role, option)
     elif spec.kind in POLICIES:
         policy_of(spec.kind, spec.key, role, option)  # loaded to see which seat it plays
     elif spec.kind != PERSON:
-        raise UsageError(option, name, "plays in bulk evaluations only, not in a live match")
+        raise UsageError(option, str(spec), "plays in bulk evaluations only, not in a live match")
     return spec
 
 

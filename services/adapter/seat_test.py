@@ -94,11 +94,12 @@ def test_plugins_are_found_inside_wrappers_and_a_live_seat_is_a_person_or_a_key(
     assert SeatSpec.parse("noisy(switch(B5,my.mod:Alice))").plugins == ("my.mod:Alice",)
     assert plugins_in(["human(proxy:/p0)", "a.zip", "sticky(b.c:D)", "b.c:D"]) == ("b.c:D",)
     assert (
-        check_live(HUMAN, "bait", "--bait").kind == PERSON and check_live("B5", "bait", "--bait").kind == KEY
+        check_live(SeatSpec.parse(HUMAN), "bait", "--bait").kind == PERSON
+        and check_live(SeatSpec.parse("B5"), "bait", "--bait").kind == KEY
     )
     for name in ("noisy(B5)", "circle(radius=100)", "adaptive-T400-cem"):
         with pytest.raises(UsageError, match="bulk evaluations only"):
-            check_live(name, "bait", "--bait")
+            check_live(SeatSpec.parse(name), "bait", "--bait")
 
 
 def test_a_live_match_refuses_an_adaptive_name_no_recording_can_hold():
@@ -106,8 +107,16 @@ def test_a_live_match_refuses_an_adaptive_name_no_recording_can_hold():
         window=108000, strategy="bayes-dwell-ood-guard-memory", hazard=0.123456789, noise=0.1234567
     )
     with pytest.raises(UsageError, match="64 characters"):
-        MatchPlan("m", adapter=config)
+        MatchPlan("m", shooter=SeatSpec.adaptive_agent(config))
     assert (
-        MatchPlan("m", adapter=AdapterConfig(noise=0.1)).adapter.name
+        MatchPlan("m", shooter=SeatSpec.adaptive_agent(AdapterConfig(noise=0.1))).adapter.name
         == "adaptive-T400-bayes-dwell-ood-guard_noise0.1"
     )
+
+
+def test_a_match_plan_carries_the_adaptive_seat_whole():
+    plan = MatchPlan("m", 7, bait=SeatSpec.parse("adaptive-T150-cem_noise0.1"))
+    assert plan.adapter == AdapterConfig("bait", 150, "cem", noise=0.1, seed=7)
+    assert plan.policies() == {"bait": plan.adapter.initial_policy(), "shooter": "mirror"}
+    with pytest.raises(UsageError, match="one seat at most"):
+        MatchPlan("m", bait=SeatSpec.parse("adaptive-T150-cem"), shooter=SeatSpec.parse("adaptive-T150-cem"))

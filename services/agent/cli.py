@@ -11,7 +11,7 @@ from rich.table import Table
 
 from services.agent.calibration import calibrate
 from services.agent.seats import policy_for
-from services.options import GAMES, Duration, Frames, Seat, console, game_frames, keys_help, number, output
+from services.options import GAMES, Duration, Frames, Role, console, game_frames, keys_help, number, output
 from services.sim.observation import VIEWS
 from services.sim.play import play, summarize
 from shared.errors import Failure, UsageError
@@ -20,7 +20,6 @@ from shared.game import ROLES, SEEDS, GameConfig, Range
 commands = typer.Typer()
 STEPS = Range(1, 10**9)  # environment steps of one training
 SCORED = Range(0, GAMES.high)  # games a trained or added policy is scored over (0: not scored)
-Role = enum.Enum("Role", {r: r for r in ROLES}, type=str)
 View = enum.Enum("View", {v: v for v in VIEWS}, type=str)
 
 
@@ -166,7 +165,7 @@ def library_add(
     hashes and provenance. List the directory in TSF_LIBRARY to play its keys everywhere."""
     from services.agent.train import add
 
-    entry = add(key, model, role.value, library_dir, view.value, partner, games)
+    entry = add(key, model, role, library_dir, view.value, partner, games)
     console.print(f"{key}: {library_dir / entry['file']} sha256 {entry['sha256'][:12]}")
     if entry.get("score"):
         console.print(f"  {_score_text(entry['score'])}")
@@ -174,7 +173,7 @@ def library_add(
 
 
 @commands.command("keys")
-def keys_command(role: Seat | None = typer.Option(None, help="Only the keys of this seat.")) -> None:
+def keys_command(role: Role | None = typer.Option(None, help="Only the keys of this seat.")) -> None:
     """Every valid policy key with the seat it plays (the library's, yours in TSF_LIBRARY, the
     scripted ones), and the other forms a key can take."""
     from services.adapter.core import STRATEGIES

@@ -31,7 +31,7 @@ from services.runtime.processes import Processes
 from shared import keys
 from shared.bus import BusConfig, Drops, free_endpoint, session, subscribe
 from shared.errors import Failure, UsageError
-from shared.messages import MAX_BYTES, MessageError, SweepJob, SweepResult, decode, printable
+from shared.messages import MAX_BYTES, JobOrder, JobResult, MessageError, decode, printable
 
 log = logging.getLogger("tsf.jobs")
 
@@ -61,12 +61,12 @@ class Coordination:
         self.journal_file = self._stack.enter_context(JournalFile(self.journal, self.ours))
         sweep = self.sweep
         self._stack.enter_context(
-            subscribe(self.z, keys.sweep_result(sweep), SweepResult, self._result, self.drops)
+            subscribe(self.z, keys.job_result(sweep), JobResult, self._result, self.drops)
         )
         self._stack.enter_context(
-            self.z.liveliness().declare_subscriber(keys.sweep_worker(sweep), self._worker, history=True)
+            self.z.liveliness().declare_subscriber(keys.job_worker(sweep), self._worker, history=True)
         )
-        self._stack.enter_context(self.z.liveliness().declare_token(keys.sweep_coordinator(sweep)))
+        self._stack.enter_context(self.z.liveliness().declare_token(keys.job_coordinator(sweep)))
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -84,7 +84,7 @@ class Coordination:
         else:
             state.worker_down(worker)
 
-    def _result(self, result: SweepResult) -> None:
+    def _result(self, result: JobResult) -> None:
         worker = result.sender.rsplit("/", 1)[-1]
         with self.lock:
             state = self.state
@@ -111,11 +111,11 @@ class Coordination:
             state = self.state
         state.refused(worker, job, why)
 
-    def _message(self, job: Spec) -> SweepJob:
+    def _message(self, job: Spec) -> JobOrder:
         """The job as every worker receives it (`batch` set as it is sent). One that no worker would
         take (over the size limit, or breaking the job contract a worker checks) is a Failure here,
         before anything is sent, rather than a job that waits for its timeout."""
-        message = SweepJob(
+        message = JobOrder(
             match=self.sweep, frame=0, sender="coordinator", job=job.id, kind=job.kind, args=job.args,
             plugins=list(job.plugins), library=self.ours.library, config=self.ours.config,
             batch=self.per_worker,
@@ -124,7 +124,7 @@ class Coordination:
         if len(data) > MAX_BYTES:
             raise Failure(f"job {job.id} is {len(data)} bytes, over {MAX_BYTES}: make the jobs smaller")
         try:
-            decode(data, SweepJob)
+            decode(data, JobOrder)
         except MessageError as error:
             raise Failure(
                 f"job {job.id} breaks the job contract, so no worker would run it: {error}"
@@ -157,7 +157,7 @@ class Coordination:
             batches = Counter(worker for worker, _ in sent)
             for worker, job in sent:
                 message = dataclasses.replace(messages[job.id], batch=batches[worker])
-                self.z.put(keys.sweep_job(self.sweep, worker), message.encode())
+                self.z.put(keys.job_order(self.sweep, worker), message.encode())
             report()
             with state.changed:
                 state.changed.wait(0.5)
@@ -199,7 +199,7 @@ def run_worker(bus: BusConfig, sweep: str, worker: str, stop: threading.Event | 
     the number of jobs done. A job it cannot run (other library or rules, a plug-in that does not
     import) is answered with the reason, and the coordinator sends it no more."""
     stop = stop or threading.Event()
-    inbox: queue.Queue[SweepJob] = queue.Queue()
+    inbox: queue.Queue[JobOrder] = queue.Queue()
     drops = Drops(f"worker/{worker}")
     coordinator_seen = threading.Event()
     ours = kinds.hashes()
@@ -214,20 +214,20 @@ def run_worker(bus: BusConfig, sweep: str, worker: str, stop: threading.Event | 
                 stop.set()
 
         sender = f"worker/{worker}"
-        publisher = z.declare_publisher(keys.sweep_result(sweep))
+        publisher = z.declare_publisher(keys.job_result(sweep))
 
-        def answer(job: SweepJob, values: list, error: str, fault: str, seconds: float) -> None:
+        def answer(job: JobOrder, values: list, error: str, fault: str, seconds: float) -> None:
             error = printable(error, 300)
-            result = SweepResult(
+            result = JobResult(
                 match=sweep, frame=0, sender=sender, job=job.job, values=values, error=error,
                 fault=fault if error else "", seconds=seconds, library=ours.library, config=ours.config,
             )  # fmt: skip
             publisher.put(result.encode())
 
         with (
-            subscribe(z, keys.sweep_job(sweep, worker), SweepJob, inbox.put, drops),
-            z.liveliness().declare_subscriber(keys.sweep_coordinator(sweep), on_coordinator, history=True),
-            z.liveliness().declare_token(keys.sweep_worker(sweep, worker)),
+            subscribe(z, keys.job_order(sweep, worker), JobOrder, inbox.put, drops),
+            z.liveliness().declare_subscriber(keys.job_coordinator(sweep), on_coordinator, history=True),
+            z.liveliness().declare_token(keys.job_worker(sweep, worker)),
         ):
             while not stop.is_set():
                 try:
@@ -253,7 +253,7 @@ def run_worker(bus: BusConfig, sweep: str, worker: str, stop: threading.Event | 
     return done
 
 
-def _run(kind: str, jobs: list[SweepJob]) -> tuple[list[list] | None, str]:
+def _run(kind: str, jobs: list[JobOrder]) -> tuple[list[list] | None, str]:
     """The jobs' values, or None and why they failed: the same jobs would fail on any worker, so
     the coordinator ends the run with that line (bad arguments end the run, not the worker)."""
     try:
@@ -265,7 +265,7 @@ def _run(kind: str, jobs: list[SweepJob]) -> tuple[list[list] | None, str]:
         return None, why
 
 
-def _rest(inbox: queue.Queue[SweepJob], count: int, patience: float = 1.0) -> list[SweepJob]:
+def _rest(inbox: queue.Queue[JobOrder], count: int, patience: float = 1.0) -> list[JobOrder]:
     """The rest of a batch: the `count` jobs the coordinator sent back to back with the first (or
     what came of them within `patience` seconds each: a lost message costs a wait, not the run)."""
     more = []

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from services.options import PEOPLE_RECORDINGS, Seat, console, number, output
+from services.options import PEOPLE_RECORDINGS, Role, console, number, output
 from services.proxy import trainer
 from services.proxy.data import HISTORY
 from shared.game import SEEDS, Range
@@ -27,7 +27,7 @@ def proxy_command() -> None:
 @proxy_commands.command("train")
 def train_command(
     recordings: list[Path] = PEOPLE_RECORDINGS,
-    role: Seat = typer.Option(..., help="The person's seat to clone."),
+    role: Role = typer.Option(..., help="The person's seat to clone."),
     out: Path = output(..., "Directory the proxy is written into.", directory=True),
     held_out: float = number(0.25, SHARE, "Share of the participants held out (at least one)."),
     seed: int = number(0, SEEDS, "Seed of the split and the training."),

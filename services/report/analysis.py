@@ -51,7 +51,7 @@ GROUP = ["kind", "partner_role"]  # one population: a kind of match and the part
 
 
 @dataclass(frozen=True)
-class Seat:
+class Partnership:
     """One partner-agent pairing in one match."""
 
     match: str
@@ -87,7 +87,7 @@ def kind_of(match: Match) -> str:
     return KINDS[1] if person_seats(match) else KINDS[2]
 
 
-def seats(match: Match, partner_role: str | None = None) -> list[Seat]:
+def seats(match: Match, partner_role: str | None = None) -> list[Partnership]:
     """The partner-agent pairings of a match (the rule is in the module docstring)."""
     policies, adapter, adaptive = match.policies, match.tables["adapter"], adaptive_seat(match)
     if match.meta.get("role") in ROLES:
@@ -106,7 +106,7 @@ def seats(match: Match, partner_role: str | None = None) -> list[Seat]:
             variant = "person" if policies[agent_role] in PERSON else policies[agent_role]
         partner = "person" if policies[role] in PERSON else policies[role]
         out.append(
-            Seat(
+            Partnership(
                 match.name,
                 kind_of(match),
                 role,
@@ -157,7 +157,7 @@ def partner_vectors(matches: list[Match], partner_role: str | None = None) -> pd
             stream = partner_stream(match, seat.partner_role)
             means = log_probs(stream, list(policies.values())).mean(axis=0) if len(stream) else []
             rows.append({**seat.__dict__, "frames": len(stream), **dict(zip(policies, means, strict=False))})
-    return pd.DataFrame(rows, columns=[*Seat.__dataclass_fields__, "frames", *library.keys()])
+    return pd.DataFrame(rows, columns=[*Partnership.__dataclass_fields__, "frames", *library.keys()])
 
 
 def reference_partner(table: Table, role: str) -> str:
@@ -267,7 +267,7 @@ def rounds(match: Match, frames: np.ndarray) -> np.ndarray:
     return np.searchsorted(ends, frames, side="left")
 
 
-def curves(match: Match, seat: Seat, smooth: int = SMOOTH) -> pd.DataFrame:
+def curves(match: Match, seat: Partnership, smooth: int = SMOOTH) -> pd.DataFrame:
     """Over one trial: the log-probability of the partner's every action under each library policy
     of its role, its moving mean over `smooth` frames, and the round of the frame."""
     policies = library_policies(seat.partner_role, match.config)

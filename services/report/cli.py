@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from services.options import GAMES, Seat, console, number, output
+from services.options import GAMES, Role, console, number, output
 from shared.errors import Failure, UsageError
 
 commands = typer.Typer()
@@ -19,7 +19,7 @@ def report_command(
         Path("report"), "Directory for report.html, figures/, data/ and parquet/.", directory=True
     ),
     table: Path | None = typer.Option(None, help="The self-play table (default: the library's)."),
-    partner_role: Seat | None = typer.Option(
+    partner_role: Role | None = typer.Option(
         None, help="Only this seat is the partner in agent-agent matches (default: each seat in turn)."
     ),
     trial: str = typer.Option("", help="Match whose log-prob curves are drawn (default: the first)."),

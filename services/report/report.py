@@ -135,7 +135,7 @@ def _common_config(matches: list[Match]) -> GameConfig:
 
 def _trial(
     matches: list[Match], partners: pd.DataFrame, trial: str | None, partner_role: str | None
-) -> tuple[Match | None, analysis.Seat | None]:
+) -> tuple[Match | None, analysis.Partnership | None]:
     """The match and seat whose log-probability curves are drawn: `trial` (a match name), else the
     first match with a partner."""
     for match in matches:
@@ -164,7 +164,7 @@ def _intro(report: Report) -> str:
     return text
 
 
-def _sections(report: Report, seat: analysis.Seat | None) -> list[Section]:
+def _sections(report: Report, seat: analysis.Partnership | None) -> list[Section]:
     d, f = report.data, report.figures
     sections = [
         Section(

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from services.adapter.core import AdapterConfig
-from services.adapter.seat import check_live
+from services.adapter.seat import ADAPTIVE_KIND, KEY, PERSON, SeatSpec, check_live
 from services.agent.outside import record_name
 from services.recorder.log import make_way
 from services.recorder.recording import load
@@ -29,7 +29,7 @@ from services.runtime.processes import Processes
 from shared import keys
 from shared.bus import BusConfig, free_endpoint, session, subscribe
 from shared.errors import Failure, UsageError
-from shared.game import HUMAN, ROLES
+from shared.game import ROLES
 from shared.messages import POLICY_NAME, AdapterStatus, State, Summary
 
 # Priorities, in nice steps from the launcher's: the sim raises itself at its first frame (where
@@ -42,12 +42,15 @@ SIM_RAISE, RECORDER_NICE = 5, 10
 
 @dataclass(frozen=True)
 class MatchPlan:
+    """A match to start: its id, seed and length, and what plays each seat (a SeatSpec, parsed
+    where its name came in; the adaptive agent's seat carries its whole AdapterConfig)."""
+
     match: str
     seed: int = 0
     frames: int = 1800
     mode: str = "realtime"
-    bait: str = "circle"
-    shooter: str = "mirror"
+    bait: SeatSpec = SeatSpec(KEY, "circle")
+    shooter: SeatSpec = SeatSpec(KEY, "mirror")
     directory: Path = Path("recordings")
     low_latency: bool = True
     peers: tuple[str, ...] = ()  # endpoints the sim also connects to (a human gateway's session)
@@ -55,16 +58,18 @@ class MatchPlan:
     endpoint: str = ""  # where the sim listens; empty: a free loopback port
     wait_services: float = 10.0  # seconds the sim waits for the recorder (and the adapter)
     timeout: float = 0.0  # seconds the whole match may take, start-up included; 0: no limit
-    adapter: AdapterConfig | None = None  # the adaptive agent, in the seat it names (that key is ignored)
 
     def __post_init__(self) -> None:
         """Refuse (UsageError) a match whose seats cannot all be filled, before anything starts
         (the AdapterConfig has checked the adaptive seat's options; its out-of-library thresholds
         are checked here, or the adapter would stop with them once the match had begun)."""
         keys.check_match(self.match)
-        for role in ROLES:
-            if self.adapter is None or role != self.adapter.role:
-                check_live(getattr(self, role), role, f"--{role}")
+        adaptive = [role for role, spec in self.seats.items() if spec.kind == ADAPTIVE_KIND]
+        for role, spec in self.seats.items():
+            if role not in adaptive:
+                check_live(spec, role, f"--{role}")
+        if len(adaptive) > 1:
+            raise UsageError("--adaptive", "both seats", "one seat at most is the adaptive agent's")
         if self.adapter is not None:
             self.adapter.threshold()
             if not re.fullmatch(POLICY_NAME, self.adapter.name):  # what the Start record names the seat
@@ -72,9 +77,18 @@ class MatchPlan:
                     "--adaptive", self.adapter.name, "a name longer than a recording's 64 characters"
                 )
 
+    @property
+    def seats(self) -> dict[str, SeatSpec]:
+        return {role: getattr(self, role) for role in ROLES}
+
+    @property
+    def adapter(self) -> AdapterConfig | None:
+        """The adaptive agent, in its seat of this match's seed; None for a match without one."""
+        return next(filter(None, (spec.adaptive(role, self.seed) for role, spec in self.seats.items())), None)
+
     def policies(self) -> dict[str, str]:
         """Each seat's starting policy key; an adaptive seat starts with the adapter's initial policy."""
-        keys_ = {"bait": self.bait, "shooter": self.shooter}
+        keys_ = {role: str(spec) for role, spec in self.seats.items()}
         if self.adapter is not None:
             keys_[self.adapter.role] = self.adapter.initial_policy()
         return keys_
@@ -157,7 +171,7 @@ def run_match(
         if plan.adapter is not None:
             processes.start("adapter", service_command("adapter", peer_bus, *match, *plan.adapter.to_args()))
         for role, policy in policies.items():
-            if policy == HUMAN:
+            if plan.seats[role].kind == PERSON:
                 continue
             processes.start(
                 f"agent-{role}",

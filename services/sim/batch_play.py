@@ -25,7 +25,7 @@ from services.sim.sampling import act_lanes, lane_uniforms
 from shared.game import ROLES, GameConfig, Policy
 
 
-class Seat:
+class RoleLanes:
     """One seat in every lane of a batch: lane i plays `policies[choice[i]]` (a choice may change
     between frames), with draws from `lane_uniforms(keys, stream, frame)`; by default the keys are
     the games' seeds and the stream is the seat's index, as in `play_batch`."""
@@ -64,7 +64,7 @@ def play_pairs(
     `seeds[i]`, all lanes of one batch; each game is the one `play_batch` plays for its pair and seed."""
     batch = BatchGame(len(seeds), config, seeds)
     seats = [
-        Seat(role, policies, choice, seeds)
+        RoleLanes(role, policies, choice, seeds)
         for role, policies, choice in zip(ROLES, (baits, shooters), (bait_of, shooter_of), strict=True)
     ]
     while not batch.done[0]:

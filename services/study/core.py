@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from services.adapter.core import AdapterConfig
-from services.adapter.seat import SeatSpec
+from services.adapter.seat import ADAPTIVE_KIND, SeatSpec
 from services.study.crowd import FAILS, Crowd
 from shared.errors import UsageError
 from shared.game import DURATION, FPS, ROLES, SEEDS, other
@@ -45,32 +45,46 @@ PRACTICE = ("practice", "circle", "mirror")  # the practice partner: the library
 
 @dataclass(frozen=True)
 class Variant:
-    """One agent the participants meet. `bait` is the agent's policy when the participant plays the
-    shooter, `shooter` when the participant plays the bait; an adaptive variant names its adaptive
-    agent instead (`adapter = "adaptive-T400-bayes-dwell-ood-guard"`, services/adapter/core.py
-    AdapterConfig)."""
+    """One agent the participants meet. `bait` is the agent's seat when the participant plays the
+    shooter, `shooter` when the participant plays the bait; an adaptive variant has its adaptive
+    agent instead (`adapter = "adaptive-T400-bayes-dwell-ood-guard"` in a config file,
+    services/adapter/core.py AdapterConfig). Each is a SeatSpec, read from its name once (`read`)."""
 
     name: str
-    bait: str = ""
-    shooter: str = ""
-    adapter: str = ""
+    bait: SeatSpec | None = None
+    shooter: SeatSpec | None = None
+    adapter: SeatSpec | None = None
 
     def __post_init__(self) -> None:
+        if self.adapter and self.adapter.kind != ADAPTIVE_KIND:
+            raise ValueError(f"variant {self.name}: {str(self.adapter)!r} names no adaptive agent")
+
+    @classmethod
+    def read(cls, name: str, bait: str = "", shooter: str = "", adapter: str = "") -> Variant:
+        """The variant a study's config names (an empty name: none); a ValueError for a name that is
+        no seat."""
         try:
-            adaptive = self.adaptive(ROLES[0], 0) is not None
+            adaptive = SeatSpec.parse(adapter, "adapter") if adapter else None
         except ValueError:
-            adaptive = False
-        if self.adapter and not adaptive:
-            raise ValueError(f"variant {self.name}: {self.adapter!r} names no adaptive agent")
+            raise ValueError(f"variant {name}: {adapter!r} names no adaptive agent") from None
+        return cls(
+            name,
+            *(SeatSpec.parse(n, role) if n else None for n, role in ((bait, "bait"), (shooter, "shooter"))),
+            adaptive,
+        )
+
+    @property
+    def names(self) -> dict[str, str]:
+        """The variant as its config names it (the study's fingerprint hashes these)."""
+        return {"name": self.name, **{f: str(getattr(self, f) or "") for f in ("bait", "shooter", "adapter")}}
 
     def adaptive(self, agent_role: str, seed: int) -> AdapterConfig | None:
         """The adaptive agent this variant plays in `agent_role`'s seat, or None for a static one."""
-        return SeatSpec.parse(self.adapter, "adapter").adaptive(agent_role, seed) if self.adapter else None
+        return self.adapter.adaptive(agent_role, seed) if self.adapter else None
 
-    def plan(self, agent_role: str, seed: int) -> dict:
-        """The MatchPlan fields that put this variant in `agent_role`'s seat in a game of `seed`."""
-        adapter = self.adaptive(agent_role, seed)
-        return {"adapter": adapter} if adapter else {agent_role: getattr(self, agent_role)}
+    def seat(self, agent_role: str) -> SeatSpec:
+        """What plays `agent_role`'s seat (MatchPlan's field of that name)."""
+        return self.adapter or getattr(self, agent_role)
 
 
 @dataclass(frozen=True)
@@ -146,7 +160,7 @@ class StudyConfig:
         file that is not a study's is a UsageError that says why."""
         try:
             data = tomllib.loads(Path(path).read_text())
-            variants = tuple(Variant(**v) for v in data.pop("variants", []))
+            variants = tuple(Variant.read(**v) for v in data.pop("variants", []))
             if "roles" in data:
                 data["roles"] = tuple(data["roles"])
             if "crowd" in data:
@@ -158,6 +172,7 @@ class StudyConfig:
     def hash(self) -> str:
         """The protocol's fingerprint; the platform's logistics (`crowd`) may change mid-study."""
         protocol = {k: v for k, v in dataclasses.asdict(self).items() if k != "crowd"}
+        protocol["variants"] = [variant.names for variant in self.variants]
         if self.crowd.attention_checks:  # these do change what participants go through
             protocol["attention_checks"] = self.crowd.attention_checks
         text = json.dumps(protocol, sort_keys=True)
@@ -377,7 +392,9 @@ class Study:
         if not self.config.practice_seconds or participant.attempts:
             return None
         match = f"{self.config.name}-{participant.id}-practice-{secrets.token_hex(3)}"
-        return Trial(participant.id, participant.role, 1, 1, 1, Variant(*PRACTICE), match, _seed(match), True)
+        return Trial(
+            participant.id, participant.role, 1, 1, 1, Variant.read(*PRACTICE), match, _seed(match), True
+        )
 
     def unsettled(self) -> list[Trial]:
         """The attempts left `running` or `dropped` (a server killed mid-trial, a page closed): each

@@ -12,13 +12,18 @@ import pytest
 
 from services.adapter.core import AdapterConfig
 from services.agent.library import keys as library_keys
+from services.runtime.launch import MatchPlan
 from services.study.core import Admission, Study, StudyConfig, Variant, assigned_role, variant_order
 
 CONFIGS = Path(__file__).parent / "configs"
 
 
 def config(**changes: object) -> StudyConfig:
-    variants = (Variant("a", "B1", "S1"), Variant("b", "B5", "S5"), Variant("c", adapter="adaptive-T150-cem"))
+    variants = (
+        Variant.read("a", "B1", "S1"),
+        Variant.read("b", "B5", "S5"),
+        Variant.read("c", adapter="adaptive-T150-cem"),
+    )
     return dataclasses.replace(StudyConfig("t", variants, trials=2), **changes)
 
 
@@ -28,7 +33,9 @@ def test_the_shipped_studies_load_and_name_library_policies(name: str) -> None:
     assert study.name == name and len(study.variants) == 5 and study.trials == 3 and study.frames == 1800
     for variant in study.variants:
         if not variant.adapter:
-            assert variant.bait in library_keys("bait") and variant.shooter in library_keys("shooter")
+            assert str(variant.bait) in library_keys("bait") and str(variant.shooter) in library_keys(
+                "shooter"
+            )
     adaptive = [v.adaptive("shooter", 0).window for v in study.variants if v.adapter]
     assert adaptive == ([] if name == "static" else [150, 400, 900])
 
@@ -38,8 +45,8 @@ def test_the_shipped_studies_load_and_name_library_policies(name: str) -> None:
     [
         ({"name": "bad name"}, "study name"),
         ({"variants": ()}, "at least one variant"),
-        ({"variants": (Variant("a", "B1", "S1"), Variant("a", "B2", "S2"))}, "names must differ"),
-        ({"variants": (Variant("a", bait="B1"),)}, "no shooter for a bait participant"),
+        ({"variants": (Variant.read("a", "B1", "S1"), Variant.read("a", "B2", "S2"))}, "names must differ"),
+        ({"variants": (Variant.read("a", bait="B1"),)}, "no shooter for a bait participant"),
         ({"trials": 0}, "at least one trial"),
         ({"trial_seconds": 0}, r"trial_seconds 0: outside the range 0.1 to 3600.0"),
         ({"trial_seconds": 1e9}, r"trial_seconds 1000000000.0: outside the range"),
@@ -77,13 +84,24 @@ def test_each_participant_meets_every_variant_once_in_an_order_of_their_own() ->
 
 def test_variants_put_their_agent_in_the_partner_seat() -> None:
     static, adaptive = config().variants[0], config().variants[2]
-    assert static.plan("shooter", 7) == {"shooter": "S1"} and static.plan("bait", 7) == {"bait": "B1"}
-    assert adaptive.plan("bait", 7) == {"adapter": AdapterConfig("bait", 150, "cem", seed=7)}
+    assert str(static.seat("shooter")) == "S1" and str(static.seat("bait")) == "B1"
+    assert adaptive.seat("bait").adaptive("bait", 7) == AdapterConfig("bait", 150, "cem", seed=7)
+    assert MatchPlan("m", 7, shooter=adaptive.seat("shooter")).adapter == AdapterConfig(
+        "shooter", 150, "cem", seed=7
+    )
 
 
 def test_a_variant_names_an_adaptive_agent_or_none() -> None:
     with pytest.raises(ValueError, match="names no adaptive agent"):
-        Variant("x", adapter="adaptive-400")
+        Variant.read("x", adapter="adaptive-400")
+    with pytest.raises(ValueError, match="names no adaptive agent"):
+        Variant.read("x", adapter="B5")
+    assert Variant.read("x", "B1", "noisy(S5)").names == {
+        "name": "x",
+        "bait": "B1",
+        "shooter": "noisy(S5)",
+        "adapter": "",
+    }
 
 
 def test_progress_resume_and_drop_outs(tmp_path: Path) -> None:
@@ -210,8 +228,6 @@ def test_a_practice_game_only_before_the_recorded_ones_and_a_new_match_each_time
     participant = study.arrive()
     first, again = study.practice(participant), study.practice(participant)
     assert first.practice and first.agent == "a practice partner" and first.match != again.match
-    assert first.variant.plan("shooter", 0) == {"shooter": "mirror"} and first.variant.plan("bait", 0) == {
-        "bait": "circle"
-    }
+    assert str(first.variant.seat("shooter")) == "mirror" and str(first.variant.seat("bait")) == "circle"
     study.record(study.next_trial(participant), "running")
     assert study.practice(participant) is None, "the recorded trials have begun"

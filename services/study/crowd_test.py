@@ -62,10 +62,10 @@ def test_a_studys_toml_names_its_platform_and_logistics_leave_its_hash_alone(tmp
     assert crowd.crowd.study == "study" and crowd.crowd.participant == "PROLIFIC_PID"
     assert crowd.crowd.bonus == Bonus(per_kill=0.05, max=2.0)
     assert crowd.hash() == plain.hash()  # a redirect or bonus fixed mid-study keeps the journal
-    checked = StudyConfig("c", (Variant("v", "B5", "S5"),), crowd=Crowd(attention_checks=(1,)))
+    checked = StudyConfig("c", (Variant.read("v", "B5", "S5"),), crowd=Crowd(attention_checks=(1,)))
     assert checked.hash() != plain.hash()  # a check changes what participants go through
     with pytest.raises(ValueError, match="sessions are 1 to 1"):
-        StudyConfig("c", (Variant("v", "B5", "S5"),), crowd=Crowd(attention_checks=(2,)))
+        StudyConfig("c", (Variant.read("v", "B5", "S5"),), crowd=Crowd(attention_checks=(2,)))
     path.write_text(base + '[crowd]\ncompletion_url = "javascript:alert(1)"\n')
     with pytest.raises(UsageError, match="not a study: crowd.completion_url"):
         StudyConfig.load(path)

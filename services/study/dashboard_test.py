@@ -9,7 +9,9 @@ from services.study.dashboard import overview, read_token
 
 
 def test_the_overview_counts_each_participants_trials_and_shows_queue_matches_and_hosts(tmp_path):
-    study = Study(StudyConfig("ov", (Variant("a", "B5", "S5"), Variant("b", "B1", "S1")), trials=2), tmp_path)
+    study = Study(
+        StudyConfig("ov", (Variant.read("a", "B5", "S5"), Variant.read("b", "B1", "S1")), trials=2), tmp_path
+    )
     first, second, third = (study.arrive(w) for w in ("W-1", "W-2", ""))
     trial = study.next_trial(first)
     study.record(trial, "failed")

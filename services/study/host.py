@@ -21,7 +21,7 @@ from pathlib import Path
 
 import zenoh
 
-from services.adapter.seat import SeatSpec
+from services.adapter.seat import ADAPTIVE_KIND, SeatSpec
 from services.agent import library
 from services.recorder.service import recording_path
 from services.runtime.launch import MatchPlan, run_match
@@ -50,13 +50,13 @@ WAIT_SERVICES = 30.0  # seconds a hosted match's sim waits for its recorder and 
 
 
 def offer_of(plan: MatchPlan, sender: str) -> MatchOffer:
-    """The offer that asks a host to run `plan` (the adaptive seat's key is sent empty)."""
-    seats = {role: getattr(plan, role) for role in ROLES}
-    if plan.adapter is not None:
-        seats[plan.adapter.role] = ""
+    """The offer that asks a host to run `plan`: each seat by its name (the adaptive seat's is sent
+    empty, and its agent's name as `adapter`)."""
+    adapter = plan.adapter
+    seats = {role: "" if adapter and role == adapter.role else str(spec) for role, spec in plan.seats.items()}
     return MatchOffer(
         match=plan.match, frame=0, sender=sender, seed=plan.seed, frames=plan.frames, **seats,
-        adapter=plan.adapter.name if plan.adapter else "", wait_players=plan.wait_players,
+        adapter=adapter.name if adapter else "", wait_players=plan.wait_players,
         timeout=plan.timeout, library=library.manifest_hash(), config=GameConfig().hash(),
     )  # fmt: skip
 
@@ -64,22 +64,17 @@ def offer_of(plan: MatchPlan, sender: str) -> MatchOffer:
 def plan_of(offer: MatchOffer, directory: Path, router: BusConfig) -> MatchPlan:
     """The match an offer asks for, run here: its sim also connects to the router (so a seat the
     server plays reaches it). A seat the host cannot fill is a UsageError (MatchPlan's checks)."""
-    seats = {role: getattr(offer, role) for role in ROLES}
-    adapter = None
-    if offer.adapter:
-        empty = [role for role in ROLES if not seats[role]]
-        adapter = (
-            SeatSpec.parse(offer.adapter, "adapter").adaptive(empty[0], offer.seed)
-            if len(empty) == 1
-            else None
-        )
-        if not adapter:
+    empty = [role for role in ROLES if not getattr(offer, role)]
+    seats = {role: SeatSpec.parse(getattr(offer, role), f"--{role}") for role in ROLES if role not in empty}
+    if offer.adapter or empty:
+        adapter = SeatSpec.parse(offer.adapter, "adapter") if offer.adapter else None
+        if len(empty) != 1 or adapter is None or adapter.kind != ADAPTIVE_KIND:
             raise UsageError("adapter", offer.adapter, "not an adaptive agent for the one empty seat")
-        seats[adapter.role] = MatchPlan.bait if adapter.role == "bait" else MatchPlan.shooter
+        seats[empty[0]] = adapter
     return MatchPlan(
         offer.match, offer.seed, offer.frames, directory=directory, low_latency=router.low_latency,
         peers=router.connect, wait_players=offer.wait_players, wait_services=WAIT_SERVICES,
-        timeout=offer.timeout, adapter=adapter, **seats,
+        timeout=offer.timeout, **seats,
     )  # fmt: skip
 
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from services.adapter.core import AdapterConfig
+from services.adapter.seat import SeatSpec
 from services.runtime.launch import MatchPlan
 from services.study.host import Host, offer_of, plan_of, sha256
 from shared import keys
@@ -27,21 +27,22 @@ from shared.messages import (
 )
 
 ROUTER = BusConfig(connect=("tcp/10.0.0.1:7447",))
+PERSON_AND_S5 = {"bait": SeatSpec.parse(HUMAN), "shooter": SeatSpec.parse("S5")}
 SECRET = b"the-hosts-secret-0123"
 
 
 @pytest.mark.parametrize(
     "seats",
     [
-        {"bait": HUMAN, "shooter": "S5"},
-        {"shooter": HUMAN, "adapter": AdapterConfig.parse("adaptive-T30-cem", role="bait", seed=9)},
+        PERSON_AND_S5,
+        {"shooter": SeatSpec.parse(HUMAN), "bait": SeatSpec.parse("adaptive-T30-cem")},
     ],
 )
 def test_an_offer_asks_for_the_same_match_run_on_the_host(seats: dict, tmp_path: Path) -> None:
     plan = MatchPlan("st-P001-s1t1", 9, 300, directory=Path("study"), wait_players=900, timeout=1000, **seats)
     offer = decode(offer_of(plan, "study").encode(), MatchOffer)
     there = plan_of(offer, tmp_path, ROUTER)
-    assert there.policies() == plan.policies() and there.adapter == plan.adapter
+    assert there.seats == plan.seats and there.policies() == plan.policies() and there.adapter == plan.adapter
     assert (there.match, there.seed, there.frames, there.wait_players, there.timeout) == (
         plan.match, 9, 300, 900, 1000
     )  # fmt: skip
@@ -49,7 +50,7 @@ def test_an_offer_asks_for_the_same_match_run_on_the_host(seats: dict, tmp_path:
 
 
 def test_an_offer_the_host_cannot_fill_is_refused(tmp_path: Path) -> None:
-    plan = MatchPlan("m", bait=HUMAN, shooter="S5")
+    plan = MatchPlan("m", **PERSON_AND_S5)
     offer = offer_of(plan, "study")
     with pytest.raises(ValueError, match="--shooter"):
         plan_of(dataclasses.replace(offer, shooter="S99"), tmp_path, ROUTER)
@@ -96,7 +97,7 @@ def test_a_recording_is_served_in_chunks_that_add_up_to_its_hash(tmp_path: Path)
 def test_a_message_is_authentic_only_as_sealed_with_the_secret(tmp_path: Path) -> None:
     """A host takes an offer or a stop only if the study's secret sealed it, and seals its own."""
     host = Host("lab-1", 1, tmp_path, SECRET)
-    offer = offer_of(MatchPlan("m", bait=HUMAN, shooter="S5"), "study")
+    offer = offer_of(MatchPlan("m", **PERSON_AND_S5), "study")
     good = decode(sealed(offer, SECRET).encode(), MatchOffer)  # as it arrives
     host.check(good)
     for bad in (

@@ -25,6 +25,10 @@ participant id and key to resume, the link's parameters and signature), `consent
 `answer`, `ready`, `keys`. The experimenter's dashboard is served beside it
 (services/study/dashboard.py).
 
+The shell is three small classes: `Front` admits each participant (consent or resume, rate limits),
+`Visit` is one participant's session (practice, attention checks, trials in order, a failed one
+again) and `TrialRunner` runs one trial's match (slot, start, seat, Ready, judgement).
+
 Each trial's metadata goes into a sidecar `<match>.study.json` beside its recording, rather than
 onto the bus: the participant id is nobody's business but the study's (bus traffic may cross a lab
 network), no service needs it, and the contract stays as it is; the match id names study,
@@ -50,8 +54,9 @@ import zenoh
 from websockets.asyncio.server import ServerConnection
 from websockets.protocol import State
 
+from services.adapter.seat import PERSON, SeatSpec
 from services.human.core import BadInput, Controls, PerAddress, RateLimit
-from services.human.gateway import Bridge, Gateway, Handler, Outbox, Web, receive_first, refuse
+from services.human.gateway import Bridge, Gateway, Outbox, Web, receive_first, refuse
 from services.recorder.recording import load
 from services.recorder.service import recording_path
 from services.runtime.launch import MatchPlan, match_buses, run_match
@@ -61,7 +66,7 @@ from services.study.dashboard import Dashboard, overview
 from services.study.remote import Remote
 from shared import keys
 from shared.bus import BusConfig, free_endpoint, until_stopped
-from shared.game import FPS, HUMAN, other
+from shared.game import FPS, other
 from shared.secret import same_secret, signature
 
 log = logging.getLogger("tsf.study")
@@ -351,21 +356,206 @@ def reconcile(study: Study) -> list[dict]:
     ]
 
 
-def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remote | None = None) -> Handler:
-    """Serve participants: consent or resume, then their trials one by one, each in a free match
-    (here, or on a match host of `remote`)."""
-    config = study.config
-    recordings, practice = study.directory / "recordings", study.directory / "practice"
-    practice_frames = round(config.practice_seconds * FPS)
-    playing: dict[str, tuple[Socket, asyncio.Event]] = {}  # participant -> their socket, set once it left
-    match_seconds = config.trial_seconds + SET_UP
-    arrivals = RateLimit(serving.arrivals, ARRIVAL_BURST)
-    per_address = PerAddress(serving.arrivals_per_address, ADDRESS_BURST)
-    starting = asyncio.Semaphore(serving.starting)
+class TrialRunner:
+    """Runs one participant's trial at a time on the study's matches: waits for a free slot, starts
+    the match (here, or on a match host of `remote`), bridges the participant's seat to it, and
+    judges and writes down how it ended. Shared by every participant; its fields are the study's
+    and the server's settings, and the limit on matches starting at once."""
 
-    async def admit(socket: Socket, hello: dict) -> Participant | None:
+    def __init__(
+        self, study: Study, serving: Serving, matches: Matches, remote: Remote | None = None
+    ) -> None:
+        self.study, self.serving, self.matches, self.remote = study, serving, matches, remote
+        config = study.config
+        self.recordings, self.practice = study.directory / "recordings", study.directory / "practice"
+        self.practice_frames = round(config.practice_seconds * FPS)
+        self.match_seconds = config.trial_seconds + SET_UP
+        self.limit = config.trial_seconds + serving.trial_timeout  # seconds a trial may play
+        self.starting = asyncio.Semaphore(serving.starting)
+
+    async def slot(self, socket: Socket, match: str) -> bool:
+        """Wait for a free match, telling the participant their place; False if they leave."""
+        admission, told = self.matches.admission, None
+        while True:
+            admission.hosts = self.remote.hosts() if self.remote else {}
+            if admission.start(match):
+                break
+            place = admission.place(match)
+            if place != told:
+                wait = round(admission.wait(place, self.match_seconds))
+                socket.send({"type": "queue", "place": place, "wait": wait})
+                told = place
+            await first(self.matches.changed.wait(), socket.gone.wait())
+            if socket.gone.is_set():
+                admission.end(match)
+                self.matches.notify()
+                return False
+        return True
+
+    def plan(self, trial: Trial, endpoint: str) -> MatchPlan:
+        """The trial's match: the participant's seat a person's, the other the variant's agent."""
+        agent = other(trial.role)
+        seats = {trial.role: SeatSpec(PERSON), agent: trial.variant.seat(agent)}
+        config, serving = self.study.config, self.serving
+        frames, directory = (
+            (self.practice_frames, self.practice) if trial.practice else (config.frames, self.recordings)
+        )
+        return MatchPlan(
+            trial.match, trial.seed, frames, directory=directory, endpoint=endpoint,
+            low_latency=serving.low_latency, wait_players=serving.ready_timeout + self.limit,
+            wait_services=30.0, timeout=serving.ready_timeout + self.limit, **seats,
+        )  # fmt: skip
+
+    async def bridge(
+        self, socket: Socket, trial: Trial, endpoint: str, obs: bool, stop: threading.Event
+    ) -> Bridge | None:
+        """The participant's seat in the trial's match, once every process of the match is up (then
+        a Ready starts the game at once): for a local match from a session of its own (opened when
+        the sim listens, closed by `leave`; None if the sim never listened), for a hosted one
+        (no `endpoint`) from the router's session."""
+        try:
+            z = self.remote.z if not endpoint and self.remote else await asyncio.to_thread(
+                open_session, match_buses(endpoint, self.serving.low_latency)[1], WARM_UP, stop
+            )  # fmt: skip
+        except zenoh.ZError as error:
+            log.error("trial %s: no session to its sim: %s", trial.match, error)
+            return None
+        agent = other(trial.role)
+        tokens = [keys.alive(trial.match, "sim"), keys.alive(trial.match, "recorder")]
+        tokens += [keys.alive(trial.match, "agent", agent)]
+        tokens += [keys.alive(trial.match, "adapter")] if trial.variant.adaptive(agent, 0) else []
+        alive = asyncio.ensure_future(asyncio.to_thread(wait_alive, z, tokens, WARM_UP, stop))
+        await first(alive, socket.gone.wait())
+        if socket.gone.is_set():  # left during set-up: the match ends, and the wait with it
+            stop.set()
+        if not await alive and not stop.is_set():
+            log.warning("trial %s: not every process of its match is up after %g s", trial.match, WARM_UP)
+        return Bridge(z, trial.match, trial.role, socket.controls, socket.outbox, obs)
+
+    def leave(self, seat: Bridge | None) -> None:
+        if seat is not None:
+            seat.close()
+            if self.remote is None or seat.z is not self.remote.z:  # a local match's session of its own
+                threading.Thread(target=seat.z.close, daemon=True).start()  # never on the loop nor a callback
+
+    async def play(self, socket: Socket, trial: Trial, obs: bool, offer: dict) -> dict | None:
+        """Run one trial: wait for a free match, start it (its processes start while the participant
+        reads the `offer`, and its sim waits for them: a warm start), then play it from their Ready
+        for at most its length and `trial_timeout`. Returns the sidecar, or None if the participant
+        left (a match they started runs out with their ship idle; one they had not is ended;
+        either is marked dropped)."""
+        if not await self.slot(socket, trial.match):
+            return None
+        if socket.closed:  # left as the slot came: nothing starts
+            self.matches.admission.end(trial.match)
+            self.matches.notify()
+            return None
+        socket.send({"type": "wait", "reason": SETTING_UP, "seconds": round(SET_UP)})
+        host = self.matches.admission.running[trial.match]  # Admission.LOCAL: this machine
+        endpoint = "" if host else free_endpoint()
+        plan = self.plan(trial, endpoint)
+        if not trial.practice:
+            self.study.record(trial, "running")
+        stop = threading.Event()
+        if host:
+            log.info("trial %s runs on match host %s", trial.match, host)
+        # start-up is CPU-bound: a burst of arrivals starts a few at a time here (a host's, there)
+        async with contextlib.nullcontext() if host else self.starting:
+            running = asyncio.ensure_future(
+                asyncio.to_thread(run_trial, plan, trial.role, stop, self.remote, host)
+            )
+            self.matches.add(trial, running, stop, endpoint)
+            seat = await self.bridge(socket, trial, endpoint, obs, stop)
+        ready = await self.live(socket, trial, seat, offer, running, stop)
+        self.leave(seat)
+        dropped = socket.gone.is_set() and not (ready and running.done())
+        if dropped and not trial.practice:  # resumable at once; the sidecar follows when the match has ended
+            self.study.record(trial, "dropped")
+            running.add_done_callback(lambda done: self.outcome(trial, plan, done, dropped))
+            return None
+        await asyncio.wait({running})  # ended by the stop, if not over
+        return self.outcome(trial, plan, running, dropped)
+
+    async def live(
+        self,
+        socket: Socket,
+        trial: Trial,
+        seat: Bridge | None,
+        offer: dict,
+        running: asyncio.Future,
+        stop: threading.Event,
+    ) -> bool:
+        """Offer the trial and play it from the participant's Ready until the match ends, they
+        leave, or it runs past its limit; False (the match ended at once) if no Ready came or the
+        match cannot start."""
+        if seat is not None:  # else the match cannot start: it fails at once
+            socket.send(offer)
+        if seat is None or not await socket.wait_for("ready", self.serving.ready_timeout):
+            stop.set()  # not started (or cannot be): ended at once; a silent participant frees the slot
+            return False
+        seat.live()
+        try:
+            async with asyncio.timeout(self.limit):
+                await first(running, socket.gone.wait())
+        except TimeoutError:
+            log.error("trial %s ran past its %g s: ended", trial.match, self.limit)
+            stop.set()
+            await asyncio.wait({running})
+        return True
+
+    def outcome(self, trial: Trial, plan: MatchPlan, done: asyncio.Future, dropped: bool) -> dict:
+        """How the ended match went: a practice game's status and kills, a trial's sidecar."""
+        if dropped:  # the page went: the recording alone says whether the trial was played
+            kills, problems = judge(recording_path(plan.directory, trial.match), trial.role)
+        else:
+            kills, problems = (None, ["cancelled"]) if done.cancelled() else done.result()
+        if trial.practice:  # no trial: nothing written down
+            return {"status": "failed" if problems else "done", "kills": kills}
+        return settle(self.study, trial, kills, problems)
+
+
+class Front:
+    """The study's front door: admits each participant who connects (consent, or resume) and runs
+    their visit; the newest window of a participant plays. Its fields are what every participant's
+    admission shares: the rate limits and who is playing."""
+
+    def __init__(self, study: Study, serving: Serving, runner: TrialRunner) -> None:
+        self.study, self.serving, self.runner = study, serving, runner
+        self.playing: dict[
+            str, tuple[Socket, asyncio.Event]
+        ] = {}  # participant -> their socket, set once it left
+        self.arrivals = RateLimit(serving.arrivals, ARRIVAL_BURST)
+        self.per_address = PerAddress(serving.arrivals_per_address, ADDRESS_BURST)
+
+    async def handle(self, ws: ServerConnection, z: zenoh.Session | None) -> None:
+        hello = await receive_first(ws, ("hello",))
+        if hello is None:
+            return
+        socket, left = Socket(ws), asyncio.Event()  # set once this handler is done
+        participant = None
+        try:
+            participant = await self.admit(socket, hello)
+            if participant is None:
+                return
+            older = self.playing.get(participant.id)
+            if older is not None:  # a reload, or the page in another window: the newest one plays
+                await older[0].ws.close(1000, "the study was opened again in another window")
+                older[0].gone.set()
+                await older[1].wait()  # its trial ended and set down (resumed below)
+            self.playing[participant.id] = (socket, left)
+            test = bool(self.serving.test_token) and same_secret(hello.get("test"), self.serving.test_token)
+            await Visit(self.study, self.runner, socket, participant, hello.get("obs", False) and test).run()
+        finally:
+            if participant is not None and self.playing.get(participant.id, (None,))[0] is socket:
+                del self.playing[participant.id]
+            left.set()
+            for task in socket.tasks:
+                task.cancel()
+
+    async def admit(self, socket: Socket, hello: dict) -> Participant | None:
         """The participant who resumes (id and key), or a new one once they consent: ids are
         issued only then, at a limited rate, and once per crowd-sourcing worker id."""
+        study, config = self.study, self.study.config
         if "participant" in hello:
             participant = study.resume(hello["participant"], hello.get("key", ""))
             if participant is None:
@@ -376,8 +566,8 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
         if worker is None or None in ids:
             await refuse(socket.ws, NO_WORKER)
             return None
-        if serving.link_secret and not (
-            worker and same_secret(hello.get("sig"), signature(serving.link_secret, worker))
+        if self.serving.link_secret and not (
+            worker and same_secret(hello.get("sig"), signature(self.serving.link_secret, worker))
         ):
             await refuse(socket.ws, UNSIGNED)
             return None
@@ -397,7 +587,7 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
             return None
         if socket.closed:  # consented and left: no id, no match
             return None
-        if not (per_address.allow(socket.ws.remote_address[0]) and arrivals.allow()):
+        if not (self.per_address.allow(socket.ws.remote_address[0]) and self.arrivals.allow()):
             await refuse(socket.ws, BUSY)
             return None
         participant = study.arrive(worker, link)
@@ -405,128 +595,25 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
         socket.send({"type": "participant", "participant": participant.id, "key": participant.key})
         return participant
 
-    async def slot(socket: Socket, match: str) -> bool:
-        """Wait for a free match, telling the participant their place; False if they leave."""
-        told = None
-        while True:
-            matches.admission.hosts = remote.hosts() if remote else {}
-            if matches.admission.start(match):
-                break
-            place = matches.admission.place(match)
-            if place != told:
-                wait = round(matches.admission.wait(place, match_seconds))
-                socket.send({"type": "queue", "place": place, "wait": wait})
-                told = place
-            await first(matches.changed.wait(), socket.gone.wait())
-            if socket.gone.is_set():
-                matches.admission.end(match)
-                matches.notify()
-                return False
-        return True
 
-    async def bridge(
-        socket: Socket, trial: Trial, endpoint: str, obs: bool, stop: threading.Event
-    ) -> Bridge | None:
-        """The participant's seat in the trial's match, once every process of the match is up (then
-        a Ready starts the game at once): for a local match from a session of its own (opened when
-        the sim listens, closed by `leave`; None if the sim never listened), for a hosted one
-        (no `endpoint`) from the router's session."""
-        try:
-            z = remote.z if not endpoint and remote else await asyncio.to_thread(
-                open_session, match_buses(endpoint, serving.low_latency)[1], WARM_UP, stop
-            )  # fmt: skip
-        except zenoh.ZError as error:
-            log.error("trial %s: no session to its sim: %s", trial.match, error)
-            return None
-        agent = other(trial.role)
-        tokens = [keys.alive(trial.match, "sim"), keys.alive(trial.match, "recorder")]
-        tokens += [keys.alive(trial.match, "agent", agent)]
-        tokens += [keys.alive(trial.match, "adapter")] if trial.variant.adaptive(agent, 0) else []
-        alive = asyncio.ensure_future(asyncio.to_thread(wait_alive, z, tokens, WARM_UP, stop))
-        await first(alive, socket.gone.wait())
-        if socket.gone.is_set():  # left during set-up: the match ends, and the wait with it
-            stop.set()
-        if not await alive and not stop.is_set():
-            log.warning("trial %s: not every process of its match is up after %g s", trial.match, WARM_UP)
-        return Bridge(z, trial.match, trial.role, socket.controls, socket.outbox, obs)
+class Visit:
+    """One participant's session: their practice game, attention checks and trials in order, a
+    failed trial offered again, until the study is done for them or they leave."""
 
-    def leave(seat: Bridge | None) -> None:
-        if seat is not None:
-            seat.close()
-            if remote is None or seat.z is not remote.z:  # a local match's session of its own
-                threading.Thread(target=seat.z.close, daemon=True).start()  # never on the loop nor a callback
+    def __init__(
+        self, study: Study, runner: TrialRunner, socket: Socket, participant: Participant, obs: bool
+    ) -> None:
+        self.study, self.runner, self.socket, self.participant, self.obs = (
+            study,
+            runner,
+            socket,
+            participant,
+            obs,
+        )
 
-    async def play(socket: Socket, trial: Trial, obs: bool, offer: dict) -> dict | None:
-        """Run one trial: wait for a free match, start it (its processes start while the participant
-        reads the `offer`, and its sim waits for them: a warm start), then play it from their Ready
-        for at most its length and `trial_timeout`. Returns the sidecar, or None if the participant
-        left (a match they started runs out with their ship idle; one they had not is ended;
-        either is marked dropped)."""
-        if not await slot(socket, trial.match):
-            return None
-        if socket.closed:  # left as the slot came: nothing starts
-            matches.admission.end(trial.match)
-            matches.notify()
-            return None
-        socket.send({"type": "wait", "reason": SETTING_UP, "seconds": round(SET_UP)})
-        seats = {trial.role: HUMAN, **trial.variant.plan(other(trial.role), trial.seed)}
-        host = matches.admission.running[trial.match]  # Admission.LOCAL: this machine
-        endpoint = "" if host else free_endpoint()
-        limit = config.trial_seconds + serving.trial_timeout
-        frames, directory = (practice_frames, practice) if trial.practice else (config.frames, recordings)
-        plan = MatchPlan(
-            trial.match, trial.seed, frames, directory=directory, endpoint=endpoint,
-            low_latency=serving.low_latency, wait_players=serving.ready_timeout + limit,
-            wait_services=30.0, timeout=serving.ready_timeout + limit, **seats,
-        )  # fmt: skip
-        if not trial.practice:
-            study.record(trial, "running")
-        stop = threading.Event()
-        if host:
-            log.info("trial %s runs on match host %s", trial.match, host)
-        # start-up is CPU-bound: a burst of arrivals starts a few at a time here (a host's, there)
-        async with contextlib.nullcontext() if host else starting:
-            running = asyncio.ensure_future(
-                asyncio.to_thread(run_trial, plan, trial.role, stop, remote, host)
-            )
-            matches.add(trial, running, stop, endpoint)
-            seat = await bridge(socket, trial, endpoint, obs, stop)
-        ready = False
-        if seat is not None:  # else the match cannot start: it fails at once
-            socket.send(offer)
-            ready = await socket.wait_for("ready", serving.ready_timeout)  # a silent one frees the slot
-        if not ready:
-            stop.set()  # not started (or cannot be): ended at once
-        else:
-            seat.live()
-            try:
-                async with asyncio.timeout(limit):
-                    await first(running, socket.gone.wait())
-            except TimeoutError:
-                log.error("trial %s ran past its %g s: ended", trial.match, limit)
-                stop.set()
-                await asyncio.wait({running})
-        leave(seat)
-        dropped = socket.gone.is_set() and not (ready and running.done())
-
-        def finish(done: asyncio.Future) -> dict:
-            if dropped:  # the page went: the recording alone says whether the trial was played
-                kills, problems = judge(recording_path(plan.directory, trial.match), trial.role)
-            else:
-                kills, problems = (None, ["cancelled"]) if done.cancelled() else done.result()
-            if trial.practice:  # no trial: nothing written down
-                return {"status": "failed" if problems else "done", "kills": kills}
-            return settle(study, trial, kills, problems)
-
-        if dropped and not trial.practice:  # resumable at once; the sidecar follows when the match has ended
-            study.record(trial, "dropped")
-            running.add_done_callback(finish)
-            return None
-        await asyncio.wait({running})  # ended by the stop above, if not over
-        return finish(running)
-
-    def offer_of(trial: Trial, last: int | None, again: bool) -> dict:
+    def offer(self, trial: Trial, last: int | None, again: bool) -> dict:
         """The `trial` message: where the game sits in the study, what to read first."""
+        config = self.study.config
         return {
             "type": "trial", "role": trial.role, "agent": trial.agent, "last": last,
             "session": trial.session, "sessions": len(config.variants),
@@ -534,15 +621,16 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
             "instructions": config.instructions.get(trial.role, ""),
         }  # fmt: skip
 
-    async def attend(socket: Socket, participant: Participant, trial: Trial) -> bool:
+    async def attend(self, trial: Trial) -> bool:
         """The attention check due before `trial`, if any; False (the page sent on to the
         screened-out address) once the participant has failed FAILS, or if they left."""
+        config, socket, participant = self.study.config, self.socket, self.participant
         if config.crowd.check_due(trial.session, trial.trial, len(participant.checks)):
             check, word = attention_check(f"{config.seed}/{participant.id}/check/{len(participant.checks)}")
             socket.send(check)
             if not await socket.wait_for("answer"):
                 return False
-            study.check(participant, socket.answer == word)
+            self.study.check(participant, socket.answer == word)
         if participant.screened:
             redirect = config.crowd.redirect(config.crowd.screened_out_url, participant.code)
             socket.send({"type": "screened", "text": SCREENED, "redirect": redirect})
@@ -551,22 +639,26 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
             return False
         return True
 
-    async def trials(socket: Socket, participant: Participant, obs: bool) -> None:
+    async def run(self) -> None:
         """The participant's remaining trials, after a practice game if the study has one and they
         have not begun; a failed trial is offered again, RETRIES times."""
+        study, socket, participant, matches = self.study, self.socket, self.participant, self.runner.matches
         last, failures = None, 0
         await matches.end_previous(participant.id)  # a reload's practice game still running out
-        first = study.practice(participant)
-        if first is not None and await play(socket, first, obs, offer_of(first, None, False)) is None:
+        practice = study.practice(participant)
+        if (
+            practice is not None
+            and await self.runner.play(socket, practice, self.obs, self.offer(practice, None, False)) is None
+        ):
             return
         while True:
             await matches.end_previous(participant.id)  # settled first: never a trial twice
             trial = study.next_trial(participant)
             if trial is None:
                 break
-            if not await attend(socket, participant, trial):
+            if not await self.attend(trial):
                 return
-            sidecar = await play(socket, trial, obs, offer_of(trial, last, failures > 0))
+            sidecar = await self.runner.play(socket, trial, self.obs, self.offer(trial, last, failures > 0))
             if sidecar is None:
                 return
             if sidecar["status"] == "failed":
@@ -577,37 +669,11 @@ def study_handler(study: Study, serving: Serving, matches: Matches, remote: Remo
                 await socket.close()
                 return
             last, failures = sidecar["kills"], 0
+        config = study.config
         redirect = config.crowd.redirect(config.crowd.completion_url, participant.code)
         socket.send({"type": "done", "text": config.end, "code": participant.code, "redirect": redirect})
         log.info("participant %s is done", participant.id)
         await socket.close()
-
-    async def handle(ws: ServerConnection, z: zenoh.Session | None) -> None:
-        hello = await receive_first(ws, ("hello",))
-        if hello is None:
-            return
-        socket, left = Socket(ws), asyncio.Event()  # set once this handler is done
-        participant = None
-        try:
-            participant = await admit(socket, hello)
-            if participant is None:
-                return
-            older = playing.get(participant.id)
-            if older is not None:  # a reload, or the page in another window: the newest one plays
-                await older[0].ws.close(1000, "the study was opened again in another window")
-                older[0].gone.set()
-                await older[1].wait()  # its trial ended and set down (resumed below)
-            playing[participant.id] = (socket, left)
-            test = bool(serving.test_token) and same_secret(hello.get("test"), serving.test_token)
-            await trials(socket, participant, hello.get("obs", False) and test)
-        finally:
-            if participant is not None and playing.get(participant.id, (None,))[0] is socket:
-                del playing[participant.id]
-            left.set()
-            for task in socket.tasks:
-                task.cancel()
-
-    return handle
 
 
 def run_study(
@@ -627,7 +693,9 @@ def run_study(
     matches = Matches(serving.max_matches)
     remote = Remote(serving.hosts, serving.host_secret) if serving.hosts else None
     try:
-        gateway = Gateway(None, study_handler(study, serving, matches, remote), web)
+        gateway = Gateway(
+            None, Front(study, serving, TrialRunner(study, serving, matches, remote)).handle, web
+        )
         # A running match holds a thread (run_trial) for its length, its start-up another: asyncio's
         # default pool (cores + 4 threads) would cap the matches at a handful, whatever hosts add.
         gateway.loop.set_default_executor(ThreadPoolExecutor(THREADS, thread_name_prefix="study"))

@@ -379,8 +379,8 @@ class AdapterLanes:
         self.out_of_library = np.zeros(lanes, bool)
         self.candidate, self.held = self.policy.copy(), np.zeros(lanes, np.int64)
         self.responses = np.array([payoff.best_response(i) for i in range(k)])
-        guarded = "guard" in config.strategy
-        self.guard = Guard(payoff.best_average(), lanes) if guarded else None
+        self.fallback = payoff.best_average()  # out of library, or the guard tripped
+        self.guard = Guard(self.fallback, lanes) if "guard" in config.strategy else None
         self.switches = np.zeros(lanes, np.int64)
 
     @property
@@ -416,7 +416,7 @@ class AdapterLanes:
         fallback = self.out_of_library.copy()
         if self.guard is not None:  # asked only where not out of library
             fallback |= self.guard.breached(~fallback)
-        choice = np.where(fallback, self.payoff.best_average(), choice)
+        choice = np.where(fallback, self.fallback, choice)
         switch = self._choose(choice)
         if self.guard is not None and switch.any():
             self._start_guard(np.flatnonzero(switch))

@@ -13,6 +13,7 @@ from services.adapter.core import AdapterConfig
 from services.adapter.evaluate import batches, play_games, play_partner, play_teams, setup
 from services.adapter.identification import follow_lag, windowed
 from services.adapter.partners import make_partner
+from services.adapter.results import TeamGame
 from services.adapter.seat import SeatSpec
 from services.adapter.team import compare, holm, paired_tests, variants
 from services.agent import networks
@@ -66,15 +67,7 @@ def test_compare_pairs_by_partner_and_seed() -> None:
             base = rng.normal(5, 1)
             for agent, shift in (("S1", 0.0), ("S2", -1.0), ("adaptive-T150-cem", 0.5 + rng.normal(0, 0.3))):
                 switches = 2 if agent.startswith("adaptive") else 0
-                rows.append(
-                    {
-                        "partner": partner,
-                        "agent": agent,
-                        "seed": seed,
-                        "kills_per_minute": base + shift,
-                        "switches": switches,
-                    }
-                )
+                rows.append(TeamGame(partner, agent, seed, base + shift, switches, 0))
                 truth.setdefault(agent, []).append(base + shift)
     result = compare(rows)
     assert result["best_static"] == "S1" and result["units"] == 18

@@ -7,9 +7,8 @@ import pytest
 from scipy import stats
 
 from services.adapter.core import AdapterConfig
-from services.adapter.evaluate import play_partner
+from services.adapter.evaluate import play_games
 from services.adapter.guard import GUARD_FRAMES, Guard, poisson_cdf
-from services.adapter.partners import make_partner
 from services.sim import observation as ob
 
 
@@ -45,10 +44,8 @@ def test_the_guard_trips_when_kills_fall_short_of_the_promise_and_not_before():
 
 def test_a_guarded_game_switches_at_most_once_more_and_reports_it():
     config = AdapterConfig("shooter", 400, "bayes-dwell-ood-guard")
-    outcome = play_partner(make_partner("human(B3)", "bait"), config, 1, "shooter")
-    plain = play_partner(
-        make_partner("human(B3)", "bait"), AdapterConfig("shooter", 400, "bayes-dwell-ood"), 1, "shooter"
-    )
+    plain = AdapterConfig("shooter", 400, "bayes-dwell-ood")
+    outcome, plain = play_games([("human(B3)", config, 1), ("human(B3)", plain, 1)], "shooter")
     assert outcome.switches <= plain.switches + 1
     if outcome.guarded:  # fell back to the best static policy
         payoff = AdapterConfig("shooter").build().payoff

@@ -12,14 +12,14 @@ import numpy as np
 from services.adapter.core import (
     AdapterConfig,
 )
-from services.adapter.evaluate import batches, play_games, play_partner, play_session
+from services.adapter.evaluate import batches, play_games, play_session
 from services.adapter.human_like import SESSION_TRIALS
-from services.adapter.partners import group_of, make_partner
+from services.adapter.partners import group_of
 from services.adapter.results import TeamGame
 from services.adapter.seat import ADAPTIVE_KIND, SeatSpec
 from services.jobs.core import Spec, spec
 from services.jobs.kinds import Runner, in_process, plugins_in
-from shared.game import check_role, other
+from shared.game import check_role
 
 JOB_GAMES = 256  # games of a team or identification job (the lanes of one batch): tsf eval --job-games
 
@@ -107,15 +107,10 @@ def paired_tests(diff: np.ndarray, margin: float = MARGIN) -> dict:
 
 def _session_games(partner: str, agent: str, person: int, role: str) -> list[list]:
     """Each trial's [seed, kills/min, switches, guarded]."""
-    config = SeatSpec.parse(agent, "--agent").adaptive(role)
+    played = play_session(partner, SeatSpec.parse(agent, "--agent").adaptive(role) or agent, person, role)
     seeds = [person * SESSION_TRIALS + trial for trial in range(SESSION_TRIALS)]
-    if config is None:
-        outcomes = [play_partner(make_partner(partner, other(role)), agent, seed, role) for seed in seeds]
-    else:
-        outcomes = play_session(partner, config, person, role)
     return [
-        [seed, o.kills_per_minute, o.switches, int(o.guarded)]
-        for seed, o in zip(seeds, outcomes, strict=True)
+        [seed, o.kills_per_minute, o.switches, int(o.guarded)] for seed, o in zip(seeds, played, strict=True)
     ]
 
 

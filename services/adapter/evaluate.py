@@ -62,8 +62,8 @@ class Outcome:
     timeline: list[tuple[int, str, str]] = field(default_factory=list)  # (frame, estimate, policy)
     values: np.ndarray | None = None  # (frames, D) the partner's world-view states, when recorded
     actions: np.ndarray | None = None  # (frames,) and its actions
-    scores: np.ndarray | None = None  # (frames, K) its scores under the library
     pairs: np.ndarray | None = None  # (frames, 2) both seats' actions, bait first
+    scores: np.ndarray | None = None  # (frames, K) the partner's scores under the library, when scored
 
 
 Agent = str | AdapterConfig  # a static library key of our seat, or an adaptive agent
@@ -75,12 +75,13 @@ def play_games(
     config: GameConfig | None = None,
     record: bool = False,
     adapters: dict[AdapterConfig, AdapterLanes] | None = None,
+    score: bool = False,
 ) -> list[Outcome]:
     """Games of (partner name, our agent, seed), our seat `role`, as the lanes of one batch. An
     adaptive agent's games go on with its adapter in `adapters` (a session's next trial; one lane
     per game of that agent, in order), else with a new one. With `record`, each outcome keeps the
-    partner's states, actions and scores under the library (the Scorer) and both seats' actions,
-    frame by frame."""
+    partner's states and actions and both seats' actions, frame by frame; with `score`, the
+    partner's scores under the library (the Scorer), frame by frame."""
     from services.adapter.partner_lanes import Partners  # bulk play only: numba loads with it
     from services.sim.batch import BatchGame
     from services.sim.batch_observation import observe as observe_lanes
@@ -94,7 +95,7 @@ def play_games(
     for lane, (_, agent, _) in enumerate(games):
         if isinstance(agent, AdapterConfig):
             adaptive.setdefault(agent, []).append(lane)
-    scored = np.arange(len(games)) if record else np.array(sorted(sum(adaptive.values(), [])), np.int64)
+    scored = np.arange(len(games)) if score else np.array(sorted(sum(adaptive.values(), [])), np.int64)
     groups = []  # (lanes, their rows among the scored, the adapter)
     for agent, lanes in adaptive.items():
         adapter = (adapters or {}).get(agent) or agent.build_lanes(len(lanes), s.payoff)
@@ -106,10 +107,9 @@ def play_games(
     seat = Seat(role, list(s.ours.values()), ours, seeds)
     outcomes = [Outcome(0.0) for _ in games]
     frames = batch.config.frames
-    if record:
-        seen: list[np.ndarray] = []  # the partner's states, frame by frame
-        scores = np.zeros((len(games), frames, len(s.payoff.partners)))
-        pairs = np.zeros((len(games), frames, 2), np.int64)
+    seen: list[np.ndarray] = []  # the partner's states, frame by frame (record)
+    scores = np.zeros((len(games), frames, len(s.payoff.partners))) if score else None
+    pairs = np.zeros((len(games), frames, 2), np.int64) if record else None
     while not batch.done[0]:
         frame = int(batch.state.frame[0])
         observed = cache(partial(observe_lanes, batch, partner_role))  # each view once a frame
@@ -129,19 +129,23 @@ def play_games(
                 chosen = (s.payoff.partners[adapter.partner[j]], s.payoff.ours[adapter.policy[j]])
                 outcomes[lanes[j]].timeline.append((frame + 1, *chosen))
         pair = bait_first(partner_role, partner_actions, our_actions)
-        if record:
-            seen.append(states)
-            scores[:, frame], pairs[:, frame] = now, np.stack(pair, axis=1)
+        if scores is not None:
+            scores[:, frame] = now
+        if pairs is not None:
+            seen.append(observed("world").copy())
+            pairs[:, frame] = np.stack(pair, axis=1)
         batch.step(*pair)
     for lanes, _, adapter in groups:
         for lane, guarded in zip(lanes.tolist(), adapter.guarded.tolist(), strict=True):
             outcomes[lane].guarded = guarded
     values = np.stack(seen, axis=1) if record else None
     for lane, kpm in enumerate(batch.kills_per_minute().tolist()):
-        outcomes[lane].kills_per_minute = kpm
-        if record:
-            o = outcomes[lane]
-            o.values, o.scores, o.pairs = values[lane], scores[lane], pairs[lane]
+        o = outcomes[lane]
+        o.kills_per_minute = kpm
+        if scores is not None:
+            o.scores = scores[lane]
+        if pairs is not None:
+            o.values, o.pairs = values[lane], pairs[lane]
             o.actions = o.pairs[:, ROLES.index(partner_role)]
     return outcomes
 

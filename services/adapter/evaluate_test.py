@@ -113,7 +113,7 @@ def test_batched_adaptive_games_decide_as_the_scalar_engine_replays_them() -> No
     policies, the same kills; and our seat's every action is the draw of the policy the timeline
     says was playing; under the guard and with human-like partners too."""
     config = GameConfig(frames=900)
-    played = play_games(GAMES, "shooter", config, record=True)
+    played = play_games(GAMES, "shooter", config, record=True, score=True)
     assert play_games(GAMES[1:2], "shooter", config)[0] == dataclasses.replace(
         played[1], values=None, actions=None, scores=None, pairs=None
     )

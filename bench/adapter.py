@@ -18,13 +18,12 @@ import time
 import numpy as np
 
 from services.adapter.core import STRATEGIES, AdapterConfig
-from services.adapter.evaluate import play_partner
-from services.adapter.partners import make_partner
+from services.adapter.evaluate import play_games
 from services.adapter.service import build, run_adapter
 from services.runtime.launch import service_command
 from services.runtime.processes import Processes
 from shared.bus import BusConfig, free_endpoint
-from shared.game import FPS, other
+from shared.game import FPS
 
 WINDOW = 800
 
@@ -32,9 +31,7 @@ WINDOW = 800
 def in_process(role: str, strategy: str, frames: int) -> np.ndarray:
     """Seconds per frame of scoring + update for a partner's recorded game."""
     partner = "B5" if role == "shooter" else "S5"
-    stream = play_partner(
-        make_partner(partner, other(role)), "S5" if role == "shooter" else "B5", 0, role, record=True
-    )
+    stream = play_games([(partner, "S5" if role == "shooter" else "B5", 0)], role, record=True)[0]
     adapter, scorer = build(AdapterConfig(role, WINDOW, strategy))
     costs = []
     for values, action in list(zip(stream.values, stream.actions, strict=True))[:frames]:

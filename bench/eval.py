@@ -1,8 +1,9 @@
 """`tsf eval` speed: the wall time of the default evaluation (`tsf eval --role shooter --seeds 8
 --identify-seeds 3`: identification, team games of every partner of the population with every
-agent, the figures), run as the command on the job system's local workers, for each number of
-workers asked (default 1 and 2: the speed-up of a second worker). Goal: <= 4 minutes with 2
-workers (it took 36 minutes when each game was played on its own); 2 workers >= 1.8x one.
+agent, the figures), run in-process as the command runs it (`evaluate`, then the report written)
+on the job system's local workers, for each number of workers asked (default 1 and 2: the
+speed-up of a second worker). Goal: <= 4 minutes with 2 workers (it took 36 minutes when each
+game was played on its own); 2 workers >= 1.8x one.
 
     .venv/bin/python bench/eval.py [--workers 1,2] [--partners N] [--out DIR]
 
@@ -14,32 +15,33 @@ measured, team games scaled by the number of partners. Run alone: other load ske
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
-import subprocess
-import sys
 import tempfile
 import time
+from pathlib import Path
 
-from services.adapter.partners import population
+from services.adapter.evaluation import EvalPlan, evaluate
+from services.jobs.engine import on_workers, open_engine
+from shared.bus import BusConfig
 
 
-def tsf_eval(workers: int, out: str, *options: str) -> float:
-    """Seconds of one `tsf eval` run with these options (a fresh output: no journal to resume)."""
-    command = [sys.executable, "-m", "services.cli", "eval", "--role", "shooter", "--seeds", "8"]
-    command += ["--identify-seeds", "3", "--workers", str(workers), "--out", out, *options]
+def seconds(plan: EvalPlan, workers: int, out: Path) -> float:
+    """Seconds of one evaluation and its report (a fresh output: no journal to resume)."""
     start = time.perf_counter()
-    subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
+    with open_engine(BusConfig(), "eval", out / "eval.journal", workers) as engine:
+        evaluate(plan, on_workers(engine)).write(out)
     return time.perf_counter() - start
 
 
-def whole_eval(workers: int, out: str, partners: int) -> float:
-    """Seconds of the default evaluation with `workers`, measured or extrapolated from `partners`."""
-    everyone = [p for group in population("bait").values() for p in group]
+def whole_eval(plan: EvalPlan, workers: int, out: Path, partners: int) -> float:
+    """Seconds of `plan` with `workers`, measured or extrapolated from `partners` of its partners."""
+    everyone = plan.partners
     if not partners or partners >= len(everyone):
-        return tsf_eval(workers, out)
+        return seconds(plan, workers, out)
     chosen = everyone[:: -(-len(everyone) // partners)]
-    ident = tsf_eval(workers, f"{out}/identification", "--no-performance")
-    team = tsf_eval(workers, f"{out}/team", "--no-identify", *(f"--partner={p}" for p in chosen))
+    ident = seconds(dataclasses.replace(plan, performance=False), workers, out / "identification")
+    team = seconds(dataclasses.replace(plan, partners=chosen, identify=False), workers, out / "team")
     print(
         f"  {workers} workers: identification and figures {ident:.0f} s; "
         f"team games of {len(chosen)} partners {team:.0f} s"
@@ -54,10 +56,11 @@ def main() -> None:
     parser.add_argument("--out", default=None, help="keep the results here (default: a temporary directory)")
     args = parser.parse_args()
     print(f"load average before: {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
+    plan = EvalPlan("shooter", seeds=8, identify_seeds=3)  # the command's options above
     walls = {}
     with tempfile.TemporaryDirectory() as tmp:
         for n in (int(w) for w in args.workers.split(",")):
-            walls[n] = whole_eval(n, f"{args.out or tmp}/{n}workers", args.partners)
+            walls[n] = whole_eval(plan, n, Path(args.out or tmp) / f"{n}workers", args.partners)
             how = "extrapolated" if args.partners else "measured"
             print(
                 f"tsf eval, default population, {n} workers, {how}: "

@@ -115,7 +115,7 @@ def test_sessions_and_calibration_games_on_ray_equal_in_process(cluster, tmp_pat
             {"role": "shooter", "partner": "noisy(B4)", "agent": "adaptive-T150-cem", "person": 0},
             3,
         ),  # noqa: E501
-        spec("calibrate", "calibrate", {"policy": "B4", "teammate": "S5", "seed": 0}, 1800),
+        spec("calibrate", "calibrate", {"games": [["B4", "S5", 0]]}, 1800),
     ]
     with OnRay(cluster.address, tmp_path / "j.journal") as engine:
         done = engine.run(todo)

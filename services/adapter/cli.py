@@ -4,6 +4,7 @@ calibrate-adapter."""
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated
 
@@ -26,7 +27,7 @@ from services.options import (
 )
 from shared.bus import BusConfig, stop_on_signals
 from shared.errors import UsageError
-from shared.game import FPS, ROLES, Range, other
+from shared.game import ROLES, Range, other
 
 commands = typer.Typer()
 
@@ -123,17 +124,15 @@ def eval_command(
     static policy, and the figures. Resumable; the numbers do not depend on the workers."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
 
-    from services.adapter import figures, identification, results, team
+    from services.adapter.evaluation import EvalPlan, evaluate
     from services.adapter.human_like import STAND_INS
-    from services.adapter.partners import SWITCH_AT, check_partner, fitted_people, population
+    from services.adapter.partners import fitted_people
     from services.adapter.seat import HUMANS
-    from services.agent import library
     from services.jobs.engine import on_workers, open_engine
 
     if role not in ROLES:
         raise UsageError("--role", role, "not a seat", ROLES)
-    window_list = window or [150, 400, 800]
-    partners = partner or [p for group in population(other(role)).values() for p in group]
+    partners = partner or []
     if partners_from is not None:
         if partner:
             raise UsageError("--partners-from", partners_from, "give --partner or --partners-from, not both")
@@ -148,42 +147,23 @@ def eval_command(
                 console.print(f"excluded {line}")
             console.print(f"partners: proxies of {', '.join(people)}")
         partners = list(people.values())
-    for name in dict.fromkeys(partners):  # every partner built and asked once, before any worker starts
-        check_partner(name, other(role))
-    strategies = [s.value for s in strategy or Strategies]
-    agents = library.keys(role) + team.variants(window_list, strategies, strategy_window)
+    plan = EvalPlan(
+        role, tuple(partners), seeds, tuple(window or EvalPlan.windows),
+        tuple(s.value for s in strategy or Strategies), strategy_window, identify_seeds, identify,
+        performance, sessions, job_games,
+    )  # fmt: skip
     columns = (BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
-    ident, rows, comparison = None, [], None
-    stop = stop_on_signals()
     with (
-        open_engine(bus, sweep_id, out / "eval.journal", workers, ray, stop) as engine,
+        open_engine(bus, sweep_id, out / "eval.journal", workers, ray, stop_on_signals()) as engine,
         Progress(*columns, console=console) as bar,
     ):
-        run = on_workers(engine)
-        if identify:
-            task = bar.add_task("identification", total=None)
-            ident = identification.identification(
-                role, window_list, list(range(identify_seeds)), run,
-                lambda done, total: bar.update(task, completed=done, total=total), job_games,
-            )  # fmt: skip
-        if performance:
-            task = bar.add_task("team games", total=None)
-            shown = lambda done, total: bar.update(task, completed=done, total=total)  # noqa: E731
-            if sessions:
-                rows = team.sessions(role, partners, agents, list(range(seeds)), run, shown)
-            else:
-                rows = team.team(role, partners, agents, list(range(seeds)), run, shown, job_games)
-            comparison = team.compare(rows)
-    summary = results.write_results(out, ident, rows, comparison)
-    if ident:
-        figures.accuracy_vs_window(ident, out / "identification.png")
-        keys = library.keys(other(role))
-        first, second = keys[0], keys[len(keys) // 2]
-        scores = identification.switch_scores(first, second, 0, role)
-        title = f"Partner noisy(switch({first},{second})), switching at {SWITCH_AT / FPS:.0f} s"
-        figures.logprob_curves(scores, keys, min(window_list), title, out / "logprob_curves.png", SWITCH_AT)
-    if comparison:
-        figures.adaptive_vs_static(comparison, out / "adaptive_vs_static.png")
+
+        def shown(step: str) -> Callable[[int, int], None]:
+            task = bar.add_task(step, total=None)
+            return lambda done, total: bar.update(task, completed=done, total=total)
+
+        report = evaluate(plan, on_workers(engine), shown)
+    summary = report.write(out)
     console.print(summary.read_text())
     console.print(f"written to {out}")
 

@@ -2,7 +2,8 @@
 
 Every frame, each library policy of the partner's role scores the partner's action in the state
 the partner saw (`Scorer`: log pi_k(a_t | s_t), the similarity score of cem.log_probs). A strategy
-turns those scores into an estimated partner type C and our policy D (`Adapter`):
+turns those scores into an estimated partner type C and our policy D (`AdapterLanes`, for n games
+at once; one game's `Adapter` is its one-lane view):
 
 - `cem` (the study's): C is the policy with the highest mean log-probability over the last T
   frames (the window, `Window`); D is the best response to C in the self-play table P.
@@ -39,9 +40,9 @@ from typing import Any
 import numpy as np
 
 from services.adapter.cem import log_probs, observed_log_probs
-from services.adapter.guard import Guard, GuardLanes
+from services.adapter.guard import Guard
 from services.agent import library
-from services.agent.policy import end_round_batch, stalled
+from services.agent.policy import end_round_batch
 from services.table.table import DEFAULT_TABLE, Table
 from shared.errors import UsageError
 from shared.game import FRAMES, N_ACTIONS, ROLES, SEEDS, Policy, Range, other
@@ -176,11 +177,12 @@ class AdapterConfig:
         return Payoff.load(self.role, table).initial(self)
 
     def build(self, payoff: Payoff | None = None) -> Adapter:
-        """The adapter core this config describes (`payoff`: the shipped table seen from our seat)."""
-        return Adapter(self, payoff or Payoff.load(self.role), self.threshold())
+        """The adapter core of one game this config describes (`payoff`: the shipped table seen
+        from our seat)."""
+        return Adapter(self.build_lanes(1, payoff))
 
     def build_lanes(self, lanes: int, payoff: Payoff | None = None) -> AdapterLanes:
-        """The same adapter in `lanes` games at once (bulk evaluation)."""
+        """The adapter core of `lanes` games at once (bulk evaluation)."""
         return AdapterLanes(self, payoff or Payoff.load(self.role), lanes, self.threshold())
 
     def threshold(self) -> float | None:
@@ -231,26 +233,27 @@ class Payoff:
 
 
 class Window:
-    """Running sums of the last `size` score vectors: O(K) per frame, never a re-scan."""
+    """Running sums of the last `size` score vectors in each of n lanes: O(K) per frame, never a
+    re-scan."""
 
-    def __init__(self, policies: int, size: int) -> None:
+    def __init__(self, lanes: int, policies: int, size: int) -> None:
         self.size = size
-        self.ring = np.zeros((size, policies))
-        self.sums = np.zeros(policies)
-        self.filled = 0
-        self.next = 0
+        self.ring = np.zeros((lanes, size, policies))
+        self.sums = np.zeros((lanes, policies))
+        self.filled, self.next = np.zeros(lanes, np.int64), np.zeros(lanes, np.int64)
 
-    def push(self, scores: np.ndarray) -> None:
-        if self.filled == self.size:
-            self.sums -= self.ring[self.next]
-        else:
-            self.filled += 1
-        self.ring[self.next] = scores
-        self.sums += scores
-        self.next = (self.next + 1) % self.size
+    def push(self, lanes: np.ndarray, scores: np.ndarray) -> None:
+        """One frame's (len(lanes), K) scores into `lanes` (distinct lane indices)."""
+        full = lanes[self.filled[lanes] == self.size]
+        self.sums[full] -= self.ring[full, self.next[full]]
+        self.filled[lanes[self.filled[lanes] < self.size]] += 1
+        self.ring[lanes, self.next[lanes]] = scores
+        self.sums[lanes] += scores
+        self.next[lanes] = (self.next[lanes] + 1) % self.size
 
     def means(self) -> np.ndarray:
-        return self.sums / max(self.filled, 1)
+        """(n, K) means of each lane's window."""
+        return self.sums / np.maximum(self.filled, 1)[:, None]
 
 
 class Scorer:
@@ -345,120 +348,6 @@ class Pairing:
         self.paired = {f for f in self.paired if f > oldest}
 
 
-class Adapter:
-    """Turns the partner's per-frame scores into an estimated type and our policy (a library key)."""
-
-    def __init__(self, config: AdapterConfig, payoff: Payoff, threshold: float | None = None) -> None:
-        if "ood" in config.strategy and threshold is None:
-            raise ValueError(f"strategy {config.strategy} needs an out-of-library threshold")
-        self.config, self.payoff, self.threshold = config, payoff, threshold
-        k = len(payoff.partners)
-        self.window = Window(k, config.window)
-        self.log_belief = np.full(k, -math.log(k))
-        self.policy = payoff.initial(config)
-        self.partner = ""  # the estimated type, "" until warmup ends
-        self.out_of_library = False
-        self.candidate, self.held = self.policy, 0
-        self.frames = 0
-        fallback = payoff.ours[payoff.best_average()]
-        self.guard = Guard(fallback) if "guard" in config.strategy else None
-        self.promise = 0.0  # kills/min the table promises for the current choice
-        self.switches = 0
-
-    @property
-    def bayes(self) -> bool:
-        return self.config.strategy.startswith("bayes")
-
-    def update(self, scores: np.ndarray, values: list[float] | None = None) -> bool:
-        """Take one frame's scores (log-probabilities, library order) and, for the guard, the
-        frame's world-view state values; True when our policy changes."""
-        self.frames += 1
-        if self.guard is not None and values is not None:
-            self.guard.watch(values)
-        # In a stalled round every library policy plays the same end-round rule (policy.stalled):
-        # the frame says nothing about the partner's type, and a partner who does not follow the
-        # rule would otherwise look out of library whenever our ship is dead.
-        if values is None or not stalled(np.asarray(values, np.float32)):
-            self.window.push(scores)
-            if self.bayes:
-                self.forward(scores)
-        if self.frames < self.config.warmup_frames:
-            return False
-        means = self.window.means()
-        if self.bayes:
-            belief = self.belief()
-            estimate, choice = int(np.argmax(belief)), self.payoff.best_expected(belief)
-            promised = belief @ self.payoff.values
-        else:
-            estimate = int(np.argmax(means))
-            choice = self.payoff.best_response(estimate)
-            promised = self.payoff.values[estimate]
-        self.partner = self.payoff.partners[estimate]
-        self.out_of_library = self.threshold is not None and float(means.max()) < self.threshold
-        if self.out_of_library or (self.guard is not None and self.guard.breached()):
-            choice = self.payoff.best_average()
-        self.promise = float(promised[choice])
-        return self._choose(self.payoff.ours[choice])
-
-    def forward(self, scores: np.ndarray) -> None:
-        """One forward step of the hidden Markov model, in log space."""
-        self.log_belief = forward(self.log_belief, scores, self.config)
-
-    def belief(self) -> np.ndarray:
-        return np.exp(self.log_belief)
-
-    def _choose(self, choice: str) -> bool:
-        if choice == self.policy:
-            self.candidate, self.held = choice, 0
-            return False
-        if choice != self.candidate:
-            self.candidate, self.held = choice, 0
-        self.held += 1
-        if self.held < self.dwell():
-            return False
-        self.policy, self.held = choice, 0
-        self.switches += 1
-        if self.guard is not None:
-            self.guard.start(choice, self.promise)
-        return True
-
-    def dwell(self) -> int:
-        """Frames a new choice must hold: the config's dwell, doubled after every switch under the
-        guard, which bounds a game's switches by about log2(frames / dwell) (6 for T = 400)."""
-        return self.config.dwell_frames * (2**self.switches if self.guard is not None else 1)
-
-    def status(self) -> dict:
-        """The adapter's view, as AdapterStatus fields."""
-        c = self.config
-        return {
-            "role": c.role,
-            "strategy": c.strategy,
-            "window": c.window,
-            "filled": self.window.filled,
-            "partner": self.partner,
-            "policy": self.policy,
-            "scores": dict(zip(self.payoff.partners, map(float, self.window.means()), strict=True)),
-            "belief": dict(zip(self.payoff.partners, map(float, self.belief()), strict=True))
-            if self.bayes
-            else {},
-            "out_of_library": self.out_of_library,
-        }
-
-    def next_trial(self) -> Adapter:
-        """The adapter for the next trial of a session with the same partner: this one going on
-        (`-memory`), or a fresh one."""
-        if "memory" not in self.config.strategy:
-            return Adapter(self.config, self.payoff, self.threshold)
-        if self.guard is not None:
-            self.guard.last = None  # a new game: no kill across the gap
-        return self
-
-    @property
-    def guarded(self) -> bool:
-        """Whether the guard has fallen back to the best static policy in this game."""
-        return self.guard is not None and self.guard.tripped
-
-
 def forward(log_belief: np.ndarray, scores: np.ndarray, config: AdapterConfig) -> np.ndarray:
     """The hidden Markov model's forward step in log space, for one lane's (K,) or n lanes' (n, K)
     beliefs and scores: the same operations, element by element, either way."""
@@ -471,11 +360,9 @@ def forward(log_belief: np.ndarray, scores: np.ndarray, config: AdapterConfig) -
 
 
 class AdapterLanes:
-    """`Adapter` in n games at once, which see their frames together (bulk evaluation): lane i
-    takes exactly the decisions an `Adapter` would from the same scores and states, the guard's
-    and the stalled rounds' included. Estimates and policies are indices into the payoff's
-    partners and ours. (Sessions, `-memory`'s trials, are played by `Adapter`: within one game
-    `-memory` is its strategy without it.)"""
+    """Turns the partner's per-frame scores into an estimated type and our policy, in n games at
+    once which see their frames together (one game is one lane: `Adapter`). Estimates and policies
+    are indices into the payoff's partners and ours."""
 
     def __init__(
         self, config: AdapterConfig, payoff: Payoff, lanes: int, threshold: float | None = None
@@ -484,32 +371,39 @@ class AdapterLanes:
             raise ValueError(f"strategy {config.strategy} needs an out-of-library threshold")
         self.config, self.payoff, self.threshold = config, payoff, threshold
         k = len(payoff.partners)
-        self.ring = np.zeros((lanes, config.window, k))  # Window, lane by lane
-        self.sums = np.zeros((lanes, k))
-        self.filled, self.next = np.zeros(lanes, np.int64), np.zeros(lanes, np.int64)
+        self.window = Window(lanes, k, config.window)
         self.frames = 0
         self.log_belief = np.full((lanes, k), -math.log(k))
         self.policy = np.full(lanes, payoff.ours.index(payoff.initial(config)))
         self.partner = np.full(lanes, -1)  # the estimated type, -1 until warmup ends
+        self.out_of_library = np.zeros(lanes, bool)
         self.candidate, self.held = self.policy.copy(), np.zeros(lanes, np.int64)
         self.responses = np.array([payoff.best_response(i) for i in range(k)])
-        guarded = "guard" in config.strategy
-        self.guard = GuardLanes(payoff.best_average(), lanes) if guarded else None
+        self.fallback = payoff.best_average()  # out of library, or the guard tripped
+        self.guard = Guard(self.fallback, lanes) if "guard" in config.strategy else None
         self.switches = np.zeros(lanes, np.int64)
 
+    @property
+    def bayes(self) -> bool:
+        return self.config.strategy.startswith("bayes")
+
     def update(self, scores: np.ndarray, values: np.ndarray | None = None) -> np.ndarray:
-        """Take every lane's scores of one frame, (n, K), and, as `Adapter.update`, the lanes'
-        world-view states, (n, D); True where a lane's policy changes."""
+        """Take every lane's scores of one frame, (n, K) log-probabilities in library order, and,
+        for the guard and the stalled rounds, the lanes' world-view states, (n, D); True where a
+        lane's policy changes."""
         self.frames += 1
         if self.guard is not None and values is not None:
             self.guard.watch(values)
+        # In a stalled round every library policy plays the same end-round rule (policy.stalled):
+        # the frame says nothing about the partner's type, and a partner who does not follow the
+        # rule would otherwise look out of library whenever our ship is dead.
         pushed = np.ones(len(scores), bool)
-        if values is not None:  # stalled rounds say nothing of the partner (Adapter.update)
+        if values is not None:
             pushed = ~end_round_batch(np.asarray(values, np.float32), "world")[0]
         self._push(np.flatnonzero(pushed), scores)
         if self.frames < self.config.warmup_frames:
             return np.zeros(len(scores), bool)
-        means = self.sums / np.maximum(self.filled, 1)[:, None]
+        means = self.window.means()
         if self.bayes:
             belief = np.exp(self.log_belief)
             self.partner = np.argmax(belief, axis=1)
@@ -517,39 +411,32 @@ class AdapterLanes:
         else:
             self.partner = np.argmax(means, axis=1)
             choice = self.responses[self.partner]
-        fallback = np.zeros(len(scores), bool)
         if self.threshold is not None:
-            fallback = means.max(axis=1) < self.threshold
-        if self.guard is not None:  # asked only where not out of library, as Adapter's `or`
+            self.out_of_library = means.max(axis=1) < self.threshold
+        fallback = self.out_of_library.copy()
+        if self.guard is not None:  # asked only where not out of library
             fallback |= self.guard.breached(~fallback)
-        choice = np.where(fallback, self.payoff.best_average(), choice)
+        choice = np.where(fallback, self.fallback, choice)
         switch = self._choose(choice)
         if self.guard is not None and switch.any():
             self._start_guard(np.flatnonzero(switch))
         return switch
 
     @property
-    def bayes(self) -> bool:
-        return self.config.strategy.startswith("bayes")
-
-    @property
     def guarded(self) -> np.ndarray:
-        """Adapter.guarded, lane by lane."""
+        """Where the guard has fallen back to the best static policy in this game."""
         return self.guard.tripped.copy() if self.guard is not None else np.zeros(len(self.policy), bool)
 
     def _push(self, lanes: np.ndarray, scores: np.ndarray) -> None:
-        """Window.push and the forward step in `lanes`."""
-        full = lanes[self.filled[lanes] == self.config.window]
-        self.sums[full] -= self.ring[full, self.next[full]]
-        self.filled[lanes[self.filled[lanes] < self.config.window]] += 1
-        self.ring[lanes, self.next[lanes]] = scores[lanes]
-        self.sums[lanes] += scores[lanes]
-        self.next[lanes] = (self.next[lanes] + 1) % self.config.window
+        """The window and the forward step of the hidden Markov model in `lanes`."""
+        self.window.push(lanes, scores[lanes])
         if self.bayes:
             self.log_belief[lanes] = forward(self.log_belief[lanes], scores[lanes], self.config)
 
     def _choose(self, choice: np.ndarray) -> np.ndarray:
-        """Adapter._choose, lane by lane."""
+        """A new choice must hold for `dwell` frames before the lane switches to it; under the
+        guard every switch doubles the dwell, which bounds a game's switches by about
+        log2(frames / dwell) (6 for T = 400)."""
         same = choice == self.policy
         fresh = ~same & (choice != self.candidate)
         self.candidate = np.where(same | fresh, choice, self.candidate)
@@ -562,11 +449,96 @@ class AdapterLanes:
         return switch
 
     def _start_guard(self, lanes: np.ndarray) -> None:
-        """Guard.start in the lanes that switched, with the table's promise computed as Adapter
-        computes it, lane by lane."""
+        """The guard's watch of the lanes that switched, against what the table promises the new
+        policy: with the belief (bayes) or with the estimated type."""
         values = self.payoff.values
         promises = []
         for i in lanes.tolist():
             promised = np.exp(self.log_belief[i]) @ values if self.bayes else values[self.partner[i]]
             promises.append(float(promised[self.policy[i]]))
         self.guard.start(lanes, self.policy[lanes], np.array(promises))
+
+    def next_trial(self) -> AdapterLanes:
+        """The adapters for the next trial of sessions with the same partners: these going on
+        (`-memory`), or fresh ones."""
+        if "memory" not in self.config.strategy:
+            return AdapterLanes(self.config, self.payoff, len(self.policy), self.threshold)
+        if self.guard is not None:
+            self.guard.last = None  # a new game: no kill across the gap
+        return self
+
+
+class Adapter:
+    """One game's adapter (the live shell's, a session's): a view of `AdapterLanes` with one lane,
+    its estimate and policy named (library keys; "" before the first estimate)."""
+
+    def __init__(self, lanes: AdapterLanes) -> None:
+        self.lanes = lanes
+
+    @property
+    def config(self) -> AdapterConfig:
+        return self.lanes.config
+
+    @property
+    def payoff(self) -> Payoff:
+        return self.lanes.payoff
+
+    def update(self, scores: np.ndarray, values: list[float] | None = None) -> bool:
+        """Take one frame's (K,) scores and, for the guard, the frame's world-view state values;
+        True when our policy changes."""
+        states = None if values is None else np.asarray(values, np.float64)[None]
+        return bool(self.lanes.update(np.asarray(scores)[None], states)[0])
+
+    @property
+    def frames(self) -> int:
+        return self.lanes.frames
+
+    @property
+    def filled(self) -> int:
+        return int(self.lanes.window.filled[0])
+
+    @property
+    def policy(self) -> str:
+        return self.payoff.ours[self.lanes.policy[0]]
+
+    @property
+    def partner(self) -> str:
+        estimate = int(self.lanes.partner[0])
+        return self.payoff.partners[estimate] if estimate >= 0 else ""
+
+    @property
+    def out_of_library(self) -> bool:
+        return bool(self.lanes.out_of_library[0])
+
+    @property
+    def switches(self) -> int:
+        return int(self.lanes.switches[0])
+
+    @property
+    def guarded(self) -> bool:
+        return bool(self.lanes.guarded[0])
+
+    def belief(self) -> np.ndarray:
+        return np.exp(self.lanes.log_belief[0])
+
+    def status(self) -> dict:
+        """The adapter's view, as AdapterStatus fields."""
+        c = self.config
+        return {
+            "role": c.role,
+            "strategy": c.strategy,
+            "window": c.window,
+            "filled": self.filled,
+            "partner": self.partner,
+            "policy": self.policy,
+            "scores": dict(zip(self.payoff.partners, map(float, self.lanes.window.means()[0]), strict=True)),
+            "belief": dict(zip(self.payoff.partners, map(float, self.belief()), strict=True))
+            if self.lanes.bayes
+            else {},
+            "out_of_library": self.out_of_library,
+        }
+
+    def next_trial(self) -> Adapter:
+        """AdapterLanes.next_trial: this adapter going on (`-memory`), or a fresh one."""
+        going_on = self.lanes.next_trial()
+        return self if going_on is self.lanes else Adapter(going_on)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import re
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -27,6 +28,11 @@ PAYOFF = Payoff(
 LOW, HIGH = math.log(0.05), math.log(0.8)
 
 
+def one(config: AdapterConfig, threshold: float | None = None) -> Adapter:
+    """One game's adapter on the hand-made table."""
+    return Adapter(AdapterLanes(config, PAYOFF, 1, threshold))
+
+
 def frame(best: int, k: int = 3) -> np.ndarray:
     """Scores of one frame in which type `best` finds the action likely and the others do not."""
     scores = np.full(k, LOW)
@@ -40,12 +46,16 @@ def frame(best: int, k: int = 3) -> np.ndarray:
     rows=st.lists(st.lists(st.floats(-20, 0), min_size=3, max_size=3), min_size=1, max_size=80),
 )
 def test_window_means_match_brute_force(size: int, rows: list[list[float]]) -> None:
-    window = Window(3, size)
+    """Lane 0 takes every row, lane 1 every other row, lane 2 none."""
+    window = Window(3, 3, size)
     for t, row in enumerate(rows):
-        window.push(np.array(row))
-        recent = np.array(rows[max(0, t + 1 - size) : t + 1])
-        assert window.filled == len(recent)
-        np.testing.assert_allclose(window.means(), recent.mean(axis=0), atol=1e-9)
+        lanes = np.array([0, 1] if t % 2 == 0 else [0])
+        window.push(lanes, np.array([row] * len(lanes)))
+        for lane, taken in ((0, rows[: t + 1]), (1, rows[: t + 1 : 2])):
+            recent = np.array(taken[-size:])
+            assert window.filled[lane] == len(recent)
+            np.testing.assert_allclose(window.means()[lane], recent.mean(axis=0), atol=1e-9)
+        assert window.filled[2] == 0 and not window.means()[2].any()
 
 
 def test_best_response_and_average_from_a_hand_made_table() -> None:
@@ -67,7 +77,7 @@ def test_payoff_from_the_shipped_table_for_either_seat() -> None:
 
 
 def test_cem_plays_the_initial_policy_until_warmup_then_the_best_response() -> None:
-    adapter = Adapter(AdapterConfig(window=10, strategy="cem", warmup=5), PAYOFF)
+    adapter = one(AdapterConfig(window=10, strategy="cem", warmup=5))
     assert adapter.policy == "c" and adapter.partner == ""  # best average
     changes = [adapter.update(frame(1)) for _ in range(5)]
     assert changes == [False] * 4 + [True]
@@ -75,7 +85,7 @@ def test_cem_plays_the_initial_policy_until_warmup_then_the_best_response() -> N
 
 
 def test_cem_follows_a_switch_once_the_window_majority_changes() -> None:
-    adapter = Adapter(AdapterConfig(window=9, strategy="cem", warmup=9), PAYOFF)
+    adapter = one(AdapterConfig(window=9, strategy="cem", warmup=9))
     for _ in range(9):
         adapter.update(frame(0))
     assert adapter.policy == "a"
@@ -86,10 +96,9 @@ def test_cem_follows_a_switch_once_the_window_majority_changes() -> None:
 
 def test_dwell_waits_for_a_choice_to_hold_and_ignores_a_blip() -> None:
     config = AdapterConfig(window=4, warmup=1, strategy="cem-dwell", dwell=3)
-    adapter = Adapter(config, PAYOFF)
+    adapter = one(config)
     assert [adapter.update(frame(0)) for _ in range(3)] == [False, False, True]
-    adapter = Adapter(config, PAYOFF)
-    adapter.window = Window(3, 1)  # a one-frame window, so every frame's estimate is that frame's
+    adapter = one(replace(config, window=1))  # every frame's estimate is that frame's
     pattern = [0, 0, 1, 0, 0, 0]
     changes = [adapter.update(frame(i)) for i in pattern]
     assert changes == [False, False, False, False, False, True]  # the Y blip never held 3 frames
@@ -98,7 +107,7 @@ def test_dwell_waits_for_a_choice_to_hold_and_ignores_a_blip() -> None:
 
 def test_out_of_library_partner_falls_back_to_the_best_average() -> None:
     config = AdapterConfig(window=5, warmup=5, strategy="cem-ood")
-    adapter = Adapter(config, PAYOFF, threshold=-1.0)
+    adapter = one(config, threshold=-1.0)
     for _ in range(5):
         adapter.update(np.full(3, math.log(0.1)))  # no type explains the actions
     assert adapter.out_of_library and adapter.policy == "c"
@@ -106,12 +115,12 @@ def test_out_of_library_partner_falls_back_to_the_best_average() -> None:
         adapter.update(frame(0))
     assert not adapter.out_of_library and adapter.policy == "a"
     with pytest.raises(ValueError, match="threshold"):
-        Adapter(config, PAYOFF)
+        one(config)
 
 
 def test_bayes_filter_matches_a_hand_computed_forward_pass() -> None:
     config = AdapterConfig(window=10, warmup=1, strategy="bayes", hazard=0.1, noise=0.2)
-    adapter = Adapter(config, PAYOFF)
+    adapter = one(config)
     p1, p2 = np.array([0.6, 0.3, 0.1]), np.array([0.2, 0.5, 0.3])
     adapter.update(np.log(p1))
     adapter.update(np.log(p2))
@@ -190,18 +199,18 @@ def test_thresholds_of_other_libraries_or_none_are_refused_with_the_remedy(tmp_p
 def test_frames_of_a_stalled_round_say_nothing_about_the_partner() -> None:
     values = np.zeros(ob.TIME + 1)
     values[ob.SELF + ob.ALIVE] = values[ob.FORTRESS + ob.F_ALIVE] = 1.0  # the partner's partner is dead
-    adapter = Adapter(AdapterConfig("shooter", 10, "bayes", warmup=1), PAYOFF)
+    adapter = one(AdapterConfig("shooter", 10, "bayes", warmup=1))
     adapter.update(frame(0), values.tolist())
-    assert adapter.window.filled == 0 and np.allclose(adapter.belief(), 1 / 3)
+    assert adapter.filled == 0 and np.allclose(adapter.belief(), 1 / 3)
     values[ob.PARTNER + ob.ALIVE] = 1.0
     adapter.update(frame(0), values.tolist())
-    assert adapter.window.filled == 1 and adapter.belief()[0] > 0.5
+    assert adapter.filled == 1 and adapter.belief()[0] > 0.5
 
 
-def test_lanes_decide_as_one_adapter_per_lane_with_the_guard_and_stalled_rounds() -> None:
-    """AdapterLanes against one Adapter per lane on the same frames: partner types that change,
-    bursts out of library, stalled rounds (left out of window and filter), kills that keep or break
-    the table's promise (the guard) and the dwell doubling per switch."""
+def test_lanes_decide_apart_with_the_guard_and_stalled_rounds() -> None:
+    """Each lane decides as a one-lane adapter fed that lane's frames alone: partner types that
+    change, bursts out of library, stalled rounds (left out of window and filter), kills that keep
+    or break the table's promise (the guard) and the dwell doubling per switch."""
     rng = np.random.default_rng(5)
     lanes, frames = 8, 2400
     kind = rng.integers(0, 2, (frames // 600 + 1, lanes))[np.arange(frames) // 600]  # X or Y
@@ -215,7 +224,7 @@ def test_lanes_decide_as_one_adapter_per_lane_with_the_guard_and_stalled_rounds(
     for strategy in ("bayes-dwell-ood-guard", "cem-dwell", "bayes"):
         config = AdapterConfig("shooter", 60, strategy, warmup=30, dwell=10)
         threshold = 2 * LOW if "ood" in strategy else None
-        scalar = [Adapter(config, PAYOFF, threshold) for _ in range(lanes)]
+        scalar = [one(config, threshold) for _ in range(lanes)]
         together = AdapterLanes(config, PAYOFF, lanes, threshold)
         for t in range(frames):
             switched = together.update(scores[t], values[t])
@@ -223,7 +232,7 @@ def test_lanes_decide_as_one_adapter_per_lane_with_the_guard_and_stalled_rounds(
             assert switched.tolist() == alone, (strategy, t)
             assert [PAYOFF.ours[p] for p in together.policy] == [a.policy for a in scalar], (strategy, t)
         assert together.guarded.tolist() == [a.guarded for a in scalar]
-        assert [a.window.filled for a in scalar] == together.filled.tolist()
+        assert [a.filled for a in scalar] == together.window.filled.tolist()
         if "guard" in strategy:
             assert 0 < sum(a.guarded for a in scalar) < lanes and max(a.switches for a in scalar) >= 2
             assert not any(a.guarded for a in scalar[:3])  # the lanes that kept the promise

@@ -1,20 +1,18 @@
 """Evaluating the adaptive agent in-process: the games every measurement plays.
 
-`play_games` plays many games of partners (services/adapter/partners.py) with our seat played by
-a static library policy or adaptively, as the lanes of one batched engine: the partners in their
-batched forms (partners.py), our seat's lanes grouped by the policy they play now, and every
-adaptive lane's update batched (`AdapterLanes`, which decides as `Adapter` does). `play_partner`
-is the same game on the scalar engine, one at a time, as a live match plays it: the reference the
-batched games are checked against, and the calibration's games. Either way the adaptive agent
-switches as the agent service does: from the frame after the adapter's choice. Draws differ: a
-batched game's come from `lane_uniforms` keyed by its seed (batch_play.py), a scalar game's from
-the policies' own generators, so the two agree in distribution, not game for game.
+`play_games` plays games of partners (services/adapter/partners.py) with our seat played by a
+static library policy or adaptively, as the lanes of one batched engine (one game is one lane):
+the partners in their batched forms (partners.py), our seat's lanes grouped by the policy
+they play now, and every adaptive lane's update batched (`AdapterLanes`). The adaptive agent
+switches as the agent service does: from the frame after the adapter's choice. A game's draws come
+from `lane_uniforms` keyed by its seed (batch_play.py), so a game is the same whichever batch it
+is played in. `play_session` plays a session's trials one after the other, an adapter carried
+from trial to trial.
 
 Bulk work runs as jobs of the job system (services/jobs: here, or on workers across machines), each
-a batch of consecutive games (`batches`), or one game (the thresholds' scalar games). The
-measurements built on it: identification.py (is the partner
-identified), team.py (does adapting help), thresholds.py (the out-of-library thresholds) and
-results.py (the numbers and summary written out).
+a batch of consecutive games (`batches`), or one game or session. The measurements built on it:
+identification.py (is the partner identified), team.py (does adapting help), thresholds.py (the
+out-of-library thresholds) and results.py (the numbers and summary written out).
 """
 
 from __future__ import annotations
@@ -27,18 +25,11 @@ from pathlib import Path
 
 import numpy as np
 
-from services.adapter.core import (
-    Adapter,
-    AdapterConfig,
-    Payoff,
-    Scorer,
-)
+from services.adapter.core import AdapterConfig, AdapterLanes, Payoff, Scorer
 from services.adapter.human_like import SESSION_TRIALS
-from services.adapter.partners import Partner, PartnerError, Partners, ask, make_partner
+from services.adapter.partners import PartnerError, Partners
 from services.agent import networks
-from services.sim.engine import Game
-from services.sim.observation import observe, world_values
-from services.sim.play import policy_seed, switch_seed
+from services.sim.observation import observe
 from services.table.table import DEFAULT_TABLE
 from shared.game import ROLES, GameConfig, Policy, bait_first, other
 
@@ -70,22 +61,28 @@ class Outcome:
     switches: int = 0
     guarded: bool = False  # a -guard strategy fell back to the best static policy
     timeline: list[tuple[int, str, str]] = field(default_factory=list)  # (frame, estimate, policy)
-    adapter: Adapter | None = field(default=None, repr=False, compare=False)  # its adapter at the end
-    values: list[list[float]] = field(default_factory=list)  # the partner's world-view states
-    actions: list[int] = field(default_factory=list)  # and actions, when recorded (scalar games)
-    scores: np.ndarray | None = None  # (frames, K) the partner's scores, when recorded (batched)
-    pairs: np.ndarray | None = None  # (frames, 2) both seats' actions, bait first, when recorded
+    values: np.ndarray | None = None  # (frames, D) the partner's world-view states, when recorded
+    actions: np.ndarray | None = None  # (frames,) and its actions
+    pairs: np.ndarray | None = None  # (frames, 2) both seats' actions, bait first
+    scores: np.ndarray | None = None  # (frames, K) the partner's scores under the library, when scored
 
 
 Agent = str | AdapterConfig  # a static library key of our seat, or an adaptive agent
 
 
 def play_games(
-    games: list[tuple[str, Agent, int]], role: str, config: GameConfig | None = None, record: bool = False
+    games: list[tuple[str, Agent, int]],
+    role: str,
+    config: GameConfig | None = None,
+    record: bool = False,
+    adapters: dict[AdapterConfig, AdapterLanes] | None = None,
+    score: bool = False,
 ) -> list[Outcome]:
-    """Games of (partner name, our agent, seed), our seat `role`, as the lanes of one batch. With
-    `record`, each outcome keeps the partner's scores under the library (the Scorer) and both
-    seats' actions, frame by frame."""
+    """Games of (partner name, our agent, seed), our seat `role`, as the lanes of one batch. An
+    adaptive agent's games go on with its adapter in `adapters` (a session's next trial; one lane
+    per game of that agent, in order), else with a new one. With `record`, each outcome keeps the
+    partner's states and actions and both seats' actions, frame by frame; with `score`, the
+    partner's scores under the library (the Scorer), frame by frame."""
     from services.sim.batch import BatchGame
     from services.sim.batch_play import RoleLanes
 
@@ -97,16 +94,20 @@ def play_games(
     for lane, (_, agent, _) in enumerate(games):
         if isinstance(agent, AdapterConfig):
             adaptive.setdefault(agent, []).append(lane)
-    scored = np.arange(len(games)) if record else np.array(sorted(sum(adaptive.values(), [])), np.int64)
-    adapters = [
-        (np.array(lanes), np.searchsorted(scored, lanes), agent.build_lanes(len(lanes), s.payoff))
-        for agent, lanes in adaptive.items()
-    ]
-    ours = [agent if isinstance(agent, str) else s.payoff.initial(agent) for _, agent, _ in games]
-    seat = RoleLanes(role, list(s.ours.values()), [s.payoff.ours.index(k) for k in ours], seeds)
+    scored = np.arange(len(games)) if score else np.array(sorted(sum(adaptive.values(), [])), np.int64)
+    groups = []  # (lanes, their rows among the scored, the adapter)
+    for agent, lanes in adaptive.items():
+        adapter = (adapters or {}).get(agent) or agent.build_lanes(len(lanes), s.payoff)
+        groups.append((np.array(lanes), np.searchsorted(scored, lanes), adapter))
+    ours = [s.payoff.ours.index(agent) if isinstance(agent, str) else -1 for _, agent, _ in games]
+    for lanes, _, adapter in groups:
+        for lane, policy in zip(lanes.tolist(), adapter.policy.tolist(), strict=True):
+            ours[lane] = policy  # the initial policy, or where a session's adapter left off
+    seat = RoleLanes(role, list(s.ours.values()), ours, seeds)
     outcomes = [Outcome(0.0) for _ in games]
     frames = batch.config.frames
-    scores = np.zeros((len(scored), frames, len(s.payoff.partners))) if record else None
+    seen: list[np.ndarray] = []  # the partner's states, frame by frame (record)
+    scores = np.zeros((len(games), frames, len(s.payoff.partners))) if score else None
     pairs = np.zeros((len(games), frames, 2), np.int64) if record else None
     while not batch.done[0]:
         frame = int(batch.state.frame[0])
@@ -119,26 +120,32 @@ def play_games(
         our_actions = seat.act(batch)
         if len(scored):
             now = s.scorer.observed({v: observed(v)[scored] for v in s.scorer.views}, partner_actions[scored])
-            states = observed("world")[scored]  # what Adapter.update reads: stalls, the guard's kills
-            if scores is not None:
-                scores[:, frame] = now
-        for lanes, rows, adapter in adapters:
+            states = observed("world")[scored]  # what AdapterLanes.update reads: stalls, the guard's kills
+        for lanes, rows, adapter in groups:
             for j in np.flatnonzero(adapter.update(now[rows], states[rows])).tolist():
                 seat.choice[lanes[j]] = adapter.policy[j]
                 outcomes[lanes[j]].switches += 1
                 chosen = (s.payoff.partners[adapter.partner[j]], s.payoff.ours[adapter.policy[j]])
                 outcomes[lanes[j]].timeline.append((frame + 1, *chosen))
         pair = bait_first(partner_role, partner_actions, our_actions)
+        if scores is not None:
+            scores[:, frame] = now
         if pairs is not None:
+            seen.append(observed("world").copy())
             pairs[:, frame] = np.stack(pair, axis=1)
         batch.step(*pair)
-    for lanes, _, adapter in adapters:
+    for lanes, _, adapter in groups:
         for lane, guarded in zip(lanes.tolist(), adapter.guarded.tolist(), strict=True):
             outcomes[lane].guarded = guarded
+    values = np.stack(seen, axis=1) if record else None
     for lane, kpm in enumerate(batch.kills_per_minute().tolist()):
-        outcomes[lane].kills_per_minute = kpm
-        if record:
-            outcomes[lane].scores, outcomes[lane].pairs = scores[lane], pairs[lane]
+        o = outcomes[lane]
+        o.kills_per_minute = kpm
+        if scores is not None:
+            o.scores = scores[lane]
+        if pairs is not None:
+            o.values, o.pairs = values[lane], pairs[lane]
+            o.actions = o.pairs[:, ROLES.index(partner_role)]
     return outcomes
 
 
@@ -180,56 +187,13 @@ def batches(items: list, workers: int, lanes: int = LANES) -> list[list]:
     return [items[a:b] for a, b in itertools.pairwise(bounds)]
 
 
-def play_partner(
-    partner: Partner,
-    agent: str | AdapterConfig,
-    seed: int,
-    role: str,
-    config: GameConfig | None = None,
-    record: bool = False,
-    adapter: Adapter | None = None,
-) -> Outcome:
-    """One game of `partner` with our seat `role` played by a static library key or adaptively
-    (by a new adapter, or by `adapter` going on from an earlier game of a session)."""
-    s, partner_role = setup(role), other(role)
-    game = Game(config, seed)
-    partner.reset(policy_seed(seed, partner_role))
-    if isinstance(agent, AdapterConfig):
-        adapter = adapter or agent.build(s.payoff)
-        agent = adapter.policy
-    ours = s.ours[agent]
-    ours.reset(policy_seed(seed, role))
-    outcome = Outcome(0.0)
-    while not game.done:
-        try:
-            partner_action = ask(partner, observe(game, partner_role, partner.view), game.frame)
-        except PartnerError as error:
-            raise PartnerError(f"partner {partner.key}, seed {seed}: {error.problem}") from None
-        our_action = ours.act(observe(game, role, ours.view))
-        if adapter is not None or record:
-            values = world_values(game, partner_role)
-        if record:
-            outcome.values.append(values)
-            outcome.actions.append(partner_action)
-        if adapter is not None and adapter.update(s.scorer(values, partner_action), values):
-            ours = s.ours[adapter.policy]
-            ours.reset(switch_seed(seed, role, game.frame + 1))
-            outcome.switches += 1
-            outcome.timeline.append((game.frame + 1, adapter.partner, adapter.policy))
-        pair = bait_first(partner_role, partner_action, our_action)
-        game.step(*pair)
-    outcome.kills_per_minute = game.kills_per_minute()
-    outcome.guarded = adapter is not None and adapter.guarded
-    outcome.adapter = adapter
-    return outcome
-
-
-def play_session(partner: str, agent: AdapterConfig, person: int, role: str) -> list[Outcome]:
-    """The trials of one session (human_like.SESSION_TRIALS games, seeds person * trials + i)
-    with the same partner; the adapter of each trial is the previous one's `next_trial()`."""
+def play_session(partner: str, agent: Agent, person: int, role: str) -> list[Outcome]:
+    """The trials of one session (human_like.SESSION_TRIALS games, seeds person * trials + i) with
+    the same partner, one after the other; an adaptive agent's adapter in each trial is the
+    previous one's `next_trial()`."""
+    adapters = {agent: agent.build_lanes(1, setup(role).payoff)} if isinstance(agent, AdapterConfig) else {}
     outcomes: list[Outcome] = []
     for trial in range(SESSION_TRIALS):
-        previous = outcomes[-1].adapter.next_trial() if outcomes else None
-        seed = person * SESSION_TRIALS + trial
-        outcomes.append(play_partner(make_partner(partner, other(role)), agent, seed, role, adapter=previous))
+        outcomes += play_games([(partner, agent, person * SESSION_TRIALS + trial)], role, adapters=adapters)
+        adapters = {a: lanes.next_trial() for a, lanes in adapters.items()}
     return outcomes

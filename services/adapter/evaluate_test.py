@@ -1,4 +1,4 @@
-"""The evaluation core: adaptive games (batched, checked against the scalar adapter), window
+"""The evaluation core: adaptive games (batched, replayed on the scalar engine), sessions, window
 arithmetic, following lags and the statistics."""
 
 from __future__ import annotations
@@ -10,9 +10,9 @@ import pytest
 from scipy import stats
 
 from services.adapter.core import AdapterConfig
-from services.adapter.evaluate import batches, play_games, play_partner, play_teams, setup
+from services.adapter.evaluate import batches, play_games, play_session, play_teams, setup
 from services.adapter.identification import follow_lag, windowed
-from services.adapter.partners import make_partner
+from services.adapter.results import TeamGame
 from services.adapter.seat import SeatSpec
 from services.adapter.team import compare, holm, paired_tests, variants
 from services.agent import networks
@@ -51,11 +51,22 @@ def test_variant_names_round_trip() -> None:
 
 def test_adaptive_game_switches_to_the_best_response_and_is_deterministic() -> None:
     config = AdapterConfig("shooter", 150, "cem")
-    first = play_partner(make_partner("B3", "bait"), config, 4, "shooter")
-    again = play_partner(make_partner("B3", "bait"), config, 4, "shooter")
+    first, again = play_games([("B3", config, 4), ("B3", config, 4)], "shooter")
     assert first == again
     assert first.timeline[0][1:] == ("B3", Table.load(DEFAULT_TABLE).best_shooter("B3"))
     assert first.timeline[0][0] == 150  # decided on the warm-up's last frame, played from the next
+
+
+def test_a_session_is_its_games_one_after_another_with_the_adapter_carried() -> None:
+    """Without -memory a session's trials are the games of their seeds, as in any batch; with it
+    the first trial is the same game and the next ones start where the adapter left off."""
+    forgetting = AdapterConfig("shooter", 150, "bayes-dwell-ood-guard")
+    remembering = dataclasses.replace(forgetting, strategy="bayes-dwell-ood-guard-memory")
+    alone = play_games([("B3", forgetting, seed) for seed in (3, 4, 5)], "shooter")  # person 1's seeds
+    assert play_session("B3", forgetting, 1, "shooter") == alone
+    carried = play_session("B3", remembering, 1, "shooter")
+    assert carried[0] == alone[0] and alone[1].timeline[0][0] >= 150  # warm-up first
+    assert sum(o.switches for o in carried[1:]) < sum(o.switches for o in alone[1:])
 
 
 def test_compare_pairs_by_partner_and_seed() -> None:
@@ -66,15 +77,7 @@ def test_compare_pairs_by_partner_and_seed() -> None:
             base = rng.normal(5, 1)
             for agent, shift in (("S1", 0.0), ("S2", -1.0), ("adaptive-T150-cem", 0.5 + rng.normal(0, 0.3))):
                 switches = 2 if agent.startswith("adaptive") else 0
-                rows.append(
-                    {
-                        "partner": partner,
-                        "agent": agent,
-                        "seed": seed,
-                        "kills_per_minute": base + shift,
-                        "switches": switches,
-                    }
-                )
+                rows.append(TeamGame(partner, agent, seed, base + shift, switches, 0))
                 truth.setdefault(agent, []).append(base + shift)
     result = compare(rows)
     assert result["best_static"] == "S1" and result["units"] == 18
@@ -104,16 +107,15 @@ GAMES = [
 ]
 
 
-def test_batched_adaptive_games_decide_as_the_scalar_adapter_on_the_same_play() -> None:
-    """Replay each batched game's actions on the scalar engine with the scalar Scorer and Adapter:
-    the same scores, switches at the same frames to the same policies, the same kills; and our
-    seat's every action is the draw of the policy the timeline says was playing; under the guard
-    and with human-like partners too (core_test.py checks AdapterLanes against Adapter where the
-    guard trips and rounds stall, which these short games seldom show)."""
+def test_batched_adaptive_games_decide_as_the_scalar_engine_replays_them() -> None:
+    """Replay each batched game's actions on the scalar engine with the Scorer on world values and
+    a one-game Adapter: the same states and scores, switches at the same frames to the same
+    policies, the same kills; and our seat's every action is the draw of the policy the timeline
+    says was playing; under the guard and with human-like partners too."""
     config = GameConfig(frames=900)
-    played = play_games(GAMES, "shooter", config, record=True)
+    played = play_games(GAMES, "shooter", config, record=True, score=True)
     assert play_games(GAMES[1:2], "shooter", config)[0] == dataclasses.replace(
-        played[1], scores=None, pairs=None
+        played[1], values=None, actions=None, scores=None, pairs=None
     )
     s = setup("shooter")
     for (_, agent, seed), outcome in zip(GAMES, played, strict=True):
@@ -125,6 +127,8 @@ def test_batched_adaptive_games_decide_as_the_scalar_adapter_on_the_same_play() 
             probs = policy.probs(observe(game, "shooter", policy.view))
             assert shooter == sample(probs[None], lane_uniforms(np.array([seed]), 1, frame))[0]
             values = world_values(game, "bait")
+            np.testing.assert_allclose(outcome.values[frame], values, rtol=1e-6, atol=1e-6)  # float32
+            assert outcome.actions[frame] == bait
             scores = s.scorer(values, bait)
             np.testing.assert_allclose(outcome.scores[frame], scores, rtol=1e-12)
             if adapter is not None and adapter.update(scores, values):
@@ -157,20 +161,6 @@ def test_batches_cover_every_game_once_in_order() -> None:
         assert [i for part in parts for i in part] == items
         assert max(map(len, parts)) - min(map(len, parts)) <= 1
         assert max(map(len, parts)) <= lanes and len(parts) >= workers
-
-
-@pytest.mark.slow
-def test_batched_games_agree_with_scalar_games_in_distribution() -> None:
-    """Batched draws are other streams than the scalar policies' own: kills/min of adaptive games
-    with a noisy partner agree within three standard errors of the difference over 40 seeds, and
-    so do the numbers of switches."""
-    agent, seeds = AdapterConfig("shooter", 150, "cem"), range(40)
-    batched = play_games([("noisy(B6)", agent, seed) for seed in seeds], "shooter")
-    scalar = [play_partner(make_partner("noisy(B6)", "bait"), agent, seed, "shooter") for seed in seeds]
-    for measure in ("kills_per_minute", "switches"):
-        a, b = (np.array([getattr(o, measure) for o in side]) for side in (batched, scalar))
-        stderr = np.hypot(a.std(ddof=1), b.std(ddof=1)) / np.sqrt(len(seeds))
-        assert abs(a.mean() - b.mean()) < 3 * stderr, (measure, a.mean(), b.mean(), stderr)
 
 
 def test_holm_and_non_inferiority() -> None:

@@ -33,60 +33,27 @@ def poisson_cdf(k: int, mean: float) -> float:
 
 
 class Guard:
-    """Counts kills, openings and deaths under the adapted policy and says when to fall back."""
-
-    def __init__(self, fallback: str, min_frames: int = GUARD_FRAMES, p: float = GUARD_P) -> None:
-        self.fallback, self.min_frames, self.p = fallback, min_frames, p
-        self.tripped = False
-        self.promise: float | None = None  # kills/min the table promised for the adapted policy
-        self.frames = self.kills = self.openings = self.deaths = 0
-        self.last: list[float] | None = None
-
-    def start(self, policy: str, promise: float) -> None:
-        """Our agent now plays `policy`, which the table promised `promise` kills/min for."""
-        self.promise = None if policy == self.fallback else promise
-        self.frames = self.kills = self.openings = self.deaths = 0
-
-    def watch(self, values: list[float] | object) -> None:
-        """One frame's world-view state (either seat's: kills, openings and deaths are the team's)."""
-        last, self.last = self.last, [float(v) for v in values]  # type: ignore[union-attr]
-        self.frames += 1
-        if last is None:
-            return
-        now, f = self.last, ob.FORTRESS
-        self.kills += last[f + ob.F_ALIVE] > 0.5 >= now[f + ob.F_ALIVE]
-        self.openings += last[f + ob.F_VULNERABLE] == 0.0 < now[f + ob.F_VULNERABLE]
-        self.deaths += sum(last[b + ob.ALIVE] > 0.5 >= now[b + ob.ALIVE] for b in (ob.SELF, ob.PARTNER))
-
-    def breached(self) -> bool:
-        """Whether the adapted policy has fallen short of its promise (and the guard trips)."""
-        if self.tripped or self.promise is None or self.frames < self.min_frames:
-            return self.tripped
-        expected = self.promise * self.frames / FRAMES_PER_MINUTE
-        self.tripped = poisson_cdf(self.kills, expected) < self.p
-        return self.tripped
-
-
-class GuardLanes:
-    """`Guard` in n games at once (core.AdapterLanes): lane i counts and trips exactly as a Guard
-    would from the same states. Policies are indices into the payoff's ours; no promise is NaN."""
+    """Counts kills, openings and deaths under the adapted policy in each of n games (lanes; one
+    game is one lane) and says where to fall back. Policies are indices into the payoff's ours; no
+    promise is NaN."""
 
     def __init__(self, fallback: int, lanes: int, min_frames: int = GUARD_FRAMES, p: float = GUARD_P) -> None:
         self.fallback, self.min_frames, self.p = fallback, min_frames, p
         self.tripped = np.zeros(lanes, bool)
-        self.promise = np.full(lanes, np.nan)
+        self.promise = np.full(lanes, np.nan)  # kills/min the table promised for the adapted policy
         self.frames, self.kills = np.zeros(lanes, np.int64), np.zeros(lanes, np.int64)
         self.openings, self.deaths = np.zeros(lanes, np.int64), np.zeros(lanes, np.int64)
         self.last: np.ndarray | None = None
 
     def start(self, lanes: np.ndarray, policies: np.ndarray, promises: np.ndarray) -> None:
-        """Guard.start for `lanes`, which now play `policies`, promised `promises` kills/min."""
+        """`lanes` now play `policies`, which the table promised `promises` kills/min for."""
         self.promise[lanes] = np.where(policies == self.fallback, np.nan, promises)
         for count in (self.frames, self.kills, self.openings, self.deaths):
             count[lanes] = 0
 
     def watch(self, values: np.ndarray) -> None:
-        """Guard.watch of every lane's world-view state, (n, D)."""
+        """One frame's world-view state of every lane, (n, D) (either seat's: kills, openings and
+        deaths are the team's)."""
         last, self.last = self.last, np.asarray(values, np.float64)
         self.frames += 1
         if last is None:
@@ -98,9 +65,10 @@ class GuardLanes:
             self.deaths += (last[:, b + ob.ALIVE] > 0.5) & (now[:, b + ob.ALIVE] <= 0.5)
 
     def breached(self, asked: np.ndarray) -> np.ndarray:
-        """Guard.breached for the lanes where `asked` (a mask); False elsewhere."""
+        """Where `asked` (a mask), whether the adapted policy has fallen short of its promise (and
+        the guard trips); False elsewhere."""
         judged = asked & ~self.tripped & ~np.isnan(self.promise) & (self.frames >= self.min_frames)
-        for i in np.flatnonzero(judged).tolist():  # the scalar test itself: the same numbers
+        for i in np.flatnonzero(judged).tolist():
             expected = float(self.promise[i]) * int(self.frames[i]) / FRAMES_PER_MINUTE
             self.tripped[i] = poisson_cdf(int(self.kills[i]), expected) < self.p
         return asked & self.tripped

@@ -7,9 +7,8 @@ import pytest
 from scipy import stats
 
 from services.adapter.core import AdapterConfig
-from services.adapter.evaluate import play_partner
+from services.adapter.evaluate import play_games
 from services.adapter.guard import GUARD_FRAMES, Guard, poisson_cdf
-from services.adapter.partners import make_partner
 from services.sim import observation as ob
 
 
@@ -30,26 +29,23 @@ def frames(kill_every: int, n: int) -> list[list[float]]:
 
 
 def test_the_guard_trips_when_kills_fall_short_of_the_promise_and_not_before():
-    kept, broken, best = Guard("S5"), Guard("S5"), Guard("S5")
-    for guard in (kept, broken, best):
-        guard.start("S7" if guard is not best else "S5", 8.0)
-    for v in frames(225, GUARD_FRAMES * 2):  # 8 kills/min
-        kept.watch(v)
-    for v in frames(10**6, GUARD_FRAMES * 2):  # none
-        broken.watch(v)
-        best.watch(v)
-        assert not (broken.breached() and broken.frames < GUARD_FRAMES)
-    assert kept.kills == 4 and not kept.breached()  # 8 kills/min for 30 s
-    assert broken.breached() and broken.kills == 0
-    assert not best.breached()  # the best static policy itself is never left
+    """Lanes: one kept promise, one broken, and the best static policy (index 5), never left."""
+    kept, broken, best = range(3)
+    guard = Guard(5, 3)
+    guard.start(np.arange(3), np.array([7, 7, 5]), np.full(3, 8.0))
+    for a, b in zip(frames(225, GUARD_FRAMES * 2), frames(10**6, GUARD_FRAMES * 2), strict=True):
+        guard.watch(np.array([a, b, b]))  # 8 kills/min for 30 s in the kept lane; none elsewhere
+        tripped = guard.breached(np.ones(3, bool))
+        assert not (tripped[broken] and guard.frames[broken] < GUARD_FRAMES)
+    assert guard.kills.tolist() == [4, 0, 0]
+    assert guard.breached(np.ones(3, bool)).tolist() == [False, True, False]
+    assert not guard.breached(np.array([True, False, True])).any()  # a lane not asked: no answer
 
 
 def test_a_guarded_game_switches_at_most_once_more_and_reports_it():
     config = AdapterConfig("shooter", 400, "bayes-dwell-ood-guard")
-    outcome = play_partner(make_partner("human(B3)", "bait"), config, 1, "shooter")
-    plain = play_partner(
-        make_partner("human(B3)", "bait"), AdapterConfig("shooter", 400, "bayes-dwell-ood"), 1, "shooter"
-    )
+    plain = AdapterConfig("shooter", 400, "bayes-dwell-ood")
+    outcome, plain = play_games([("human(B3)", config, 1), ("human(B3)", plain, 1)], "shooter")
     assert outcome.switches <= plain.switches + 1
     if outcome.guarded:  # fell back to the best static policy
         payoff = AdapterConfig("shooter").build().payoff
@@ -67,7 +63,8 @@ def test_memory_carries_the_adapter_into_the_next_trial():
     initial = forgetting.payoff.initial(forgetting.config)  # the best static policy of the table
     assert remembering.partner == forgetting.partner == "B3" and remembering.policy != initial
     carried, fresh = remembering.next_trial(), forgetting.next_trial()
-    assert carried is remembering and carried.guard.last is None and carried.guard.frames > 0
+    guard = carried.lanes.guard
+    assert carried is remembering and guard.last is None and guard.frames[0] > 0
     assert fresh.partner == "" and fresh.policy == initial and fresh.frames == 0
 
 

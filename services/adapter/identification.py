@@ -40,7 +40,7 @@ def bayes_estimates(scores: np.ndarray, config: AdapterConfig, payoff: Payoff) -
 
 def _scores(games: list[tuple[str, str, int]], role: str) -> list[np.ndarray]:
     """Each game's partner scores: frames (rows) under each library policy of its role (columns)."""
-    return [outcome.scores for outcome in play_games(games, role, record=True)]
+    return [outcome.scores for outcome in play_games(games, role, score=True)]
 
 
 def _switch_game(first: str, second: str, seed: int, role: str) -> tuple[str, str, int]:

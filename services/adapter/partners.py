@@ -38,7 +38,7 @@ per lane, reset and asked lane by lane.
 
 Every draw, a policy's and each wrapper's, comes from its own stream of `lane_uniforms`, keyed by
 the game's seed and the frame: a game's partner depends on its seed, never on which lanes share
-the batch. `build` makes the partner of a single game (play_partner, a stand-in, a recorded
+the batch. `build` makes the partner of a single game (a stand-in, a recorded
 trial): a policy alone plays as itself (its own generator, as every scalar game plays a policy),
 and a wrapper plays as one lane of its batched form (`OneGame`), so it gives exactly the actions
 its lane gives in any batch.

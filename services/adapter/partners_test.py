@@ -143,7 +143,7 @@ MIXED = [
 
 def test_a_partner_acts_the_same_in_a_single_game_as_among_many_lanes() -> None:
     """The same partner spec played as a single game (`make_partner`: one lane of its batched
-    form, what play_partner, a stand-in and a recorded trial play) and among other partners' lanes
+    form, what a stand-in and a recorded trial play) and among other partners' lanes
     (`Partners`, an evaluation's batch) gives the same actions, exactly: every draw is its game's,
     keyed by seed and frame. The lanes see the states of real games (the batched engine, the
     partners under test in the bait seat), past the switches' frame."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 from collections.abc import Iterable
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from services.adapter.partners import group_of
@@ -12,6 +13,24 @@ from services.adapter.seat import ADAPTIVE_KIND, SeatSpec
 from services.agent import library
 from services.provenance import lines as provenance_lines
 from services.provenance import provenance
+
+
+@dataclass(frozen=True)
+class TeamGame:
+    """One team game: a row of team.csv."""
+
+    partner: str
+    agent: str
+    seed: int
+    kills_per_minute: float
+    switches: int
+    guarded: int  # 1 where a -guard strategy fell back to the best static policy
+    trial: int | None = None  # the trial, in games played as sessions
+
+    def row(self) -> dict:
+        """The game as team.csv writes it: the trial only for sessions."""
+        row = asdict(self)
+        return row if self.trial is not None else {k: v for k, v in row.items() if k != "trial"}
 
 
 def _csv(path: Path, header: list[str], rows: Iterable[Iterable]) -> None:
@@ -57,7 +76,7 @@ def _group_tests(comparison: dict) -> list[str]:
 
 
 def write_results(
-    out: Path, identification_result: dict | None, rows: list[dict], comparison: dict | None
+    out: Path, identification_result: dict | None, games: list[TeamGame], comparison: dict | None
 ) -> Path:
     """Every number behind the figures, as JSON and CSV, and a Markdown summary (summary.md)."""
     out.mkdir(parents=True, exist_ok=True)
@@ -81,8 +100,8 @@ def write_results(
                 f"{follow['median_frames']} |"
             )
         lines.append("")
-    if rows:
-        _csv(out / "team.csv", list(rows[0]), (r.values() for r in rows))
+    if games:
+        _csv(out / "team.csv", list(games[0].row()), (g.row().values() for g in games))
     if comparison:
         (out / "comparison.json").write_text(json.dumps(comparison, indent=1) + "\n")
         agents = comparison["agents"]

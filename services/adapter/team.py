@@ -12,25 +12,14 @@ import numpy as np
 from services.adapter.core import (
     AdapterConfig,
 )
-from services.adapter.evaluate import batches, play_games, play_partner, play_session
+from services.adapter.evaluate import batches, play_games, play_session
 from services.adapter.human_like import SESSION_TRIALS
-from services.adapter.partners import group_of, make_partner
+from services.adapter.partners import group_of
+from services.adapter.results import TeamGame
 from services.adapter.seat import ADAPTIVE_KIND, SeatSpec
 from services.jobs.core import Spec, spec
 from services.jobs.kinds import Runner, in_process, plugins_in
-from shared.game import check_role, other
-
-
-def _row(partner: str, agent: str, seed: int, kills_per_minute: float, switches: int, guarded: int) -> dict:
-    return {
-        "partner": partner,
-        "agent": agent,
-        "seed": seed,
-        "kills_per_minute": kills_per_minute,
-        "switches": switches,
-        "guarded": guarded,
-    }
-
+from shared.game import check_role
 
 JOB_GAMES = 256  # games of a team or identification job (the lanes of one batch): tsf eval --job-games
 
@@ -71,13 +60,13 @@ def team(
     run: Runner = in_process,
     progress: Callable[[int, int], None] | None = None,
     job_games: int | None = None,
-) -> list[dict]:
+) -> list[TeamGame]:
     """Kills/min of every (partner, agent, seed); agents are static keys or adaptive variant names.
     The games are jobs (`team_jobs`), run by `run`: here, or on the job system's workers."""
     todo = team_jobs(role, partners, agents, seeds, job_games or JOB_GAMES)
     played = run(todo, progress)
     return [
-        _row(partner, agent, seed, kpm, switches, guarded)
+        TeamGame(partner, agent, seed, kpm, switches, guarded)
         for job, values in zip(todo, played, strict=True)
         for (partner, agent, seed), (kpm, switches, guarded) in zip(job.args["games"], values, strict=True)
     ]
@@ -118,15 +107,10 @@ def paired_tests(diff: np.ndarray, margin: float = MARGIN) -> dict:
 
 def _session_games(partner: str, agent: str, person: int, role: str) -> list[list]:
     """Each trial's [seed, kills/min, switches, guarded]."""
-    config = SeatSpec.parse(agent, "--agent").adaptive(role)
+    played = play_session(partner, SeatSpec.parse(agent, "--agent").adaptive(role) or agent, person, role)
     seeds = [person * SESSION_TRIALS + trial for trial in range(SESSION_TRIALS)]
-    if config is None:
-        outcomes = [play_partner(make_partner(partner, other(role)), agent, seed, role) for seed in seeds]
-    else:
-        outcomes = play_session(partner, config, person, role)
     return [
-        [seed, o.kills_per_minute, o.switches, int(o.guarded)]
-        for seed, o in zip(seeds, outcomes, strict=True)
+        [seed, o.kills_per_minute, o.switches, int(o.guarded)] for seed, o in zip(seeds, played, strict=True)
     ]
 
 
@@ -142,7 +126,7 @@ def sessions(
     people: list[int],
     run: Runner = in_process,
     progress: Callable[[int, int], None] | None = None,
-) -> list[dict]:
+) -> list[TeamGame]:
     """`team`, played as sessions: SESSION_TRIALS one-minute trials of each person (seeds
     person * SESSION_TRIALS + trial) with the same partner, an adaptive agent carrying over from
     trial to trial where its strategy has `-memory`. One row per trial; one job per session."""
@@ -158,7 +142,7 @@ def sessions(
         for i, (p, a, person) in enumerate((p, a, n) for p in partners for a in agents for n in people)
     ]
     return [
-        _row(job.args["partner"], job.args["agent"], seed, kpm, switches, guarded) | {"trial": trial}
+        TeamGame(job.args["partner"], job.args["agent"], seed, kpm, switches, guarded, trial)
         for job, values in zip(todo, run(todo, progress), strict=True)
         for trial, (seed, kpm, switches, guarded) in enumerate(values)
     ]
@@ -168,7 +152,7 @@ def _stderr(values: np.ndarray) -> float:
     return float(values.std(ddof=1) / math.sqrt(len(values))) if len(values) > 1 else 0.0
 
 
-def compare(rows: list[dict]) -> dict:
+def compare(games: list[TeamGame]) -> dict:
     """Each agent's mean and standard error over the population, and each adaptive variant against
     the best static policy (chosen on this same data, which favours the static side): a one-sided
     paired t-test and a Wilcoxon signed-rank test over (partner, seed) pairs (with Holm's
@@ -177,10 +161,10 @@ def compare(rows: list[dict]) -> dict:
     non-inferiority (margin MARGIN) tests; and each variant's switches per game."""
     from scipy import stats
 
-    units = sorted({(r["partner"], r["seed"]) for r in rows})
+    units = sorted({(g.partner, g.seed) for g in games})
     grid: dict[str, dict[tuple[str, int], float]] = {}
-    for r in rows:
-        grid.setdefault(r["agent"], {})[(r["partner"], r["seed"])] = r["kills_per_minute"]
+    for g in games:
+        grid.setdefault(g.agent, {})[(g.partner, g.seed)] = g.kills_per_minute
     values = {a: np.array([g[u] for u in units]) for a, g in grid.items()}
     agents = {a: _summary(v) for a, v in values.items()}
     statics = [a for a in values if SeatSpec.parse(a).kind != ADAPTIVE_KIND]
@@ -223,10 +207,9 @@ def compare(rows: list[dict]) -> dict:
     }
     switching = {}
     for a in tests:
-        counts = [r["switches"] for r in rows if r["agent"] == a]
+        counts = [g.switches for g in games if g.agent == a]
         switching[a] = {"mean": float(np.mean(counts)), "max": int(max(counts))}
-        guarded = [r.get("guarded", 0) for r in rows if r["agent"] == a]
-        switching[a]["guarded_games"] = int(sum(guarded))
+        switching[a]["guarded_games"] = int(sum(g.guarded for g in games if g.agent == a))
     per_partner = {
         p: {a: _summary([grid[a][u] for u in units if u[0] == p]) for a in values} for p in partners
     }

@@ -10,26 +10,28 @@ from pathlib import Path
 import numpy as np
 
 from services.adapter.cem import log_probs
-from services.adapter.evaluate import play_partner
+from services.adapter.evaluate import batches, play_games
 from services.adapter.identification import windowed
-from services.adapter.partners import make_partner
 from services.agent import library, networks
 from services.jobs.core import spec
 from services.jobs.kinds import Progress, Runner, in_process
 from shared.game import ROLES, GameConfig, other
 
+JOB_GAMES = 3  # games of one job: three games' streams stay under a message's 64 KiB
 
-def _self_scores(key: str, teammate: str, seed: int) -> np.ndarray:
-    """log pi(a | s) of a library policy's own actions over one game with `teammate`."""
-    policy = networks.load(key)
-    partner_role = other(policy.role)
-    outcome = play_partner(make_partner(key, policy.role), teammate, seed, partner_role, record=True)
-    return log_probs([policy], outcome.values, outcome.actions)[:, 0]
+
+def _self_scores(games: list[list]) -> np.ndarray:
+    """log pi(a | s) of library policies' own actions over games of [policy, teammate, seed] (one
+    policy's), (games, frames), the games as the lanes of one batch."""
+    policy = networks.load(games[0][0])
+    played = play_games([(k, mate, int(seed)) for k, mate, seed in games], other(policy.role), record=True)
+    return np.array([log_probs([policy], o.values, o.actions)[:, 0] for o in played])
 
 
 def run_calibrate_jobs(args: list[dict]) -> list[list]:
-    """The job system's runner for `calibrate` jobs ({policy, teammate, seed}): each game's stream."""
-    return [_self_scores(a["policy"], a["teammate"], int(a["seed"])).tolist() for a in args]
+    """The job system's runner for `calibrate` jobs ({games: [[policy, teammate, seed]...]}): the
+    games' streams, one after another."""
+    return [_self_scores(job["games"]).ravel().tolist() for job in args]
 
 
 def calibrate(
@@ -45,20 +47,18 @@ def calibrate(
     library policy of the other role, minus `margin` nats. A partner whose best similarity is
     below it explains its actions far worse than any library policy explains its own."""
     seeds = seeds or [0, 1]
-    tasks = [
-        (k, mate, seed)
+    by_policy = [  # each library policy's games with every teammate and seed
+        [[k, mate, seed] for mate in library.keys(other(_role(k))) for seed in seeds]
         for k in library.registry()
-        for mate in library.keys(other(_role(k)))
-        for seed in seeds
     ]
+    tasks = [game for games in by_policy for game in games]
     frames = GameConfig().frames
+    parts = [part for games in by_policy for part in batches(games, 1, JOB_GAMES)]
     todo = [
-        spec(
-            f"calibrate-{k}-{mate}-{seed}", "calibrate", {"policy": k, "teammate": mate, "seed": seed}, frames
-        )
-        for k, mate, seed in tasks
+        spec(f"calibrate-{i}", "calibrate", {"games": part}, len(part) * frames)
+        for i, part in enumerate(parts)
     ]
-    streams = [np.array(values) for values in run(todo, progress)]
+    streams = [stream for values in run(todo, progress) for stream in np.reshape(values, (-1, frames))]
     thresholds: dict[str, dict[str, float]] = {role: {} for role in ROLES}
     lowest: dict[str, dict[str, dict[str, float]]] = {role: {} for role in ROLES}
     for window in windows:

@@ -108,3 +108,49 @@ def table_command(
         from services.table.plot import heatmap
 
         console.print(f"heatmap written to {heatmap(table, plot)}")
+
+
+@commands.command("skill-table")
+def skill_table(
+    role: str = typer.Option("shooter", help="Our seat: its library teammates are the columns."),
+    games: int = number(20, GAMES, "Seeded one-minute games per cell (seeds 0..games-1)."),
+    teammate: list[str] | None = typer.Option(None, help="Our seat's teammate, repeatable (default: all)."),
+    style: list[str] | None = typer.Option(
+        None, help="A partner style (library key), repeatable; default all."
+    ),
+    workers: int = number(1, WORKERS, "Processes playing batches at once."),
+    out: Path = output(Path("tsf-skill-table.json"), "Where the skill table goes."),
+    plot: Path | None = output(None, "Also draw the heatmap into this PNG."),
+) -> None:
+    """Measure the skill table: every library teammate of our seat with calibrated human-like
+    stand-ins of each style (the other seat's library) and skill (novice, typical, practised),
+    beside P; writes and prints each stand-in's best response beside P's for its style (OUT.md)."""
+    from services.table.skills import measure, summary
+
+    if role not in ("bait", "shooter"):
+        raise typer.BadParameter(f"--role {role}: expected bait or shooter")
+    partner_role = "bait" if role == "shooter" else "shooter"
+    table = measure(role, _keys(teammate, role), _keys(style, partner_role), games=games, workers=workers)
+    table.save(out)
+    text = summary(table, _p_best(table))
+    out.with_suffix(".md").write_text(text)
+    console.print(text, markup=False)
+    console.print(f"skill table written to {out} (and its summary to {out.with_suffix('.md')})")
+    if plot is not None:
+        from services.table.plot import skill_heatmap
+
+        console.print(f"heatmap written to {skill_heatmap(table, plot, _p_best(table))}")
+
+
+def _p_best(table) -> dict[str, str]:  # noqa: ANN001 - a services.table.skills.SkillTable
+    """P's best response to each style of the skill table ({} without a current P)."""
+    from services.table.table import DEFAULT_TABLE, StaleTable
+    from services.table.table import Table as SelfPlayTable
+
+    try:
+        p = SelfPlayTable.load(DEFAULT_TABLE)
+    except StaleTable:
+        return {}
+    if table.role == "shooter":
+        return {s: p.best_shooter(s) for s in table.styles if s in p.baits}
+    return {s: p.best_bait(s) for s in table.styles if s in p.shooters}

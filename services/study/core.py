@@ -48,7 +48,9 @@ class Variant:
     """One agent the participants meet. `bait` is the agent's policy when the participant plays the
     shooter, `shooter` when the participant plays the bait; an adaptive variant names its adaptive
     agent instead (`adapter = "adaptive-T400-bayes-dwell-ood-guard"`, services/adapter/core.py
-    AdapterConfig)."""
+    AdapterConfig), which plays every seat the variant names no static policy for (the shipped
+    adaptive study plays the static B1 in the bait seat: adapting the bait does not pay with
+    people-like shooters, docs/adapter.md)."""
 
     name: str
     bait: str = ""
@@ -57,7 +59,7 @@ class Variant:
 
     def __post_init__(self) -> None:
         try:
-            adaptive = self.adaptive(ROLES[0], 0) is not None
+            adaptive = SeatSpec.parse(self.adapter, "adapter").adaptive(ROLES[0], 0) is not None
         except ValueError:
             adaptive = False
         if self.adapter and not adaptive:
@@ -65,7 +67,9 @@ class Variant:
 
     def adaptive(self, agent_role: str, seed: int) -> AdapterConfig | None:
         """The adaptive agent this variant plays in `agent_role`'s seat, or None for a static one."""
-        return SeatSpec.parse(self.adapter, "adapter").adaptive(agent_role, seed) if self.adapter else None
+        if not self.adapter or getattr(self, agent_role):
+            return None
+        return SeatSpec.parse(self.adapter, "adapter").adaptive(agent_role, seed)
 
     def plan(self, agent_role: str, seed: int) -> dict:
         """The MatchPlan fields that put this variant in `agent_role`'s seat in a game of `seed`."""

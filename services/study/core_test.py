@@ -79,6 +79,9 @@ def test_variants_put_their_agent_in_the_partner_seat() -> None:
     static, adaptive = config().variants[0], config().variants[2]
     assert static.plan("shooter", 7) == {"shooter": "S1"} and static.plan("bait", 7) == {"bait": "B1"}
     assert adaptive.plan("bait", 7) == {"adapter": AdapterConfig("bait", 150, "cem", seed=7)}
+    static_bait = Variant("d", bait="B1", adapter="adaptive-T150-cem")  # the adapter in the other seat
+    assert static_bait.plan("bait", 7) == {"bait": "B1"} and static_bait.adaptive("bait", 7) is None
+    assert static_bait.plan("shooter", 7) == {"adapter": AdapterConfig("shooter", 150, "cem", seed=7)}
 
 
 def test_a_variant_names_an_adaptive_agent_or_none() -> None:

@@ -10,8 +10,8 @@ from rich.table import Table
 from services.options import GAMES, RAY, WORKERS, bus_options, console, number, output
 from services.table.table import LANES
 from shared.bus import BusConfig, stop_on_signals
-from shared.errors import Failure
-from shared.game import Range
+from shared.errors import Failure, UsageError
+from shared.game import ROLES, Range
 from shared.messages import JOB_SEEDS
 
 commands = typer.Typer()
@@ -121,16 +121,33 @@ def skill_table(
     workers: int = number(1, WORKERS, "Processes playing batches at once."),
     out: Path = output(Path("tsf-skill-table.json"), "Where the skill table goes."),
     plot: Path | None = output(None, "Also draw the heatmap into this PNG."),
+    into: Path | None = typer.Option(
+        None,
+        exists=True,
+        dir_okay=False,
+        help="Add the teammates as columns to this skill table (its role, styles, games).",
+    ),
 ) -> None:
     """Measure the skill table: every library teammate of our seat with calibrated human-like
     stand-ins of each style (the other seat's library) and skill (novice, typical, practised),
-    beside P; writes and prints each stand-in's best response beside P's for its style (OUT.md)."""
-    from services.table.skills import measure, summary
+    beside P; writes and prints each stand-in's best response beside P's for its style (OUT.md).
+    With --into, measures only the --teammate columns and adds them to that table."""
+    from services.table.skills import SkillTable, measure, summary
 
-    if role not in ("bait", "shooter"):
-        raise typer.BadParameter(f"--role {role}: expected bait or shooter")
-    partner_role = "bait" if role == "shooter" else "shooter"
-    table = measure(role, _keys(teammate, role), _keys(style, partner_role), games=games, workers=workers)
+    if role not in ROLES:
+        raise UsageError("--role", role, "not a seat", ROLES)
+    before = SkillTable.load(into) if into else None
+    if before:
+        new = [t for t in _keys(teammate, before.role) if t not in before.teammates]
+        if not teammate or not new:
+            raise UsageError(
+                "--teammate", " ".join(teammate or []) or "(none)", f"name teammates {into} lacks"
+            )
+        added = measure(before.role, new, list(before.styles), before.skills, before.games, workers)
+        table = before.extend(added)
+    else:
+        partner_role = ROLES[1 - ROLES.index(role)]
+        table = measure(role, _keys(teammate, role), _keys(style, partner_role), games=games, workers=workers)
     table.save(out)
     text = summary(table, _p_best(table))
     out.with_suffix(".md").write_text(text)
@@ -149,8 +166,12 @@ def _p_best(table) -> dict[str, str]:  # noqa: ANN001 - a services.table.skills.
 
     try:
         p = SelfPlayTable.load(DEFAULT_TABLE)
-    except StaleTable:
-        return {}
+    except StaleTable:  # TSF_LIBRARY adds members: the shipped P still holds for the shipped pairs
+        from services.agent import library
+
+        p = SelfPlayTable.load(library.LIBRARY / "table.json", check=False)
+        if p.library != library.manifest_hash(library.LIBRARY):
+            return {}
     if table.role == "shooter":
         return {s: p.best_shooter(s) for s in table.styles if s in p.baits}
     return {s: p.best_bait(s) for s in table.styles if s in p.shooters}

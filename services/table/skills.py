@@ -96,6 +96,22 @@ class SkillTable:
                 gains.append(mean(p, best, scored) - mean(p, other, scored))
         return statistics.fmean(gains)
 
+    def extend(self, other: SkillTable) -> SkillTable:
+        """This table with `other`'s teammates as more columns (same role, stand-ins and seeds),
+        bound to the libraries `other` was measured with."""
+        if (other.role, other.styles, other.skills, other.games) != (
+            self.role,
+            self.styles,
+            self.skills,
+            self.games,
+        ):
+            raise ValueError("the tables differ in role, styles, skills or games")
+        results = {p: self.results[p] | other.results[p] for p in self.partners}
+        teammates = self.teammates + other.teammates
+        return SkillTable(
+            self.role, teammates, self.styles, self.skills, self.games, results, other.library, other.config
+        )
+
     def save(self, path: Path) -> None:
         record = {
             "version": self.version,

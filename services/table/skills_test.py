@@ -48,3 +48,14 @@ def test_the_held_out_headroom_takes_the_luck_of_the_choice_out():
     assert table.mean(NOVICE, "B1") - table.mean(NOVICE, "B6") == pytest.approx(0.25)
     assert table.held_out() == pytest.approx(-0.125)  # B1 chosen on the even seeds scores 0.5 on the odd
     assert table.held_out({NOVICE: "B1", PRACTISED: "B6"}) == pytest.approx(-0.25)  # B6 on odd, B1 on even
+
+
+def test_a_table_extends_by_the_columns_of_another_of_the_same_stand_ins():
+    one = {NOVICE: {"B6": [1.0, 2.0]}, PRACTISED: {"B6": [3.0, 4.0]}}
+    two = {NOVICE: {"B10": [2.0, 2.0]}, PRACTISED: {"B10": [5.0, 5.0]}}
+    first = SkillTable("bait", ("B6",), ("S4",), ("novice", "practised"), 2, one, "lib1")
+    table = first.extend(SkillTable("bait", ("B10",), ("S4",), ("novice", "practised"), 2, two, "lib2"))
+    assert table.teammates == ("B6", "B10") and table.library == "lib2"
+    assert table.best(NOVICE) == "B10" and table.results[PRACTISED] == {"B6": [3.0, 4.0], "B10": [5.0, 5.0]}
+    with pytest.raises(ValueError, match="differ"):
+        first.extend(SkillTable("bait", ("B10",), ("S5",), ("novice", "practised"), 2, two))

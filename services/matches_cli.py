@@ -71,7 +71,11 @@ def match_command(
     overwrite: bool = typer.Option(
         False, "--overwrite", help="Reuse the id of an existing recording; the old one is renamed aside."
     ),
-    adaptive: Role | None = typer.Option(None, help="Make this seat the adaptive agent."),
+    adaptive: Role | None = typer.Option(
+        None,
+        help="Make this seat the adaptive agent (in the bait seat it does not pay: the best static "
+        "bait is B6 with library shooters, B1 with people-like ones; docs/adapter.md).",
+    ),
     *,
     adapter: AdapterFactory,
 ) -> None:

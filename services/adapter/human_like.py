@@ -148,36 +148,47 @@ class HumanLike:
 
     def reset_lanes(self, seeds: list[int]) -> None:
         """Start one game per seed, the seed its seat resets its partner with (play.policy_seed of
-        the game's seed): the person's traits, drawn from the person of the game's seed, this
-        trial's skill (practice) and this game's reaction delay."""
+        the game's seed)."""
         n = len(seeds)
-        self.seeds = np.asarray(seeds, np.int64)
         for inner in (self.first, self.second):
             if inner is not None:
                 inner.reset(int(seeds[0]))
+        self.seeds, self.start, self.trial = (np.zeros(n, np.int64) for _ in range(3))
+        self.mu, self.look, self.lapse, self.slip, self.foresight = (np.zeros(n) for _ in range(5))
+        self.ring = np.zeros((n, HISTORY, ob.TIME + 1), np.float32)
+        self.keys = np.zeros((n, HISTORY), np.int64)  # the actions pressed, for the forward model
+        self.held, self.hold = np.zeros(n, np.int64), np.zeros(n, np.int64)
+        self.since_change = np.zeros((n, 3), np.int64)  # frames each key is as it is
+        self.seen_at = np.zeros(n, np.int64)  # the frame whose state the person last took in
+        self.look_left = np.zeros(n, np.int64)  # frames to the next look
+        self.lapse_left = np.zeros(n, np.int64)
+        self.t = 0
+        self.restart_lanes(np.arange(n), seeds)
+
+    def restart_lanes(self, lanes: np.ndarray, seeds: list[int]) -> None:
+        """Start a new game in each of `lanes` (seeded as reset_lanes's) while the others play on,
+        as a training env's lanes restart one by one: the person's traits, drawn from the person
+        of the game's seed, this trial's skill (practice) and this game's reaction delay. A lane's
+        draws count frames from its own start, so its game is the scalar game of its seed."""
         played = np.array([max(0, game_seed(int(s), self.role)) for s in seeds], np.int64)
-        self.trial = played % SESSION_TRIALS
-        skill = 1.0 - (1.0 - self.skill) * (self.trial + 1.0) ** -LEARNING
+        trial = played % SESSION_TRIALS
+        skill = 1.0 - (1.0 - self.skill) * (trial + 1.0) ** -LEARNING
         people = [np.random.default_rng([int(g) // SESSION_TRIALS, 17]) for g in played]
         games = [np.random.default_rng([int(s), 29]) for s in seeds]
         # the person's draws: reaction mu, lapse rate, slip rate, foresight
         draws = np.array([[r.normal(), r.uniform(), r.uniform(), r.normal()] for r in people])
         mu = between(RT_MU, skill) + RT_MU_PERSON_SD * draws[:, 0]
-        self.mu = np.clip(mu + [g.normal(0.0, RT_MU_GAME_SD) for g in games], 120.0, 450.0)
+        self.mu[lanes] = np.clip(mu + [g.normal(0.0, RT_MU_GAME_SD) for g in games], 120.0, 450.0)
         lapses = np.exp(_pick(np.log(between(LAPSES_PER_MINUTE, skill)), draws[:, 1]))
-        self.look = between(LOOK_MS, skill) / FRAME_MS  # frames between looks, on average
-        self.lapse = lapses / (60.0 * 30.0) * self.look  # a lapse can start at any look
-        self.slip = _pick(between(SLIP, skill), draws[:, 2])
-        self.foresight = np.clip(between(FORESIGHT, skill) + FORESIGHT_SD * draws[:, 3], 0.0, 1.0)
-        self.ring = np.zeros((n, HISTORY, ob.TIME + 1), np.float32)
-        self.keys = np.zeros((n, HISTORY), np.int64)  # the actions pressed, for the forward model
-        self.held = np.zeros(n, np.int64)
-        self.hold = np.rint(between(HOLD_MS, skill) / FRAME_MS).astype(np.int64)  # frames
-        self.since_change = np.zeros((n, 3), np.int64) + self.hold[:, None]  # frames each key is as it is
-        self.seen_at = np.zeros(n, np.int64)  # the frame whose state the person last took in
-        self.look_left = np.zeros(n, np.int64)  # frames to the next look
-        self.lapse_left = np.zeros(n, np.int64)
-        self.t = 0
+        look = between(LOOK_MS, skill) / FRAME_MS  # frames between looks, on average
+        self.look[lanes], self.lapse[lanes] = look, lapses / (60.0 * 30.0) * look  # a lapse starts at a look
+        self.slip[lanes] = _pick(between(SLIP, skill), draws[:, 2])
+        self.foresight[lanes] = np.clip(between(FORESIGHT, skill) + FORESIGHT_SD * draws[:, 3], 0.0, 1.0)
+        self.seeds[lanes], self.trial[lanes], self.start[lanes] = seeds, trial, self.t
+        self.hold[lanes] = np.rint(between(HOLD_MS, skill) / FRAME_MS).astype(np.int64)  # frames
+        self.since_change[lanes] = self.hold[lanes, None]
+        self.held[lanes], self.seen_at[lanes] = 0, self.t
+        self.look_left[lanes], self.lapse_left[lanes] = 0, 0
 
     def act(self, obs: np.ndarray) -> int:
         """The action of a single game (after reset): act_lanes with one lane."""
@@ -190,7 +201,8 @@ class HumanLike:
         t, lanes = self.t, np.arange(len(self.seeds))
         self.ring[:, t % HISTORY] = observations
         self.t += 1
-        u = {name: lane_uniforms(self.seeds, stream, t) for name, stream in _STREAMS.items()}
+        frames = t - self.start  # each lane's frame of its own game
+        u = {name: lane_uniforms(self.seeds, stream, frames) for name, stream in _STREAMS.items()}
         self.since_change += 1
         lapsing = self.lapse_left > 0
         self.lapse_left[lapsing] -= 1
@@ -203,7 +215,7 @@ class HumanLike:
         normal = np.sqrt(-2.0 * np.log1p(-u["n1"])) * np.cos(2.0 * math.pi * u["n2"])
         lag_ms = self.mu + self.input_ms + RT_SIGMA * normal - RT_TAU * np.log1p(-u["tail"])
         lag = np.clip(np.rint(lag_ms / FRAME_MS).astype(np.int64), 0, LONGEST_LAG)
-        self.seen_at[look] = np.maximum(t - lag[look], 0)
+        self.seen_at[look] = np.maximum(t - lag[look], self.start[look])
         extra = np.maximum(self.look - LOOK_MIN, 1e-9)
         runs = np.floor(np.log1p(-u["look"]) / np.log(extra / (1.0 + extra))).astype(np.int64)
         self.look_left[look] = np.minimum(LOOK_MIN + runs[look], HISTORY - LONGEST_LAG - 1)

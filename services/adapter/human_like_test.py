@@ -46,6 +46,30 @@ def test_lanes_act_as_single_games_and_a_seed_repeats_its_game():
     assert (other != together).any()
 
 
+def test_a_restarted_lane_plays_the_single_game_of_its_new_seed_while_the_others_play_on():
+    """A training env restarts its lanes one by one: after `restart_lanes`, the lane's actions are
+    those of a fresh single game of the new seed, and the other lane goes on as it was."""
+    lanes, first, fresh = (make_partner("human(B5,skill=novice)", "bait") for _ in range(3))
+    lanes.reset_lanes(SEEDS[:2])
+    first.reset(SEEDS[0])
+    games, shooter = [Game(None, s) for s in SEEDS[:2]], networks.load("S5")
+    shooter.reset(0)
+    mismatches = []
+    for frame in range(300):
+        if frame == 100:
+            lanes.restart_lanes(np.array([1]), [SEEDS[2]])
+            fresh.reset(SEEDS[2])
+            games[1] = Game(None, SEEDS[2])
+        obs = np.stack([observe(g, "bait", lanes.view) for g in games])
+        together = lanes.act_lanes(obs)
+        mismatches.append(together[0] != first.act(obs[0]))
+        if frame >= 100:
+            mismatches.append(together[1] != fresh.act(obs[1]))
+        for game, action in zip(games, together, strict=True):
+            game.step(int(action), shooter.act(observe(game, "shooter", "world")))
+    assert not any(mismatches)
+
+
 def test_each_key_is_held_at_least_the_persons_shortest_press():
     partner = make_partner("human(B5,skill=novice)", "bait")
     partner.reset_lanes(SEEDS)

@@ -228,10 +228,17 @@ class HumanLanes:
 
     def __init__(self, partner: HumanLike, offset: int = 0) -> None:
         self.partner, self.offset, self.view = partner, offset, partner.view
+        self.key, self.role = partner.key, partner.role
 
     def reset(self, keys: np.ndarray) -> None:
-        seeds = [policy_seed(key, self.partner.role) + self.offset for key in keys.tolist()]
-        self.partner.reset_lanes(seeds)
+        self.partner.reset_lanes(self._seeds(keys))
+
+    def restart(self, lanes: np.ndarray, keys: np.ndarray) -> None:
+        """New games of seeds `keys` in `lanes` while the others play on (a training env's)."""
+        self.partner.restart_lanes(lanes, self._seeds(keys))
+
+    def _seeds(self, keys: np.ndarray) -> list[int]:
+        return [policy_seed(key, self.partner.role) + self.offset for key in np.asarray(keys).tolist()]
 
     def act(self, obs: np.ndarray, frame: int) -> np.ndarray:
         return self.partner.act_lanes(obs)

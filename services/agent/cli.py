@@ -85,7 +85,8 @@ def train(
         False, help="Imitate the recipe's scripted demonstrator before RL (not the shipped recipes)."
     ),
     jobs: int = number(1, Range(1, 64), "Policies trained at once (processes)."),
-    score_games: int = number(20, SCORED, "Games scored with the first partner after training."),
+    score_games: int = number(20, SCORED, "Games scored with the first library partner after training."),
+    every: int = number(250_000, STEPS, "Environment steps between the curve's points and checkpoints."),
 ) -> None:
     """Train library policies by their registry recipes into a library directory (needs the
     `train` extra). A run stopped part way resumes from its last checkpoint in RUNS/KEY."""
@@ -101,7 +102,7 @@ def train(
     started = time.monotonic()
     console.print(f"training {', '.join(todo)} into {out}, {jobs} at a time")
     options = {"steps": steps, "seed": seed, "run_dir": runs, "figures": figures}
-    options |= {"warm_start": warm_start, "score_games": score_games, "progress": jobs == 1}
+    options |= {"warm_start": warm_start, "score_games": score_games, "progress": jobs == 1, "every": every}
     entries = train_library(todo, out, jobs, **options)
     for key, entry in entries.items():
         score = entry.get("score")

@@ -16,6 +16,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import shutil
 import tomllib
 from dataclasses import dataclass, field
@@ -29,6 +30,9 @@ from shared.errors import UsageError
 from shared.game import OBS_SIZE, ROLES
 
 LIBRARY = Path(__file__).parent / "library"
+# Recipes trained into libraries of their own (`tsf train KEY --library DIR` adds the entry to DIR's
+# registry), not members of the shipped library, its table or the adapter's candidates.
+CANDIDATES = LIBRARY / "candidates.toml"
 OUTSIDE = "outside"  # the family of a policy added from outside (a network over all 12 actions)
 PROXY_FAMILY = "proxy"  # the family of a proxy added from recorded people (services/proxy)
 
@@ -105,11 +109,38 @@ def registry(root: Path | None = None) -> dict[str, Recipe]:
     return merged
 
 
+def candidates() -> dict[str, Recipe]:
+    """The candidate recipes (CANDIDATES): trained into a library of their own, not the shipped one's."""
+    return _read(CANDIDATES, LIBRARY)
+
+
+def adopt(root: Path, keys: list[str]) -> None:
+    """Add the candidate recipes of `keys` that the library at `root` lacks to its registry, each
+    entry's text as CANDIDATES writes it."""
+    missing = [k for k in keys if k in candidates() and k not in registry(root)]
+    if not missing:
+        return
+    sections: dict[str, list[str]] = {}
+    for line in CANDIDATES.read_text().splitlines():
+        header = re.match(r"^\[([A-Za-z][\w-]*)\]$", line)
+        if header:
+            sections[header[1]] = []
+        if sections:
+            sections[list(sections)[-1]].append(line)
+    with open(root / "registry.toml", "a") as f:
+        f.write("".join("\n" + "\n".join(sections[k]).strip() + "\n" for k in missing))
+    _registry.cache_clear()
+
+
 @cache
 def _registry(root: Path) -> dict[str, Recipe]:
     path = root / "registry.toml"
     if not path.exists():
         raise UsageError("TSF_LIBRARY", root, "is not a policy library (no registry.toml)")
+    return _read(path, root)
+
+
+def _read(path: Path, root: Path) -> dict[str, Recipe]:
     with open(path, "rb") as f:
         raw = tomllib.load(f)
     recipes = {}
@@ -195,8 +226,11 @@ def file_hash(path: Path) -> str:
 
 
 def learned(chosen: list[str]) -> list[str]:
-    """The learned policies to train: `chosen` (UsageError for a key that is not one), or all."""
+    """The learned policies to train: `chosen` (UsageError for a key that is not one), or all
+    of the library; a candidate recipe (CANDIDATES) is trained only when chosen."""
     trainable = [k for k, r in registry().items() if r.algorithm]
+    if set(chosen) - set(trainable):
+        trainable += [k for k in candidates() if k not in trainable]
     for key in chosen:
         if key not in trainable:
             raise UsageError("KEYS", key, "not a learned policy of the library", trainable)

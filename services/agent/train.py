@@ -45,7 +45,7 @@ from services.sim.observation import observe
 from services.sim.play import summarize
 from services.sim.vec_env import RoleVectorEnv
 from shared.errors import UsageError
-from shared.game import ROLES, GameConfig, Policy, bait_first, join_action
+from shared.game import ROLES, GameConfig, Policy, bait_first, join_action, other
 
 # --- rewards: one value per lane of a batched game, for the learner's seat -----------------------
 
@@ -123,11 +123,34 @@ REWARDS: dict[str, Callable[[BatchGame, int, np.ndarray, dict[str, float]], np.n
 # --- the env a recipe trains in ------------------------------------------------------------------
 
 
+def recipe_partner(name: str, recipe: Recipe, config: GameConfig, root: Path):  # noqa: ANN201
+    """One of a recipe's partners by name: a library key plays as the library plays it; a
+    calibrated human-like stand-in (`human(B5,skill=novice)`, adapter/partners.py) plays in its
+    batched form (adapter/partners.py), stateful per lane. Anything else is a UsageError."""
+    if name in library.registry(root):
+        return networks.load(name, config, root)
+    from services.adapter.human_like import HumanLike  # the adapter's partners: only when named
+    from services.adapter.partners import HumanLanes, make_partner
+
+    partner = make_partner(name, other(recipe.role))
+    if not isinstance(partner, HumanLike):
+        raise UsageError(f"{recipe.key}.partners", name, "a recipe's partner is a library key or human(...)")
+    return HumanLanes(partner)
+
+
+def curve_partner(recipe: Recipe, root: Path) -> Policy:
+    """The partner of a recipe's curve and score: its first library partner."""
+    keys = [name for name in recipe.partners if name in library.registry(root)]
+    if not keys:
+        raise UsageError(f"{recipe.key}.partners", ", ".join(recipe.partners), "name no library policy")
+    return networks.load(keys[0], root=root)
+
+
 class RecipeVecEnv(VecEnv):
     """The learned heads of one recipe over lanes of the batched engine, as SB3's vectorised env:
     the observation is the recipe's feature set, the action the learned heads (Discrete for one,
     MultiDiscrete for two); the rule heads are the loaded policy's rules, in batch; the partner is
-    drawn per game from the recipe's partners."""
+    drawn per game from the recipe's partners (recipe_partner)."""
 
     render_mode = None
 
@@ -136,7 +159,7 @@ class RecipeVecEnv(VecEnv):
     ) -> None:
         self.recipe = recipe
         self.config = config or GameConfig()
-        partners = [networks.load(k, self.config, root) for k in recipe.partners]
+        partners = [recipe_partner(name, recipe, self.config, root) for name in recipe.partners]
         weights, reward = dict(recipe.weights), REWARDS[recipe.reward]
         self.env = RoleVectorEnv(
             n_envs,
@@ -493,7 +516,7 @@ def train(
         model = make_model(recipe, seed, settings["hyperparameters"], root=out)
         agreement = warm_start_fit(model, recipe) if warm_start else None
         state = settings | {"steps": 0, "seconds": 0.0, "agreement": agreement}
-    partner = networks.load(recipe.partners[0], root=out)
+    partner = curve_partner(recipe, out)
     run = Run(run_dir, recipe, partner, every, state)
     if state["steps"] < steps:
         model.learn(steps - state["steps"], callback=run, progress_bar=progress, reset_num_timesteps=False)
@@ -525,18 +548,20 @@ def train(
     return entry
 
 
-def prepare(out: Path) -> None:
-    """A library directory to train into: an empty one starts as a copy of the shipped library
-    (`library.copy`), so that untouched policies stay playable."""
+def prepare(out: Path, keys: list[str] = ()) -> None:
+    """A library directory to train `keys` into: an empty one starts as a copy of the shipped
+    library (`library.copy`), so that untouched policies stay playable; candidate recipes among
+    `keys` join its registry (`library.adopt`)."""
     if not (out / "registry.toml").exists() and out.exists() and any(out.iterdir()):
         raise UsageError("--library", out, "is neither a library (no registry.toml) nor empty")
     library.copy(out)
+    library.adopt(out, list(keys))
 
 
 def train_library(keys: list[str], out: Path, jobs: int = 1, **options: object) -> dict[str, dict]:
     """Train `keys` into the library at `out`, `jobs` at a time: the baits first, then the shooters,
     which train with baits of this library. Returns each key's manifest entry."""
-    prepare(out)
+    prepare(out, keys)
     recipes = library.registry(out)
     entries: dict[str, dict] = {}
     with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:

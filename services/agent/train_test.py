@@ -54,6 +54,37 @@ def test_a_new_library_starts_as_a_copy_and_a_stray_directory_is_refused(tmp_pat
         prepare(tmp_path / "stray")
 
 
+def test_a_recipe_trains_with_human_like_stand_ins_and_a_candidate_joins_a_library_of_its_own(tmp_path):
+    """A candidate recipe (library.CANDIDATES) is trained only when named, into a library whose
+    registry it joins; its partners may be calibrated stand-ins, which play their lanes' games as
+    each lane restarts; any other kind of partner is refused with one clear line."""
+    from dataclasses import replace
+
+    from services.agent.train import RecipeVecEnv
+
+    assert "B10" in library.learned(["B10"]) and "B10" not in library.learned([])
+    root = tmp_path / "library"
+    prepare(root, ["B10"])
+    recipe = library.registry(root)["B10"]
+    assert recipe.partners[0] == "S4" and any(p.startswith("human(") for p in recipe.partners)
+    prepare(root, ["B10"])  # once only
+    assert (root / "registry.toml").read_text().count("[B10]") == 1
+    env = RecipeVecEnv(replace(recipe, partners=("S4", "human(S5,skill=novice)")), 8, root=root)
+    env.seed(1)
+    env.reset()
+    human = env.env.partners[1]
+    restarted = 0
+    for _ in range(400):
+        env.step_async(np.array([env.action_space.sample() for _ in range(8)]))
+        env.step_wait()
+        restarted = max(restarted, int(human.partner.start.max()))
+    assert set(env.env.partner_of.tolist()) == {0, 1} and restarted > 0
+    lanes = np.flatnonzero(human.partner.start > 0)
+    assert (human.partner.start[lanes] <= human.partner.t).all()
+    with pytest.raises(UsageError, match="B10.partners"):
+        RecipeVecEnv(replace(recipe, partners=("S4", "noisy(S5)")), 2, root=root)
+
+
 @pytest.mark.parametrize("key", ["B4", "S2"])
 def test_numpy_network_matches_torch(tmp_path, key):
     from services.agent.train import export

@@ -1,8 +1,12 @@
 """One role's seat in many games at once: a Gymnasium `VectorEnv` over the batched engine.
 
 The learner plays `role` in every lane; the partner seat is played by one policy, or by a pool
-(each game draws its partner from its own seed). Partners answer in batch (`probs_batch`) and
-their actions are drawn with `lane_uniforms`, so a lane's game depends on its seed only. Games end
+(each game draws its partner from its own seed). A pool may hold stateful partners in their
+batched form (`LanePartner`, e.g. a human-like stand-in's, adapter/partners.py): such a
+partner plays every lane every frame, so that its per-lane state runs on, and a lane's game uses
+its action when it drew that partner; a restarted lane restarts it there. Policies answer in
+batch (`probs_batch`) and their actions are drawn with `lane_uniforms`, so a lane's game depends
+on its seed only. Games end
 by truncation after `config.frames`. With `end_on_death`, a game also ends when a ship dies: a
 dead ship stays dead until its round ends, so the rest of such a game is often time in which the
 learner has no control or no partner. The learner's death terminates its game, the partner's
@@ -14,6 +18,7 @@ seed (Gymnasium's same-step autoreset: the finished game's last observation is i
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Protocol
 
 import numpy as np
 from gymnasium import spaces
@@ -31,6 +36,21 @@ BatchReward = Callable[[BatchGame, int, np.ndarray], np.ndarray]
 PARTNER_DRAW = 2  # lane_uniforms stream that picks a game's partner from a pool
 
 
+class LanePartner(Protocol):
+    """A stateful partner in every lane at once: reset with the lanes' game seeds, restarted lane by
+    lane, one action per lane per frame."""
+
+    key: str
+    role: str
+    view: str
+
+    def reset(self, keys: np.ndarray) -> None: ...
+
+    def restart(self, lanes: np.ndarray, keys: np.ndarray) -> None: ...
+
+    def act(self, obs: np.ndarray, frame: np.ndarray) -> np.ndarray: ...  # frame: each lane's
+
+
 def team_points(batch: BatchGame, seat: int, before: np.ndarray) -> np.ndarray:
     """The default reward: the team's change in points, as RoleEnv's."""
     return (batch.state.points - before).astype(np.float64)
@@ -45,7 +65,7 @@ class RoleVectorEnv(VectorEnv):
         self,
         num_envs: int,
         role: str,
-        partners: Policy | list[Policy],
+        partners: Policy | list[Policy | LanePartner],
         config: GameConfig | None = None,
         view: str = "world",
         reward: BatchReward = team_points,
@@ -71,6 +91,8 @@ class RoleVectorEnv(VectorEnv):
         super().reset(seed=seed)
         self.batch = BatchGame(self.num_envs, self.config, self._seeds(self.num_envs))
         self._draw_partners(np.arange(self.num_envs))
+        for partner in self._stateful():
+            partner.reset(self.batch.seeds)
         return observe(self.batch, self.role, self.view), {}
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict]:
@@ -93,6 +115,8 @@ class RoleVectorEnv(VectorEnv):
             infos = {"final_obs": obs.copy(), "_final_obs": ended}
             batch.reset(lanes, self._seeds(len(lanes)))
             self._draw_partners(lanes)
+            for partner in self._stateful():
+                partner.restart(lanes, batch.seeds[lanes])
             obs = observe(batch, self.role, self.view)
         return obs, rewards, terminated, truncated, infos
 
@@ -104,11 +128,17 @@ class RoleVectorEnv(VectorEnv):
         views: dict[str, np.ndarray] = {}
         for index, partner in enumerate(self.partners):
             lanes = np.flatnonzero(self.partner_of == index)
-            if lanes.size:
-                if partner.view not in views:
-                    views[partner.view] = observe(batch, ROLES[seat], partner.view)
+            stateful = hasattr(partner, "restart")
+            if (lanes.size or stateful) and partner.view not in views:
+                views[partner.view] = observe(batch, ROLES[seat], partner.view)
+            if stateful:  # every lane, every frame: its per-lane state runs on
+                actions[lanes] = partner.act(views[partner.view], batch.state.frame)[lanes]
+            elif lanes.size:
                 actions[lanes] = batch_act(partner, views[partner.view][lanes], uniforms[lanes])
         return actions
+
+    def _stateful(self) -> list[LanePartner]:
+        return [p for p in self.partners if hasattr(p, "restart")]
 
     def _seeds(self, n: int) -> np.ndarray:
         return self.np_random.integers(2**31 - 1, size=n)

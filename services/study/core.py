@@ -46,9 +46,12 @@ PRACTICE = ("practice", "circle", "mirror")  # the practice partner: the library
 @dataclass(frozen=True)
 class Variant:
     """One agent the participants meet. `bait` is the agent's seat when the participant plays the
-    shooter, `shooter` when the participant plays the bait; an adaptive variant has its adaptive
-    agent instead (`adapter = "adaptive-T400-bayes-dwell-ood-guard"` in a config file,
-    services/adapter/core.py AdapterConfig). Each is a SeatSpec, read from its name once (`read`)."""
+    shooter, `shooter` when the participant plays the bait; an adaptive variant names its adaptive
+    agent (`adapter = "adaptive-T400-bayes-dwell-ood-guard"` in a config file,
+    services/adapter/core.py AdapterConfig), which plays every seat the variant names no static
+    policy for (the shipped adaptive study plays the static B1 in the bait seat: adapting the bait
+    does not pay with people-like shooters, docs/adapter.md). Each is a SeatSpec, read from its
+    name once (`read`)."""
 
     name: str
     bait: SeatSpec | None = None
@@ -80,11 +83,14 @@ class Variant:
 
     def adaptive(self, agent_role: str, seed: int) -> AdapterConfig | None:
         """The adaptive agent this variant plays in `agent_role`'s seat, or None for a static one."""
-        return self.adapter.adaptive(agent_role, seed) if self.adapter else None
+        if not self.adapter or getattr(self, agent_role):
+            return None
+        return self.adapter.adaptive(agent_role, seed)
 
     def seat(self, agent_role: str) -> SeatSpec:
-        """What plays `agent_role`'s seat (MatchPlan's field of that name)."""
-        return self.adapter or getattr(self, agent_role)
+        """What plays `agent_role`'s seat (MatchPlan's field of that name): the static policy the
+        variant names for it, else its adaptive agent."""
+        return getattr(self, agent_role) or self.adapter
 
 
 @dataclass(frozen=True)

@@ -89,6 +89,9 @@ def test_variants_put_their_agent_in_the_partner_seat() -> None:
     assert MatchPlan("m", 7, shooter=adaptive.seat("shooter")).adapter == AdapterConfig(
         "shooter", 150, "cem", seed=7
     )
+    static_bait = Variant.read("d", bait="B1", adapter="adaptive-T150-cem")  # the adapter in the other seat
+    assert str(static_bait.seat("bait")) == "B1" and static_bait.adaptive("bait", 7) is None
+    assert static_bait.seat("shooter").adaptive("shooter", 7) == AdapterConfig("shooter", 150, "cem", seed=7)
 
 
 def test_a_variant_names_an_adaptive_agent_or_none() -> None:

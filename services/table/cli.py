@@ -10,8 +10,8 @@ from rich.table import Table
 from services.options import GAMES, RAY, WORKERS, bus_options, console, number, output
 from services.table.table import LANES
 from shared.bus import BusConfig, stop_on_signals
-from shared.errors import Failure
-from shared.game import Range
+from shared.errors import Failure, UsageError
+from shared.game import ROLES, Range
 from shared.messages import JOB_SEEDS
 
 commands = typer.Typer()
@@ -108,3 +108,70 @@ def table_command(
         from services.table.plot import heatmap
 
         console.print(f"heatmap written to {heatmap(table, plot)}")
+
+
+@commands.command("skill-table")
+def skill_table(
+    role: str = typer.Option("shooter", help="Our seat: its library teammates are the columns."),
+    games: int = number(20, GAMES, "Seeded one-minute games per cell (seeds 0..games-1)."),
+    teammate: list[str] | None = typer.Option(None, help="Our seat's teammate, repeatable (default: all)."),
+    style: list[str] | None = typer.Option(
+        None, help="A partner style (library key), repeatable; default all."
+    ),
+    workers: int = number(1, WORKERS, "Processes playing batches at once."),
+    out: Path = output(Path("tsf-skill-table.json"), "Where the skill table goes."),
+    plot: Path | None = output(None, "Also draw the heatmap into this PNG."),
+    into: Path | None = typer.Option(
+        None,
+        exists=True,
+        dir_okay=False,
+        help="Add the teammates as columns to this skill table (its role, styles, games).",
+    ),
+) -> None:
+    """Measure the skill table: every library teammate of our seat with calibrated human-like
+    stand-ins of each style (the other seat's library) and skill (novice, typical, practised),
+    beside P; writes and prints each stand-in's best response beside P's for its style (OUT.md).
+    With --into, measures only the --teammate columns and adds them to that table."""
+    from services.table.skills import SkillTable, measure, summary
+
+    if role not in ROLES:
+        raise UsageError("--role", role, "not a seat", ROLES)
+    before = SkillTable.load(into) if into else None
+    if before:
+        new = [t for t in _keys(teammate, before.role) if t not in before.teammates]
+        if not teammate or not new:
+            raise UsageError(
+                "--teammate", " ".join(teammate or []) or "(none)", f"name teammates {into} lacks"
+            )
+        added = measure(before.role, new, list(before.styles), before.skills, before.games, workers)
+        table = before.extend(added)
+    else:
+        partner_role = ROLES[1 - ROLES.index(role)]
+        table = measure(role, _keys(teammate, role), _keys(style, partner_role), games=games, workers=workers)
+    table.save(out)
+    text = summary(table, _p_best(table))
+    out.with_suffix(".md").write_text(text)
+    console.print(text, markup=False)
+    console.print(f"skill table written to {out} (and its summary to {out.with_suffix('.md')})")
+    if plot is not None:
+        from services.table.plot import skill_heatmap
+
+        console.print(f"heatmap written to {skill_heatmap(table, plot, _p_best(table))}")
+
+
+def _p_best(table) -> dict[str, str]:  # noqa: ANN001 - a services.table.skills.SkillTable
+    """P's best response to each style of the skill table ({} without a current P)."""
+    from services.table.table import DEFAULT_TABLE, StaleTable
+    from services.table.table import Table as SelfPlayTable
+
+    try:
+        p = SelfPlayTable.load(DEFAULT_TABLE)
+    except StaleTable:  # TSF_LIBRARY adds members: the shipped P still holds for the shipped pairs
+        from services.agent import library
+
+        p = SelfPlayTable.load(library.LIBRARY / "table.json", check=False)
+        if p.library != library.manifest_hash(library.LIBRARY):
+            return {}
+    if table.role == "shooter":
+        return {s: p.best_shooter(s) for s in table.styles if s in p.baits}
+    return {s: p.best_bait(s) for s in table.styles if s in p.shooters}

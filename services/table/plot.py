@@ -45,3 +45,39 @@ def heatmap(table: Table, path: Path) -> Path:
         ax.axhline(i - 0.5, color="white", linewidth=2)
     ax.set_title(f"Self-play table P: mean kills/min over {table.games} games (red: best shooter)")
     return save(fig, path)
+
+
+def skill_heatmap(table, path: Path, p_best: dict[str, str] | None = None) -> Path:  # noqa: ANN001 - a SkillTable
+    """The skill table as a heatmap: stand-ins (style x skill) as rows, our seat's teammates as
+    columns; each row's best teammate outlined red, and P's best response to the style (`p_best`:
+    style -> teammate) dashed white, so that where they differ shows."""
+    rows = table.partners
+    means = [[table.mean(p, t) for t in table.teammates] for p in rows]
+    fig, ax = plt.subplots(figsize=(max(6.0, 1.6 + 0.8 * len(table.teammates)), 1.4 + 0.32 * len(rows)))
+    image = ax.imshow(means, cmap="viridis", aspect="auto")
+    fig.colorbar(image, ax=ax, label="kills per minute")
+    ax.set_xticks(range(len(table.teammates)), table.teammates)
+    labels = [f"{style} {skill}" for style in table.styles for skill in table.skills]
+    ax.set_yticks(range(len(rows)), labels, fontsize=8)
+    ax.set_xlabel(f"our {table.role}")
+    ax.set_ylabel("stand-in partner: style, skill")
+    top = max(max(row) for row in means) or 1.0
+    for i, partner in enumerate(rows):
+        best = table.teammates.index(table.best(partner))
+        ax.add_patch(Rectangle((best - 0.5, i - 0.5), 1, 1, fill=False, edgecolor="red", linewidth=2))
+        style = table.styles[i // len(table.skills)]
+        if p_best and p_best.get(style) in table.teammates:
+            j = table.teammates.index(p_best[style])
+            box = Rectangle((j - 0.42, i - 0.42), 0.84, 0.84, fill=False, edgecolor="white", linestyle="--")
+            ax.add_patch(box)
+        for j, value in enumerate(means[i]):
+            color = "white" if value < top / 2 else "black"
+            ax.text(j, i, f"{value:.1f}", ha="center", va="center", color=color, fontsize=7)
+    for i in range(len(table.skills), len(rows), len(table.skills)):
+        ax.axhline(i - 0.5, color="white", linewidth=1.5)
+    ax.set_title(
+        f"Skill table, {table.role} seat: kills/min over {table.games} games\n"
+        "(red: best teammate; dashed: P's best response to the style)",
+        fontsize=9,
+    )
+    return save(fig, path)

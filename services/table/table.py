@@ -93,6 +93,11 @@ def run_cells(args: list[dict]) -> list[list[float]]:
     return run_jobs(todo)
 
 
+def stderr(values: list[float]) -> float:
+    """The standard error of a mean of per-game values (0 for one game)."""
+    return statistics.stdev(values) / math.sqrt(len(values)) if len(values) > 1 else 0.0
+
+
 @dataclass(frozen=True)
 class Table:
     """P[bait][shooter] with the per-game results behind it and what it was measured with."""
@@ -109,8 +114,7 @@ class Table:
         return statistics.fmean(self.results[bait][shooter])
 
     def stderr(self, bait: str, shooter: str) -> float:
-        values = self.results[bait][shooter]
-        return statistics.stdev(values) / math.sqrt(len(values)) if len(values) > 1 else 0.0
+        return stderr(self.results[bait][shooter])
 
     def best_shooter(self, bait: str) -> str:
         return max(self.shooters, key=lambda s: self.mean(bait, s))

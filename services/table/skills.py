@@ -1,0 +1,210 @@
+"""The skill table: every library teammate of one seat with calibrated human-like stand-ins of
+each style and skill, beside P.
+
+P measures library pairs only, so it knows nothing about what works with a slow, lapsing or
+novice partner. Here a partner is `human(K,skill=S)` (adapter/human_like.py, docs/humans.md): the
+library policy K of the other role (its style) played by a simulated hand of skill S (novice,
+typical, practised). Each (partner, teammate) cell is the mean kills/min over seeded one-minute
+games (seeds 0..games-1, as P's), with its standard error; the games are played as the lanes of
+batches (evaluate.play_teams). The table is bound to the libraries and rules it was measured with,
+as P is.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import statistics
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from services.agent import library
+from services.provenance import provenance
+from services.table.table import stderr
+from shared.game import ROLES, GameConfig
+
+VERSION = 1
+SKILLS = ("novice", "typical", "practised")  # human_like.SKILLS, in order of practice
+LANES = 1024  # games per batch at most
+
+
+def stand_in(style: str, skill: str) -> str:
+    """The partner name of `style` (a library key) played by a hand of `skill`."""
+    return f"human({style},skill={skill})"
+
+
+@dataclass(frozen=True)
+class SkillTable:
+    """Kills/min of each teammate (our seat, `role`) with each stand-in (style x skill)."""
+
+    role: str
+    teammates: tuple[str, ...]
+    styles: tuple[str, ...]
+    skills: tuple[str, ...]
+    games: int
+    results: dict[str, dict[str, list[float]]]  # partner name -> teammate -> kills/min per seed
+    library: str = field(default_factory=library.manifest_hash)
+    config: str = field(default_factory=lambda: GameConfig().hash())
+    version: int = VERSION
+
+    @property
+    def partners(self) -> list[str]:
+        return [stand_in(style, skill) for style in self.styles for skill in self.skills]
+
+    def mean(self, partner: str, teammate: str) -> float:
+        return statistics.fmean(self.results[partner][teammate])
+
+    def stderr(self, partner: str, teammate: str) -> float:
+        return stderr(self.results[partner][teammate])
+
+    def best(self, partner: str) -> str:
+        """The best response to `partner`: the teammate of the highest mean."""
+        return max(self.teammates, key=lambda t: self.mean(partner, t))
+
+    def overall(self, teammate: str) -> float:
+        """A teammate's mean over every stand-in (each weighted alike)."""
+        return statistics.fmean(self.mean(p, teammate) for p in self.partners)
+
+    def best_static(self) -> str:
+        """The best single teammate over every stand-in."""
+        return max(self.teammates, key=self.overall)
+
+    def gain(self, partner: str, teammate: str, than: str) -> tuple[float, float]:
+        """Mean and standard error of `teammate` minus `than` with `partner`, paired by seed."""
+        a, b = self.results[partner][teammate], self.results[partner][than]
+        diff = [x - y for x, y in zip(a, b, strict=True)]
+        return statistics.fmean(diff), stderr(diff)
+
+    def held_out(self, than: dict[str, str] | None = None) -> float:
+        """The headroom without the choice's luck: the best response and the best static teammate
+        chosen on one half of the seeds (even, odd), scored on the other, both ways; the mean over
+        stand-ins of best minus static (or minus `than`: partner -> teammate, chosen elsewhere)."""
+        folds = [range(0, self.games, 2), range(1, self.games, 2)]
+        gains = []
+        for chosen, scored in (folds, folds[::-1]):
+
+            def mean(p: str, t: str, seeds: range) -> float:
+                return statistics.fmean(self.results[p][t][i] for i in seeds)
+
+            static = max(
+                self.teammates, key=lambda t: statistics.fmean(mean(p, t, chosen) for p in self.partners)
+            )
+            for p in self.partners:
+                best = max(self.teammates, key=lambda t: mean(p, t, chosen))
+                other = than[p] if than else static
+                gains.append(mean(p, best, scored) - mean(p, other, scored))
+        return statistics.fmean(gains)
+
+    def extend(self, other: SkillTable) -> SkillTable:
+        """This table with `other`'s teammates as more columns (same role, stand-ins and seeds),
+        bound to the libraries `other` was measured with."""
+        if (other.role, other.styles, other.skills, other.games) != (
+            self.role,
+            self.styles,
+            self.skills,
+            self.games,
+        ):
+            raise ValueError("the tables differ in role, styles, skills or games")
+        results = {p: self.results[p] | other.results[p] for p in self.partners}
+        teammates = self.teammates + other.teammates
+        return SkillTable(
+            self.role, teammates, self.styles, self.skills, self.games, results, other.library, other.config
+        )
+
+    def save(self, path: Path) -> None:
+        record = {
+            "version": self.version,
+            "library": self.library,
+            "config": self.config,
+            "role": self.role,
+            "games": self.games,
+            "seeds": list(range(self.games)),
+            "teammates": list(self.teammates),
+            "styles": list(self.styles),
+            "skills": list(self.skills),
+            "mean": {p: {t: round(self.mean(p, t), 6) for t in self.teammates} for p in self.partners},
+            "stderr": {p: {t: round(self.stderr(p, t), 6) for t in self.teammates} for p in self.partners},
+            "results": self.results,
+            "provenance": provenance(self.library, "self") | {"config": self.config},
+        }
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(record, indent=1) + "\n")
+
+    @classmethod
+    def load(cls, path: Path) -> SkillTable:
+        record = json.loads(Path(path).read_text())
+        if record.get("version") != VERSION:
+            raise ValueError(f"{path}: skill table format {record.get('version')}, expected {VERSION}")
+        fields = ("role", "teammates", "styles", "skills", "games", "results", "library", "config")
+        return cls(**{k: tuple(record[k]) if isinstance(record[k], list) else record[k] for k in fields})
+
+
+def _play(teams: list[tuple[str, str]], games: int) -> list[list[float]]:
+    from services.adapter.evaluate import play_teams  # bulk play: numba loads with it
+
+    return play_teams(teams, list(range(games))).tolist()
+
+
+def measure(
+    role: str,
+    teammates: list[str],
+    styles: list[str],
+    skills: tuple[str, ...] = SKILLS,
+    games: int = 20,
+    workers: int = 1,
+) -> SkillTable:
+    """Play every (stand-in, teammate) pair over seeds 0..games-1, `workers` batches at once."""
+    if role not in ROLES:
+        raise ValueError(f"unknown role {role!r}; expected one of {ROLES}")
+    partners = [stand_in(style, skill) for style in styles for skill in skills]
+    pairs = [(p, t) for p in partners for t in teammates]
+    teams = [(t, p) if role == "bait" else (p, t) for p, t in pairs]
+    per = max(1, LANES // games)
+    chunks = [teams[i : i + per] for i in range(0, len(teams), per)]
+    if workers > 1:
+        with ProcessPoolExecutor(workers) as pool:
+            played = [row for chunk in pool.map(_play, chunks, [games] * len(chunks)) for row in chunk]
+    else:
+        played = [row for chunk in chunks for row in _play(chunk, games)]
+    results: dict[str, dict[str, list[float]]] = {p: {} for p in partners}
+    for (p, t), row in zip(pairs, played, strict=True):
+        results[p][t] = row
+    return SkillTable(role, tuple(teammates), tuple(styles), tuple(skills), games, results)
+
+
+def summary(table: SkillTable, p_best: dict[str, str]) -> str:
+    """Markdown: each stand-in's best response (and its gain over the best static teammate, paired
+    by seed) beside P's best response to its style (`p_best`: style -> teammate) and what that
+    one scores here; then the headroom over the best static teammate and over P's choice."""
+    static = table.best_static()
+    lines = [
+        f"| style | skill | best {table.role} | best static {static} | best - {static} | P's best | it here |"
+        "",
+        "| --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    chosen_by_p: dict[str, str] = {}
+    for style in table.styles:
+        for skill in table.skills:
+            partner = stand_in(style, skill)
+            best, p = table.best(partner), p_best.get(style, "")
+            gain, se = table.gain(partner, best, static)
+            here = table.mean(partner, p) if p in table.teammates else math.nan
+            if p in table.teammates:
+                chosen_by_p[partner] = p
+            best_text = f"{best} {table.mean(partner, best):.2f} ± {table.stderr(partner, best):.2f}"
+            lines.append(
+                f"| {style} | {skill} | {best_text} | {table.mean(partner, static):.2f} "
+                f"| {gain:+.2f} ± {se:.2f} | {p or '-'} | {here:.2f} |"
+            )
+    headroom = statistics.fmean(table.mean(p, table.best(p)) - table.mean(p, static) for p in table.partners)
+    lines += [
+        "",
+        f"Best static {table.role}: {static}, {table.overall(static):.2f} kills/min over every stand-in. "
+        f"Headroom (mean best response minus it): {headroom:.2f} chosen after the fact, "
+        f"{table.held_out():.2f} chosen on half the seeds and scored on the other half.",
+    ]
+    if len(chosen_by_p) == len(table.partners):
+        over_p = table.held_out(chosen_by_p)
+        lines[-1] += f" Held-out best response minus P's best response to the style: {over_p:.2f}."
+    return "\n".join(lines) + "\n"

@@ -144,12 +144,7 @@ class HumanLike:
         inner = [p.key for p in (first, second) if p is not None]
         self.key = f"human({','.join(inner + settings)})"
         self.role = first.role
-        c = config or GameConfig()  # the rules the person's forward model knows
-        self.rules = np.array(
-            [c.ship_turn, c.ship_thrust, c.ship_drag, c.ship_max_speed, c.fortress_turn]
-            + [c.fortress_aim_tolerance, c.fortress_fire_interval, c.vulnerable_frames, c.frames],
-            np.float64,
-        )
+        self.rules = rules_of(config or GameConfig())  # the rules the person's forward model knows
         self.reset()
 
     @classmethod
@@ -287,6 +282,15 @@ class HumanLike:
             if second.any():
                 probs[second] = _inner_probs(self.second, expected[second])
         return probs
+
+
+def rules_of(c: GameConfig) -> np.ndarray:
+    """The numbers of a game's rules that the forward model (predict) reads."""
+    return np.array(
+        [c.ship_turn, c.ship_thrust, c.ship_drag, c.ship_max_speed, c.fortress_turn]
+        + [c.fortress_aim_tolerance, c.fortress_fire_interval, c.vulnerable_frames, c.frames],
+        np.float64,
+    )
 
 
 def in_view(world: np.ndarray, view: str) -> np.ndarray:

@@ -235,16 +235,17 @@ def likeliest_policy(trials: list[Trial], role: str) -> str:
 
 def simulated(people: dict[str, tuple[str, str]], role: str, seeds: int = FIT_SEEDS) -> dict[str, np.ndarray]:
     """For each person (policy, agent), the (FIT_SKILLS, STATISTICS) means and standard deviations
-    of stand-ins of that policy at each skill, playing with that agent."""
+    of stand-ins of that policy at each skill, playing with that agent (played once for each)."""
+    kinds = list(dict.fromkeys(people.values()))
     teams = []
-    for policy, agent in people.values():
+    for policy, agent in kinds:
         for skill in FIT_SKILLS:
             person = f"human({policy},skill={skill:g})"
             teams.append((person, agent) if role == "bait" else (agent, person))
     kills, played, opened = play_teams(teams, list(range(seeds)), record=True)
     seat = ROLES.index(role)
-    out = {}
-    for p, name in enumerate(people):
+    tables = []
+    for p in range(len(kinds)):
         table = np.zeros((len(FIT_SKILLS), 2, len(STATISTICS)))
         for j in range(len(FIT_SKILLS)):
             row = p * len(FIT_SKILLS) + j
@@ -254,8 +255,8 @@ def simulated(people: dict[str, tuple[str, str]], role: str, seeds: int = FIT_SE
             ]
             values = np.array([[game[k] for k in STATISTICS] for game in games])
             table[j] = values.mean(axis=0), values.std(axis=0, ddof=1)
-        out[name] = table
-    return out
+        tables.append(table)
+    return {name: tables[kinds.index(kind)] for name, kind in people.items()}
 
 
 def fit(paths: list[Path], role: str) -> dict[str, dict]:
@@ -299,7 +300,7 @@ def fit(paths: list[Path], role: str) -> dict[str, dict]:
         policy, agent = people[name]
         parameters, errors = parameters_of([t for _, t in own], policy, agent, role, designs)
         out[name] = {
-            "partner": stand_in(policy, parameters, skill),
+            "partner": human_with(policy, parameters, skill=skill),
             "policy": policy,
             "skill": skill,
             "parameters": parameters,
@@ -315,11 +316,12 @@ def fit(paths: list[Path], role: str) -> dict[str, dict]:
 # ---------------------------------------------------------------- the model's parameters, fitted
 
 LAGS = (0, 4, 8, 12)  # frames: where the policy's likelihood of the keys is read (signature)
-DESIGN = 64  # simulated stand-ins per (policy, agent), their parameters drawn at random
+DESIGN = 96  # simulated stand-ins per (policy, agent), their parameters drawn at random
 DESIGN_GAMES = 2  # games each
 DESIGN_SEED = 30  # the generator of the design's parameters
 # The parameters the regression estimates, and the range the design draws each from (ours: a bit
-# wider than novice to practised). The holds are read directly off the keys (shortest_runs).
+# wider than novice to practised). The holds are read directly off the keys (shortest_runs); the
+# design draws them too, and the signature carries them, so one design serves every participant.
 ESTIMATED = {
     "reaction_ms": (150.0, 330.0),
     "look_ms": (67.0, 400.0),
@@ -327,6 +329,7 @@ ESTIMATED = {
     "slip": (0.0, 0.1),
     "foresight": (0.0, 1.0),
 }
+HOLDS = {"hold_ms": (33.0, 167.0), "fire_ms": (33.0, 333.0), "fire_gap_ms": (33.0, 200.0)}
 SIGNATURE = (
     *(f"likelihood_{lag}" for lag in LAGS),
     "key_changes_per_s",
@@ -336,6 +339,7 @@ SIGNATURE = (
     "fires_per_s",
     "fires_open_share",
     "kills_per_minute",
+    *HOLDS,
 )
 
 
@@ -365,7 +369,8 @@ def signature(actions: np.ndarray, obs: np.ndarray, kills_per_minute: float, pol
     changes per second; the share of turn changes straight from left to right or back (slips make
     them); runs of 0.5 s or more without a change (ship alive) per minute, and their share of the
     time; fire presses per second, the share of them made while the fortress is vulnerable;
-    kills/min. Which parameter each speaks for is the regression's to find (regress)."""
+    kills/min; the holds (shortest_runs). Which parameter each speaks for is the regression's to
+    find (regress)."""
     frames = len(actions)
     keys = np.array(split_action(actions))
     when = np.flatnonzero((np.diff(keys, axis=1) != 0).any(axis=0)) + 1
@@ -399,18 +404,21 @@ def signature(actions: np.ndarray, obs: np.ndarray, kills_per_minute: float, pol
             len(pressed) / seconds,
             float(open_share.mean()) if len(pressed) else 0.0,
             kills_per_minute,
+            *shortest_runs([actions]).values(),
         ]
     )
 
 
-def design(policy: str, agent: str, role: str, holds: dict[str, float]) -> tuple[np.ndarray, np.ndarray]:
-    """DESIGN stand-ins of `policy` with `agent`, each parameter of ESTIMATED drawn uniformly in its
-    range (the holds fixed at the person's), DESIGN_GAMES games each: their (DESIGN, ESTIMATED)
-    parameters and (DESIGN, SIGNATURE) mean signatures."""
+def design(policy: str, agent: str, role: str) -> tuple[np.ndarray, np.ndarray]:
+    """DESIGN stand-ins of `policy` with `agent`, each parameter of ESTIMATED and each hold drawn
+    uniformly in its range, DESIGN_GAMES games each: their (DESIGN, ESTIMATED) parameters and
+    (DESIGN, SIGNATURE) mean signatures."""
     rng = np.random.default_rng(DESIGN_SEED)
-    drawn = np.array([[rng.uniform(*bounds) for bounds in ESTIMATED.values()] for _ in range(DESIGN)])
-    names = [stand_in(policy, dict(zip(ESTIMATED, row, strict=True)) | holds) for row in drawn]
-    teams = [(name, agent) if role == "bait" else (agent, name) for name in names]
+    ranges = {**ESTIMATED, **HOLDS}
+    drawn = [{name: rng.uniform(*bounds) for name, bounds in ranges.items()} for _ in range(DESIGN)]
+    teams = [
+        (human_with(policy, d), agent) if role == "bait" else (agent, human_with(policy, d)) for d in drawn
+    ]
     kills, actions, obs = play_seat(teams, list(range(DESIGN_GAMES)), role)
     inner = networks.load(policy)
     signatures = np.array(
@@ -421,13 +429,13 @@ def design(policy: str, agent: str, role: str, holds: dict[str, float]) -> tuple
             for i in range(DESIGN)
         ]
     )
-    return drawn, signatures
+    return np.array([[d[name] for name in ESTIMATED] for d in drawn]), signatures
 
 
-def stand_in(policy: str, parameters: dict[str, float], skill: float | None = None) -> str:
-    """The human(...) partner of a policy played with these parameters (PARAMETERS' order), and
-    the skill, where given, of whatever they leave unnamed."""
-    values = [f"skill={skill:g}"] if skill is not None else []
+def human_with(policy: str, parameters: dict[str, float], **settings: float) -> str:
+    """The human(...) partner of a policy played with these parameters (PARAMETERS' order), after
+    other settings (skill, input_ms) where given."""
+    values = [f"{name}={value:g}" for name, value in settings.items()]
     values += [f"{name}={parameters[name]:.3g}" for name in PARAMETERS if name in parameters]
     return f"human({policy},{','.join(values)})"
 
@@ -454,19 +462,19 @@ RIDGE = 1.0  # the regression's ridge, in units of the standardised signature (o
 
 def parameters_of(own: list[Trial], policy: str, agent: str, role: str, designs: dict) -> tuple[dict, dict]:
     """A participant's parameters: the holds read off their keys, the rest by the regression over
-    the design of their policy and agent (made once per policy, agent and holds, kept in `designs`);
-    and the regression's error of each."""
-    holds = shortest_runs([t.actions for t in own])
-    key = (policy, agent, tuple(holds.values()))
-    if key not in designs:
-        designs[key] = design(policy, agent, role, holds)
-    drawn, signatures = designs[key]
+    the design of their policy and agent (made once for each, kept in `designs`); and the
+    regression's error of each."""
+    if (policy, agent) not in designs:
+        designs[policy, agent] = design(policy, agent, role)
+    drawn, signatures = designs[policy, agent]
     inner = networks.load(policy)
     observed = np.mean([signature(t.actions, t.obs, t.kills_per_minute, inner) for t in own], 0)
     estimate, error = regress(drawn, signatures, observed)
     names = list(ESTIMATED)
-    errors = dict(zip(names, error.tolist(), strict=True))
-    return holds | dict(zip(names, estimate.tolist(), strict=True)), errors
+    holds = shortest_runs([t.actions for t in own])
+    return holds | dict(zip(names, estimate.tolist(), strict=True)), dict(
+        zip(names, error.tolist(), strict=True)
+    )
 
 
 def play_seat(teams: list[tuple[str, str]], seeds: list[int], role: str) -> tuple[np.ndarray, ...]:

@@ -14,10 +14,10 @@ from services.adapter.humans import (
     FROZEN,
     SIGNATURE,
     fit,
+    human_with,
     read_trial,
     regress,
     shortest_runs,
-    stand_in,
     statistics,
     traits,
     write,
@@ -136,12 +136,13 @@ RECOVERED = {  # people with known parameters (B5 with S4, three trials each)
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1800)
 def test_fit_recovers_known_parameters(tmp_path: Path):
     """Stand-ins with known parameters, three recorded trials each, fitted back: the holds to the
     frame, every estimated parameter within three of the errors the fit states (docs/humans.md,
     Recovery, has the table this prints)."""
     paths = [
-        record_trial(tmp_path / f"{name}-{t}.tsflog", stand_in("B5", truth), "bait", "S4",
+        record_trial(tmp_path / f"{name}-{t}.tsflog", human_with("B5", truth), "bait", "S4",
                      trial_seed(200, i, t), name)
         for i, (name, truth) in enumerate(RECOVERED.items())
         for t in range(3)

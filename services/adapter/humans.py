@@ -320,16 +320,22 @@ DESIGN = 96  # simulated stand-ins per (policy, agent), their parameters drawn a
 DESIGN_GAMES = 2  # games each
 DESIGN_SEED = 30  # the generator of the design's parameters
 # The parameters the regression estimates, and the range the design draws each from (ours: a bit
-# wider than novice to practised). The holds are read directly off the keys (shortest_runs); the
-# design draws them too, and the signature carries them, so one design serves every participant.
+# wider than novice to practised). The turn and thrust keys' hold is read directly off the keys
+# (shortest_runs): they change often enough that the floor shows. The fire key's runs are the
+# policy's as much as the person's (a policy that rarely wants a short gap never shows the
+# person's), so its burst and gap are estimated, the shortest runs among the signature.
 ESTIMATED = {
     "reaction_ms": (150.0, 330.0),
     "look_ms": (67.0, 400.0),
     "lapses": (0.0, 8.0),
     "slip": (0.0, 0.1),
     "foresight": (0.0, 1.0),
+    "fire_ms": (33.0, 333.0),
+    "fire_gap_ms": (33.0, 200.0),
 }
-HOLDS = {"hold_ms": (33.0, 167.0), "fire_ms": (33.0, 333.0), "fire_gap_ms": (33.0, 200.0)}
+HOLDS = ("hold_ms", "fire_ms", "fire_gap_ms")  # shortest_runs' names
+HOLD_RANGE = (33.0, 167.0)  # the design's turn and thrust hold
+
 SIGNATURE = (
     *(f"likelihood_{lag}" for lag in LAGS),
     "key_changes_per_s",
@@ -410,11 +416,11 @@ def signature(actions: np.ndarray, obs: np.ndarray, kills_per_minute: float, pol
 
 
 def design(policy: str, agent: str, role: str) -> tuple[np.ndarray, np.ndarray]:
-    """DESIGN stand-ins of `policy` with `agent`, each parameter of ESTIMATED and each hold drawn
+    """DESIGN stand-ins of `policy` with `agent`, each parameter of ESTIMATED and the hold drawn
     uniformly in its range, DESIGN_GAMES games each: their (DESIGN, ESTIMATED) parameters and
     (DESIGN, SIGNATURE) mean signatures."""
     rng = np.random.default_rng(DESIGN_SEED)
-    ranges = {**ESTIMATED, **HOLDS}
+    ranges = {**ESTIMATED, "hold_ms": HOLD_RANGE}
     drawn = [{name: rng.uniform(*bounds) for name, bounds in ranges.items()} for _ in range(DESIGN)]
     teams = [
         (human_with(policy, d), agent) if role == "bait" else (agent, human_with(policy, d)) for d in drawn
@@ -461,9 +467,9 @@ RIDGE = 1.0  # the regression's ridge, in units of the standardised signature (o
 
 
 def parameters_of(own: list[Trial], policy: str, agent: str, role: str, designs: dict) -> tuple[dict, dict]:
-    """A participant's parameters: the holds read off their keys, the rest by the regression over
-    the design of their policy and agent (made once for each, kept in `designs`); and the
-    regression's error of each."""
+    """A participant's parameters: the turn and thrust hold read off their keys, the rest by the
+    regression over the design of their policy and agent (made once for each, kept in `designs`);
+    and the regression's error of each."""
     if (policy, agent) not in designs:
         designs[policy, agent] = design(policy, agent, role)
     drawn, signatures = designs[policy, agent]

@@ -1,6 +1,8 @@
 """Stand-ins for people measured and fitted (docs/humans.md): the calibration, how human-like
 partners of each skill score in pairs and with library teammates against the study's human pairs
-(about 2.6 kills/min); and `tsf humans fit`, a stand-in per participant from recordings.
+(about 2.6 kills/min); and `tsf humans fit`, a stand-in per participant from recordings: its
+policy, skill and the model's own parameters (holds read off the keys, the rest by a regression
+calibrated on simulated stand-ins of known parameters), which the stand-in plays with.
 
 Three groups of teams per skill, each bait policy paired as the shipped table pairs it:
 - **pairs**: `human(Bk)` with `human(S)`, S the table's best shooter for Bk, both of that skill;

@@ -70,6 +70,6 @@ def test_fit_recovers_stand_ins_who_played_through_the_gateway(tmp_path, study_s
     for name, truth in known.items():
         found, errors = fitted[name]["parameters"], fitted[name]["errors"]
         print(name, {k: (v, round(found[k], 3), round(errors.get(k, 0.0), 3)) for k, v in truth.items()})
-        assert abs(found["hold_ms"] - truth["hold_ms"]) < 2000 / 30, (name, found)  # the page's frame or so
+        assert abs(found["hold_ms"] - truth["hold_ms"]) < 1000 / 30, (name, found)
         for parameter, error in errors.items():
             assert abs(found[parameter] - truth[parameter]) <= 3 * error, (name, parameter, found, errors)

@@ -109,7 +109,7 @@ def test_fit_recovers_a_known_stand_ins_policy_and_skill(tmp_path: Path):
 
 
 def test_shortest_runs_read_the_holds_and_the_regression_inverts_a_known_map():
-    turn = np.repeat([0, 1, 0, 2, 0], [30, 4, 27, 6, 30])  # turn presses of 4 and 6 frames
+    turn = np.repeat([0, 1, 0, 2, 0, 1, 0, 2, 0], [30, 4, 27, 6, 4, 3, 4, 4, 15])  # mostly 4 frames
     fire = np.repeat([0, 1, 0, 1, 0, 1], [10, 9, 5, 12, 7, 54])  # bursts of 9 and 12, gaps of 5 and 7
     holds = shortest_runs([join_action(turn, 0, fire)])
     assert holds == pytest.approx({"hold_ms": 4000 / 30, "fire_ms": 9000 / 30, "fire_gap_ms": 5000 / 30})

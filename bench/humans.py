@@ -4,11 +4,13 @@
 for Bk), a bait stand-in with that library shooter, a shooter stand-in with its best library
 bait; per skill (novice, typical, practised), kills/min with standard errors over teams x seeds,
 against the study's human pairs (2.6).
-(b) With --evidence: library pairs (each bait with its best shooter) with a pure delay of 0-8
+(b) With --learning: the pairs over a whole study (`session=15`: fifteen one-minute trials of one
+person, practice carrying over), kills/min per trial by skill.
+(c) With --evidence: library pairs (each bait with its best shooter) with a pure delay of 0-8
 frames on the shooter, the bait or both (`delayed(K,frames=d)`); and the library pairs and the
 typical stand-in pairs under the rule numbers marked *(assumption)* on docs/rules.md, varied.
 
-    .venv/bin/python bench/humans.py [--seeds 12] [--evidence]
+    .venv/bin/python bench/humans.py [--seeds 12] [--learning PEOPLE] [--evidence]
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import time
 import numpy as np
 
 from services.adapter.evaluate import play_teams
+from services.adapter.human_like import SKILLS
 from services.adapter.humans import STUDY_PAIRS, calibration
 from services.agent import library
 from services.table.table import Table
@@ -61,18 +64,44 @@ def evidence(seeds: list[int]) -> None:
         print(f"{name:>22s}{cells[0]:>18s}{cells[1]:>20s}")
 
 
+STUDY_TRIALS = 15  # a study's session: fifteen one-minute trials
+
+
+def learning(people: int) -> None:
+    """Each skill's pairs (every bait with its table-best shooter, both stand-ins of that skill,
+    in sessions of STUDY_TRIALS), `people` people each: kills/min per trial, over teams x people."""
+    table = Table.load()
+    pairs = [(b, table.best_shooter(b)) for b in library.keys("bait")]
+    seeds = list(range(people * STUDY_TRIALS))  # seed s: trial s % 15 of person s // 15
+    print(f"\npairs over a study of {STUDY_TRIALS} trials ({len(pairs)} teams x {people} people per cell)")
+    print(f"{'trial':>6s}" + "".join(f"{skill:>16s}" for skill in SKILLS))
+    kills = {}
+    for skill in SKILLS:
+        person = f"skill={skill},session={STUDY_TRIALS}"
+        teams = [(f"human({b},{person})", f"human({s},{person})") for b, s in pairs]
+        kills[skill] = play_teams(teams, seeds).reshape(len(pairs), people, STUDY_TRIALS)
+    for trial in range(STUDY_TRIALS):
+        cells = [mean_se(k[:, :, trial]) for k in kills.values()]
+        print(f"{trial + 1:6d}" + "".join(f"{c:>16s}" for c in cells))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=12, help="game seeds per team (3 trials per person)")
+    parser.add_argument("--learning", type=int, metavar="PEOPLE", help="also the pairs over a 15-trial study")
     parser.add_argument("--evidence", action="store_true", help="also the delay and rule measurements")
+    parser.add_argument("--no-calibration", action="store_true", help="only what the other options ask for")
     args = parser.parse_args()
     began = time.monotonic()
-    print(f"stand-ins' kills/min ({args.seeds} seeds per team; the study's human pairs: {STUDY_PAIRS})")
-    print(f"{'skill':>10s}{'pairs':>16s}{'bait stand-in':>18s}{'shooter stand-in':>20s}")
-    rows = calibration(seeds=args.seeds)
-    for skill in dict.fromkeys(r.skill for r in rows):
-        cells = [f"{r.mean:5.2f} ± {r.stderr:.2f}" for r in rows if r.skill == skill]
-        print(f"{skill:>10s}{cells[0]:>16s}{cells[1]:>18s}{cells[2]:>20s}")
+    if not args.no_calibration:
+        print(f"stand-ins' kills/min ({args.seeds} seeds per team; the study's human pairs: {STUDY_PAIRS})")
+        print(f"{'skill':>10s}{'pairs':>16s}{'bait stand-in':>18s}{'shooter stand-in':>20s}")
+        rows = calibration(seeds=args.seeds)
+        for skill in dict.fromkeys(r.skill for r in rows):
+            cells = [f"{r.mean:5.2f} ± {r.stderr:.2f}" for r in rows if r.skill == skill]
+            print(f"{skill:>10s}{cells[0]:>16s}{cells[1]:>18s}{cells[2]:>20s}")
+    if args.learning:
+        learning(args.learning)
     if args.evidence:
         evidence(list(range(args.seeds)))
     print(f"\n{time.monotonic() - began:.0f} s")

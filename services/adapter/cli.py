@@ -219,8 +219,10 @@ def humans_fit(
     role: Role = typer.Option(..., help="The person's seat."),
     out: Path = output(..., "Directory the stand-ins are written into.", directory=True),
 ) -> None:
-    """Fit a stand-in per participant: the likeliest library policy and the skill whose simulated
-    stand-ins come nearest the participant's keys and score. Play one as humans:OUT@PARTICIPANT."""
+    """Fit a stand-in per participant: the likeliest library policy, the skill whose simulated
+    stand-ins come nearest the participant's keys and score, and the model's own parameters
+    (reaction, looks, holds, fire habits, lapses, slips, foresight), which the stand-in plays
+    with. Play one as humans:OUT@PARTICIPANT."""
     import shlex
     import sys
 
@@ -236,6 +238,11 @@ def humans_fit(
             f"shortest press {s['hold_ms']:.0f} ms, "
             f"response {s['response_ms']:.0f} ms)"
         )
+        fitted_with = ", ".join(
+            f"{k} {v:.3g}" + (f" ± {person['errors'][k]:.2g}" if k in person["errors"] else "")
+            for k, v in person["parameters"].items()
+        )
+        console.print(f"  parameters (± the fit's error): {fitted_with}")
         t = person["traits"]
         console.print(
             "  traits: " + ", ".join(f"{k} {'-' if v is None else f'{v:.3g}'}" for k, v in t.items())

@@ -14,6 +14,8 @@ ours and how they were calibrated:
   the fortress turning and firing when aimed and due: a person fires into an opening they expect.
 - **Held keys.** Every frame the policy chooses on the predicted state, and each key (turn,
   thrust, fire) changes only once held the person's shortest press (intermittent control).
+- **Fire habits.** The fire key has its own: once down it stays down a burst (`fire_ms`, a missile
+  every cooldown while held), and once up it stays up the person's gap between presses (`fire_gap_ms`).
 - **Lapses.** At a look the person may lapse: the keys stay as they are for 0.5 s plus a tail.
 - **Slips.** A key change may come out wrong (the turn the third way, a press missed).
 - **Skill and learning.** Every trait lies between a first-time player's value (skill 0) and a
@@ -21,6 +23,10 @@ ours and how they were calibrated:
   shrinks as a power law of practice.
 - **Drift.** With two policies, each frame follows the second with probability w, which grows
   from 0 to 1 over the session.
+- **Parameters.** Each trait is drawn from the person and their practice unless `human(...)` names
+  it (PARAMETERS: `reaction_ms`, `look_ms`, `hold_ms`, `fire_ms`, `fire_gap_ms`, `lapses`,
+  `slip`, `foresight`): a named one is the person's in every trial, as `tsf humans fit` estimates it.
+  `session=N` makes a session N trials (default SESSION_TRIALS).
 
 Every draw is counter-based (sampling.lane_uniforms, keyed by the game's seed, a stream and the
 frame), so a game is a function of its seed, and one game (`act`) is one lane of many
@@ -74,7 +80,19 @@ _STREAMS = dict(
     )
 )
 _HEADS = np.array([split_action(a)[:2] for a in range(N_ACTIONS)], np.int64)  # turn, thrust
-_SETTING = re.compile(r"^(skill|input_ms)\s*=\s*(.+)$")
+# The model's own parameters, which human(...) may name (then fixed for the person): their bounds.
+PARAMETERS = {
+    "reaction_ms": (120.0, 450.0),  # the person's mean reaction time (the ex-Gaussian's mu)
+    "look_ms": (67.0, 600.0),  # the mean time between looks
+    "hold_ms": (33.0, 300.0),  # the shortest press or release of the turn and thrust keys
+    "fire_ms": (33.0, 1000.0),  # the shortest press of the fire key: a burst
+    "fire_gap_ms": (33.0, 1000.0),  # the shortest release of the fire key: the gap between presses
+    "lapses": (0.0, 20.0),  # lapses per minute
+    "slip": (0.0, 0.5),  # the chance that a key change comes out wrong
+    "foresight": (0.0, 1.0),  # the share of the lag over which the fortress is foreseen
+}
+SETTINGS = ("skill", "input_ms", *PARAMETERS, "session")  # human(...)'s settings, in its name's order
+_SETTING = re.compile(r"^(\w+)\s*=\s*(.+)$")
 
 
 def between(trait: tuple, skill: np.ndarray) -> np.ndarray:
@@ -109,38 +127,49 @@ class HumanLike:
         skill: float = SKILLS["typical"],
         input_ms: float = PAGE_INPUT_MS,
         config=None,
+        session: int = SESSION_TRIALS,
+        **parameters: float,
     ) -> None:
         if second is not None and first.role != second.role:
             raise ValueError(f"human({first.key},{second.key}): both must share a role")
+        if unknown := set(parameters) - set(PARAMETERS):
+            raise ValueError(f"{', '.join(sorted(unknown))}: not among {', '.join(PARAMETERS)}")
         self.first, self.second, self.skill, self.input_ms = first, second, float(skill), float(input_ms)
+        self.session = int(session)
+        self.parameters = {name: float(parameters[name]) for name in PARAMETERS if name in parameters}
         settings = [] if skill == SKILLS["typical"] else [f"skill={_skill_name(skill)}"]
         settings += [f"input_ms={input_ms:g}"] if input_ms != PAGE_INPUT_MS else []
+        settings += [f"{name}={value:g}" for name, value in self.parameters.items()]
+        settings += [f"session={self.session}"] if self.session != SESSION_TRIALS else []
         inner = [p.key for p in (first, second) if p is not None]
         self.key = f"human({','.join(inner + settings)})"
         self.role = first.role
-        c = config or GameConfig()  # the rules the person's forward model knows
-        self.rules = np.array(
-            [c.ship_turn, c.ship_thrust, c.ship_drag, c.ship_max_speed, c.fortress_turn]
-            + [c.fortress_aim_tolerance, c.fortress_fire_interval, c.vulnerable_frames, c.frames],
-            np.float64,
-        )
+        self.rules = rules_of(config or GameConfig())  # the rules the person's forward model knows
         self.reset()
 
     @classmethod
     def from_arguments(cls, inner: list, settings: list[str]) -> HumanLike:
-        """human(...)'s partners and its `skill=...` and `input_ms=...` settings."""
+        """human(...)'s partners and its settings: `skill=LEVEL`, `input_ms=`, a parameter's value
+        (PARAMETERS) and `session=TRIALS`, each a number within its bounds."""
         values: dict[str, float] = {}
+        bounds = {"input_ms": (0.0, 300.0), **PARAMETERS, "session": (1, 100)}
         for item in settings:
             match = _SETTING.match(item)
-            if not match:
-                raise ValueError(f"{item!r} is not skill=LEVEL or input_ms=NUMBER")
+            if not match or match[1] not in SETTINGS:
+                raise ValueError(
+                    f"{item!r} is not skill=LEVEL or NAME=NUMBER for NAME in {', '.join(SETTINGS[1:])}"
+                )
             name, text = match[1], match[2].strip()
+            if name == "skill":
+                values[name] = parse_skill(text)
+                continue
             try:
-                values[name] = parse_skill(text) if name == "skill" else float(text)
-            except ValueError as error:
-                raise ValueError(str(error) if name == "skill" else f"input_ms={text} is no number") from None
-            if name == "input_ms" and not 0.0 <= values[name] <= 300.0:
-                raise ValueError(f"input_ms={text} is outside [0, 300]")
+                values[name] = int(text) if name == "session" else float(text)
+            except ValueError:
+                raise ValueError(f"{name}={text} is no {'whole ' * (name == 'session')}number") from None
+            low, high = bounds[name]
+            if not low <= values[name] <= high:
+                raise ValueError(f"{name}={text} is outside [{low:g}, {high:g}]")
         return cls(*inner, **values)
 
     def reset(self, seed: int | None = None) -> None:
@@ -157,7 +186,7 @@ class HumanLike:
         self.mu, self.look, self.lapse, self.slip, self.foresight = (np.zeros(n) for _ in range(5))
         self.ring = np.zeros((n, HISTORY, ob.TIME + 1), np.float32)
         self.keys = np.zeros((n, HISTORY), np.int64)  # the actions pressed, for the forward model
-        self.held, self.hold = np.zeros(n, np.int64), np.zeros(n, np.int64)
+        self.held, self.hold = np.zeros(n, np.int64), np.zeros((n, 3, 2), np.int64)
         self.since_change = np.zeros((n, 3), np.int64)  # frames each key is as it is
         self.seen_at = np.zeros(n, np.int64)  # the frame whose state the person last took in
         self.look_left = np.zeros(n, np.int64)  # frames to the next look
@@ -171,22 +200,34 @@ class HumanLike:
         of the game's seed, this trial's skill (practice) and this game's reaction delay. A lane's
         draws count frames from its own start, so its game is the scalar game of its seed."""
         played = np.array([max(0, game_seed(int(s), self.role)) for s in seeds], np.int64)
-        trial = played % SESSION_TRIALS
+        n = len(seeds)
+        trial = played % self.session
         skill = 1.0 - (1.0 - self.skill) * (trial + 1.0) ** -LEARNING
-        people = [np.random.default_rng([int(g) // SESSION_TRIALS, 17]) for g in played]
+        people = [np.random.default_rng([int(g) // self.session, 17]) for g in played]
         games = [np.random.default_rng([int(s), 29]) for s in seeds]
         # the person's draws: reaction mu, lapse rate, slip rate, foresight
         draws = np.array([[r.normal(), r.uniform(), r.uniform(), r.normal()] for r in people])
-        mu = between(RT_MU, skill) + RT_MU_PERSON_SD * draws[:, 0]
-        self.mu[lanes] = np.clip(mu + [g.normal(0.0, RT_MU_GAME_SD) for g in games], 120.0, 450.0)
-        lapses = np.exp(_pick(np.log(between(LAPSES_PER_MINUTE, skill)), draws[:, 1]))
-        look = between(LOOK_MS, skill) / FRAME_MS  # frames between looks, on average
-        self.look[lanes], self.lapse[lanes] = look, lapses / (60.0 * 30.0) * look  # a lapse starts at a look
-        self.slip[lanes] = _pick(between(SLIP, skill), draws[:, 2])
-        self.foresight[lanes] = np.clip(between(FORESIGHT, skill) + FORESIGHT_SD * draws[:, 3], 0.0, 1.0)
+
+        def trait(name: str, drawn: np.ndarray) -> np.ndarray:  # a named parameter, else as drawn
+            return np.full(n, self.parameters[name]) if name in self.parameters else drawn
+
+        mu = trait("reaction_ms", between(RT_MU, skill) + RT_MU_PERSON_SD * draws[:, 0])
+        mu = np.clip(mu + [g.normal(0.0, RT_MU_GAME_SD) for g in games], *PARAMETERS["reaction_ms"])
+        lapses = trait("lapses", np.exp(_pick(np.log(between(LAPSES_PER_MINUTE, skill)), draws[:, 1])))
+        look = trait("look_ms", between(LOOK_MS, skill)) / FRAME_MS  # frames between looks, on average
+        self.mu[lanes], self.look[lanes] = mu, look
+        self.lapse[lanes] = lapses / (60.0 * 30.0) * look  # a lapse can start at any look
+        self.slip[lanes] = trait("slip", _pick(between(SLIP, skill), draws[:, 2]))
+        foresight = trait("foresight", between(FORESIGHT, skill) + FORESIGHT_SD * draws[:, 3])
+        self.foresight[lanes] = np.clip(foresight, 0.0, 1.0)
+        # frames each key must stay as it is, (lanes, turn/thrust/fire, released/pressed): by
+        # default the skill's shortest press, every key both ways
+        hold = between(HOLD_MS, skill)
+        turn, fire = trait("hold_ms", hold), [trait("fire_gap_ms", hold), trait("fire_ms", hold)]
+        ms = np.stack([np.stack([turn, turn], 1), np.stack([turn, turn], 1), np.stack(fire, 1)], 1)
+        self.hold[lanes] = np.rint(ms / FRAME_MS).astype(np.int64)
+        self.since_change[lanes] = self.hold[lanes].max(axis=(1, 2))[:, None]
         self.seeds[lanes], self.trial[lanes], self.start[lanes] = seeds, trial, self.t
-        self.hold[lanes] = np.rint(between(HOLD_MS, skill) / FRAME_MS).astype(np.int64)  # frames
-        self.since_change[lanes] = self.hold[lanes, None]
         self.held[lanes], self.seen_at[lanes] = 0, self.t
         self.look_left[lanes], self.lapse_left[lanes] = 0, 0
 
@@ -235,7 +276,8 @@ class HumanLike:
         expected = predict(seen, age, foreseen, self.keys[lanes], t, self.rules)
         chosen = sample(self._probs(expected, lanes, u["style"][lanes]), u["action"][lanes])
         wanted, now = np.array(split_action(chosen)), np.array(split_action(self.held[lanes]))
-        change = (wanted != now) & (self.hold[lanes] <= self.since_change[lanes].T)
+        needed = np.take_along_axis(self.hold[lanes], (now.T != 0)[:, :, None].astype(np.int64), 2)[..., 0]
+        change = (wanted != now) & (needed.T <= self.since_change[lanes].T)
         # a slip: the turn goes the third way, a thrust or fire press is missed
         wrong = np.array([3 - now[0] - wanted[0], now[1], now[2]])
         pressed = np.where(
@@ -254,6 +296,15 @@ class HumanLike:
             if second.any():
                 probs[second] = _inner_probs(self.second, expected[second])
         return probs
+
+
+def rules_of(c: GameConfig) -> np.ndarray:
+    """The numbers of a game's rules that the forward model (predict) reads."""
+    return np.array(
+        [c.ship_turn, c.ship_thrust, c.ship_drag, c.ship_max_speed, c.fortress_turn]
+        + [c.fortress_aim_tolerance, c.fortress_fire_interval, c.vulnerable_frames, c.frames],
+        np.float64,
+    )
 
 
 def in_view(world: np.ndarray, view: str) -> np.ndarray:

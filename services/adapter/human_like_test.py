@@ -70,16 +70,51 @@ def test_a_restarted_lane_plays_the_single_game_of_its_new_seed_while_the_others
     assert not any(mismatches)
 
 
+def runs_of(key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The inner runs of one key's values (the first and last are cut by the game's ends), and
+    whether each was a press (non-zero)."""
+    changes = np.flatnonzero(np.diff(key)) + 1
+    runs = np.diff(np.concatenate([[0], changes, [len(key)]]))
+    return runs[1:-1], key[changes[:-1]] != 0
+
+
 def test_each_key_is_held_at_least_the_persons_shortest_press():
     partner = make_partner("human(B5,skill=novice)", "bait")
     partner.reset_lanes(SEEDS)
     together, _ = play("human(B5,skill=novice)", SEEDS)
     for lane, hold in zip(together.T, partner.hold, strict=True):
+        assert (hold == 3).all()
         for key in split_action(lane):
-            changes = np.flatnonzero(np.diff(key)) + 1
-            runs = np.diff(np.concatenate([[0], changes, [len(key)]]))
-            assert runs[1:-1].min() >= hold == 3  # the first and last runs are cut by the game's ends
+            assert runs_of(key)[0].min() >= 3
         assert 2.0 < np.mean(np.diff(lane) != 0) ** -1 < 30.0  # held, but not frozen
+
+
+def test_named_parameters_fix_the_persons_traits_in_every_trial():
+    """human(...)'s parameters replace what the person and their practice would draw: the
+    reaction time (but for the game's own spread), looks, lapses, slips, foresight, and the holds,
+    the fire key's burst and gap its own."""
+    name = (
+        "human(B5,reaction_ms=300,look_ms=200,hold_ms=100,fire_ms=300,fire_gap_ms=200,"
+        "lapses=3,slip=0.1,foresight=0.5)"
+    )
+    partner = make_partner(name, "bait")
+    assert partner.key == name and make_partner(partner.key, "bait").key == name
+    partner.reset_lanes([policy_seed(g, "bait") for g in range(30)])
+    assert abs(partner.mu.mean() - 300.0) < 10.0 and partner.mu.std() > 5.0
+    assert (partner.look == 6.0).all() and (partner.slip == 0.1).all() and (partner.foresight == 0.5).all()
+    assert np.allclose(partner.lapse, 3.0 / 1800.0 * 6.0)
+    assert partner.hold[0].tolist() == [[3, 3], [3, 3], [6, 9]]
+    together, _ = play(name, SEEDS)
+    keys = [[runs_of(key) for key in split_action(lane)] for lane in together.T]
+    turn, thrust, fire = (np.concatenate([lane[k][0] for lane in keys]) for k in range(3))
+    pressed = np.concatenate([lane[2][1] for lane in keys])
+    assert turn.min() >= 3 and thrust.min() >= 3 and len(fire) > 4
+    assert fire[pressed].min() >= 9 and fire[~pressed].min() >= 6
+    unchanged = make_partner("human(B5,skill=practised,slip=0.2)", "bait")
+    practised = make_partner("human(B5,skill=practised)", "bait")
+    for p in (unchanged, practised):
+        p.reset_lanes([policy_seed(g, "bait") for g in range(6)])
+    assert (unchanged.mu == practised.mu).all() and (unchanged.slip == 0.2).all()
 
 
 def test_traits_are_a_persons_the_delay_a_games_and_practice_helps():
@@ -139,6 +174,9 @@ def test_grammar_population_and_group():
         ("human(B5,skill=2)", "number in"),
         ("human(B5,input_ms=-1)", "outside"),
         ("human(B5,speed=3)", "skill=LEVEL"),
+        ("human(B5,lapses=-1)", "outside"),
+        ("human(B5,reaction_ms=fast)", "no number"),
+        ("human(B5,session=2.5)", "no whole number"),
         ("human(B1,B2,B3)", "one or two"),
     ]:
         with pytest.raises(UsageError, match=problem):

@@ -1,6 +1,8 @@
 """Stand-ins for people measured and fitted (docs/humans.md): the calibration, how human-like
 partners of each skill score in pairs and with library teammates against the study's human pairs
-(about 2.6 kills/min); and `tsf humans fit`, a stand-in per participant from recordings.
+(about 2.6 kills/min); and `tsf humans fit`, a stand-in per participant from recordings: its
+policy, skill and the model's own parameters (holds read off the keys, the rest by a regression
+calibrated on simulated stand-ins of known parameters), which the stand-in plays with.
 
 Three groups of teams per skill, each bait policy paired as the shipped table pairs it:
 - **pairs**: `human(Bk)` with `human(S)`, S the table's best shooter for Bk, both of that skill;
@@ -13,12 +15,22 @@ from __future__ import annotations
 import json
 from collections import Counter
 from dataclasses import dataclass
+from functools import cache, partial
 from pathlib import Path
 
 import numpy as np
 
 from services.adapter.evaluate import play_teams
-from services.adapter.human_like import FRAME_MS, SKILLS, STAND_INS, in_view
+from services.adapter.human_like import (
+    FRAME_MS,
+    HISTORY,
+    PARAMETERS,
+    SKILLS,
+    STAND_INS,
+    in_view,
+    predict,
+    rules_of,
+)
 from services.agent import library, networks
 from services.proxy.data import pairs, person_seats, study_record
 from services.recorder.recording import load
@@ -133,6 +145,7 @@ class Trial:
     cues: np.ndarray  # action indices of the events that call for a response (cues_of)
     alive: np.ndarray  # (frames,) the person's ship alive
     vulnerable: np.ndarray  # (frames,) the fortress vulnerable
+    obs: np.ndarray  # (frames, 64) the person's world view of each frame's state, before its keys
 
 
 def read_trial(path: Path, role: str) -> Trial:
@@ -159,7 +172,7 @@ def read_trial(path: Path, role: str) -> Trial:
     summary = recording.summary
     return Trial(
         actions, opened, summary.kills_per_minute, agent, recording.start.seed, obs, alive_actions,
-        cues[cues < len(actions)], alive, open_now,
+        cues[cues < len(actions)], alive, open_now, np.array([s.obs[role] for s in states[:-1]], np.float32),
     )  # fmt: skip
 
 
@@ -224,16 +237,17 @@ def likeliest_policy(trials: list[Trial], role: str) -> str:
 
 def simulated(people: dict[str, tuple[str, str]], role: str, seeds: int = FIT_SEEDS) -> dict[str, np.ndarray]:
     """For each person (policy, agent), the (FIT_SKILLS, STATISTICS) means and standard deviations
-    of stand-ins of that policy at each skill, playing with that agent."""
+    of stand-ins of that policy at each skill, playing with that agent (played once for each)."""
+    kinds = list(dict.fromkeys(people.values()))
     teams = []
-    for policy, agent in people.values():
+    for policy, agent in kinds:
         for skill in FIT_SKILLS:
             person = f"human({policy},skill={skill:g})"
             teams.append((person, agent) if role == "bait" else (agent, person))
     kills, played, opened = play_teams(teams, list(range(seeds)), record=True)
     seat = ROLES.index(role)
-    out = {}
-    for p, name in enumerate(people):
+    tables = []
+    for p in range(len(kinds)):
         table = np.zeros((len(FIT_SKILLS), 2, len(STATISTICS)))
         for j in range(len(FIT_SKILLS)):
             row = p * len(FIT_SKILLS) + j
@@ -243,8 +257,8 @@ def simulated(people: dict[str, tuple[str, str]], role: str, seeds: int = FIT_SE
             ]
             values = np.array([[game[k] for k in STATISTICS] for game in games])
             table[j] = values.mean(axis=0), values.std(axis=0, ddof=1)
-        out[name] = table
-    return out
+        tables.append(table)
+    return {name: tables[kinds.index(kind)] for name, kind in people.items()}
 
 
 def fit(paths: list[Path], role: str) -> dict[str, dict]:
@@ -272,6 +286,7 @@ def fit(paths: list[Path], role: str) -> dict[str, dict]:
         people[name] = (likeliest_policy([t for _, t in own], role), agents.most_common(1)[0][0])
     simulation = simulated(people, role)
     fine = np.linspace(0.0, 1.0, 51)
+    designs: dict = {}
     out = {}
     for name, own in trials.items():
         games = [statistics(t.actions, t.opened, t.kills_per_minute) for _, t in own]
@@ -285,16 +300,218 @@ def fit(paths: list[Path], role: str) -> dict[str, dict]:
         distance = sum(((observed[k] - at[i]) / sd[i]) ** 2 for i, k in enumerate(STATISTICS))
         skill = float(fine[int(np.argmin(distance))])
         policy, agent = people[name]
+        parameters, errors = parameters_of([t for _, t in own], policy, agent, role, designs)
         out[name] = {
-            "partner": f"human({policy},skill={skill:g})",
+            "partner": human_with(policy, parameters, skill=skill),
             "policy": policy,
             "skill": skill,
+            "parameters": parameters,
+            "errors": errors,
             "agent": agent,
             "statistics": observed,
             "traits": traits([t for _, t in own]),
             "recordings": [str(p) for p, _ in own],
         }
     return out
+
+
+# ---------------------------------------------------------------- the model's parameters, fitted
+
+LAGS = (0, 4, 8, 12)  # frames: where the policy's likelihood of the keys is read (signature)
+DESIGN = 96  # simulated stand-ins per (policy, agent), their parameters drawn at random
+DESIGN_GAMES = 2  # games each
+DESIGN_SEED = 30  # the generator of the design's parameters
+# The parameters the regression estimates, and the range the design draws each from (ours: a bit
+# wider than novice to practised). The turn and thrust keys' hold is read directly off the keys
+# (shortest_runs): they change often enough that the floor shows. The fire key's runs are the
+# policy's as much as the person's (a policy that rarely wants a short gap never shows the
+# person's), so its burst and gap are estimated, the shortest runs among the signature.
+ESTIMATED = {
+    "reaction_ms": (150.0, 330.0),
+    "look_ms": (67.0, 400.0),
+    "lapses": (0.0, 8.0),
+    "slip": (0.0, 0.1),
+    "foresight": (0.0, 1.0),
+    "fire_ms": (33.0, 333.0),
+    "fire_gap_ms": (33.0, 200.0),
+}
+HOLDS = ("hold_ms", "fire_ms", "fire_gap_ms")  # shortest_runs' names
+HOLD_RANGE = (33.0, 167.0)  # the design's turn and thrust hold
+
+SIGNATURE = (
+    *(f"likelihood_{lag}" for lag in LAGS),
+    "key_changes_per_s",
+    "turn_reversals",
+    "frozen_per_minute",
+    "frozen_share",
+    "fires_per_s",
+    "fires_open_share",
+    "kills_per_minute",
+    *HOLDS,
+)
+
+
+def shortest_runs(actions: list[np.ndarray]) -> dict[str, float]:
+    """The holds, read directly, in ms over all games: the turn and thrust keys' commonest inner
+    run (`hold_ms`: the model changes a dithering key as soon as its hold allows, so most runs are
+    the hold, and a run the page's timing cuts a frame short, as in a study's recordings, does not
+    move it); the fire key's shortest run down (`fire_ms`: a burst) and up (`fire_gap_ms`). A hold
+    the keys never show is left to its longest bound."""
+    found: dict[str, list[int]] = {"hold_ms": [], "fire_ms": [], "fire_gap_ms": []}
+    for game in actions:
+        for k, key in enumerate(split_action(game)):
+            changes = np.flatnonzero(np.diff(key)) + 1
+            runs, pressed = np.diff(changes), key[changes[:-1]] != 0
+            if k < 2:
+                found["hold_ms"] += runs.tolist()
+            else:
+                found["fire_ms"] += runs[pressed].tolist()
+                found["fire_gap_ms"] += runs[~pressed].tolist()
+    read = {"hold_ms": lambda runs: np.bincount(runs).argmax(), "fire_ms": min, "fire_gap_ms": min}
+    return {
+        name: float(read[name](runs) * FRAME_MS) if runs else PARAMETERS[name][1]
+        for name, runs in found.items()
+    }
+
+
+def signature(actions: np.ndarray, obs: np.ndarray, kills_per_minute: float, policy) -> np.ndarray:
+    """What one game's keys say of the person's parameters (SIGNATURE): the mean log-likelihood of
+    their keys under the policy on the state of `lag` frames before, moved to now by the forward
+    model (the person's own ship by their keys), over the frames alive and not in a long run; key
+    changes per second; the share of turn changes straight from left to right or back (slips make
+    them); runs of 0.5 s or more without a change (ship alive) per minute, and their share of the
+    time; fire presses per second, the share of them made while the fortress is vulnerable;
+    kills/min; the holds (shortest_runs). Which parameter each speaks for is the regression's to
+    find (regress)."""
+    frames = len(actions)
+    keys = np.array(split_action(actions))
+    when = np.flatnonzero((np.diff(keys, axis=1) != 0).any(axis=0)) + 1
+    lengths = np.diff(np.concatenate([[0], when, [frames]]))
+    alive = obs[:, ob.SELF + ob.ALIVE] > 0.5
+    frozen = np.repeat(lengths >= FROZEN, lengths) & alive
+    rules = rules_of(GameConfig())
+    likelihoods = []
+    for lag in LAGS:  # over the frames alive and not frozen: a lapse's frames say nothing of the lag
+        t = np.arange(lag, frames)
+        ring = np.zeros((len(t), HISTORY), np.int64)  # predict reads keys at (0 - lag + k) % HISTORY
+        if lag:
+            back = np.arange(-lag, 0)
+            ring[:, back % HISTORY] = actions[t[:, None] + back[None]]
+        moved = predict(obs[t - lag], np.full(len(t), lag), np.zeros(len(t), np.int64), ring, 0, rules)
+        probs = batch_probs(policy, in_view(moved, policy.view))[np.arange(len(t)), actions[t]]
+        likelihoods.append(float(np.mean(np.log(np.maximum(probs, 1e-9))[alive[t] & ~frozen[t]])))
+    turns = keys[0][np.flatnonzero(np.diff(keys[0]) != 0)[:, None] + [0, 1]]  # (changes, before/after)
+    reversals = float(np.mean(turns.min(axis=1) > 0)) if len(turns) else 0.0  # left <-> right at once
+    starts = np.flatnonzero(np.diff(np.concatenate([[0], frozen.astype(np.int64)])) == 1)
+    pressed = np.flatnonzero(np.diff(np.concatenate([[0], keys[2]])) == 1)
+    open_share = obs[pressed, ob.FORTRESS + ob.F_VULNERABLE] > 0.0
+    seconds = frames / 30.0
+    return np.array(
+        [
+            *likelihoods,
+            len(when) / seconds,
+            reversals,
+            len(starts) / seconds * 60.0,
+            float(frozen.mean()),
+            len(pressed) / seconds,
+            float(open_share.mean()) if len(pressed) else 0.0,
+            kills_per_minute,
+            *shortest_runs([actions]).values(),
+        ]
+    )
+
+
+def design(policy: str, agent: str, role: str) -> tuple[np.ndarray, np.ndarray]:
+    """DESIGN stand-ins of `policy` with `agent`, each parameter of ESTIMATED and the hold drawn
+    uniformly in its range, DESIGN_GAMES games each: their (DESIGN, ESTIMATED) parameters and
+    (DESIGN, SIGNATURE) mean signatures."""
+    rng = np.random.default_rng(DESIGN_SEED)
+    ranges = {**ESTIMATED, "hold_ms": HOLD_RANGE}
+    drawn = [{name: rng.uniform(*bounds) for name, bounds in ranges.items()} for _ in range(DESIGN)]
+    teams = [
+        (human_with(policy, d), agent) if role == "bait" else (agent, human_with(policy, d)) for d in drawn
+    ]
+    kills, actions, obs = play_seat(teams, list(range(DESIGN_GAMES)), role)
+    inner = networks.load(policy)
+    signatures = np.array(
+        [
+            np.mean(
+                [signature(a, o, k, inner) for a, o, k in zip(actions[i], obs[i], kills[i], strict=True)], 0
+            )
+            for i in range(DESIGN)
+        ]
+    )
+    return np.array([[d[name] for name in ESTIMATED] for d in drawn]), signatures
+
+
+def human_with(policy: str, parameters: dict[str, float], **settings: float) -> str:
+    """The human(...) partner of a policy played with these parameters (PARAMETERS' order), after
+    other settings (skill, input_ms) where given."""
+    values = [f"{name}={value:g}" for name, value in settings.items()]
+    values += [f"{name}={parameters[name]:.3g}" for name in PARAMETERS if name in parameters]
+    return f"human({policy},{','.join(values)})"
+
+
+def regress(drawn: np.ndarray, signatures: np.ndarray, observed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each parameter estimated from a signature by a ridge regression fitted on the design (the
+    statistic-to-parameter map, calibrated by simulation), clipped to its range: the estimates at
+    `observed` and each parameter's error, the root mean square of its leave-one-out residuals."""
+    centre, scale = signatures.mean(0), signatures.std(0) + 1e-9
+    x = np.column_stack([np.ones(len(drawn)), (signatures - centre) / scale])
+    ridge = np.eye(x.shape[1]) * RIDGE
+    ridge[0, 0] = 0.0
+    inverse = np.linalg.inv(x.T @ x + ridge)
+    coefficients = inverse @ x.T @ drawn
+    leverage = np.einsum("ij,jk,ik->i", x, inverse, x)
+    residuals = (drawn - x @ coefficients) / (1.0 - leverage)[:, None]
+    low, high = np.array(list(ESTIMATED.values())).T
+    estimate = np.concatenate([[1.0], (observed - centre) / scale]) @ coefficients
+    return np.clip(estimate, low, high), np.sqrt(np.mean(residuals**2, axis=0))
+
+
+RIDGE = 1.0  # the regression's ridge, in units of the standardised signature (ours)
+
+
+def parameters_of(own: list[Trial], policy: str, agent: str, role: str, designs: dict) -> tuple[dict, dict]:
+    """A participant's parameters: the turn and thrust hold read off their keys, the rest by the
+    regression over the design of their policy and agent (made once for each, kept in `designs`);
+    and the regression's error of each."""
+    if (policy, agent) not in designs:
+        designs[policy, agent] = design(policy, agent, role)
+    drawn, signatures = designs[policy, agent]
+    inner = networks.load(policy)
+    observed = np.mean([signature(t.actions, t.obs, t.kills_per_minute, inner) for t in own], 0)
+    estimate, error = regress(drawn, signatures, observed)
+    names = list(ESTIMATED)
+    holds = shortest_runs([t.actions for t in own])
+    return holds | dict(zip(names, estimate.tolist(), strict=True)), dict(
+        zip(names, error.tolist(), strict=True)
+    )
+
+
+def play_seat(teams: list[tuple[str, str]], seeds: list[int], role: str) -> tuple[np.ndarray, ...]:
+    """Games of (bait, shooter) partners by name, every team with every seed, in one batch: the
+    (teams, seeds) kills/min and, of `role`'s seat, the (teams, seeds, frames) actions and the
+    (teams, seeds, frames, 64) world view of each frame's state."""
+    from services.adapter.partner_lanes import Partners  # bulk play only: numba loads with it
+    from services.sim.batch import BatchGame
+    from services.sim.batch_observation import observe
+
+    keys = np.array([seed for _ in teams for seed in seeds], np.int64)
+    batch = BatchGame(len(keys), None, keys)
+    seats = [Partners([team[i] for team in teams for _ in seeds], r, keys) for i, r in enumerate(ROLES)]
+    frames = batch.config.frames
+    actions = np.zeros((len(keys), frames), np.int64)
+    obs = np.zeros((len(keys), frames, ob.TIME + 1), np.float32)
+    while not batch.done[0]:
+        frame = int(batch.state.frame[0])
+        seen = [cache(partial(observe, batch, r)) for r in ROLES]
+        pair = [seat.act(view, frame) for seat, view in zip(seats, seen, strict=True)]
+        obs[:, frame], actions[:, frame] = seen[ROLES.index(role)]("world"), pair[ROLES.index(role)]
+        batch.step(*pair)
+    shape = (len(teams), len(seeds))
+    kills = batch.kills_per_minute().reshape(shape)
+    return kills, actions.reshape(*shape, -1), obs.reshape(*shape, frames, -1)
 
 
 def write(directory: Path, role: str, fitted: dict[str, dict], command: str) -> Path:

@@ -12,7 +12,8 @@
                              AdapterConfig that is not the default: _initial-random, _warmup150,
                              _dwell20, _hazard0.01, _noise0.1 (AdapterConfig.name and .parse)
     noisy(X), delayed(X), sticky(X), switch(X,Y), human(X), human(X,Y)   wrappers (partners.py);
-                             delayed(X,frames=N) and human(X,skill=...,input_ms=...) with settings
+                             delayed(X,frames=N) and human(X,skill=...,input_ms=...,reaction_ms=...)
+                             with settings (human_like.SETTINGS: the model's parameters too)
 
 The adaptive agent's seat and seed come from where it plays (the seat it is given, the match's
 seed), so its name carries the other seven settings. Old names read as before: every name a
@@ -43,7 +44,8 @@ WRAPPERS = {
     "switch": (2,),
     "human": (1, 2),
 }  # partners each takes
-WRAPPER_SETTINGS = {"delayed": ("frames",), "human": ("skill", "input_ms")}  # their values: partners.build
+# their values: partners.build; human's are human_like.SETTINGS (skill, input_ms, the model's parameters)
+WRAPPER_SETTINGS = {"delayed": ("frames",), "human": ("skill", "input_ms", "reaction_ms", "...")}
 POLICIES = (KEY, ZIP, PLUGIN, PROXY_KIND)  # a policy by its key: services/agent/seats.policy_of
 KINDS = (*POLICIES, RULE, FITTED, PERSON, ADAPTIVE_KIND, *WRAPPERS)
 _CALL = re.compile(r"^(\w+)\((.*)\)$")

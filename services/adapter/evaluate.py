@@ -31,7 +31,7 @@ from services.adapter.partners import PartnerError, Partners
 from services.agent import networks
 from services.sim.observation import observe
 from services.table.table import DEFAULT_TABLE
-from shared.game import ROLES, GameConfig, Policy, bait_first, other
+from shared.game import OBS_SIZE, ROLES, GameConfig, Policy, bait_first, other
 
 LANES = 1024  # games per batch at most
 
@@ -150,12 +150,18 @@ def play_games(
 
 
 def play_teams(
-    teams: list[tuple[str, str]], seeds: list[int], config: GameConfig | None = None, record: bool = False
-) -> np.ndarray | tuple[np.ndarray, np.ndarray, np.ndarray]:
+    teams: list[tuple[str, str]],
+    seeds: list[int],
+    config: GameConfig | None = None,
+    record: bool = False,
+    world_of: str = "",
+) -> np.ndarray | tuple[np.ndarray, ...]:
     """The (teams, seeds) kills/min of games of (bait partner, shooter partner) by name, one per
     team and seed, as the lanes of one batch: both seats played by partners (stand-ins, library
     keys, wrappers). With `record`, also the (teams, seeds, frames, 2) actions, bait first, and
-    the (teams, seeds, frames + 1) flags of the states in which the fortress has just fired (opened)."""
+    the (teams, seeds, frames + 1) flags of the states in which the fortress has just fired (opened);
+    with `world_of` a role, also the (teams, seeds, frames, OBS_SIZE) world view of its seat in each
+    frame's state (what a fit of that seat's person reads)."""
     from services.sim.batch import BatchGame
 
     keys = np.array([seed for _ in teams for seed in seeds], np.int64)
@@ -165,17 +171,23 @@ def play_teams(
     }
     played = np.zeros((len(keys), batch.config.frames, 2), np.int64) if record else None
     opened = np.zeros((len(keys), batch.config.frames + 1), bool)
+    world = np.zeros((len(keys), batch.config.frames, OBS_SIZE), np.float32) if world_of else None
     while not batch.done[0]:
         frame = int(batch.state.frame[0])
-        bait, shooter = (seat.act(cache(partial(observe, batch, r)), frame) for r, seat in seats.items())
+        seen = {r: cache(partial(observe, batch, r)) for r in ROLES}  # each view once a frame
+        bait, shooter = (seat.act(seen[r], frame) for r, seat in seats.items())
         if played is not None:
             played[:, frame] = np.stack([bait, shooter], axis=1)
+        if world is not None:
+            world[:, frame] = seen[world_of]("world")
         batch.step(bait, shooter)
         opened[:, frame + 1] = batch.state.vulnerable == batch.config.vulnerable_frames
-    kills = batch.kills_per_minute().reshape(len(teams), len(seeds))
+    shape = (len(teams), len(seeds))
+    kills = batch.kills_per_minute().reshape(shape)
     if played is None:
         return kills
-    return kills, played.reshape(len(teams), len(seeds), -1, 2), opened.reshape(len(teams), len(seeds), -1)
+    recorded = kills, played.reshape(*shape, -1, 2), opened.reshape(*shape, -1)
+    return recorded if world is None else (*recorded, world.reshape(*shape, batch.config.frames, -1))
 
 
 def batches(items: list, workers: int, lanes: int = LANES) -> list[list]:

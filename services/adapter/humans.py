@@ -15,7 +15,6 @@ from __future__ import annotations
 import json
 from collections import Counter
 from dataclasses import dataclass
-from functools import cache, partial
 from pathlib import Path
 
 import numpy as np
@@ -431,7 +430,8 @@ def design(policy: str, agent: str, role: str) -> tuple[np.ndarray, np.ndarray]:
     teams = [
         (human_with(policy, d), agent) if role == "bait" else (agent, human_with(policy, d)) for d in drawn
     ]
-    kills, actions, obs = play_seat(teams, list(range(DESIGN_GAMES)), role)
+    kills, played, _, obs = play_teams(teams, list(range(DESIGN_GAMES)), record=True, world_of=role)
+    actions = played[..., ROLES.index(role)]
     inner = networks.load(policy)
     signatures = np.array(
         [
@@ -487,31 +487,6 @@ def parameters_of(own: list[Trial], policy: str, agent: str, role: str, designs:
     return holds | dict(zip(names, estimate.tolist(), strict=True)), dict(
         zip(names, error.tolist(), strict=True)
     )
-
-
-def play_seat(teams: list[tuple[str, str]], seeds: list[int], role: str) -> tuple[np.ndarray, ...]:
-    """Games of (bait, shooter) partners by name, every team with every seed, in one batch: the
-    (teams, seeds) kills/min and, of `role`'s seat, the (teams, seeds, frames) actions and the
-    (teams, seeds, frames, 64) world view of each frame's state."""
-    from services.adapter.partner_lanes import Partners  # bulk play only: numba loads with it
-    from services.sim.batch import BatchGame
-    from services.sim.batch_observation import observe
-
-    keys = np.array([seed for _ in teams for seed in seeds], np.int64)
-    batch = BatchGame(len(keys), None, keys)
-    seats = [Partners([team[i] for team in teams for _ in seeds], r, keys) for i, r in enumerate(ROLES)]
-    frames = batch.config.frames
-    actions = np.zeros((len(keys), frames), np.int64)
-    obs = np.zeros((len(keys), frames, ob.TIME + 1), np.float32)
-    while not batch.done[0]:
-        frame = int(batch.state.frame[0])
-        seen = [cache(partial(observe, batch, r)) for r in ROLES]
-        pair = [seat.act(view, frame) for seat, view in zip(seats, seen, strict=True)]
-        obs[:, frame], actions[:, frame] = seen[ROLES.index(role)]("world"), pair[ROLES.index(role)]
-        batch.step(*pair)
-    shape = (len(teams), len(seeds))
-    kills = batch.kills_per_minute().reshape(shape)
-    return kills, actions.reshape(*shape, -1), obs.reshape(*shape, frames, -1)
 
 
 def write(directory: Path, role: str, fitted: dict[str, dict], command: str) -> Path:

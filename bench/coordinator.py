@@ -30,7 +30,7 @@ def fake_worker(stack: ExitStack, endpoint: str, sweep: str, name: str, games: i
 
     def answer(job: JobOrder) -> None:
         result = JobResult(
-            match=sweep, frame=0, sender=f"worker/{name}", job=job.job, values=[0.0] * games,
+            sweep=sweep, frame=0, sender=f"worker/{name}", job=job.job, values=[0.0] * games,
             library=ours.library, config=ours.config,
         )  # fmt: skip
         publisher.put(result.encode())

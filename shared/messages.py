@@ -1,7 +1,8 @@
 """Every message type on the bus: versioned msgpack records, validated where they enter a service.
 
-Each record is a map with the envelope `v` (SCHEMA_VERSION), `type`, `match`, `frame`, `sender`
-and the type's own fields. `decode(data, Type)` checks type, shape and ranges and returns the
+Each record is a map with the envelope `v` (SCHEMA_VERSION), `type`, `frame`, `sender`, the id of
+what it belongs to, named for what it holds (`match`, `sweep` or `host`: the type's `ID`), and the
+type's own fields. `decode(data, Type)` checks type, shape and ranges and returns the
 dataclass, or raises `MessageError` whose `reason` is a short, stable code that services count and
 log once per reason. docs/contract.md lists the fields.
 """
@@ -33,7 +34,7 @@ from shared.game import (
 )
 from shared.secret import same_secret, signature
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 MAX_BYTES = 64 * 1024
 MAX_FRAME = 10**9
 JOB_SEEDS = Range(1, 1000)  # games of one job (tsf sweep --chunk)
@@ -117,18 +118,20 @@ _KEY = _text(POLICY_NAME)
 _KEY_OR_NONE = _text(f"(?:{POLICY_NAME})?")
 _ACTION = _int(0, N_ACTIONS - 1)
 _SENDER = _text(r"[A-Za-z0-9_.:/-]{1,64}")
-_MATCH = _text(r"[A-Za-z0-9_-]{1,64}")
+_ID = _text(r"[A-Za-z0-9_-]{1,64}")  # a match, sweep or host id: one key chunk (keys.check_match)
 
 
 @dataclass(frozen=True, kw_only=True)
 class Message:
-    """The envelope every message carries. Every message is built by keyword: with up to a dozen
-    fields, a positional call would silently accept fields in the wrong order."""
+    """The envelope every message carries. Each type adds the id of what it belongs to, named `ID`
+    for what it holds: through its family (MatchMessage, JobMessage) or itself (HostStatus). Every
+    message is built by keyword: with up to a dozen fields, a positional call would silently accept
+    fields in the wrong order."""
 
     TYPE: ClassVar[str] = ""
+    ID: ClassVar[str] = ""
     CHECKS: ClassVar[dict[str, Check]] = {}
 
-    match: str
     frame: int
     sender: str
 
@@ -139,7 +142,25 @@ class Message:
 
 
 @dataclass(frozen=True, kw_only=True)
-class State(Message):
+class MatchMessage(Message):
+    """A message about one match: its traffic, and a study server's and a match host's about it."""
+
+    ID: ClassVar[str] = "match"
+
+    match: str
+
+
+@dataclass(frozen=True, kw_only=True)
+class JobMessage(Message):
+    """A message of the job system, within one sweep (one run of jobs: a table or an evaluation)."""
+
+    ID: ClassVar[str] = "sweep"
+
+    sweep: str
+
+
+@dataclass(frozen=True, kw_only=True)
+class State(MatchMessage):
     """One frame of the game, published by the sim after stepping.
 
     `obs` holds each role's world-view observation values (float64, docs/observation.md), from
@@ -176,7 +197,7 @@ class State(Message):
 
 
 @dataclass(frozen=True, kw_only=True)
-class Action(Message):
+class Action(MatchMessage):
     """A player's action for the state of `frame`, from an agent (`policy` = its key) or a human.
     `failures` counts the frames of this match on which the seat's policy raised or answered no
     action (it played no-op then); `failure` says why, on the frame it happened, else ""."""
@@ -198,7 +219,7 @@ class Action(Message):
 
 
 @dataclass(frozen=True, kw_only=True)
-class PolicySwitch(Message):
+class PolicySwitch(MatchMessage):
     """Tells the agent of `role` to play library policy `policy` from the next frame on."""
 
     TYPE: ClassVar[str] = "policy"
@@ -210,7 +231,7 @@ class PolicySwitch(Message):
 
 
 @dataclass(frozen=True, kw_only=True)
-class GameEvent(Message):
+class GameEvent(MatchMessage):
     """Something that happened in a frame (services/sim/engine.py Event), or the match's start/end."""
 
     TYPE: ClassVar[str] = "event"
@@ -249,7 +270,7 @@ def _config(value: Any) -> bool:
 
 
 @dataclass(frozen=True, kw_only=True)
-class Start(Message):
+class Start(MatchMessage):
     """The match's set-up, published by the sim when it starts: enough to replay it."""
 
     TYPE: ClassVar[str] = "start"
@@ -267,7 +288,7 @@ class Start(Message):
 
 
 @dataclass(frozen=True, kw_only=True)
-class Summary(Message):
+class Summary(MatchMessage):
     """The match result, published once by the sim when the match ends."""
 
     TYPE: ClassVar[str] = "summary"
@@ -291,7 +312,7 @@ class Summary(Message):
 
 
 @dataclass(frozen=True, kw_only=True)
-class AdapterStatus(Message):
+class AdapterStatus(MatchMessage):
     """The adapter's view of the partner, published a few times a second and on every switch.
 
     `role` is the adaptive agent's seat (the partner plays the other); `scores` holds the CEM
@@ -356,10 +377,10 @@ def _plain(depth: int = 4) -> Check:
 
 
 @dataclass(frozen=True, kw_only=True)
-class JobOrder(Message):
+class JobOrder(JobMessage):
     """A coordinator's job for one worker slot: one piece of a bulk computation (a table cell's
     games, a batch of evaluation games, sessions, identification runs), its `kind` saying which.
-    `match` carries the sweep id; `args` are the kind's arguments; `plugins` the `module:attr`
+    `args` are the kind's arguments; `plugins` the `module:attr`
     partners or policies it needs imported; `library` and `config` the hashes the worker's own copies
     must have; `batch` the jobs handed to the worker at once, this one among them (sent back to back,
     played together)."""
@@ -388,7 +409,7 @@ FAULTS = ("", "worker", "job")  # whose fault a failed job is ("" for a result)
 
 
 @dataclass(frozen=True, kw_only=True)
-class JobResult(Message):
+class JobResult(JobMessage):
     """A worker's answer to a job: the kind's values, or why it could not run it, with whose
     `fault` that is: "worker" when this worker cannot (other library, rules or a plug-in missing:
     no more jobs of the sweep go to it, others may run it), "job" when the job itself failed and
@@ -423,18 +444,21 @@ _AUTH = _text(r"(?:[0-9a-f]{64})?")  # a host message's HMAC (sealed), "" before
 
 @dataclass(frozen=True, kw_only=True)
 class HostStatus(Message):
-    """A match host's capacity, put every second while it runs. `match` carries the host's name."""
+    """A match host's capacity, put every second while it runs: the one message a host puts about
+    itself rather than about one of its matches, so its id is the host's name."""
 
     TYPE: ClassVar[str] = "host_status"
+    ID: ClassVar[str] = "host"
     CHECKS: ClassVar[dict[str, Check]] = {"slots": _int(0, 1024), "free": _int(0, 1024), "auth": _AUTH}
 
+    host: str
     slots: int = 1
     free: int = 1
     auth: str = ""
 
 
 @dataclass(frozen=True, kw_only=True)
-class MatchOffer(Message):
+class MatchOffer(MatchMessage):
     """A study server asks a match host to run a match: its seats (a policy key, `human` for a seat
     the server plays over the router, "" for the adaptive seat), the adaptive agent's name if any,
     how long the sim waits for the players and how long the whole match may take. `library` and
@@ -467,7 +491,7 @@ class MatchOffer(Message):
 
 
 @dataclass(frozen=True, kw_only=True)
-class MatchAnswer(Message):
+class MatchAnswer(MatchMessage):
     """A match host's reply to an offer: accepted, or why not (full, other library, ...)."""
 
     TYPE: ClassVar[str] = "match_answer"
@@ -483,7 +507,7 @@ class MatchAnswer(Message):
 
 
 @dataclass(frozen=True, kw_only=True)
-class MatchStop(Message):
+class MatchStop(MatchMessage):
     """A study server asks the match host to end `match` now (the participant left, or it ran late)."""
 
     TYPE: ClassVar[str] = "match_stop"
@@ -493,7 +517,7 @@ class MatchStop(Message):
 
 
 @dataclass(frozen=True, kw_only=True)
-class MatchDone(Message):
+class MatchDone(MatchMessage):
     """A match host's match has ended: `error` says why it failed ("" if it did not), and `size` and
     `sha256` describe its recording (size 0: none), which the server then fetches in chunks."""
 
@@ -512,7 +536,7 @@ class MatchDone(Message):
 
 
 @dataclass(frozen=True, kw_only=True)
-class RecordingChunk(Message):
+class RecordingChunk(MatchMessage):
     """A host's reply to a recording query: up to CHUNK bytes from `offset` of a `size`-byte file."""
 
     TYPE: ClassVar[str] = "recording_chunk"
@@ -529,21 +553,21 @@ class RecordingChunk(Message):
     auth: str = ""
 
 
-HostMessage = TypeVar("HostMessage", bound=Message)  # one of the six above, each with its `auth`
+Sealed = TypeVar("Sealed", bound=Message)  # one of the six above, each with its `auth`
 
 
-def sealed(message: HostMessage, secret: bytes) -> HostMessage:
+def sealed(message: Sealed, secret: bytes) -> Sealed:
     """A match-host message signed with the study's host secret: its `auth` is the HMAC-SHA256 of
     its encoding with `auth` empty, so a peer without the secret can neither make one nor alter one."""
     return dataclasses.replace(message, auth=_seal(message, secret))
 
 
-def authentic(message: HostMessage, secret: bytes) -> bool:
+def authentic(message: Sealed, secret: bytes) -> bool:
     """Whether `message` was sealed with `secret` (compared as bytes)."""
     return same_secret(message.auth, _seal(message, secret))
 
 
-def _seal(message: HostMessage, secret: bytes) -> str:
+def _seal(message: Sealed, secret: bytes) -> str:
     unsealed = dataclasses.replace(message, auth="").encode()
     return hmac.new(secret, unsealed, hashlib.sha256).hexdigest()
 
@@ -566,7 +590,12 @@ TYPES: dict[str, type[Message]] = {
         HostStatus, MatchOffer, MatchAnswer, MatchStop, MatchDone, RecordingChunk,
     )
 }  # fmt: skip
-_ENVELOPE: dict[str, Check] = {"match": _MATCH, "frame": _int(0, MAX_FRAME), "sender": _SENDER}
+# Version 1 named every family's id `match`: for a match's own traffic, what a recording holds, that
+# is still its name, so old recordings load. A live job or host peer of version 1 is refused
+# (`version`): it would refuse this version's answers, and a sealed message's seal covers its
+# version.
+RECORDED = frozenset((Start, State, Action, PolicySwitch, GameEvent, Summary, AdapterStatus))
+_ENVELOPE: dict[str, Check] = {"frame": _int(0, MAX_FRAME), "sender": _SENDER}
 M = TypeVar("M", bound=Message)
 
 
@@ -611,7 +640,7 @@ def _unpack(data: bytes | bytearray | memoryview) -> dict:
         raise MessageError("undecodable", f"not msgpack: {type(exc).__name__}") from None
     if not isinstance(record, dict):
         raise MessageError("shape", f"expected a map, got {type(record).__name__}")
-    if type(record.get("v")) is not int or record["v"] != SCHEMA_VERSION:
+    if type(record.get("v")) is not int or record["v"] not in (1, SCHEMA_VERSION):
         raise MessageError("version", f"schema version {record.get('v')!r}, expected {SCHEMA_VERSION}")
     return record
 
@@ -619,7 +648,11 @@ def _unpack(data: bytes | bytearray | memoryview) -> dict:
 def _build(record: dict, expected: type[M]) -> M:
     if record.get("type") != expected.TYPE:
         raise MessageError("type", f"expected {expected.TYPE!r}, got {record.get('type')!r}")
-    checks = {**_ENVELOPE, **expected.CHECKS}
+    if record["v"] != SCHEMA_VERSION and expected not in RECORDED:
+        raise MessageError(
+            "version", f"{expected.TYPE} of schema version {record['v']}, expected {SCHEMA_VERSION}"
+        )
+    checks = {**_ENVELOPE, expected.ID: _ID, **expected.CHECKS}
     extra = set(record) - set(checks) - {"v", "type"}
     if extra:
         raise MessageError("shape", f"unexpected fields {sorted(extra)}")

@@ -10,6 +10,7 @@ import asyncio
 import contextlib
 import dataclasses
 import hashlib
+import hmac
 import json
 import signal
 import subprocess
@@ -17,6 +18,7 @@ import sys
 import threading
 from pathlib import Path
 
+import msgpack
 import pytest
 import zenoh
 from conftest import STAND_IN_TOKEN, wait_until
@@ -38,6 +40,7 @@ from shared.messages import (
     MatchAnswer,
     MatchDone,
     MatchOffer,
+    Message,
     RecordingChunk,
     decode,
     recording_query,
@@ -205,7 +208,7 @@ def test_a_peer_without_the_host_secret_can_neither_offer_slots_nor_return_a_rec
             z.declare_queryable(keys.host_offer(rogue), answer),
             z.declare_queryable(keys.host_recording(rogue), chunk),
         ):
-            status = HostStatus(match=rogue, frame=0, sender=f"host/{rogue}", slots=8, free=8)
+            status = HostStatus(host=rogue, frame=0, sender=f"host/{rogue}", slots=8, free=8)
             for _ in range(10):
                 z.put(keys.host_status(rogue), status.encode())
                 z.put(keys.host_status(rogue), sealed(status, wrong).encode())
@@ -233,5 +236,33 @@ def test_a_peer_without_the_host_secret_can_neither_offer_slots_nor_return_a_rec
             z.put(keys.host_done(rogue), sealed(done, wrong).encode())
             assert wait_until(lambda: remote.drops.counts["unauthenticated"] >= 24, timeout=10)
             assert remote.done == {} and not (tmp_path / "m.tsflog").exists()
+    finally:
+        remote.close()
+
+
+def version_1(message: Message, secret: bytes) -> bytes:
+    """`message` as a match host of schema version 1 put it: `v` 1, its id named `match`, sealed with
+    the secret over that encoding."""
+    record = msgpack.unpackb(message.encode(), raw=False)
+    record.update(v=1, match=record.pop(message.ID), auth="")
+    record["auth"] = hmac.new(secret, msgpack.packb(record, use_bin_type=True), hashlib.sha256).hexdigest()
+    return msgpack.packb(record, use_bin_type=True)
+
+
+def test_a_match_host_of_schema_version_1_is_refused_as_such() -> None:
+    """A version-1 host that holds the secret: the server counts its status as `version` (not as a
+    forgery) and sees no slot of it; a host must run the server's version."""
+    endpoint = free_endpoint()
+    remote = Remote(BusConfig("router", (endpoint,)), SECRET)
+    status = version_1(HostStatus(host="lab-1", frame=0, sender="host/lab-1", slots=2, free=2), SECRET)
+    try:
+        with (
+            session(BusConfig("client", (), (endpoint,))) as z,
+            z.liveliness().declare_token(keys.host_alive("lab-1")),
+        ):
+            assert wait_until(
+                lambda: z.put(keys.host_status("lab-1"), status) or remote.drops.counts["version"] >= 3
+            )
+            assert remote.hosts() == {} and remote.drops.counts["unauthenticated"] == 0
     finally:
         remote.close()

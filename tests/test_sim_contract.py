@@ -15,7 +15,7 @@ from services.sim.engine import Game
 from services.sim.service import run_sim
 from shared import keys
 from shared.game import ROLES, GameConfig
-from shared.messages import MAX_BYTES, Action, GameEvent, Start, State, Summary, decode
+from shared.messages import MAX_BYTES, SCHEMA_VERSION, Action, GameEvent, Start, State, Summary, decode
 
 SEED = 11
 POLICIES = {"bait": "hand", "shooter": "hand"}
@@ -190,7 +190,7 @@ def bad_inputs(match: str, frame: int, rng: random.Random) -> list[tuple[str, by
         ("bait", b"\0" * (MAX_BYTES + 1), "too_large"),
         ("bait", msgpack.packb([1, 2, 3]), "shape"),
         ("shooter", msgpack.packb({"v": 1, "type": "action", "match": match}), "shape"),
-        ("bait", record(v=2), "version"),
+        ("bait", record(v=SCHEMA_VERSION + 1), "version"),
         ("bait", record(type="summary"), "type"),
         ("shooter", action(role="shooter", action=99), "range"),
         ("shooter", action(role="bait"), "mismatch"),

@@ -116,7 +116,7 @@ class Coordination:
         take (over the size limit, or breaking the job contract a worker checks) is a Failure here,
         before anything is sent, rather than a job that waits for its timeout."""
         message = JobOrder(
-            match=self.sweep, frame=0, sender="coordinator", job=job.id, kind=job.kind, args=job.args,
+            sweep=self.sweep, frame=0, sender="coordinator", job=job.id, kind=job.kind, args=job.args,
             plugins=list(job.plugins), library=self.ours.library, config=self.ours.config,
             batch=self.per_worker,
         )  # fmt: skip
@@ -219,7 +219,7 @@ def run_worker(bus: BusConfig, sweep: str, worker: str, stop: threading.Event | 
         def answer(job: JobOrder, values: list, error: str, fault: str, seconds: float) -> None:
             error = printable(error, 300)
             result = JobResult(
-                match=sweep, frame=0, sender=sender, job=job.job, values=values, error=error,
+                sweep=sweep, frame=0, sender=sender, job=job.job, values=values, error=error,
                 fault=fault if error else "", seconds=seconds, library=ours.library, config=ours.config,
             )  # fmt: skip
             publisher.put(result.encode())

@@ -103,7 +103,7 @@ class Host:
         with self.lock:
             free = max(0, self.slots - len(self.running))
         return sealed(
-            HostStatus(match=self.name, frame=0, sender=self.sender, slots=self.slots, free=free), self.secret
+            HostStatus(host=self.name, frame=0, sender=self.sender, slots=self.slots, free=free), self.secret
         )
 
     def check(self, message: MatchOffer | MatchStop) -> None:

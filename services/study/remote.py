@@ -100,10 +100,10 @@ class Remote:
     def _on_status(self, status: HostStatus) -> None:
         self._check(status)
         with self.changed:
-            if status.match not in self.alive or self.slots.get(status.match) == status.slots:
+            if status.host not in self.alive or self.slots.get(status.host) == status.slots:
                 return
-            log.info("match host %s offers %d slots", status.match, status.slots)
-            self.slots[status.match] = status.slots
+            log.info("match host %s offers %d slots", status.host, status.slots)
+            self.slots[status.host] = status.slots
         self.on_change()
 
     def _on_done(self, done: MatchDone) -> None:

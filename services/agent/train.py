@@ -33,6 +33,8 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv
 
 from services import envs
+from services.adapter.human_like import HumanLike
+from services.adapter.partners import HumanLanes, make_partner
 from services.agent import library, networks
 from services.agent.library import FEATURES, LIBRARY, Recipe
 from services.agent.networks import HEAD_SIZES, HEADS
@@ -129,8 +131,6 @@ def recipe_partner(name: str, recipe: Recipe, config: GameConfig, root: Path):  
     batched form (adapter/partners.py), stateful per lane. Anything else is a UsageError."""
     if name in library.registry(root):
         return networks.load(name, config, root)
-    from services.adapter.human_like import HumanLike  # the adapter's partners: only when named
-    from services.adapter.partners import HumanLanes, make_partner
 
     partner = make_partner(name, other(recipe.role))
     if not isinstance(partner, HumanLike):

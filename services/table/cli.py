@@ -7,11 +7,11 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from services.options import GAMES, RAY, WORKERS, bus_options, console, number, output
+from services.options import GAMES, RAY, WORKERS, Role, bus_options, console, number, output
 from services.table.table import LANES
 from shared.bus import BusConfig, stop_on_signals
 from shared.errors import Failure, UsageError
-from shared.game import ROLES, Range
+from shared.game import Range, other
 from shared.messages import JOB_SEEDS
 
 commands = typer.Typer()
@@ -112,7 +112,7 @@ def table_command(
 
 @commands.command("skill-table")
 def skill_table(
-    role: str = typer.Option("shooter", help="Our seat: its library teammates are the columns."),
+    role: Role = typer.Option("shooter", help="Our seat: its library teammates are the columns."),
     games: int = number(20, GAMES, "Seeded one-minute games per cell (seeds 0..games-1)."),
     teammate: list[str] | None = typer.Option(None, help="Our seat's teammate, repeatable (default: all)."),
     style: list[str] | None = typer.Option(
@@ -134,8 +134,6 @@ def skill_table(
     With --into, measures only the --teammate columns and adds them to that table."""
     from services.table.skills import SkillTable, measure, summary
 
-    if role not in ROLES:
-        raise UsageError("--role", role, "not a seat", ROLES)
     before = SkillTable.load(into) if into else None
     if before:
         new = [t for t in _keys(teammate, before.role) if t not in before.teammates]
@@ -146,7 +144,7 @@ def skill_table(
         added = measure(before.role, new, list(before.styles), before.skills, before.games, workers)
         table = before.extend(added)
     else:
-        partner_role = ROLES[1 - ROLES.index(role)]
+        partner_role = other(role)
         table = measure(role, _keys(teammate, role), _keys(style, partner_role), games=games, workers=workers)
     table.save(out)
     text = summary(table, _p_best(table))

@@ -19,6 +19,7 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from services.adapter.evaluate import play_teams
 from services.agent import library
 from services.provenance import provenance
 from services.table.table import stderr
@@ -141,7 +142,6 @@ class SkillTable:
 
 
 def _play(teams: list[tuple[str, str]], games: int) -> list[list[float]]:
-    from services.adapter.evaluate import play_teams  # bulk play: numba loads with it
 
     return play_teams(teams, list(range(games))).tolist()
 

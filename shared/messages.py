@@ -195,6 +195,12 @@ class State(MatchMessage):
     applied: list[int] = field(default_factory=lambda: [0, 0])  # the actions that led to this frame
     sent_ns: int = 0
 
+    @property
+    def last(self) -> bool:
+        """The game's last state: the sim applies no answer to it, so no seat sends one (a late
+        answer would reach the recording or not by timing)."""
+        return self.frame >= self.frames
+
 
 @dataclass(frozen=True, kw_only=True)
 class Action(MatchMessage):

@@ -30,7 +30,7 @@ def run_agent(
         )
 
         def on_state(state: State) -> None:
-            if state.frame >= state.frames:  # the game's last state: the sim applies no answer to it
+            if state.last:
                 return
             action = player.act(state, sender)
             if action.failure and action.failures == 1:  # one line a match; the sim counts the rest

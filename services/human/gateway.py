@@ -180,7 +180,7 @@ class Bridge:
 
     def _on_state(self, state: State) -> None:
         self._check(state)
-        if self.token is not None:
+        if self.token is not None and not state.last:
             action = Action(
                 match=self.match,
                 frame=state.frame,

@@ -83,9 +83,8 @@ class Variant:
 
     def adaptive(self, agent_role: str, seed: int) -> AdapterConfig | None:
         """The adaptive agent this variant plays in `agent_role`'s seat, or None for a static one."""
-        if not self.adapter or getattr(self, agent_role):
-            return None
-        return self.adapter.adaptive(agent_role, seed)
+        seat = self.seat(agent_role)
+        return seat.adaptive(agent_role, seed) if seat else None
 
     def seat(self, agent_role: str) -> SeatSpec:
         """What plays `agent_role`'s seat (MatchPlan's field of that name): the static policy the

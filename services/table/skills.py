@@ -19,7 +19,7 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from services.adapter.evaluate import play_teams
+from services.adapter.evaluate import batches, play_teams
 from services.agent import library
 from services.provenance import provenance
 from services.table.table import stderr
@@ -142,7 +142,6 @@ class SkillTable:
 
 
 def _play(teams: list[tuple[str, str]], games: int) -> list[list[float]]:
-
     return play_teams(teams, list(range(games))).tolist()
 
 
@@ -160,8 +159,7 @@ def measure(
     partners = [stand_in(style, skill) for style in styles for skill in skills]
     pairs = [(p, t) for p in partners for t in teammates]
     teams = [(t, p) if role == "bait" else (p, t) for p, t in pairs]
-    per = max(1, LANES // games)
-    chunks = [teams[i : i + per] for i in range(0, len(teams), per)]
+    chunks = batches(teams, workers, max(1, LANES // games))  # a game is the same in any batch
     if workers > 1:
         with ProcessPoolExecutor(workers) as pool:
             played = [row for chunk in pool.map(_play, chunks, [games] * len(chunks)) for row in chunk]

@@ -102,6 +102,22 @@ FROZEN = 15  # frames (0.5 s) without a key change: a lapse, or a long hold
 STATISTICS = ("key_changes_per_s", "frozen_share", "response_ms", "fires_per_s", "kills_per_minute")
 
 
+def changes(keys: np.ndarray) -> np.ndarray:
+    """The frames at which any of the keys (3, frames) changes."""
+    return np.flatnonzero((np.diff(keys, axis=1) != 0).any(axis=0)) + 1
+
+
+def still(when: np.ndarray, frames: int) -> np.ndarray:
+    """Each frame's run without a key change (frames), from the changes `when`."""
+    lengths = np.diff(np.concatenate([[0], when, [frames]]))
+    return np.repeat(lengths, lengths)
+
+
+def fire_presses(keys: np.ndarray) -> np.ndarray:
+    """The frames at which the fire key goes down (a press held from the first frame counts)."""
+    return np.flatnonzero(np.diff(np.concatenate([[0], keys[2]])) == 1)
+
+
 def statistics(actions: np.ndarray, opened: np.ndarray, kills_per_minute: float) -> dict[str, float]:
     """What a person's keys say about them, over one game's actions (frames,) and the frames at
     which the fortress opened (fired a shell): key changes per second, the share of frames in runs
@@ -109,8 +125,7 @@ def statistics(actions: np.ndarray, opened: np.ndarray, kills_per_minute: float)
     change (as ms), fire presses per second, and the game's kills/min; and the shortest key run
     (5th percentile, ms), the person's shortest press."""
     keys = np.array(split_action(actions))  # (3, frames)
-    changed = (np.diff(keys, axis=1) != 0).any(axis=0)
-    when = np.flatnonzero(changed) + 1
+    when = changes(keys)
     bounds = np.concatenate([[0], when, [len(actions)]])
     runs = np.diff(bounds)
     per_key = [np.diff(np.flatnonzero(np.diff(k) != 0)) for k in keys]
@@ -198,18 +213,16 @@ def traits(trials: list[Trial]) -> dict[str, float]:
     reactions, holds, lapsed, alive, presses, open_presses, frames = [], {k: [] for k in KEYS}, 0, 0, 0, 0, 0
     for t in trials:
         keys = np.array(split_action(t.actions))  # (3, frames)
-        when = np.flatnonzero((np.diff(keys, axis=1) != 0).any(axis=0)) + 1
+        when = changes(keys)
         after = np.searchsorted(when, t.cues, side="right")
         reactions += [when[i] - c for i, c in zip(after, t.cues, strict=True) if i < len(when)]
         for name, key in zip(KEYS, keys, strict=True):
             edges = np.flatnonzero(np.diff(np.concatenate([[0], key, [0]])) != 0)
             runs = np.diff(edges)[key[edges[:-1]] != 0]  # runs of one held value
             holds[name] += list(runs)
-        lengths = np.diff(np.concatenate([[0], when, [len(t.actions)]]))
-        run_of = np.repeat(lengths, lengths)  # each frame's run without a key change
-        lapsed += int(np.sum(t.alive & (run_of >= LAPSE)))
+        lapsed += int(np.sum(t.alive & (still(when, len(t.actions)) >= LAPSE)))
         alive += int(t.alive.sum())
-        pressed = np.flatnonzero(np.diff(np.concatenate([[0], keys[2]])) == 1)
+        pressed = fire_presses(keys)
         presses += len(pressed)
         open_presses += int(t.vulnerable[pressed].sum())
         frames += len(t.actions)
@@ -384,10 +397,9 @@ def signature(actions: np.ndarray, obs: np.ndarray, kills_per_minute: float, pol
     find (regress)."""
     frames = len(actions)
     keys = np.array(split_action(actions))
-    when = np.flatnonzero((np.diff(keys, axis=1) != 0).any(axis=0)) + 1
-    lengths = np.diff(np.concatenate([[0], when, [frames]]))
+    when = changes(keys)
     alive = obs[:, ob.SELF + ob.ALIVE] > 0.5
-    frozen = np.repeat(lengths >= FROZEN, lengths) & alive
+    frozen = (still(when, frames) >= FROZEN) & alive
     rules = rules_of(GameConfig())
     likelihoods = []
     for lag in LAGS:  # over the frames alive and not frozen: a lapse's frames say nothing of the lag
@@ -402,7 +414,7 @@ def signature(actions: np.ndarray, obs: np.ndarray, kills_per_minute: float, pol
     turns = keys[0][np.flatnonzero(np.diff(keys[0]) != 0)[:, None] + [0, 1]]  # (changes, before/after)
     reversals = float(np.mean(turns.min(axis=1) > 0)) if len(turns) else 0.0  # left <-> right at once
     starts = np.flatnonzero(np.diff(np.concatenate([[0], frozen.astype(np.int64)])) == 1)
-    pressed = np.flatnonzero(np.diff(np.concatenate([[0], keys[2]])) == 1)
+    pressed = fire_presses(keys)
     open_share = obs[pressed, ob.FORTRESS + ob.F_VULNERABLE] > 0.0
     seconds = frames / 30.0
     return np.array(

@@ -19,6 +19,10 @@ tsf/host/<host>/offer               study server -> host, a query: MatchOffer, a
 tsf/host/<host>/stop                study server -> host: MatchStop (end a match early)
 tsf/host/<host>/done                host -> study server: MatchDone (the match ended; its hash)
 tsf/host/<host>/recording/<match>   study server -> host, a query (?offset=N): RecordingChunk
+
+tsf/pool/<pool>/order               launcher -> a pool's services: MatchOrder (play this match)
+tsf/pool/<pool>/stop                launcher -> a pool's services: MatchStop (end this match now)
+tsf/pool/<pool>/alive/<service>     liveliness token of each of a pool's services
 """
 
 from __future__ import annotations
@@ -143,6 +147,21 @@ def host_recording(host: str, match: str = "*") -> str:
     return f"{PREFIX}/host/{check_match(host)}/recording/{_worker(match)}"
 
 
+def pool_order(pool: str) -> str:
+    return f"{PREFIX}/pool/{check_match(pool)}/order"
+
+
+def pool_stop(pool: str) -> str:
+    return f"{PREFIX}/pool/{check_match(pool)}/stop"
+
+
+def pool_alive(pool: str, service: str = "*") -> str:
+    """A pool service's liveliness token (the default `*` matches each of the pool's services)."""
+    if service != "*" and service not in SERVICES:
+        raise UsageError("--service", service, "unknown service", SERVICES)
+    return f"{PREFIX}/pool/{check_match(pool)}/alive/{service}"
+
+
 def _worker(worker: str) -> str:
     return worker if worker == "*" else check_match(worker)
 
@@ -154,7 +173,8 @@ class Key(NamedTuple):
     kind: str  # state, start, event, summary, adapter, action, policy, alive; or a sweep's kinds
     role: str = ""  # the seat an action, policy or seat's alive key names
     service: str = ""  # the service an alive key names
-    worker: str = ""  # the worker a sweep's worker or job key names, or the match host a host key names
+    worker: str = ""  # the worker a sweep's worker or job key names, the match host a host key names,
+    # or the pool a pool key names
 
 
 _PLAIN = ("state", "start", "event", "summary", "adapter")  # tsf/<match>/<kind>
@@ -177,6 +197,12 @@ def parse(key: object) -> Key:
             return Key("", kind, worker=check_match(host))
         if kind == "recording" and len(rest) == 1:
             return Key(check_match(rest[0]), kind, worker=check_match(host))
+    if len(chunks) >= 4 and chunks[:2] == [PREFIX, "pool"]:
+        _, _, pool, kind, *rest = chunks
+        if kind in ("order", "stop") and not rest:
+            return Key("", kind, worker=check_match(pool))
+        if kind == "alive" and len(rest) == 1 and rest[0] in SERVICES:
+            return Key("", kind, service=rest[0], worker=check_match(pool))
     if len(chunks) >= 3 and chunks[0] == PREFIX:
         _, match, kind, *rest = chunks
         if kind in _PLAIN and not rest:

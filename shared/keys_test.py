@@ -98,6 +98,10 @@ def test_unknown_service(service: str) -> None:
         (keys.host_done("lab-2"), keys.Key("", "done", worker="lab-2")),
         (keys.host_recording("lab-2", M), keys.Key(M, "recording", worker="lab-2")),
         ("tsf/host/state", keys.Key("host", "state")),  # a match may be called host
+        (keys.pool_order("lab"), keys.Key("", "order", worker="lab")),
+        (keys.pool_stop("lab"), keys.Key("", "stop", worker="lab")),
+        (keys.pool_alive("lab", "sim"), keys.Key("", "alive", service="sim", worker="lab")),
+        ("tsf/pool/state", keys.Key("pool", "state")),  # a match may be called pool
     ],
 )
 def test_parse_inverts_every_builder(key: str, parts: keys.Key) -> None:
@@ -118,6 +122,9 @@ def test_parse_inverts_every_builder(key: str, parts: keys.Key) -> None:
         keys.host_recording("lab-2"),
         "tsf/host/lab-2/offer/x",
         "tsf/host/lab-2/recording",
+        keys.pool_alive("lab"),
+        "tsf/pool/lab/alive/ghost",
+        "tsf/pool/lab/order/x",
         "other/m/state",
         "bait",
         "",

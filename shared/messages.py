@@ -523,6 +523,48 @@ class MatchStop(MatchMessage):
 
 
 @dataclass(frozen=True, kw_only=True)
+class MatchOrder(MatchMessage):
+    """A launcher asks a pool's services (long-lived, many matches each) to play a match: what its
+    own command lines would say to a match's own processes. `bait`/`shooter` are the policies the
+    agent service starts each seat with ("" for a seat no agent plays: a person's), `names` what
+    the Start record calls each seat, `adaptive` the seat the adapter service adapts with the
+    adaptive agent `adapter` ("" for none), `wait_players` and `wait_services` the sim's waits
+    before the first frame (for the seats; for the recorder and the adapter), `folder` the
+    recording's folder under the recorder's own ("" for that one)."""
+
+    TYPE: ClassVar[str] = "match_order"
+    CHECKS: ClassVar[dict[str, Check]] = {
+        "seed": _SEED,
+        "frames": _int(FRAMES.low, FRAMES.high),
+        "mode": _one_of(("realtime", "lockstep")),
+        "bait": _KEY_OR_NONE,
+        "shooter": _KEY_OR_NONE,
+        "names": _map(ROLES, _KEY),
+        "adapter": _text(r"[A-Za-z0-9_.:-]{0,64}"),
+        "adaptive": _ROLE_OR_NONE,
+        "wait_players": _WAIT,
+        "wait_services": _WAIT,
+        "folder": _text(r"[A-Za-z0-9_-]{0,64}"),
+    }
+
+    seed: int = 0
+    frames: int = 1800
+    mode: str = "realtime"
+    bait: str = ""
+    shooter: str = ""
+    names: dict[str, str] = field(default_factory=dict)
+    adapter: str = ""
+    adaptive: str = ""
+    wait_players: float = 10.0
+    wait_services: float = 10.0
+    folder: str = ""
+
+    def policy(self, role: str) -> str:
+        """The policy the agent service starts `role`'s seat with; "" for a seat it does not play."""
+        return self.bait if role == "bait" else self.shooter
+
+
+@dataclass(frozen=True, kw_only=True)
 class MatchDone(MatchMessage):
     """A match host's match has ended: `error` says why it failed ("" if it did not), and `size` and
     `sha256` describe its recording (size 0: none), which the server then fetches in chunks."""
@@ -593,7 +635,7 @@ TYPES: dict[str, type[Message]] = {
     t.TYPE: t
     for t in (
         Start, State, Action, PolicySwitch, GameEvent, Summary, AdapterStatus, JobOrder, JobResult,
-        HostStatus, MatchOffer, MatchAnswer, MatchStop, MatchDone, RecordingChunk,
+        HostStatus, MatchOffer, MatchAnswer, MatchStop, MatchDone, RecordingChunk, MatchOrder,
     )
 }  # fmt: skip
 # Version 1 named every family's id `match`: for a match's own traffic, what a recording holds, that

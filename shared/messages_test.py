@@ -30,6 +30,7 @@ from shared.messages import (
     MatchAnswer,
     MatchDone,
     MatchOffer,
+    MatchOrder,
     MatchStop,
     Message,
     MessageError,
@@ -129,6 +130,12 @@ def examples() -> dict[str, Message]:
             match=M, frame=0, sender="host/lab-2", accepted=False, reason="no free slot"
         ),
         "match_stop": MatchStop(match=M, frame=0, sender="study"),
+        "match_order": MatchOrder(
+            match=M, frame=0, sender="pool/lab", seed=7, frames=300, mode="realtime", bait="",
+            shooter="S4", names={"bait": "human", "shooter": "adaptive-T30-cem"},
+            adapter="adaptive-T30-cem", adaptive="shooter", wait_players=915.0, wait_services=30.0,
+            folder="practice",
+        ),  # fmt: skip
         "match_done": MatchDone(match=M, frame=0, sender="host/lab-2", error="", size=5, sha256="ab" * 32),
         "recording_chunk": RecordingChunk(
             match=M, frame=0, sender="host/lab-2", offset=0, size=5, data=b"TSF\x00\x01"
@@ -288,6 +295,7 @@ BAD: list[tuple[str, Callable[[], bytes], type[Message] | None, str]] = [
     ("chunk as text", lambda: pack(record("recording_chunk", data="TSF")), RecordingChunk, "range"),
     ("short hash", lambda: pack(record("match_done", sha256="ab" * 31)), MatchDone, "range"),
     ("offer of a seat 'x y'", lambda: pack(record("match_offer", bait="x y")), MatchOffer, "range"),
+    ("order into folder '../x'", lambda: pack(record("match_order", folder="../x")), MatchOrder, "range"),
     (
         "config spawn",
         lambda: pack(record("start", config=config_with(bait_spawn=["a", None, []]))),

@@ -30,7 +30,7 @@ from shared import keys
 from shared.bus import BusConfig, free_endpoint, session, subscribe
 from shared.errors import Failure, UsageError
 from shared.game import ROLES
-from shared.messages import POLICY_NAME, AdapterStatus, State, Summary
+from shared.messages import POLICY_NAME, AdapterStatus, MatchOrder, State, Summary
 
 # Priorities, in nice steps from the launcher's: the sim raises itself at its first frame (where
 # permitted; its start-up runs at the launcher's), so every start-up runs below the live sims and
@@ -85,6 +85,25 @@ class MatchPlan:
     def adapter(self) -> AdapterConfig | None:
         """The adaptive agent, in its seat of this match's seed; None for a match without one."""
         return next(filter(None, (spec.adaptive(role, self.seed) for role, spec in self.seats.items())), None)
+
+    def names(self) -> dict[str, str]:
+        """What the Start record calls each seat: a policy by its name (a .zip path's name), the
+        adaptive seat by the adaptive agent's."""
+        names = {role: record_name(key) for role, key in self.policies().items()}
+        if self.adapter is not None:
+            names[self.adapter.role] = self.adapter.name
+        return names
+
+    def order(self, sender: str, folder: str = "") -> MatchOrder:
+        """This match as a pool's order (services/runtime/pool.py): the recording goes into
+        `folder` of the pool recorder's directory."""
+        policies, adapter = self.policies(), self.adapter
+        return MatchOrder(
+            match=self.match, frame=0, sender=sender, seed=self.seed, frames=self.frames, mode=self.mode,
+            **{role: "" if self.seats[role].kind == PERSON else policies[role] for role in ROLES},
+            names=self.names(), adapter=adapter.name if adapter else "", adaptive=adapter.role if adapter else "",
+            wait_players=self.wait_players, wait_services=self.wait_services, folder=folder,
+        )  # fmt: skip
 
     def policies(self) -> dict[str, str]:
         """Each seat's starting policy key; an adaptive seat starts with the adapter's initial policy."""
@@ -152,9 +171,7 @@ def run_match(
 
     match = ["--match", plan.match]
     policies = plan.policies()
-    recorded = {role: record_name(key) for role, key in policies.items()}  # a .zip path: its name
-    if plan.adapter is not None:
-        recorded[plan.adapter.role] = plan.adapter.name
+    recorded = plan.names()
     with Processes() as processes:
         processes.start(
             "sim",

@@ -4,14 +4,17 @@ arriving at random gets.
 Stand-ins (services/study/standin.py) take part in a study served here (`run_study`), over the
 page's WebSocket protocol, each playing `--trials` trials of `--trial-seconds`.
 
-Load: for each count of participants, all arrive together with a match for each; reported are
-the trials done of all (done = the recording read back complete), the worst and median tick
-jitter p99 of the matches' sims and how many are over 5 ms, Ready-to-first-frame p50/p99 over all
-trials, the waits before the offers (consent to the first, each trial's end to the next; more
-than one `--trials` for the latter), the load average, and what one participant costs:
-CPU seconds of the match processes per second of play, and the resident memory of one match's
-processes (peak over the run, divided by the matches then running). The most participants served
-is the largest count with every trial done and tick jitter p99 <= 5 ms.
+Load: for each count of participants, all arrive together with a match for each, in a study of the
+shipped config's five variants (services/study/configs/static.toml; `--adaptive`: adaptive.toml,
+three adaptive variants and two static ones), `--trials` trials of each; reported are the trials
+done of all (done = the recording read back complete), the worst and median tick jitter p99 of the
+matches' sims and how many are over 5 ms, Ready-to-first-frame p50/p99 over all trials, the waits
+before the offers (consent to the first, each trial's end to the next), the load average, and what
+one participant costs: CPU seconds of the server's pool (its sim, agent, recorder and adapter
+processes) per second of play, from the moment the pool is up to the last trial's end, and the
+pool's resident memory (peak over the run) divided by the participants. The pool's own start-up
+(once per server) is printed apart. The most participants served is the largest count with every
+trial done and tick jitter p99 <= 5 ms.
 
 Arrivals (`--arrivals N --over S`): N participants arrive at random times over S seconds with at
 most `--max-matches` matches at once: completed (goal N), lost (goal 0) and the queue wait
@@ -25,7 +28,7 @@ namespace's own loopback). `--second-host process` runs it as a plain process on
 root needed). Both hosts share this machine's CPUs: the figure shows the slots adding up and the
 protocol's cost, not a second machine's CPU.
 
-    nice .venv/bin/python bench/study.py [--counts 1 2 4 8] [--trial-seconds 10] [--trials 2] [--adaptive]
+    nice .venv/bin/python bench/study.py [--counts 1 4 8 12] [--trial-seconds 10] [--trials 1] [--adaptive]
     nice .venv/bin/python bench/study.py --arrivals 20 --over 120 --trial-seconds 5 --max-matches 4
     nice .venv/bin/python bench/study.py --arrivals 16 --over 60 --trial-seconds 5 --max-matches 2 \
         --second-host netns
@@ -36,9 +39,9 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import dataclasses
 import os
 import random
-import resource
 import statistics
 import subprocess
 import sys
@@ -46,57 +49,61 @@ import tempfile
 import threading
 import time
 from collections import Counter
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from services.human.gateway import Web
 from services.recorder.recording import load
 from services.study.core import StudyConfig, Variant
-from services.study.runner import SERVING, Serving, run_study
+from services.study.runner import Serving, run_study
 from services.study.standin import StandInReport, stand_in
 from shared.bus import BusConfig, free_endpoint
 
 TOKEN = "bench"
 HOST_SECRET = b"the-bench-host-secret"  # shared by the server and its match host
 JITTER_MS = 5.0
-ADAPTIVE = "adaptive-T400-bayes-dwell-ood-guard"
+CONFIGS = Path(__file__).resolve().parent.parent / "services" / "study" / "configs"
 
 
 def quantile(values: list[float], q: int) -> float:
     return statistics.quantiles(values, n=100, method="inclusive")[q - 1] if len(values) > 1 else values[0]
 
 
-class Memory:
-    """Samples the resident memory of this process's children (the match processes) twice a second."""
+class Children:
+    """Samples the resident memory and CPU time of this process's children (the study server's
+    pool) five times a second: the peak memory, and the CPU time they have used so far."""
 
     def __init__(self) -> None:
-        self.peak_per_match, self.stop = 0.0, threading.Event()
+        self.peak, self.cpu, self.stop = 0, dict[int, float](), threading.Event()
+        self.page, self.tick = os.sysconf("SC_PAGE_SIZE"), os.sysconf("SC_CLK_TCK")
         self.thread = threading.Thread(target=self._sample, daemon=True)
         self.thread.start()
 
+    def used(self) -> float:
+        """CPU seconds used by every child seen so far (an ended one: until its last sample)."""
+        return sum(self.cpu.values())
+
     def _sample(self) -> None:
-        page = os.sysconf("SC_PAGE_SIZE")
-        while not self.stop.wait(0.5):
-            total, sims = 0, 0
+        while not self.stop.wait(0.2):
+            total = 0
             for stat in Path("/proc").glob("[0-9]*/stat"):
                 try:
                     fields = stat.read_text().rsplit(")", 1)[1].split()
                     if int(fields[1]) != os.getpid():
                         continue
-                    total += int((stat.parent / "statm").read_text().split()[1]) * page
-                    sims += b" sim " in (stat.parent / "cmdline").read_bytes().replace(b"\0", b" ")
+                    total += int((stat.parent / "statm").read_text().split()[1]) * self.page
+                    self.cpu[int(stat.parent.name)] = (int(fields[11]) + int(fields[12])) / self.tick
                 except (OSError, IndexError, ValueError):
                     continue
-            if sims:
-                self.peak_per_match = max(self.peak_per_match, total / sims)
+            self.peak = max(self.peak, total)
 
 
 def serve(
-    config: StudyConfig, serving: Serving, arrivals: list[float]
+    config: StudyConfig, serving: Serving, arrivals: list[float], on_up: Callable[[], None] = lambda: None
 ) -> tuple[list[StandInReport], list, list]:
-    """Run the study with one stand-in arriving at each of `arrivals` (seconds from now): their
-    reports, every attempt, and the tick jitter p99 of each match done."""
+    """Run the study with one stand-in arriving at each of `arrivals` (seconds from now, once the
+    server is up: `on_up`): their reports, every attempt, and the tick jitter p99 of each match done."""
     stop, urls = threading.Event(), []
     with tempfile.TemporaryDirectory() as directory, ThreadPoolExecutor(1) as pool:
         server = pool.submit(
@@ -107,6 +114,7 @@ def serve(
                 server.result()
             time.sleep(0.01)
         url = urls[0].url
+        on_up()
 
         async def arrive(at: float, seed: int) -> StandInReport:
             await asyncio.sleep(at)
@@ -118,6 +126,7 @@ def serve(
         try:
             reports = asyncio.run(crowd())
         finally:
+            on_up()  # the end of play
             stop.set()
         study = server.result()
         attempts = [(a, Path(directory)) for p in study.participants.values() for a in p.attempts]
@@ -133,44 +142,45 @@ def spread(values: list[float]) -> str:
     return f"p50 {quantile(values, 50):.1f} s, p99 {quantile(values, 99):.1f} s" if values else "none"
 
 
-def load_test(
-    counts: list[int], trials: int, seconds: float, adaptive: bool = False, starting: int = SERVING.starting
-) -> None:
-    variant = Variant.read("a", adapter=ADAPTIVE) if adaptive else Variant.read("s", "B5", "S5")
-    config = StudyConfig("bench", (variant,), trials=trials, trial_seconds=seconds)
-    served = 0
+def load_test(counts: list[int], trials: int, seconds: float, adaptive: bool = False) -> None:
+    shipped = StudyConfig.load(CONFIGS / ("adaptive.toml" if adaptive else "static.toml"))
+    config = dataclasses.replace(shipped, trials=trials, trial_seconds=seconds, practice_seconds=0.0)
+    served, each = 0, trials * len(config.variants)
     print(
-        f"load: everyone arrives at once, {trials} trial(s) of {seconds:g} s each, a match for each, "
-        f"{starting} starting at once"
+        f"load: everyone arrives at once, a match for each; {shipped.name}.toml's {len(config.variants)} "
+        f"variants, {trials} trial(s) of {seconds:g} s with each ({each} trials a participant)"
     )
     for count in counts:
         load = os.getloadavg()[0]
-        before = resource.getrusage(resource.RUSAGE_CHILDREN)
-        memory = Memory()
+        children, marks = Children(), []
+        began = time.monotonic()
         reports, attempts, jitters = serve(
-            config, Serving(max_matches=count, test_token=TOKEN, starting=starting), [0.0] * count
-        )
-        memory.stop.set()
-        after = resource.getrusage(resource.RUSAGE_CHILDREN)
-        cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+            config, Serving(max_matches=count, test_token=TOKEN), [0.0] * count,
+            lambda marks=marks, children=children: marks.append((time.monotonic(), children.used())),
+        )  # fmt: skip
+        children.stop.set()
+        (up, at_up), (_, at_end) = marks
         done = sum(a["status"] == "done" for a in attempts)
         first = [f for r in reports for f in r.first_frames]
         jitter = max(jitters, default=float("nan"))
-        complete = done == count * trials and all(r.done for r in reports)
+        complete = done == count * each and all(r.done for r in reports)
         if complete and jitter <= JITTER_MS:
             served = max(served, count)
         print(
-            f"  {count:3d} participants: trials done {done}/{count * trials} ({len(attempts)} attempts); "
+            f"  {count:3d} participants: trials done {done}/{count * each} ({len(attempts)} attempts); "
             f"tick jitter p99 worst {jitter:.1f} ms, median {statistics.median(jitters or [jitter]):.1f} ms, "
             f"{sum(j > JITTER_MS for j in jitters)} matches over {JITTER_MS:g} ms; "
-            f"Ready-to-first-frame p50 {quantile(first, 50):.3f} s, "
-            f"p99 {quantile(first, 99):.3f} s; per participant {cpu / (count * trials * seconds):.2f} CPU s "
-            f"per s of play, {memory.peak_per_match / 2**20:.0f} MiB"
+            f"Ready-to-first-frame p50 {quantile(first, 50):.3f} s, p99 {quantile(first, 99):.3f} s"
         )
         print(
             f"       consent to first offer {spread([r.offers[0] for r in reports if r.offers])}; "
             f"trial end to next offer {spread([o for r in reports for o in r.offers[1:]])}; "
             f"load average {load:.1f} at the start, {os.getloadavg()[0]:.1f} at the end"
+        )
+        print(
+            f"       per participant {(at_end - at_up) / (count * each * seconds):.4f} CPU s per s of play, "
+            f"{children.peak / count / 2**20:.1f} MiB (the pool {children.peak / 2**20:.0f} MiB at its peak; "
+            f"its start-up {up - began:.1f} s, {at_up:.1f} CPU s, once per server)"
         )
     print(f"most participants served with every trial done and tick jitter p99 <= {JITTER_MS:g} ms: {served}")
 
@@ -260,10 +270,7 @@ def main() -> None:
         choices=("netns", "process"),
         help="arrival test: again with a second match host, in a network namespace (root) or a process",
     )
-    parser.add_argument("--adaptive", action="store_true", help="load test: an adaptive variant")
-    parser.add_argument(
-        "--starting", type=int, default=SERVING.starting, help="load test: matches starting up at once"
-    )
+    parser.add_argument("--adaptive", action="store_true", help="load test: the adaptive study's variants")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     if args.second_host:
@@ -277,7 +284,7 @@ def main() -> None:
     elif args.arrivals:
         arrival_test(args.arrivals, args.over, args.trial_seconds, args.max_matches, args.seed)
     else:
-        load_test(args.counts, args.trials, args.trial_seconds, args.adaptive, args.starting)
+        load_test(args.counts, args.trials, args.trial_seconds, args.adaptive)
 
 
 if __name__ == "__main__":

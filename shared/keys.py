@@ -98,6 +98,11 @@ def seats_alive(match: str) -> str:
     return f"{PREFIX}/{check_match(match)}/alive/*/*"
 
 
+def services_alive(match: str) -> str:
+    """Liveliness tokens of every service of a match (what a launcher watches)."""
+    return f"{PREFIX}/{check_match(match)}/alive/**"
+
+
 def everything(match: str) -> str:
     """All data keys of a match (what the recorder subscribes to)."""
     return f"{PREFIX}/{check_match(match)}/**"

@@ -101,7 +101,8 @@ class MatchPlan:
         return MatchOrder(
             match=self.match, frame=0, sender=sender, seed=self.seed, frames=self.frames, mode=self.mode,
             **{role: "" if self.seats[role].kind == PERSON else policies[role] for role in ROLES},
-            names=self.names(), adapter=adapter.name if adapter else "", adaptive=adapter.role if adapter else "",
+            names=self.names(), adapter=adapter.name if adapter else "",
+            adaptive=adapter.role if adapter else "",
             wait_players=self.wait_players, wait_services=self.wait_services, folder=folder,
         )  # fmt: skip
 

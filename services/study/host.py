@@ -3,10 +3,10 @@
 A match host is a `tsf` process on a machine of its own, connected to the study's zenoh router. It
 holds a liveliness token (`tsf/host/<host>/alive`) and puts its slots every second; a study server
 offers it a match (MatchOffer, a query), which it accepts while it has a free slot, the same
-library and the same rules. Each accepted match is started here as any match is
-(services/runtime/launch.run_match: sim, agent, adapter, recorder as processes), with one difference: its
-sim, the match's router, also connects to the study's router, so the participant's seat, bridged
-by the study server, reaches it over the router under the match's own keys. When the match ends
+library and the same rules. Each accepted match is played by the host's warm pool
+(services/runtime/pool.py: one sim, agent, recorder and adapter process for all its matches), whose
+sim, the pool's router, also connects to the study's router, so the participant's seat, bridged by
+the study server, reaches it over the router under the match's own keys. When the match ends
 the host puts MatchDone with its recording's size and sha256, and serves the recording in chunks
 (a queryable); the study server fetches it and checks the hash. A `stop` from the server ends a
 match early. Killed, the host's token goes and the server offers the trial again.
@@ -24,7 +24,8 @@ import zenoh
 from services.adapter.seat import ADAPTIVE_KIND, SeatSpec
 from services.agent import library
 from services.recorder.service import recording_path
-from services.runtime.launch import MatchPlan, run_match
+from services.runtime.launch import MatchPlan
+from services.runtime.pool import Pool, pool_name
 from shared import keys
 from shared.bus import BusConfig, Drops, subscribe, why
 from shared.errors import Failure, UsageError
@@ -61,9 +62,9 @@ def offer_of(plan: MatchPlan, sender: str) -> MatchOffer:
     )  # fmt: skip
 
 
-def plan_of(offer: MatchOffer, directory: Path, router: BusConfig) -> MatchPlan:
-    """The match an offer asks for, run here: its sim also connects to the router (so a seat the
-    server plays reaches it). A seat the host cannot fill is a UsageError (MatchPlan's checks)."""
+def plan_of(offer: MatchOffer, directory: Path) -> MatchPlan:
+    """The match an offer asks for, run here. A seat the host cannot fill is a UsageError
+    (MatchPlan's checks)."""
     empty = [role for role in ROLES if not getattr(offer, role)]
     seats = {role: SeatSpec.parse(getattr(offer, role), f"--{role}") for role in ROLES if role not in empty}
     if offer.adapter or empty:
@@ -72,8 +73,8 @@ def plan_of(offer: MatchOffer, directory: Path, router: BusConfig) -> MatchPlan:
             raise UsageError("adapter", offer.adapter, "not an adaptive agent for the one empty seat")
         seats[empty[0]] = adapter
     return MatchPlan(
-        offer.match, offer.seed, offer.frames, directory=directory, low_latency=router.low_latency,
-        peers=router.connect, wait_players=offer.wait_players, wait_services=WAIT_SERVICES,
+        offer.match, offer.seed, offer.frames, directory=directory,
+        wait_players=offer.wait_players, wait_services=WAIT_SERVICES,
         timeout=offer.timeout, **seats,
     )  # fmt: skip
 
@@ -164,12 +165,15 @@ class MatchHost:
             self.z = zenoh.open(bus.to_zenoh())
         except zenoh.ZError as error:
             raise Failure(f"cannot reach the router at {', '.join(bus.connect)}: {why(error)}") from None
+        # its sim joins the study's router, so that a seat the server plays reaches the pool's matches
+        self.pool = Pool(pool_name(name), out, low_latency=bus.low_latency, peers=bus.connect)
 
     def serve(self, stop: threading.Event) -> int:
         """Serve until `stop`, end the running matches, close the session; the matches run."""
         z, name = self.z, self.name
         try:
             with (
+                self.pool,
                 z.declare_queryable(keys.host_offer(name), self._on_offer),
                 z.declare_queryable(keys.host_recording(name), self._on_recording),
                 subscribe(z, keys.host_stop(name), MatchStop, self._on_stop, self.drops),
@@ -200,7 +204,7 @@ class MatchHost:
     def _play(self, plan: MatchPlan, ended: threading.Event) -> None:
         host, error = self.host, ""
         try:
-            run_match(plan, stop=ended)
+            self.pool.run(plan, ended)
         except Exception as failure:  # noqa: BLE001 - a match that fails is reported, never fatal
             error = (str(failure) or type(failure).__name__)[:300]
         path = recording_path(plan.directory, plan.match)
@@ -227,7 +231,7 @@ class MatchHost:
         with host.lock:  # checked and taken at once: two offers never share the last slot
             try:
                 reason = host.refusal(offer)
-                plan = None if reason else plan_of(offer, self.out, self.bus)
+                plan = None if reason else plan_of(offer, self.out)
             except ValueError as error:  # a seat this host cannot fill (UsageError)
                 reason = str(error)[:300]
             if plan is not None:

@@ -41,21 +41,21 @@ SECRET = b"the-hosts-secret-0123"
 def test_an_offer_asks_for_the_same_match_run_on_the_host(seats: dict, tmp_path: Path) -> None:
     plan = MatchPlan("st-P001-s1t1", 9, 300, directory=Path("study"), wait_players=900, timeout=1000, **seats)
     offer = decode(offer_of(plan, "study").encode(), MatchOffer)
-    there = plan_of(offer, tmp_path, ROUTER)
+    there = plan_of(offer, tmp_path)
     assert there.seats == plan.seats and there.policies() == plan.policies() and there.adapter == plan.adapter
     assert (there.match, there.seed, there.frames, there.wait_players, there.timeout) == (
         plan.match, 9, 300, 900, 1000
     )  # fmt: skip
-    assert there.directory == tmp_path and there.peers == ROUTER.connect, "its sim joins the router"
+    assert there.directory == tmp_path
 
 
 def test_an_offer_the_host_cannot_fill_is_refused(tmp_path: Path) -> None:
     plan = MatchPlan("m", **PERSON_AND_S5)
     offer = offer_of(plan, "study")
     with pytest.raises(ValueError, match="--shooter"):
-        plan_of(dataclasses.replace(offer, shooter="S99"), tmp_path, ROUTER)
+        plan_of(dataclasses.replace(offer, shooter="S99"), tmp_path)
     with pytest.raises(ValueError, match="adaptive agent"):
-        plan_of(dataclasses.replace(offer, adapter="adaptive-T30-cem"), tmp_path, ROUTER)
+        plan_of(dataclasses.replace(offer, adapter="adaptive-T30-cem"), tmp_path)
     host = Host("lab-1", 1, tmp_path, SECRET)
     assert host.refusal(offer) == ""
     assert "update its checkout" in host.refusal(dataclasses.replace(offer, library="0" * 16))

@@ -1,14 +1,14 @@
 """`tsf study`: the study's front door on the human gateway. Each participant's socket stays open
-across all their trials; each trial is a match of its own (services/runtime/launch.run_match: sim, agent,
-adapter for adaptive variants, recorder), the participant's seat bridged from this process.
+across all their trials; each trial is a match of its own, played by the server's warm pool
+(services/runtime/pool.py: one sim, agent, recorder and adapter process for all its matches, kept
+for the server's life), the participant's seat bridged from this process over the pool's bus.
 
-Many participants play at once, each match on its own: its sim is the match's zenoh router on a
-loopback port of its own, its processes are clients of that sim alone, and this server opens a
-client session to it for the trial only (and closes it off the event loop). At most
-`max_matches` run at once; the other trials wait in a queue whose place and estimated wait the
-participant sees. A trial is done only if its recording is complete (read back and checked); a
-trial whose match fails to start, runs past its time or leaves an incomplete recording is marked
-`failed` and offered again as a new attempt.
+Many participants play at once: a match starts with an order to the pool, so it is ready by the
+time the participant has read the trial's offer. At most `max_matches` run at once; the other
+trials wait in a queue whose place and estimated wait the participant sees. A trial is done only
+if its recording is complete (read back and checked); a trial whose match fails to start, runs
+past its time or leaves an incomplete recording is marked `failed` and offered again as a new
+attempt.
 
 Match hosts on other machines add capacity (`Serving.hosts`: the study's router): once this
 machine's `max_matches` are taken, a trial's match is offered to a live host with a free slot
@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import dataclasses
 import json
 import logging
 import threading
@@ -59,14 +58,15 @@ from services.human.core import BadInput, Controls, PerAddress, RateLimit
 from services.human.gateway import Bridge, Gateway, Outbox, Web, receive_first, refuse
 from services.recorder.recording import load
 from services.recorder.service import recording_path
-from services.runtime.launch import MatchPlan, match_buses, run_match
+from services.runtime.launch import MatchPlan
+from services.runtime.pool import Pool, pool_name
 from services.study.core import SET_UP, Admission, Participant, Study, StudyConfig, Trial, worker_id
 from services.study.crowd import FAILS, attention_check, write_bonuses
 from services.study.dashboard import Dashboard, overview
 from services.study.remote import Remote
 from shared import keys
-from shared.bus import BusConfig, free_endpoint, until_stopped
-from shared.game import FPS, other
+from shared.bus import BusConfig, until_stopped
+from shared.game import FPS, ROLES, other
 from shared.secret import same_secret, signature
 
 log = logging.getLogger("tsf.study")
@@ -75,7 +75,7 @@ RETRIES = 3  # failed attempts in a row before the participant is told of a prob
 READ_TIMEOUT = 900.0  # seconds a participant may take to read the consent text or the instructions
 THREADS = 512  # threads for blocking work off the event loop: two per running match, and more
 DRAIN = 60.0  # seconds the stopping server waits for its matches to end and be written down
-WARM_UP = 60.0  # seconds to wait for a match's processes before offering its trial anyway
+WARM_UP = 60.0  # seconds to wait for a match's services to take it before offering its trial anyway
 ARRIVAL_BURST = 20  # participant ids issued at once, beyond the rate
 ADDRESS_BURST = 5  # ... to one address
 SCREENED = "Thank you. This study cannot go on: two attention checks were not passed."
@@ -100,7 +100,6 @@ class Serving:
     # every client has the proxy's address), so that one client cannot drain the ids of all
     arrivals_per_address: float = 0.1
     ready_timeout: float = 120.0  # seconds an offered trial waits for Ready; then its match and slot go
-    starting: int = 2  # matches starting up at once (until their processes are up; each starts 3-4)
     hosts: BusConfig | None = None  # the router where match hosts offer their slots; None: local only
     # A signed link's secret: new participants need a worker id and its signature (`sig`, the
     # HMAC-SHA256 of the id with this secret, shared.secret.signature); b"": links are not signed.
@@ -198,18 +197,23 @@ async def first(*waits: Awaitable) -> None:
 
 
 def run_trial(
-    plan: MatchPlan, role: str, stop: threading.Event, remote: Remote | None = None, host: str = ""
+    plan: MatchPlan,
+    role: str,
+    stop: threading.Event,
+    pool: Pool,
+    remote: Remote | None = None,
+    host: str = "",
 ) -> tuple[int | None, list[str]]:
-    """Run a trial's match (here, or on match `host`, whose recording `remote` fetches) and read
-    its recording back: (kills, problems), no problems for a complete recording with the
-    participant's seat played from this server. The kills are the recording's, when it has a
-    summary (a stopped match's sim still sends one)."""
+    """Run a trial's match (on this server's `pool`, or on match `host`, whose recording `remote`
+    fetches) and read its recording back: (kills, problems), no problems for a complete recording
+    with the participant's seat played from this server. The kills are the recording's, when it
+    has a summary (a stopped match's sim still sends one)."""
     problems = []
     try:
         if host and remote is not None:
             remote.run(host, plan, stop)
         else:
-            run_match(plan, stop=stop)
+            pool.run(plan, stop)
     except Exception as error:  # noqa: BLE001 - any failure fails the trial, never the server
         problems.append(str(error) or type(error).__name__)
     kills, found = judge(recording_path(plan.directory, plan.match), role)
@@ -232,20 +236,6 @@ def judge(path: Path, role: str) -> tuple[int | None, list[str]]:
         last = f"frame {max(answered)} of {recording.summary.frame}"
         problems.append(f"the participant's {role} seat stopped answering at {last}")  # the page went
     return (recording.summary.kills if recording.summary else None), problems
-
-
-def open_session(bus: BusConfig, patience: float, abort: threading.Event) -> zenoh.Session:
-    """A client session to a match's sim, which may not listen yet: tried for a second at a time
-    for up to `patience` seconds, so that a stopped match (Ctrl-C) ends the wait within a second
-    (one try of the whole minute held a thread that held the server's exit). ZError if none."""
-    deadline = time.monotonic() + patience
-    once = dataclasses.replace(bus, wait_router=1.0)
-    while True:
-        try:
-            return zenoh.open(once.to_zenoh())
-        except zenoh.ZError:
-            if abort.is_set() or time.monotonic() > deadline:
-                raise
 
 
 def wait_alive(z: zenoh.Session, tokens: list[str], timeout: float, abort: threading.Event) -> bool:
@@ -358,20 +348,19 @@ def reconcile(study: Study) -> list[dict]:
 
 class TrialRunner:
     """Runs one participant's trial at a time on the study's matches: waits for a free slot, starts
-    the match (here, or on a match host of `remote`), bridges the participant's seat to it, and
-    judges and writes down how it ended. Shared by every participant; its fields are the study's
-    and the server's settings, and the limit on matches starting at once."""
+    the match (on this server's pool, or on a match host of `remote`), bridges the participant's
+    seat to it, and judges and writes down how it ended. Shared by every participant; its fields
+    are the study's and the server's settings."""
 
     def __init__(
-        self, study: Study, serving: Serving, matches: Matches, remote: Remote | None = None
+        self, study: Study, serving: Serving, matches: Matches, pool: Pool, remote: Remote | None = None
     ) -> None:
-        self.study, self.serving, self.matches, self.remote = study, serving, matches, remote
+        self.study, self.serving, self.matches, self.pool, self.remote = study, serving, matches, pool, remote
         config = study.config
         self.recordings, self.practice = study.directory / "recordings", study.directory / "practice"
         self.practice_frames = round(config.practice_seconds * FPS)
         self.match_seconds = config.trial_seconds + SET_UP
         self.limit = config.trial_seconds + serving.trial_timeout  # seconds a trial may play
-        self.starting = asyncio.Semaphore(serving.starting)
 
     async def slot(self, socket: Socket, match: str) -> bool:
         """Wait for a free match, telling the participant their place; False if they leave."""
@@ -392,7 +381,7 @@ class TrialRunner:
                 return False
         return True
 
-    def plan(self, trial: Trial, endpoint: str) -> MatchPlan:
+    def plan(self, trial: Trial) -> MatchPlan:
         """The trial's match: the participant's seat a person's, the other the variant's agent."""
         agent = other(trial.role)
         seats = {trial.role: SeatSpec(PERSON), agent: trial.variant.seat(agent)}
@@ -401,25 +390,18 @@ class TrialRunner:
             (self.practice_frames, self.practice) if trial.practice else (config.frames, self.recordings)
         )
         return MatchPlan(
-            trial.match, trial.seed, frames, directory=directory, endpoint=endpoint,
-            low_latency=serving.low_latency, wait_players=serving.ready_timeout + self.limit,
-            wait_services=30.0, timeout=serving.ready_timeout + self.limit, **seats,
+            trial.match, trial.seed, frames, directory=directory, low_latency=serving.low_latency,
+            wait_players=serving.ready_timeout + self.limit, wait_services=30.0,
+            timeout=serving.ready_timeout + self.limit, **seats,
         )  # fmt: skip
 
     async def bridge(
-        self, socket: Socket, trial: Trial, endpoint: str, obs: bool, stop: threading.Event
-    ) -> Bridge | None:
-        """The participant's seat in the trial's match, once every process of the match is up (then
-        a Ready starts the game at once): for a local match from a session of its own (opened when
-        the sim listens, closed by `leave`; None if the sim never listened), for a hosted one
-        (no `endpoint`) from the router's session."""
-        try:
-            z = self.remote.z if not endpoint and self.remote else await asyncio.to_thread(
-                open_session, match_buses(endpoint, self.serving.low_latency)[1], WARM_UP, stop
-            )  # fmt: skip
-        except zenoh.ZError as error:
-            log.error("trial %s: no session to its sim: %s", trial.match, error)
-            return None
+        self, socket: Socket, trial: Trial, hosted: bool, obs: bool, stop: threading.Event
+    ) -> Bridge:
+        """The participant's seat in the trial's match, once every service has taken the match
+        (then a Ready starts the game at once): from the pool's session, or for a `hosted` match
+        from the router's."""
+        z = self.remote.z if hosted and self.remote else self.pool.z
         agent = other(trial.role)
         tokens = [keys.alive(trial.match, "sim"), keys.alive(trial.match, "recorder")]
         tokens += [keys.alive(trial.match, "agent", agent)]
@@ -429,14 +411,8 @@ class TrialRunner:
         if socket.gone.is_set():  # left during set-up: the match ends, and the wait with it
             stop.set()
         if not await alive and not stop.is_set():
-            log.warning("trial %s: not every process of its match is up after %g s", trial.match, WARM_UP)
+            log.warning("trial %s: not every service has taken its match after %g s", trial.match, WARM_UP)
         return Bridge(z, trial.match, trial.role, socket.controls, socket.outbox, obs)
-
-    def leave(self, seat: Bridge | None) -> None:
-        if seat is not None:
-            seat.close()
-            if self.remote is None or seat.z is not self.remote.z:  # a local match's session of its own
-                threading.Thread(target=seat.z.close, daemon=True).start()  # never on the loop nor a callback
 
     async def play(self, socket: Socket, trial: Trial, obs: bool, offer: dict) -> dict | None:
         """Run one trial: wait for a free match, start it (its processes start while the participant
@@ -452,22 +428,19 @@ class TrialRunner:
             return None
         socket.send({"type": "wait", "reason": SETTING_UP, "seconds": round(SET_UP)})
         host = self.matches.admission.running[trial.match]  # Admission.LOCAL: this machine
-        endpoint = "" if host else free_endpoint()
-        plan = self.plan(trial, endpoint)
+        plan = self.plan(trial)
         if not trial.practice:
             self.study.record(trial, "running")
         stop = threading.Event()
         if host:
             log.info("trial %s runs on match host %s", trial.match, host)
-        # start-up is CPU-bound: a burst of arrivals starts a few at a time here (a host's, there)
-        async with contextlib.nullcontext() if host else self.starting:
-            running = asyncio.ensure_future(
-                asyncio.to_thread(run_trial, plan, trial.role, stop, self.remote, host)
-            )
-            self.matches.add(trial, running, stop, endpoint)
-            seat = await self.bridge(socket, trial, endpoint, obs, stop)
+        running = asyncio.ensure_future(
+            asyncio.to_thread(run_trial, plan, trial.role, stop, self.pool, self.remote, host)
+        )
+        self.matches.add(trial, running, stop, "" if host else self.pool.endpoint)
+        seat = await self.bridge(socket, trial, bool(host), obs, stop)
         ready = await self.live(socket, trial, seat, offer, running, stop)
-        self.leave(seat)
+        seat.close()
         dropped = socket.gone.is_set() and not (ready and running.done())
         if dropped and not trial.practice:  # resumable at once; the sidecar follows when the match has ended
             self.study.record(trial, "dropped")
@@ -480,18 +453,16 @@ class TrialRunner:
         self,
         socket: Socket,
         trial: Trial,
-        seat: Bridge | None,
+        seat: Bridge,
         offer: dict,
         running: asyncio.Future,
         stop: threading.Event,
     ) -> bool:
         """Offer the trial and play it from the participant's Ready until the match ends, they
-        leave, or it runs past its limit; False (the match ended at once) if no Ready came or the
-        match cannot start."""
-        if seat is not None:  # else the match cannot start: it fails at once
-            socket.send(offer)
-        if seat is None or not await socket.wait_for("ready", self.serving.ready_timeout):
-            stop.set()  # not started (or cannot be): ended at once; a silent participant frees the slot
+        leave, or it runs past its limit; False (the match ended at once) if no Ready came."""
+        socket.send(offer)
+        if not await socket.wait_for("ready", self.serving.ready_timeout):
+            stop.set()  # not started: ended at once; a silent participant frees the slot
             return False
         seat.live()
         try:
@@ -692,10 +663,12 @@ def run_study(
         log.info("attempt %s left %s by an earlier server", sidecar["match"], sidecar["status"])
     matches = Matches(serving.max_matches)
     remote = Remote(serving.hosts, serving.host_secret) if serving.hosts else None
+    adaptive = any(v.adaptive(role, 0) for v in config.variants for role in ROLES)
+    pool = Pool(pool_name("study"), study.directory, adaptive, serving.low_latency)
     try:
-        gateway = Gateway(
-            None, Front(study, serving, TrialRunner(study, serving, matches, remote)).handle, web
-        )
+        pool.__enter__()
+        runner = TrialRunner(study, serving, matches, pool, remote)
+        gateway = Gateway(None, Front(study, serving, runner).handle, web)
         # A running match holds a thread (run_trial) for its length, its start-up another: asyncio's
         # default pool (cores + 4 threads) would cap the matches at a handful, whatever hosts add.
         gateway.loop.set_default_executor(ThreadPoolExecutor(THREADS, thread_name_prefix="study"))
@@ -713,6 +686,7 @@ def run_study(
             with contextlib.suppress(TimeoutError):  # a match's thread that hangs: leave it to exit
                 asyncio.run_coroutine_threadsafe(matches.drained(), gateway.loop).result(DRAIN)
     finally:
+        pool.__exit__()
         if remote is not None:
             remote.close()
         study.close()

@@ -1,0 +1,239 @@
+"""A pool: long-lived services that play many matches each, kept warm for a study server or a match
+host (docs/architecture.md, "Pools").
+
+A pool is one process per service: a sim (the pool's zenoh router, on a loopback port of its own,
+its priority raised above everything else on the machine), an agent, a recorder and, for a pool
+that may play adaptive matches, an adapter. A match is an order (MatchOrder on
+tsf/pool/<pool>/order) that each service plays its part of under the match's own keys, exactly as a
+match's own processes do (services/runtime/launch.run_match), so a pooled match's traffic, seat
+bridging and recording are those of any match. Starting one costs a message instead of four
+interpreters (about 2 CPU-s and 72 MiB each), so a participant's match is ready when they are and
+one machine serves many more of them.
+
+A service of the pool that dies is started again at once; its clients reconnect to a restarted sim
+by themselves. The matches it was playing fail (`run` sees their tokens go before their summary)
+and are offered again by whoever ran them.
+"""
+
+from __future__ import annotations
+
+import logging
+import secrets
+import threading
+import time
+from collections import Counter
+from pathlib import Path
+
+import zenoh
+
+from services.recorder.service import recording_path
+from services.runtime.launch import RECORDER_NICE, SIM_RAISE, MatchPlan, match_buses, service_command
+from services.runtime.processes import Processes
+from shared import keys
+from shared.bus import free_endpoint, subscribe
+from shared.errors import Failure, UsageError
+from shared.game import ROLES
+from shared.messages import MatchStop, Summary
+
+log = logging.getLogger("tsf.pool")
+READY = 60.0  # seconds a new pool's services may take to come up (a busy machine, a cold cache)
+ORDER_AGAIN = 1.0  # seconds between puts of an order, until every service of the match has taken it
+TAKE = 30.0  # seconds every service has to take an order (a restarting service's start-up)
+CLOSE = 10.0  # seconds a stopped match's sim has to send its summary, and its recorder to close the log
+
+
+def pool_name(prefix: str) -> str:
+    """A pool id that no other pool on a shared router has: pools linked to one router (match hosts)
+    would otherwise take each other's orders."""
+    return keys.check_match(f"{prefix}-{secrets.token_hex(4)}"[-64:])
+
+
+class Pool:
+    """A warm pool of services (the module's docstring): `with Pool(...) as pool: pool.run(plan)`.
+    `directory` is where the recorder writes; a plan's directory must be it or a folder in it.
+    `peers`: routers the pool's sim also connects to (a match host's study router)."""
+
+    def __init__(
+        self,
+        name: str,
+        directory: Path,
+        adaptive: bool = True,
+        low_latency: bool = True,
+        peers: tuple[str, ...] = (),
+    ) -> None:
+        self.name, self.directory = keys.check_match(name), Path(directory)
+        self.endpoint = free_endpoint()
+        self.sim_bus, self.client_bus = match_buses(self.endpoint, low_latency, peers)
+        self.services = ("sim", "agent", "recorder", *(("adapter",) if adaptive else ()))
+        self.sender = f"pool/{self.name}"
+        self.processes = Processes()
+        self.restarts: Counter[str] = Counter()
+        self.closing = threading.Event()
+        self.z: zenoh.Session | None = None
+        self.supervisor = threading.Thread(target=self._supervise, name=f"pool-{name}", daemon=True)
+
+    def _start(self, service: str) -> None:
+        pool = ("--pool", self.name)
+        if service == "sim":
+            command = service_command("sim", self.sim_bus, *pool, "--priority", str(SIM_RAISE))
+        elif service == "recorder":
+            command = service_command("recorder", self.client_bus, *pool, "--out", str(self.directory))
+        else:
+            command = service_command(service, self.client_bus, *pool)
+        self.processes.start(service, command, nice=RECORDER_NICE if service == "recorder" else 0)
+
+    def __enter__(self) -> Pool:
+        """Start the services and wait until each is up (Failure if one is not within READY s)."""
+        self.directory.mkdir(parents=True, exist_ok=True)
+        try:
+            for service in self.services:
+                self._start(service)
+            self.z = zenoh.open(self.client_bus.to_zenoh())
+            missing = self._wait_up(READY)
+            if missing:
+                raise Failure(f"pool {self.name}: {', '.join(missing)} not up after {READY:g} s")
+        except BaseException:
+            self.__exit__()
+            raise
+        self.supervisor.start()
+        log.info("pool %s: %s up on %s", self.name, ", ".join(self.services), self.endpoint)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.closing.set()
+        if self.supervisor.is_alive():
+            self.supervisor.join()
+        if self.z is not None:
+            self.z.close()
+        self.processes.__exit__()
+
+    def _wait_up(self, timeout: float) -> list[str]:
+        """The services whose pool token is still missing after `timeout` seconds."""
+        up: set[str] = set()
+        changed = threading.Condition()
+
+        def on_alive(sample: zenoh.Sample) -> None:
+            with changed:
+                service = keys.parse(sample.key_expr).service
+                (up.add if sample.kind == zenoh.SampleKind.PUT else up.discard)(service)
+                changed.notify_all()
+
+        with self.z.liveliness().declare_subscriber(keys.pool_alive(self.name), on_alive, history=True):
+            deadline = time.monotonic() + timeout
+            with changed:
+                while not up >= set(self.services) and time.monotonic() < deadline:
+                    if any(c.poll() is not None for c in self.processes.children.values()):
+                        break
+                    changed.wait(0.1)
+                return [s for s in self.services if s not in up]
+
+    def _supervise(self) -> None:
+        """Start again, at once, any service of the pool that ends while the pool runs."""
+        while not self.closing.wait(0.2):
+            for service in self.services:
+                child = self.processes.children[service]
+                if child.poll() is not None and not self.closing.is_set():
+                    self.restarts[service] += 1
+                    log.error(
+                        "pool %s: the %s exited with status %s; started again (its matches fail)",
+                        self.name, service, child.returncode,
+                    )  # fmt: skip
+                    self._start(service)
+
+    def folder(self, plan: MatchPlan) -> str:
+        """The folder of the pool's directory that `plan` records into ("" for the directory itself);
+        a UsageError for a directory elsewhere."""
+        directory, root = plan.directory.resolve(), self.directory.resolve()
+        if directory == root:
+            return ""
+        if directory.parent != root:
+            raise UsageError("--out", plan.directory, f"a pooled match records into {root} or a folder in it")
+        return directory.name
+
+    def run(self, plan: MatchPlan, stop: threading.Event | None = None) -> tuple[Summary, Path]:
+        """Play `plan` on the pool to its end, as run_match does with processes of its own: its
+        summary and recording. A match that was stopped or ran past `plan.timeout`, one that some
+        service of the pool did not take or left before the end, and one without a summary is a
+        Failure (its recording, if any, is kept)."""
+        stop = stop or threading.Event()
+        order = plan.order(self.sender, self.folder(plan))
+        path = recording_path(plan.directory, plan.match)
+        if path.exists():
+            raise UsageError("--match", plan.match, f"{path} exists: a pooled match needs a new id")
+        match = plan.match
+        needed = {keys.alive(match, "sim"), keys.alive(match, "recorder")}
+        needed |= {keys.alive(match, "agent", role) for role in ROLES if order.policy(role)}
+        needed |= {keys.alive(match, "adapter")} if order.adapter else set()
+        watch = MatchWatch(needed)
+        deadline = time.monotonic() + plan.timeout if plan.timeout else float("inf")
+        with (
+            self.z.liveliness().declare_subscriber(keys.services_alive(match), watch.on_alive, history=True),
+            subscribe(self.z, keys.summary(match), Summary, watch.on_summary),
+        ):
+            ordered, put_at, why = time.monotonic(), 0.0, ""
+            while not watch.ended.wait(0.05):
+                now = time.monotonic()
+                if stop.is_set():
+                    why = f"match {match} was stopped before its end"
+                elif now >= deadline:
+                    why = f"match {match} ran past its {plan.timeout:g} s"
+                elif lost := watch.lost():
+                    why = f"match {match}: the pool's {lost} left it before its end"
+                elif not watch.taken() and now - ordered > plan.wait_services + TAKE:
+                    why = f"match {match}: not every service of pool {self.name} took it ({watch.missing()})"
+                if why:
+                    break
+                if not watch.taken() and now - put_at >= ORDER_AGAIN:
+                    self.z.put(keys.pool_order(self.name), order.encode())
+                    put_at = now
+            if why:  # the sim ends it (with a summary) and the recorder closes its log
+                self.z.put(
+                    keys.pool_stop(self.name), MatchStop(match=match, frame=0, sender=self.sender).encode()
+                )
+            watch.closed.wait(CLOSE)
+        if why:
+            raise Failure(why)
+        return watch.summary, path
+
+
+class MatchWatch:
+    """What a launcher sees of one pooled match: which of its services' tokens are up, which have
+    been, its summary, and whether its recorder has closed the log (its token gone after the summary)."""
+
+    def __init__(self, needed: set[str]) -> None:
+        self.needed, self.up, self.seen = needed, set[str](), set[str]()
+        self.summary: Summary | None = None
+        self.ended, self.closed = threading.Event(), threading.Event()
+        self.lock = threading.Lock()
+
+    def on_alive(self, sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
+        with self.lock:
+            if sample.kind == zenoh.SampleKind.PUT:
+                self.up.add(key)
+                self.seen.add(key)
+            else:
+                self.up.discard(key)
+            if self.summary is not None and not any("/alive/recorder" in k for k in self.up):
+                self.closed.set()
+
+    def on_summary(self, summary: Summary) -> None:
+        with self.lock:
+            self.summary = summary
+            if not any("/alive/recorder" in k for k in self.up):
+                self.closed.set()
+        self.ended.set()
+
+    def taken(self) -> bool:
+        with self.lock:
+            return self.seen >= self.needed
+
+    def missing(self) -> str:
+        with self.lock:
+            return ", ".join(sorted(self.needed - self.seen))
+
+    def lost(self) -> str:
+        """The first service (`agent/bait`, `recorder`, ...) whose token went before the summary."""
+        with self.lock:
+            gone = sorted((self.needed & self.seen) - self.up)
+        return gone[0].split("/alive/", 1)[1] if gone else ""

@@ -1,0 +1,95 @@
+"""A pool (services/runtime/pool.py) as a study server uses it: real service processes on a real
+zenoh router, many matches at once, each recorded complete; a killed service fails the matches it
+was playing and is started again, and the next match plays."""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import pytest
+
+from services.adapter.seat import SeatSpec
+from services.recorder.recording import load
+from services.runtime.launch import MatchPlan
+from services.runtime.pool import Pool
+from shared.errors import Failure, UsageError
+
+
+def plan(match: str, directory: Path, frames: int = 90, **seats: str) -> MatchPlan:
+    specs = {role: SeatSpec.parse(name) for role, name in {"bait": "B5", "shooter": "S5", **seats}.items()}
+    return MatchPlan(
+        match, seed=7, frames=frames, directory=directory, wait_services=10.0, timeout=60, **specs
+    )
+
+
+def complete(path: Path, frames: int) -> None:
+    recording = load(path)
+    assert recording.problems() == [], recording.problems()
+    assert recording.summary is not None and recording.summary.frame == frames
+
+
+@pytest.fixture(scope="module")
+def pool(tmp_path_factory: pytest.TempPathFactory):  # noqa: ANN201 - a Pool
+    with Pool("test-pool", tmp_path_factory.mktemp("pool")) as pool:
+        yield pool
+
+
+def test_a_pool_plays_matches_at_once_each_recorded_complete(pool: Pool) -> None:
+    folder = pool.directory / "recordings"
+    plans = [plan(f"pool-{n}", folder, shooter=shooter) for n, shooter in enumerate(("S5", "S4", "S1"))]
+    plans.append(plan("pool-adaptive", folder, shooter="adaptive-T30-cem"))
+    with ThreadPoolExecutor(len(plans)) as threads:
+        results = list(threads.map(pool.run, plans))
+    for (summary, path), one in zip(results, plans, strict=True):
+        assert path == folder / f"{one.match}.tsflog" and summary.frame == one.frames
+        complete(path, one.frames)
+    adaptive = load(folder / "pool-adaptive.tsflog")
+    assert adaptive.start.policies["shooter"] == "adaptive-T30-cem" and adaptive.adapter, "the adapter played"
+    assert {load(p).start.policies["shooter"] for _, p in results[:3]} == {"S5", "S4", "S1"}
+
+
+def test_a_stopped_match_is_a_failure_and_its_recording_is_kept(pool: Pool) -> None:
+    stop = threading.Event()
+    threading.Timer(1.0, stop.set).start()
+    with pytest.raises(Failure, match="stopped before its end"):
+        pool.run(plan("pool-stopped", pool.directory, frames=900), stop)
+    recording = load(pool.directory / "pool-stopped.tsflog")
+    assert recording.summary is not None and 0 < recording.summary.frame < 900
+
+
+def test_a_match_outside_the_pools_directory_or_of_a_used_id_is_refused(pool: Pool, tmp_path: Path) -> None:
+    with pytest.raises(UsageError, match="records into"):
+        pool.run(plan("pool-elsewhere", tmp_path / "x" / "y"))
+    pool.run(plan("pool-once", pool.directory, frames=9))
+    with pytest.raises(UsageError, match="new id"):
+        pool.run(plan("pool-once", pool.directory, frames=9))
+
+
+@pytest.mark.parametrize("service", ["agent", "sim", "recorder"])
+def test_a_killed_service_fails_its_matches_and_the_next_match_plays(pool: Pool, service: str) -> None:
+    victim = pool.processes.children[service]
+    failure: list[BaseException] = []
+
+    def run() -> None:
+        try:
+            pool.run(plan(f"pool-killed-{service}", pool.directory, frames=900))
+        except Failure as error:
+            failure.append(error)
+
+    running = threading.Thread(target=run)
+    running.start()
+    time.sleep(2.0)  # under way
+    os.kill(victim.pid, signal.SIGKILL)
+    running.join(60)
+    assert failure and "left it before its end" in str(failure[0]), failure
+    deadline = time.monotonic() + 30
+    while pool.processes.children[service] is victim or pool.restarts[service] == 0:
+        assert time.monotonic() < deadline, f"the {service} was not started again"
+        time.sleep(0.1)
+    summary, path = pool.run(plan(f"pool-after-{service}", pool.directory, frames=60))
+    complete(path, 60)

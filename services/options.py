@@ -231,6 +231,13 @@ WaitRouter = Annotated[
 Match = Annotated[
     str, typer.Option("--match", envvar="TSF_MATCH", help="Match id: the key namespace tsf/<match>/...")
 ]
+Pool = Annotated[
+    str,
+    typer.Option(
+        "--pool",
+        help="Pool name: play every match ordered on tsf/pool/<pool>/order, until stopped (no --match).",
+    ),
+]
 
 
 BUS_OPTIONS = {  # parameter name: (annotation, default)

@@ -19,6 +19,7 @@ from services.options import (
     Frames,
     Host,
     Match,
+    Pool,
     Port,
     Role,
     Seed,
@@ -33,6 +34,7 @@ from services.options import (
     output,
 )
 from shared.bus import BusConfig, stop_on_signals
+from shared.errors import UsageError
 from shared.game import FPS, SEEDS, GameConfig
 
 commands = typer.Typer()
@@ -41,7 +43,8 @@ commands = typer.Typer()
 @commands.command()
 @bus_options
 def sim(
-    match: Match,
+    match: Match = "",
+    pool: Pool = "",
     seed: Seed = 0,
     duration: Duration = None,
     frames: Frames = None,
@@ -53,13 +56,23 @@ def sim(
     wait_players: float = number(10.0, SECONDS, "Seconds to wait for both seats before starting."),
     wait_recorder: float = number(0.0, SECONDS, "Seconds to wait for a recorder before starting."),
     wait_adapter: float = number(0.0, SECONDS, "Seconds to wait for an adapter before starting."),
-    priority: int = number(0, PRIORITY, "Nice steps to raise the sim's priority by at its first frame."),
+    priority: int = number(
+        0, PRIORITY, "Nice steps to raise the sim's priority by: at its first frame; a pool's at once."
+    ),
     *,
     bus: BusConfig,
 ) -> None:
-    """Run the sim service for one match."""
+    """Run the sim service for one match (--match), or a pool's sim for every match ordered (--pool)."""
+    from services.sim.pool import run_pool
     from services.sim.service import run_sim
 
+    if bool(match) == bool(pool):
+        raise UsageError(
+            "--pool", pool or "''", "give either --match (one match) or --pool (a pool's matches)"
+        )
+    if pool:
+        run_pool(bus, pool, stop_on_signals(), priority)
+        return
     config = GameConfig(frames=game_frames(duration, frames))
     summary = run_sim(
         bus, match, seed, config, mode, {"bait": bait, "shooter": shooter},

@@ -108,6 +108,9 @@ MISTAKES = [
         "tsf table: Invalid value for 'path': file '{tmp}/none.json' does not exist.",
     ),
     ("sim --match a/b", 2, "tsf sim: --match a/b: invalid match id: use 1-64 letters, digits, '-' or '_'"),
+    ("sim --match x --pool p", 2, "tsf sim: --pool p: give either --match (one match) or --pool"),
+    ("sim", 2, "tsf sim: --pool '': give either --match (one match) or --pool (a pool's matches)"),
+    ("sim --pool a/b", 2, "tsf sim: --pool a/b: invalid pool name: use 1-64 letters, digits, '-' or '_'"),
     (
         "sim --match x --sim-mode fast",
         2,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 
 from services.sim.engine import Game
-from services.sim.observation import world_values
+from services.sim.observation import world_views
 from shared.game import NOOP, ROLES
 from shared.messages import Action, GameEvent, Start, State, Summary
 
@@ -83,7 +83,7 @@ def state_message(game: Game, match: str, sender: str, applied: tuple[int, int])
         match=match,
         frame=game.frame,
         sender=sender,
-        obs={role: world_values(game, role) for role in ROLES},
+        obs=world_views(game),
         ships=[[s.x, s.y, s.vx, s.vy, s.heading, float(s.alive)] for s in game.ships],
         fortress=[game.facing, float(game.fortress_alive), game.vulnerable, game.lock, game.since_shell],
         missiles=[list(m) for m in game.missiles],

@@ -150,3 +150,11 @@ def test_event_messages_follow_game_events() -> None:
         assert [(m.frame, m.kind, m.role, m.detail) for m in messages] == [tuple(e) for e in game.events]
         seen += [decode(m.encode(), GameEvent) for m in messages]
     assert any(e.kind == "missile" and e.role == "shooter" for e in seen)
+
+
+def test_the_state_reads_both_seats_views_as_each_alone_would() -> None:
+    """state_message reads the game once for both seats (world_views): the same values, every frame."""
+    for steps in range(0, 61, 3):
+        game = played(steps, seed=steps)
+        obs = state_message(game, M, "sim", (0, 0)).obs
+        assert obs == {role: world_values(game, role) for role in ("bait", "shooter")}

@@ -86,6 +86,14 @@ def world_values(game: Game, role: str) -> list[float]:
     return _world_rows(game, role)[0].tolist()
 
 
+def world_views(game: Game) -> dict[str, list[float]]:
+    """Each seat's `world_values`, reading the game once for both (the sim's state, every frame)."""
+    lane, rows = _Lane.of(game), np.empty((len(ROLES), OBS_SIZE), np.float64)
+    for me, role in enumerate(ROLES):
+        _world_values(lane, *_settings(game, role), memoryview(rows[me : me + 1]))
+    return dict(zip(ROLES, rows.tolist(), strict=True))
+
+
 def as_observation(values: list[float], view: str = "world") -> np.ndarray:
     """World-view values (as the sim publishes them) -> the float32 vector a policy reads.
 
@@ -140,9 +148,7 @@ class _Lane(NamedTuple):
 
 def _world_rows(game: Game | BatchGame, role: str) -> np.ndarray:
     """The (lanes, 64) float64 world-view values of `role`: compiled for a batch, Python for a Game."""
-    me = ROLES.index(check_role(role))
-    c = game.config
-    settings = (me, c.vulnerable_frames, c.fortress_fire_interval, c.frames)
+    settings = _settings(game, role)
     if isinstance(game, Game):
         rows = np.empty((1, OBS_SIZE), np.float64)
         _world_values(_Lane.of(game), *settings, memoryview(rows))
@@ -150,6 +156,12 @@ def _world_rows(game: Game | BatchGame, role: str) -> np.ndarray:
         rows = np.empty((game.n, OBS_SIZE), np.float64)
         _world_lanes(game.state, *settings, rows)
     return rows
+
+
+def _settings(game: Game | BatchGame, role: str) -> tuple[int, int, int, int]:
+    """The arguments of `_world_values` after the lane: the seat and the config it reads."""
+    c = game.config
+    return ROLES.index(check_role(role)), c.vulnerable_frames, c.fortress_fire_interval, c.frames
 
 
 def _world_values(a, me, vulnerable_frames, fire_interval, frames, out):

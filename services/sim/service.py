@@ -1,10 +1,11 @@
 """The sim service: a thin shell that runs the engine on the bus. It owns the clock.
 
-Real-time mode ticks at the game's fps on a monotonic schedule (tick k is due at start + k/fps,
-so lateness never accumulates) and applies each seat's latest action; lockstep mode waits for
-both seats' answers to each state, but never longer than `step_timeout`, and never for a seat
-whose player is gone. State is published with congestion control *drop*: a frozen subscriber
-can never stall the sim.
+A match (`MatchSim`) is played by a clock (clock.Clock): one loop per process, for its one match
+(`tsf sim --match`, `run_sim`) or a pool's many (pool.py). Real-time mode ticks at the game's fps
+on a monotonic schedule (tick k is due at start + k/fps, so lateness never accumulates) and
+applies each seat's latest action; lockstep mode waits for both seats' answers to each state, but
+never longer than `step_timeout`, and never for a seat whose player is gone. State is published
+with congestion control *drop*: a frozen subscriber can never stall the sim.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from collections.abc import Callable
 
 import zenoh
 
+from services.sim.clock import Clock
 from services.sim.engine import Game
 from services.sim.match import Seats, event_messages, start_message, state_message, summary_message
 from shared import keys
@@ -38,13 +40,10 @@ def run_sim(bus: BusConfig, match: str, *args: object, **options: object) -> Sum
 
 
 class Sim:
-    """One match's sim on the bus. The fields are what the bus's callbacks share with the frame
-    loop (under `changed`); `play` runs the match.
-
-    Waits up to `wait_players` seconds for both seats and up to `wait_recorder` for a recorder
-    before the first frame (and `wait_adapter` for an adapter, in adaptive matches); a seat still
-    empty then plays no-op until its player arrives. At the first frame it raises its priority by
-    `priority` nice steps (in every thread; where permitted), above start-ups and bulk work."""
+    """One match's sim on the bus, its own process's only match (`tsf sim --match`): the pool's
+    per-match `MatchSim` on a clock of its own, until the match ends or `stop` is set. At the first
+    frame it raises its priority by `priority` nice steps (in every thread; where permitted), above
+    start-ups and bulk work."""
 
     def __init__(
         self,
@@ -61,87 +60,169 @@ class Sim:
         wait_adapter: float = 0.0,
         priority: int = 0,
     ) -> None:
-        if mode not in MODES:
-            raise UsageError("--sim-mode", mode, "unknown", MODES)
-        self.bus, self.match, self.mode = bus, match, mode
-        self.policies = {role: (policies or {}).get(role, "") for role in ROLES}  # the contract wants both
-        self.stop = stop or threading.Event()
-        self.wait_players, self.wait_recorder, self.wait_adapter = wait_players, wait_recorder, wait_adapter
-        self.step_timeout, self.priority = step_timeout, priority
-        self.game = Game(config, seed)
-        self.seats, self.drops = Seats(), Drops("sim")
-        self.changed = threading.Condition()
-        self.answered_at: dict[tuple[str, int], int] = {}  # (role, frame) -> arrival time, for round trips
-        self.observers: Counter[str] = Counter()  # live recorder and adapter tokens
+        self.bus, self.stop, self.priority = bus, stop or threading.Event(), priority
+        self.match = dict(
+            match=match, seed=seed, config=config, mode=mode, policies=policies, wait_players=wait_players,
+            wait_recorder=wait_recorder, step_timeout=step_timeout, wait_adapter=wait_adapter,
+        )  # fmt: skip
 
     def play(self) -> Summary:
         """Play the match and return its summary (also published on the summary key)."""
-        match, seats = self.match, self.seats
         with session(self.bus) as z:
-            fast = {"congestion_control": zenoh.CongestionControl.DROP, "express": True}
-            state_pub = z.declare_publisher(keys.state(match), priority=zenoh.Priority.REAL_TIME, **fast)
-            event_pub = z.declare_publisher(keys.event(match), **fast)
-            liveliness = z.liveliness()
-            with (
-                liveliness.declare_token(keys.alive(match, "sim")),
-                subscribe(z, keys.actions(match), seat_actions(match), self._on_action, self.drops),
-                liveliness.declare_subscriber(keys.seats_alive(match), self._on_alive, history=True),
-                liveliness.declare_subscriber(keys.alive(match, "recorder"), self._on_alive, history=True),
-                liveliness.declare_subscriber(keys.alive(match, "adapter"), self._on_alive, history=True),
-            ):
-                self._wait(lambda: all(seats.present(r) for r in ROLES), self.wait_players)
-                self._wait(lambda: self.observers["recorder"] > 0, self.wait_recorder)
-                self._wait(lambda: self.observers["adapter"] > 0, self.wait_adapter)
-                # At the states' priority: zenoh orders messages only within one priority, so a start
-                # put at the default priority could arrive after state 0.
-                start_bytes = start_message(self.game, match, "sim", self.mode, self.policies).encode()
-                z.put(keys.start(match), start_bytes, priority=zenoh.Priority.REAL_TIME)
-                timing = self._frames(state_pub, event_pub)
-                summary = summary_message(self.game, match, "sim", self.drops.counts, timing, seats.failures)
-                z.put(keys.summary(match), summary.encode())
-                time.sleep(0.2)  # let the last puts leave before the session closes
-                return summary
+            clock = Clock()
+            match = MatchSim(
+                z, clock.changed, **self.match, on_first_frame=lambda: _raise_priority(self.priority)
+            )
+            match.open()
+            clock.add(match)
+            clock.run(self.stop, until_empty=True)
+            assert match.summary is not None  # a closed match has published its summary
+            return match.summary
 
-    def _frames(self, state_pub: zenoh.Publisher, event_pub: zenoh.Publisher) -> dict[str, float]:
-        """Publish every state and play every frame, on the clock or in lockstep; the timing."""
-        game, match, seats, changed = self.game, self.match, self.seats, self.changed
-        sent: dict[int, int] = {}
-        ticks: list[float] = []
-        applied = (0, 0)
-        period = 1.0 / game.config.fps
-        _raise_priority(self.priority)
-        start = time.monotonic()
-        while True:
-            sent[game.frame] = time.perf_counter_ns()
-            state_pub.put(state_message(game, match, "sim", applied).encode())
-            with changed:
-                failed = seats.failure_events(match, "sim")
-            for event in [*event_messages(game, match, "sim"), *failed]:
-                event_pub.put(event.encode())
-            if game.done or self.stop.is_set():
-                break
-            if self.mode == "lockstep":
-                frame = game.frame
-                self._wait(lambda frame=frame: seats.answered(frame), self.step_timeout)
-            else:
-                due = start + (game.frame + 1) * period
-                delay = due - time.monotonic()
-                if delay > 0:
-                    time.sleep(delay)
-                ticks.append(time.monotonic())
-            with changed:
-                applied = seats.actions()
-            game.step(*applied)
-        with changed:
-            trips = [(t - sent[f]) / 1e6 for (_, f), t in self.answered_at.items() if f in sent]
-        return _timing(trips, ticks, period)
+
+class MatchSim:
+    """One match on an open session, played by a `Clock` (alone, or with a pool's other matches).
+    The fields are what the bus's callbacks share with the clock (under `changed`, the clock's).
+
+    Waits up to `wait_players` seconds for both seats, then up to `wait_recorder` for a recorder
+    and `wait_adapter` for an adapter (in adaptive matches); a seat still empty then plays no-op
+    until its player arrives. Real time ticks at the game's fps (tick k due at the first frame +
+    k/fps) with each seat's latest action; lockstep steps once both present seats have answered,
+    or `step_timeout` after the state. State is put with congestion control *drop*: a frozen
+    subscriber can never stall the clock. After the summary it keeps its declarations `LINGER`
+    seconds (the last puts leave before its token goes), then undeclares them all (`closed`)."""
+
+    LINGER = 0.2
+
+    def __init__(
+        self,
+        z: zenoh.Session,
+        changed: threading.Condition,
+        match: str,
+        seed: int = 0,
+        config: GameConfig | None = None,
+        mode: str = "realtime",
+        policies: dict[str, str] | None = None,
+        wait_players: float = 10.0,
+        wait_recorder: float = 0.0,
+        step_timeout: float = 1.0,
+        wait_adapter: float = 0.0,
+        on_first_frame: Callable[[], None] = lambda: None,
+    ) -> None:
+        if mode not in MODES:
+            raise UsageError("--sim-mode", mode, "unknown", MODES)
+        self.z, self.changed, self.match, self.mode = z, changed, match, mode
+        self.policies = {role: (policies or {}).get(role, "") for role in ROLES}  # the contract wants both
+        self.step_timeout, self.on_first_frame = step_timeout, on_first_frame
+        self.game = Game(config, seed)
+        self.period = 1.0 / self.game.config.fps
+        self.seats, self.drops = Seats(), Drops("sim")
+        self.answered_at: dict[tuple[str, int], int] = {}  # (role, frame) -> arrival time, for round trips
+        self.observers: Counter[str] = Counter()  # live recorder and adapter tokens
+        self.waits: list[tuple[Callable[[], bool], float]] = [
+            (lambda: all(self.seats.present(r) for r in ROLES), wait_players),
+            (lambda: self.observers["recorder"] > 0, wait_recorder),
+            (lambda: self.observers["adapter"] > 0, wait_adapter),
+        ]
+        self.deadline: float | None = None  # of the first wait left, from when it began
+        self.started: float | None = None  # monotonic time of the first frame
+        self.sent: dict[int, int] = {}  # frame -> when its state was put (perf_counter_ns)
+        self.ticks: list[float] = []  # monotonic time of each real-time tick
+        self.applied = (0, 0)
+        self.ended = False
+        self.summary: Summary | None = None
+        self.closed = False
+        self.declared = contextlib.ExitStack()
+
+    def open(self) -> None:
+        """Declare the match's token, subscribers and publishers on the session."""
+        z, match, on = self.z, self.match, self.declared.enter_context
+        fast = {"congestion_control": zenoh.CongestionControl.DROP, "express": True}
+        self.state_pub = z.declare_publisher(keys.state(match), priority=zenoh.Priority.REAL_TIME, **fast)
+        self.event_pub = z.declare_publisher(keys.event(match), **fast)
+        self.declared.callback(self.state_pub.undeclare)
+        self.declared.callback(self.event_pub.undeclare)
+        liveliness = z.liveliness()
+        on(liveliness.declare_token(keys.alive(match, "sim")))
+        on(subscribe(z, keys.actions(match), seat_actions(match), self._on_action, self.drops))
+        for key in (keys.seats_alive(match), keys.alive(match, "recorder"), keys.alive(match, "adapter")):
+            on(liveliness.declare_subscriber(key, self._on_alive, history=True))
+
+    def end(self) -> None:
+        self.ended = True
+
+    def due(self, now: float) -> float:
+        if self.summary is not None:
+            return self.summary_at + self.LINGER
+        if self.ended:
+            return now
+        if self.started is None:
+            while self.waits:
+                condition, timeout = self.waits[0]
+                self.deadline = self.deadline if self.deadline is not None else now + timeout
+                if not condition() and now < self.deadline:
+                    return self.deadline
+                self.waits.pop(0)
+                self.deadline = None
+            return now
+        if self.mode == "lockstep":
+            return now if self.seats.answered(self.game.frame) else self.sent_at + self.step_timeout
+        return self.started + (self.game.frame + 1) * self.period
+
+    def tick(self) -> None:
+        if self.summary is not None:
+            self.closed = True
+            self.declared.close()
+        elif self.started is None:
+            self._start()
+        elif self.ended:
+            self._finish()
+        else:
+            if self.mode == "realtime":
+                self.ticks.append(time.monotonic())
+            with self.changed:
+                self.applied = self.seats.actions()
+            self.game.step(*self.applied)
+            self._publish()
+
+    def _start(self) -> None:
+        # At the states' priority: zenoh orders messages only within one priority, so a start put
+        # at the default priority could arrive after state 0.
+        start = start_message(self.game, self.match, "sim", self.mode, self.policies)
+        self.z.put(keys.start(self.match), start.encode(), priority=zenoh.Priority.REAL_TIME)
+        self.on_first_frame()
+        self.started = time.monotonic()
+        self._publish()
+
+    def _publish(self) -> None:
+        """Put the state and the events of the frame just played; the summary after the last."""
+        game, match = self.game, self.match
+        self.sent_at, self.sent[game.frame] = time.monotonic(), time.perf_counter_ns()
+        self.state_pub.put(state_message(game, match, "sim", self.applied).encode())
+        with self.changed:
+            failed = self.seats.failure_events(match, "sim")
+        for event in [*event_messages(game, match, "sim"), *failed]:
+            self.event_pub.put(event.encode())
+        if game.done or self.ended:
+            self._finish()
+
+    def _finish(self) -> None:
+        with self.changed:
+            trips = [(t - self.sent[f]) / 1e6 for (_, f), t in self.answered_at.items() if f in self.sent]
+        timing = _timing(trips, self.ticks, self.period)
+        summary = summary_message(
+            self.game, self.match, "sim", self.drops.counts, timing, self.seats.failures
+        )
+        self.z.put(keys.summary(self.match), summary.encode())
+        self.summary_at, self.summary = time.monotonic(), summary
 
     def _on_action(self, action: Action) -> None:
         arrived = time.perf_counter_ns()
         with self.changed:
             if self.seats.offer(action):
                 self.answered_at.setdefault((action.role, action.frame), arrived)
-            self.changed.notify_all()
+            if self.mode == "lockstep":
+                self.changed.notify_all()
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
         try:
@@ -154,16 +235,6 @@ class Sim:
             elif key.service in ("recorder", "adapter"):
                 self.observers[key.service] += 1 if sample.kind == zenoh.SampleKind.PUT else -1
             self.changed.notify_all()
-
-    def _wait(self, condition: Callable[[], bool], timeout: float) -> None:
-        """Until `condition` holds, `timeout` passes or the match is stopped."""
-        deadline = time.monotonic() + timeout
-        with self.changed:
-            while not condition() and not self.stop.is_set():
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    return
-                self.changed.wait(min(left, 0.05))
 
 
 def _raise_priority(steps: int) -> None:

@@ -1,0 +1,96 @@
+"""The pool's sim: one long-lived process that plays every match a launcher orders on one clock
+(`tsf sim --pool P`), each match exactly as a match's own sim plays it (service.MatchSim)."""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import sys
+import threading
+from collections import OrderedDict
+
+import zenoh
+
+from services.sim.clock import Clock
+from services.sim.service import MatchSim, _raise_priority
+from shared import keys
+from shared.bus import BusConfig, Drops, session, subscribe
+from shared.errors import UsageError
+from shared.game import GameConfig
+from shared.messages import MatchOrder, MatchStop
+
+log = logging.getLogger("tsf.sim")
+REMEMBERED = 10_000  # match ids a pool remembers, to ignore a re-put order (hours of matches)
+SWITCH_INTERVAL = 0.001  # seconds a thread holds the GIL before it must offer it (Python's: 0.005)
+
+
+class Seen:
+    """The last `size` ids seen, oldest forgotten first: bounded memory for a pool that runs hours."""
+
+    def __init__(self, size: int = REMEMBERED) -> None:
+        self.size, self.ids = size, OrderedDict[str, None]()
+
+    def add(self, id: str) -> bool:
+        """Remember `id`; whether it is new."""
+        if id in self.ids:
+            return False
+        self.ids[id] = None
+        if len(self.ids) > self.size:
+            self.ids.popitem(last=False)
+        return True
+
+
+class PoolSim:
+    """Starts a match per order (a repeated order, for a match it has or had, is ignored) and ends
+    one on its stop; the clock plays them. Bad orders and stops are counted in `drops`."""
+
+    def __init__(self, z: zenoh.Session, pool: str, clock: Clock) -> None:
+        self.z, self.pool, self.clock = z, pool, clock
+        self.seen, self.drops = Seen(), Drops("sim")
+        self.lock = threading.Lock()
+
+    def declare(self, stack: contextlib.ExitStack) -> None:
+        """Subscribe to the pool's orders and stops, then declare the pool's sim token."""
+        stack.enter_context(subscribe(self.z, keys.pool_order(self.pool), MatchOrder, self.order, self.drops))
+        stack.enter_context(subscribe(self.z, keys.pool_stop(self.pool), MatchStop, self.stop, self.drops))
+        stack.enter_context(self.z.liveliness().declare_token(keys.pool_alive(self.pool, "sim")))
+
+    def order(self, order: MatchOrder) -> None:
+        with self.lock:
+            if not self.seen.add(order.match):
+                return
+        match = MatchSim(
+            self.z, self.clock.changed, order.match, order.seed, GameConfig(frames=order.frames), order.mode,
+            order.names, order.wait_players, order.wait_services,
+            wait_adapter=order.wait_services if order.adapter else 0.0,
+        )  # fmt: skip
+        match.open()
+        self.clock.add(match)
+        log.info(
+            "pool %s: match %s ordered (%d frames, %s)", self.pool, order.match, order.frames, order.mode
+        )
+
+    def stop(self, stop: MatchStop) -> None:
+        with self.lock:
+            self.seen.add(stop.match)  # an order that comes after its stop is not played
+        self.clock.end(stop.match)
+
+
+def run_pool(bus: BusConfig, pool: str, stop: threading.Event, priority: int = 0) -> PoolSim:
+    """Play the pool's matches until `stop` is set, then end those running (their summaries are
+    published) and return. Raises the priority by `priority` nice steps at once (every thread of
+    the process, the session's included), and offers the GIL more often so that the bus's
+    callbacks delay the clock less."""
+    try:
+        keys.check_match(pool)
+    except UsageError:
+        raise UsageError("--pool", pool, "invalid pool name: use 1-64 letters, digits, '-' or '_'") from None
+    with session(bus) as z, contextlib.ExitStack() as stack:
+        clock = Clock()
+        sim = PoolSim(z, pool, clock)
+        _raise_priority(priority)
+        sys.setswitchinterval(SWITCH_INTERVAL)
+        sim.declare(stack)
+        log.info("pool %s: the sim is ready for orders", pool)
+        clock.run(stop)
+        return sim

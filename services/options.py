@@ -21,6 +21,7 @@ import typer
 from rich.console import Console
 
 from services.adapter.core import STRATEGIES, AdapterConfig
+from shared import keys
 from shared.bus import BusConfig
 from shared.errors import UsageError
 from shared.game import DURATION, FPS, FRAMES, ROLES, SEEDS, GameConfig, Range
@@ -235,9 +236,26 @@ Pool = Annotated[
     str,
     typer.Option(
         "--pool",
-        help="Pool name: play every match ordered on tsf/pool/<pool>/order, until stopped (no --match).",
+        help="A pool's name: play every match its orders name (tsf/pool/<pool>/order), not one --match.",
     ),
 ]
+
+
+def in_pool(match: str, pool: str) -> bool:
+    """Whether a service command plays a pool's matches (--pool) rather than one (--match); it is
+    given one of the two, never both nor neither (UsageError)."""
+    if match and pool:
+        raise UsageError("--pool", pool, "give --pool or --match, not both")
+    if not (match or pool):
+        raise UsageError("--match", "(none)", "give --match (one match) or --pool (a pool's matches)")
+    if match:
+        keys.check_match(match)
+        return False
+    try:
+        keys.check_match(pool)
+    except UsageError:
+        raise UsageError("--pool", pool, "invalid pool name: use 1-64 letters, digits, '-' or '_'") from None
+    return True
 
 
 BUS_OPTIONS = {  # parameter name: (annotation, default)

@@ -29,6 +29,7 @@ from services.options import (
     bus_options,
     console,
     game_frames,
+    in_pool,
     keys_help,
     number,
     output,
@@ -86,21 +87,29 @@ def sim(
 @commands.command()
 @bus_options
 def agent(
-    match: Match,
-    role: Role = typer.Option(..., help="The seat."),
+    match: Match = "",
+    pool: Pool = "",
+    role: Role | None = typer.Option(None, help="The seat (with --match)."),
     policy: str = typer.Option(
-        ...,
+        "",
         help=keys_help(
-            None, "Policy key to play, or an adaptive agent's name (adaptive-T<window>-<strategy>)"
+            None,
+            "With --match: policy key to play, or an adaptive agent's name (adaptive-T<window>-<strategy>)",
         ),
     ),
     seed: int = number(0, SEEDS, "The match's seed (the policy's seed derives from it)."),
     *,
     bus: BusConfig,
 ) -> None:
-    """Run an agent service that plays one seat."""
-    from services.agent.service import run_agent
+    """Run an agent service that plays one seat (--match), or every agent seat of a pool's matches
+    (--pool: each match's seats, policies and seed come from its order)."""
+    from services.agent.service import run_agent, run_agent_pool
 
+    if in_pool(match, pool):
+        run_agent_pool(bus, pool, stop_on_signals())
+        return
+    if role is None or not policy:
+        raise UsageError("--role" if role is None else "--policy", "(none)", "needed with --match")
     adaptive = SeatSpec.parse(policy, "--policy").adaptive(role, seed)
     run_agent(bus, match, role, adaptive.initial_policy() if adaptive else policy, seed, stop_on_signals())
 
@@ -123,11 +132,16 @@ def recorder(
 @commands.command()
 @bus_options
 @adapter_options()
-def adapter(match: Match, *, adapter: AdapterFactory, bus: BusConfig) -> None:
-    """Run the adapter service: watch the partner, switch the agent of ROLE to the best response."""
-    from services.adapter.service import run_adapter
+def adapter(match: Match = "", pool: Pool = "", *, adapter: AdapterFactory, bus: BusConfig) -> None:
+    """Run the adapter service: watch the partner, switch the agent of ROLE to the best response.
+    With --pool, for every adaptive match of a pool (each one's adapter settings, seat and seed
+    come from its order; the options here are then unused)."""
+    from services.adapter.service import run_adapter, run_adapter_pool
 
-    run_adapter(bus, match, adapter(), stop_on_signals())
+    if in_pool(match, pool):
+        run_adapter_pool(bus, pool, stop_on_signals())
+    else:
+        run_adapter(bus, match, adapter(), stop_on_signals())
 
 
 @commands.command()

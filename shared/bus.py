@@ -13,16 +13,17 @@ import re
 import signal
 import socket
 import threading
-from collections import Counter
+from collections import Counter, OrderedDict
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
+from typing import Protocol, TypeVar
 
 import zenoh
 
 from shared import keys
 from shared.errors import UsageError
-from shared.messages import M, Summary, decode
+from shared.messages import M, MatchOrder, Summary, decode
 
 log = logging.getLogger("tsf.bus")
 
@@ -173,9 +174,85 @@ def subscribe(
     return z.declare_subscriber(key, on_sample)
 
 
-def stop_on_summary(z: zenoh.Session, match: str, stop: threading.Event, drops: Drops) -> zenoh.Subscriber:
-    """Set `stop` when the match's valid summary arrives (the match is over)."""
-    return subscribe(z, keys.summary(match), Summary, lambda _: stop.set(), drops)
+def on_match_end(z: zenoh.Session, match: str, ended: threading.Event, drops: Drops) -> ExitStack:
+    """Set `ended` when the match is over for a service that plays a part of it: its valid summary
+    arrives, or the sim's token goes away (a killed sim publishes none). A sim not seen yet ends
+    nothing: a part may be ready before its sim. Close the stack to undeclare both subscribers."""
+
+    def on_sim(sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.DELETE:
+            ended.set()
+
+    watches = ExitStack()
+    watches.enter_context(subscribe(z, keys.summary(match), Summary, lambda _: ended.set(), drops))
+    watches.enter_context(z.liveliness().declare_subscriber(keys.alive(match, "sim"), on_sim, history=True))
+    return watches
+
+
+class Part(Protocol):
+    """A service's part in one match (its subscriptions, publishers and token, declared when made):
+    `ended` is set when the match is over for it (on_match_end), `close` undeclares everything."""
+
+    match: str
+    ended: threading.Event
+
+    def close(self) -> None: ...
+
+
+P = TypeVar("P", bound=Part)
+ORDERS_KEPT = 4096  # match ids a pool service remembers, so that a re-put order is ignored
+
+
+def serve_orders(
+    z: zenoh.Session,
+    pool: str,
+    service: str,
+    start: Callable[[MatchOrder], list[P]],
+    drops: Drops,
+    stop: threading.Event,
+    every: float = 0.5,
+    tick: Callable[[P], None] = lambda part: None,
+) -> None:
+    """Play the matches a pool's orders name until `stop` is set, then close every part still open.
+    Each order's match gets the parts `start` makes (none: the service plays no part in it; a
+    ValueError: the order is counted as a drop). The launcher re-puts an order until it sees the
+    match's tokens, so the last ORDERS_KEPT ids are remembered and an order of one of them is
+    ignored, a bad one's included. Once `every` seconds this thread closes the parts that ended and
+    calls `tick` on each of the others (zenoh's callback threads never undeclare). The pool's token
+    is declared once the order key is subscribed."""
+    seen: OrderedDict[str, None] = OrderedDict()
+    parts: list[P] = []
+    lock = threading.Lock()
+
+    def on_order(order: MatchOrder) -> None:
+        with lock:
+            if order.match in seen:
+                return
+            seen[order.match] = None
+            if len(seen) > ORDERS_KEPT:
+                seen.popitem(last=False)
+        made = start(order)
+        with lock:
+            parts.extend(made)
+
+    try:
+        with (
+            subscribe(z, keys.pool_order(pool), MatchOrder, on_order, drops),
+            z.liveliness().declare_token(keys.pool_alive(pool, service)),
+        ):
+            while not stop.wait(every):
+                with lock:
+                    ended = [part for part in parts if part.ended.is_set()]
+                    parts[:] = [part for part in parts if not part.ended.is_set()]
+                for part in ended:
+                    part.close()
+                for part in list(parts):
+                    tick(part)
+    finally:  # orders no longer arrive
+        with lock:
+            left, parts[:] = list(parts), []
+        for part in left:
+            part.close()
 
 
 def until_stopped(stop: threading.Event) -> None:

@@ -11,49 +11,81 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from contextlib import ExitStack
 from pathlib import Path
 
 import zenoh
 
 from services.adapter.core import Adapter, AdapterConfig, Pairing, Payoff, Scorer
+from services.adapter.seat import SeatSpec
 from services.agent import networks
 from services.table.table import DEFAULT_TABLE
 from shared import keys
-from shared.bus import BusConfig, Drops, session, stop_on_summary, subscribe
-from shared.messages import Action, AdapterStatus, MessageError, PolicySwitch, State, seat_actions
+from shared.bus import BusConfig, Drops, on_match_end, serve_orders, session, subscribe
+from shared.messages import Action, AdapterStatus, MatchOrder, MessageError, PolicySwitch, State, seat_actions
 
 log = logging.getLogger("tsf.adapter")
 SENDER = "adapter"
 RESEND_FRAMES = 30  # ask again if the agent still plays another policy this many frames later
 
 
+def seat_of(role: str, table: Path = DEFAULT_TABLE) -> tuple[Payoff, Scorer]:
+    """The costly, read-only parts of an adaptive seat: the table seen from `role`'s seat and the
+    partner library's networks (scoring only reads them, so a pool's matches share them)."""
+    payoff = Payoff.load(role, table)
+    return payoff, Scorer([networks.load(k) for k in payoff.partners])
+
+
 def build(config: AdapterConfig, table: Path = DEFAULT_TABLE) -> tuple[Adapter, Scorer]:
-    """The core for one adaptive seat: the table's view from that seat and the partner's library."""
-    payoff = Payoff.load(config.role, table)
-    return config.build(payoff), Scorer([networks.load(k) for k in payoff.partners])
+    """The core for one adaptive seat of one match (its own Adapter: the window and estimates)."""
+    payoff, scorer = seat_of(config.role, table)
+    return config.build(payoff), scorer
 
 
 class AdapterShell:
     """One adaptive seat's shell in a live match: the fields are what the callbacks share, the
-    methods the callbacks (on_state, on_action from the bus; report from the status loop)."""
+    methods the callbacks (on_state, on_action from the bus; report_if_new from the status loop).
+    It declares its subscriptions, publishers and the adapter's token when made; `ended` is set
+    when the match is over (its summary, or its sim gone); `close` undeclares everything, and
+    nothing is put after it."""
 
     def __init__(
-        self, z: zenoh.Session, match: str, config: AdapterConfig, table: Path, costs: list[float] | None
+        self,
+        z: zenoh.Session,
+        match: str,
+        config: AdapterConfig,
+        seat: tuple[Payoff, Scorer],
+        drops: Drops,
+        costs: list[float] | None = None,
+        ended: threading.Event | None = None,
     ) -> None:
         self.match, self.config, self.costs = match, config, costs
-        self.adapter, self.scorer = build(config, table)
-        self.pairing, self.lock = Pairing(), threading.Lock()
-        self.switch = z.declare_publisher(keys.policy(match, config.role))
-        self.status = z.declare_publisher(
-            keys.adapter(match), congestion_control=zenoh.CongestionControl.DROP
-        )
+        payoff, self.scorer = seat
+        self.adapter = config.build(payoff)
+        self.pairing, self.lock, self.open = Pairing(), threading.Lock(), True
+        self.ended = ended or threading.Event()
         self.playing = ""  # what the agent plays, from its own actions
         self.asked, self.asked_at = "", -RESEND_FRAMES  # the last switch requested, and when
-        self.reported_frames, self.reported_partner = (
-            -1,
-            "",
-        )  # the core's frames and estimate at the last status
+        self.reported_frames = -1  # the core's frames at the last status
+        self.reported_partner = ""  # and its estimate
         self.latest = 0  # the newest frame scored
+        with ExitStack() as declared:
+            self.switch = declared.enter_context(z.declare_publisher(keys.policy(match, config.role)))
+            self.status = declared.enter_context(
+                z.declare_publisher(keys.adapter(match), congestion_control=zenoh.CongestionControl.DROP)
+            )
+            declared.enter_context(subscribe(z, keys.state(match), State, self.on_state, drops))
+            declared.enter_context(
+                subscribe(z, keys.actions(match), seat_actions(match), self.on_action, drops)
+            )
+            declared.enter_context(on_match_end(z, match, self.ended, drops))
+            declared.enter_context(z.liveliness().declare_token(keys.alive(match, "adapter")))
+            self.declared = declared.pop_all()
+
+    def close(self) -> None:
+        with self.lock:
+            self.open = False
+        self.declared.close()
 
     def report(self, frame: int) -> None:
         adapter = self.adapter
@@ -65,7 +97,7 @@ class AdapterShell:
     def report_if_new(self) -> None:
         """A status when the core has seen frames since the last one (the status loop's tick)."""
         with self.lock:
-            if self.adapter.frames != self.reported_frames:
+            if self.open and self.adapter.frames != self.reported_frames:
                 self.report(self.latest)
 
     def feed(self, pair: tuple[list[float], int] | None, frame: int) -> None:
@@ -101,10 +133,13 @@ class AdapterShell:
         if state.match != self.match:
             raise MessageError("mismatch", f"state of {state.match} on {keys.state(self.match)}")
         with self.lock:
-            self.feed(self.pairing.state(state.frame, state.obs[self.config.partner_role]), state.frame)
+            if self.open:
+                self.feed(self.pairing.state(state.frame, state.obs[self.config.partner_role]), state.frame)
 
     def on_action(self, action: Action) -> None:
         with self.lock:
+            if not self.open:
+                return
             if action.role == self.config.role:
                 self.playing = action.policy
             else:
@@ -120,20 +155,62 @@ def run_adapter(
     table: Path = DEFAULT_TABLE,
     costs: list[float] | None = None,
 ) -> Drops:
-    """Adapt the agent of `config.role` until the match's summary arrives or `stop` is set.
-    `costs`, if given, receives the seconds each scored frame took (scoring and update)."""
+    """Adapt the agent of `config.role` until the match is over (its summary, or its sim gone) or
+    `stop` is set. `costs`, if given, receives the seconds each scored frame took (scoring and
+    update)."""
     stop = stop or threading.Event()
     drops = Drops(SENDER)
     with session(bus) as z:
-        shell = AdapterShell(z, match, config, table, costs)
-        with (
-            subscribe(z, keys.state(match), State, shell.on_state, drops),
-            subscribe(z, keys.actions(match), seat_actions(match), shell.on_action, drops),
-            stop_on_summary(z, match, stop, drops),
-            z.liveliness().declare_token(keys.alive(match, "adapter")),
-        ):
+        shell = AdapterShell(z, match, config, seat_of(config.role, table), drops, costs, stop)
+        try:
             while not stop.wait(1.0 / status_hz):  # a modest report rate, whatever the frame rate
                 shell.report_if_new()
+        finally:
+            shell.close()
+    if drops.total:
+        log.info("adapter dropped %d bad inputs: %s", drops.total, dict(drops.counts))
+    return drops
+
+
+def config_of(order: MatchOrder) -> AdapterConfig | None:
+    """The adaptive agent of an order, in its seat and seed; None for an order without one. An
+    order whose `adapter` names no adaptive agent is a MessageError."""
+    if not order.adapter:
+        return None
+    try:
+        config = SeatSpec.parse(order.adapter, "adapter").adaptive(order.adaptive, order.seed)
+        if config is None:
+            raise ValueError(f"{order.adapter} is not an adaptive agent")
+        config.threshold()  # the out-of-library thresholds, checked before anything is declared
+    except ValueError as error:
+        raise MessageError("adapter", f"{order.match}: {error}") from error
+    return config
+
+
+def run_adapter_pool(
+    bus: BusConfig,
+    pool: str,
+    stop: threading.Event | None = None,
+    status_hz: float = 5.0,
+    table: Path = DEFAULT_TABLE,
+) -> Drops:
+    """Adapt the agent of every adaptive match `pool`'s orders name until `stop` is set, with one
+    status loop for all; returns the drop counts (bad orders and bad input of every match)."""
+    stop = stop or threading.Event()
+    drops = Drops(SENDER)
+    seats: dict[str, tuple[Payoff, Scorer]] = {}  # each seat's, built at its first match
+    with session(bus) as z:
+
+        def start(order: MatchOrder) -> list[AdapterShell]:
+            config = config_of(order)
+            if config is None:
+                return []
+            if config.role not in seats:
+                seats[config.role] = seat_of(config.role, table)
+            log.info("match %s: adapting the %s as %s", order.match, config.role, config.name)
+            return [AdapterShell(z, order.match, config, seats[config.role], drops)]
+
+        serve_orders(z, pool, SENDER, start, drops, stop, 1.0 / status_hz, AdapterShell.report_if_new)
     if drops.total:
         log.info("adapter dropped %d bad inputs: %s", drops.total, dict(drops.counts))
     return drops

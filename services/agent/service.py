@@ -1,56 +1,144 @@
-"""The agent service: a thin shell that answers each state of a match with its seat's action."""
+"""The agent service: a thin shell that answers each state of a match with its seat's action.
+
+One seat of one match is a `Seat`; `run_agent` plays the seat a command line names, `run_agent_pool`
+the seats of every match a pool's orders name (shared.bus.serve_orders), with the same class.
+"""
 
 from __future__ import annotations
 
+import copy
 import logging
 import threading
+from contextlib import ExitStack
 
 import zenoh
 
-from services.agent.player import Player
+from services.agent import library
+from services.agent.networks import load
+from services.agent.outside import BY_KEY, policy_kind
+from services.agent.player import Player, PolicyLoader
+from services.agent.seats import check_seat, policy_for
 from shared import keys
-from shared.bus import BusConfig, Drops, session, stop_on_summary, subscribe, until_stopped
-from shared.messages import MessageError, PolicySwitch, State
+from shared.bus import BusConfig, Drops, on_match_end, serve_orders, session, subscribe, until_stopped
+from shared.game import ROLES, Policy
+from shared.messages import MatchOrder, MessageError, PolicySwitch, State
 
 log = logging.getLogger("tsf.agent")
+
+
+class Seat:
+    """One seat of a live match: answers each state but the last with the player's action, plays
+    the policy a switch names from the next state, and holds the seat's token. `ended` is set when
+    the match is over (its summary, or its sim gone); `close` undeclares everything, and no answer
+    is put after it (a state's callback may still be running)."""
+
+    def __init__(
+        self, z: zenoh.Session, match: str, player: Player, drops: Drops, ended: threading.Event | None = None
+    ) -> None:
+        self.match, self.player, self.drops = match, player, drops
+        self.role, self.sender = player.role, f"agent/{player.role}"
+        self.ended = ended or threading.Event()
+        self.lock, self.open = threading.Lock(), True
+        with ExitStack() as declared:
+            self.publisher = declared.enter_context(
+                z.declare_publisher(
+                    keys.action(match, self.role),
+                    congestion_control=zenoh.CongestionControl.DROP,
+                    express=True,
+                )
+            )
+            declared.enter_context(subscribe(z, keys.state(match), State, self.on_state, drops))
+            declared.enter_context(
+                subscribe(z, keys.policy(match, self.role), PolicySwitch, self.on_switch, drops)
+            )
+            declared.enter_context(on_match_end(z, match, self.ended, drops))
+            declared.enter_context(z.liveliness().declare_token(keys.alive(match, "agent", self.role)))
+            self.declared = declared.pop_all()
+
+    def on_state(self, state: State) -> None:
+        if state.last:
+            return
+        action = self.player.act(state, self.sender)
+        if action.failure and action.failures == 1:  # one line a match; the sim counts the rest
+            log.error("%s: the policy failed and plays no-op on such frames: %s", self.sender, action.failure)
+        data = action.encode()
+        with self.lock:
+            if self.open:
+                self.publisher.put(data)
+
+    def on_switch(self, message: PolicySwitch) -> None:
+        if message.role != self.role:
+            raise MessageError("mismatch", f"switch for {message.role} on {self.role}'s key")
+        try:
+            self.player.switch(message.policy)
+        except ValueError as error:  # a key this seat cannot play
+            raise MessageError("policy", str(error)) from error
+        log.info("%s switches to %s from the next frame (%s)", self.sender, message.policy, message.reason)
+
+    def close(self) -> None:
+        with self.lock:
+            self.open = False
+        self.declared.close()
 
 
 def run_agent(
     bus: BusConfig, match: str, role: str, policy: str, seed: int = 0, stop: threading.Event | None = None
 ) -> Drops:
-    """Play `role` until the match's summary arrives or `stop` is set; returns the drop counts."""
+    """Play `role` until the match is over (its summary, or its sim gone) or `stop` is set; returns
+    the drop counts."""
     stop = stop or threading.Event()
-    player = Player(role, policy, seed)
     drops = Drops(f"agent/{role}")
-    sender = f"agent/{role}"
-
+    player = Player(role, policy, seed)
     with session(bus) as z:
-        publisher = z.declare_publisher(
-            keys.action(match, role), congestion_control=zenoh.CongestionControl.DROP, express=True
-        )
-
-        def on_state(state: State) -> None:
-            if state.last:
-                return
-            action = player.act(state, sender)
-            if action.failure and action.failures == 1:  # one line a match; the sim counts the rest
-                log.error("%s: the policy failed and plays no-op on such frames: %s", sender, action.failure)
-            publisher.put(action.encode())
-
-        def on_switch(message: PolicySwitch) -> None:
-            if message.role != role:
-                raise MessageError("mismatch", f"switch for {message.role} on {role}'s key")
-            try:
-                player.switch(message.policy)
-            except ValueError as error:  # a key this seat cannot play
-                raise MessageError("policy", str(error)) from error
-            log.info("%s switches to %s from the next frame (%s)", sender, message.policy, message.reason)
-
-        with (
-            subscribe(z, keys.state(match), State, on_state, drops),
-            subscribe(z, keys.policy(match, role), PolicySwitch, on_switch, drops),
-            stop_on_summary(z, match, stop, drops),
-            z.liveliness().declare_token(keys.alive(match, "agent", role)),
-        ):
+        seat = Seat(z, match, player, drops, stop)
+        try:
             until_stopped(stop)
+        finally:
+            seat.close()
+    return drops
+
+
+class Library:
+    """A policy loader (Player's `load`) that reads each library policy's weights once a process:
+    every seat plays a shallow copy. Only the network is shared, which playing never changes; what
+    a policy changes as it plays (its random stream, a proxy's last actions) is set anew by the
+    reset the Player gives every policy before it plays. Other keys load as policy_for does (a
+    scripted rule costs nothing to make; a policy from outside may hold anything)."""
+
+    def __init__(self) -> None:
+        self.loaded: dict[str, Policy] = {}
+        self.lock = threading.Lock()
+
+    def __call__(self, key: str, role: str) -> Policy:
+        if policy_kind(key) != BY_KEY or key not in library.registry():
+            return policy_for(key, role)
+        check_seat(key, role)
+        with self.lock:
+            if key not in self.loaded:
+                self.loaded[key] = load(key)
+            return copy.copy(self.loaded[key])
+
+
+def seats_of(order: MatchOrder, load: PolicyLoader) -> dict[str, Player]:
+    """A player for each seat of the order an agent plays ("" names a person's seat); an order
+    naming a policy that cannot play its seat is a MessageError."""
+    try:
+        return {role: Player(role, key, order.seed, load) for role in ROLES if (key := order.policy(role))}
+    except Exception as error:  # noqa: BLE001 - a policy from outside may raise anything as it loads
+        raise MessageError("policy", f"{order.match}: {type(error).__name__}: {error}") from error
+
+
+def run_agent_pool(bus: BusConfig, pool: str, stop: threading.Event | None = None) -> Drops:
+    """Play every agent seat of the matches `pool`'s orders name until `stop` is set; returns the
+    drop counts (bad orders and bad input of every match)."""
+    stop = stop or threading.Event()
+    drops, load = Drops("agent"), Library()
+    with session(bus) as z:
+
+        def start(order: MatchOrder) -> list[Seat]:
+            players = seats_of(order, load)
+            log.info("match %s: playing %s", order.match, {r: p.key for r, p in players.items()} or "no seat")
+            return [Seat(z, order.match, player, drops) for player in players.values()]
+
+        serve_orders(z, pool, "agent", start, drops, stop)
     return drops

@@ -67,11 +67,7 @@ def sim(
     from services.sim.pool import run_pool
     from services.sim.service import run_sim
 
-    if bool(match) == bool(pool):
-        raise UsageError(
-            "--pool", pool or "''", "give either --match (one match) or --pool (a pool's matches)"
-        )
-    if pool:
+    if in_pool(match, pool):
         run_pool(bus, pool, stop_on_signals(), priority)
         return
     config = GameConfig(frames=game_frames(duration, frames))

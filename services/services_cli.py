@@ -111,7 +111,13 @@ def recorder(
     if bool(match) == bool(pool):
         raise UsageError("--pool", pool or "(none)", "give either --match or --pool, not both or neither")
     if pool:
-        run_pool_recorder(bus, keys.check_match(pool), out, stop_on_signals())
+        try:
+            keys.check_match(pool)  # a pool's name is a key chunk, as a match id is
+        except UsageError:
+            raise UsageError(
+                "--pool", pool, "invalid pool name: use 1-64 letters, digits, '-' or '_'"
+            ) from None
+        run_pool_recorder(bus, pool, out, stop_on_signals())
         return
     path = run_recorder(bus, match, out, stop_on_signals())
     logging.getLogger("tsf.recorder").info("recording written to %s", path)

@@ -138,6 +138,9 @@ MISTAKES = [
     ("agent --match x --policy circle", 2, "tsf agent: Missing option '--role'."),
     ("agent --match 'bad id' --role bait --policy circle", 2, "--match bad id: invalid match id"),
     ("recorder --match x/y", 2, "tsf recorder: --match x/y: invalid match id"),
+    ("recorder", 2, "tsf recorder: --pool (none): give either --match or --pool, not both or neither"),
+    ("recorder --match x --pool p", 2, "tsf recorder: --pool p: give either --match or --pool, not both"),
+    ("recorder --pool p/q", 2, "tsf recorder: --pool p/q: invalid pool name"),
     ("recorder --match " + M + " --out {tmp}", 2, f"--match {M}: {{done}} holds a finished match of this id"),
     (
         "adapter --match x --role pilot",

@@ -34,6 +34,7 @@ from services.options import (
     number,
     output,
 )
+from shared import keys
 from shared.bus import BusConfig, stop_on_signals
 from shared.errors import UsageError
 from shared.game import FPS, SEEDS, GameConfig
@@ -113,14 +114,28 @@ def agent(
 @commands.command()
 @bus_options
 def recorder(
-    match: Match,
+    match: str = typer.Option(
+        "", "--match", envvar="TSF_MATCH", help="Match id: the key namespace tsf/<match>/..."
+    ),
+    pool: str = typer.Option("", "--pool", help="Record every match this pool orders (instead of --match)."),
     out: Path = output(Path("recordings"), "Directory of the recordings.", directory=True),
     *,
     bus: BusConfig,
 ) -> None:
-    """Run the recorder service for one match."""
-    from services.recorder.service import run_recorder
+    """Run the recorder service for one match, or for every match of a pool until stopped."""
+    from services.recorder.service import run_pool_recorder, run_recorder
 
+    if bool(match) == bool(pool):
+        raise UsageError("--pool", pool or "(none)", "give either --match or --pool, not both or neither")
+    if pool:
+        try:
+            keys.check_match(pool)  # a pool's name is a key chunk, as a match id is
+        except UsageError:
+            raise UsageError(
+                "--pool", pool, "invalid pool name: use 1-64 letters, digits, '-' or '_'"
+            ) from None
+        run_pool_recorder(bus, pool, out, stop_on_signals())
+        return
     path = run_recorder(bus, match, out, stop_on_signals())
     logging.getLogger("tsf.recorder").info("recording written to %s", path)
 
@@ -198,7 +213,6 @@ def alive(
     so the probe never joins the match's mesh of peers."""
     import zenoh
 
-    from shared import keys
     from shared.bus import session
 
     key = keys.alive(match, service, role or None)

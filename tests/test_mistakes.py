@@ -145,6 +145,9 @@ MISTAKES = [
     ("adapter --pool 'a b'", 2, "tsf adapter: --pool a b: invalid pool name"),
     ("agent --match 'bad id' --role bait --policy circle", 2, "--match bad id: invalid match id"),
     ("recorder --match x/y", 2, "tsf recorder: --match x/y: invalid match id"),
+    ("recorder", 2, "tsf recorder: --pool (none): give either --match or --pool, not both or neither"),
+    ("recorder --match x --pool p", 2, "tsf recorder: --pool p: give either --match or --pool, not both"),
+    ("recorder --pool p/q", 2, "tsf recorder: --pool p/q: invalid pool name"),
     ("recorder --match " + M + " --out {tmp}", 2, f"--match {M}: {{done}} holds a finished match of this id"),
     (
         "adapter --match x --role pilot",

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
+import logging
+import signal
 from concurrent.futures import Future
 
 import msgpack
@@ -10,16 +12,16 @@ import pytest
 import zenoh
 
 from services.provenance import read_sidecar
-from services.recorder.log import read_log
+from services.recorder.log import LogWriter, read_log
 from services.recorder.recording import load
-from services.recorder.service import recording_path, run_recorder
+from services.recorder.service import recording_path, run_pool_recorder, run_recorder
 from services.sim.engine import Game
 from services.sim.match import start_message, state_message, summary_message
 from shared import keys
 from shared.bus import BusConfig, session
 from shared.errors import Failure, UsageError
 from shared.game import ROLES, GameConfig
-from shared.messages import Action, GameEvent, PolicySwitch
+from shared.messages import Action, GameEvent, MatchOrder, PolicySwitch
 
 MATCH, SEED = "rec", 3
 POLICIES = {"bait": "circle", "shooter": "mirror"}
@@ -28,8 +30,8 @@ POLICIES = {"bait": "circle", "shooter": "mirror"}
 class FakeMatch:
     """Publishes the messages of a real game (states skipped where asked) and remembers the valid ones."""
 
-    def __init__(self, z) -> None:  # noqa: ANN001 - a session
-        self.z, self.game, self.sent = z, Game(GameConfig(frames=20), SEED), []
+    def __init__(self, z, match: str = MATCH) -> None:  # noqa: ANN001 - a session
+        self.z, self.match, self.game, self.sent = z, match, Game(GameConfig(frames=20), SEED), []
         self.state_at: dict[int, int] = {}  # frame -> index of its state in `sent`
 
     def put(self, key: str, data: bytes, valid: bool = True) -> None:
@@ -38,7 +40,9 @@ class FakeMatch:
             self.sent.append((key, data))
 
     def start(self) -> None:
-        self.put(keys.start(MATCH), start_message(self.game, MATCH, "sim", "lockstep", POLICIES).encode())
+        self.put(
+            keys.start(self.match), start_message(self.game, self.match, "sim", "lockstep", POLICIES).encode()
+        )
 
     def frames(self, last: int, skip: tuple[int, ...] = ()) -> None:
         """States (with both seats' actions) up to `last`; the states of `skip` are not published."""
@@ -46,18 +50,21 @@ class FakeMatch:
             frame = self.game.frame
             if frame not in skip:
                 self.state_at[frame] = len(self.sent)
-                self.put(keys.state(MATCH), state_message(self.game, MATCH, "sim", (frame % 12, 3)).encode())
+                self.put(
+                    keys.state(self.match),
+                    state_message(self.game, self.match, "sim", (frame % 12, 3)).encode(),
+                )
             for role, action in (("bait", frame % 12), ("shooter", 3)):
                 self.put(
-                    keys.action(MATCH, role),
+                    keys.action(self.match, role),
                     Action(
-                        match=MATCH, frame=frame, sender="agent", role=role, action=action, policy="p"
+                        match=self.match, frame=frame, sender="agent", role=role, action=action, policy="p"
                     ).encode(),
                 )
             self.game.step(frame % 12, 3)
 
     def summary(self) -> None:
-        self.put(keys.summary(MATCH), summary_message(self.game, MATCH, "sim", {}, {}).encode())
+        self.put(keys.summary(self.match), summary_message(self.game, self.match, "sim", {}, {}).encode())
 
 
 @pytest.fixture
@@ -212,3 +219,148 @@ def test_the_log_of_a_finished_match_is_never_appended_to(recorder, tmp_path):
     with pytest.raises(UsageError, match=f"--match {MATCH}: .* holds a finished match of this id"):
         run_recorder(BusConfig(), MATCH, tmp_path)
     assert path.read_bytes() == before
+
+
+POOL = "lab"
+
+
+def order(match: str, folder: str = "") -> bytes:
+    names = {"bait": "circle", "shooter": "mirror"}
+    return MatchOrder(match=match, frame=0, sender="pool/lab", names=names, folder=folder).encode()
+
+
+class Pool:
+    """The pool's router (its sim's session: it publishes the matches) with a pool recorder client."""
+
+    def __init__(self, router, client: BusConfig, tap, wait_until) -> None:  # noqa: ANN001 - fixtures
+        self.router, self.client, self.wait_until = router, client, wait_until
+        self.taps: dict[str, object] = {}
+        self.tap = tap
+        pool_alive = []
+        router.liveliness().declare_subscriber(
+            keys.pool_alive(POOL, "recorder"), lambda s: pool_alive.append(s.kind), history=True
+        )
+        self.pool_alive = pool_alive
+
+    def order(self, match: str, folder: str = "") -> FakeMatch:
+        """Order `match` (as the launcher does, more than once) and return it once the recorder's
+        token for it is seen."""
+        tap = self.watch(match)
+        self.router.put(keys.pool_order(POOL), order(match, folder))
+        self.router.put(keys.pool_order(POOL), order(match, folder))  # re-put: ignored
+        assert self.wait_until(lambda: tap.is_alive("recorder"), timeout=10)
+        return FakeMatch(self.router, match)
+
+    def watch(self, match: str):  # noqa: ANN201 - a Tap
+        self.taps[match] = self.tap(self.router, match)
+        return self.taps[match]
+
+    def ended(self, match: str) -> bool:
+        return self.wait_until(lambda: not self.taps[match].is_alive("recorder"), timeout=10)
+
+
+@pytest.fixture
+def pool_router(endpoint, tap, wait_until):
+    """A Pool with no recorder yet."""
+    with session(BusConfig("router", (endpoint,))) as router:
+        yield Pool(router, BusConfig("client", (), (endpoint,)), tap, wait_until)
+
+
+@pytest.fixture
+def pool(pool_router, background, wait_until, tmp_path):
+    """(a Pool, the pool recorder's future): the recorder runs as the pool's client, into tmp_path."""
+    future = background(run_pool_recorder, pool_router.client, POOL, tmp_path)
+    assert wait_until(lambda: pool_router.pool_alive == [zenoh.SampleKind.PUT], timeout=10)
+    return pool_router, future
+
+
+def records(path) -> list:  # noqa: ANN001 - a Path
+    return [(r.key, r.data) for r in read_log(path)[0]]
+
+
+def test_a_pool_records_overlapping_matches_from_their_orders_into_their_folders(pool, tmp_path):
+    made, future = pool
+    a = made.order("pa", folder="one")
+    a.start()
+    a.frames(3)
+    b = made.order("pb", folder="two")
+    b.start()
+    a.frames(6)
+    b.frames(4)
+    a.summary()
+    recorded = len(a.sent)
+    assert made.ended("pa")
+    b.frames(8)
+    a.frames(9)  # after its end: nothing of match pa is subscribed any more
+    made.router.put(keys.pool_order(POOL), order("pa", "one"))  # an order of a match it had: ignored
+    b.summary()
+    assert made.ended("pb")
+    assert not made.wait_until(lambda: made.taps["pa"].is_alive("recorder"), timeout=0.5)
+    a_path, b_path = tmp_path / "one" / "pa.tsflog", tmp_path / "two" / "pb.tsflog"
+    assert records(a_path) == a.sent[:recorded] and records(b_path) == b.sent
+    assert all(load(path).summary is not None and load(path).clean for path in (a_path, b_path))
+    assert sorted(p.name for p in tmp_path.rglob("*.tsflog")) == ["pa.tsflog", "pb.tsflog"]
+    assert not future.done()
+
+
+def test_a_killed_sim_ends_its_match_s_recording_only(pool, tmp_path):
+    made, _ = pool
+    sims = {m: made.router.liveliness().declare_token(keys.alive(m, "sim")) for m in ("ka", "kb")}
+    a, b = made.order("ka"), made.order("kb")
+    for match in (a, b):
+        match.start()
+        match.frames(3)
+    sims["ka"].undeclare()  # its sim is gone: the recording ends as it is
+    assert made.ended("ka")
+    b.frames(6)
+    b.summary()
+    assert made.ended("kb")
+    sims["kb"].undeclare()
+    killed = load(tmp_path / "ka.tsflog")
+    assert killed.clean and killed.problems() == ["no summary (last state: frame 3)"]
+    assert records(tmp_path / "kb.tsflog") == b.sent
+
+
+def test_an_order_it_cannot_take_is_dropped_with_one_line_and_the_pool_records_on(pool, tmp_path, caplog):
+    made, future = pool
+    with LogWriter(tmp_path / "done.tsflog") as finished:  # a finished match's log: never appended to
+        finished.write(
+            keys.summary("done"), summary_message(Game(GameConfig(), 1), "done", "sim", {}, {}).encode()
+        )
+    caplog.set_level(logging.WARNING)
+    bad = msgpack.unpackb(order("up", folder="x"))
+    made.router.put(keys.pool_order(POOL), b"\xc1 garbage")
+    made.router.put(keys.pool_order(POOL), msgpack.packb({**bad, "folder": "../up"}))
+    done = made.watch("done")
+    made.router.put(keys.pool_order(POOL), order("done"))
+    good = made.order("good")
+    good.start()
+    good.summary()
+    assert made.ended("good") and load(tmp_path / "good.tsflog").summary is not None
+    assert not (tmp_path.parent / "up.tsflog").exists() and not future.done()
+    assert not done.is_alive("recorder") and len(read_log(tmp_path / "done.tsflog")[0]) == 1
+    lines = [r.getMessage() for r in caplog.records]
+    assert sum("dropped input on tsf/pool/lab/order" in line for line in lines) == 2  # two reasons
+    assert [line for line in lines if "not recorded" in line] == [
+        f"match done not recorded: --match done: {tmp_path / 'done.tsflog'} holds a finished match"
+        " of this id; give the new one another id"
+    ]
+
+
+def test_sigterm_closes_every_open_log(pool_router, spawn, tmp_path, wait_until):
+    made = pool_router
+    recorder = spawn("recorder", made.client, "--pool", POOL, "--out", str(tmp_path))
+    assert wait_until(lambda: made.pool_alive == [zenoh.SampleKind.PUT], timeout=30)
+    matches = [made.order(m) for m in ("ta", "tb")]
+    for match in matches:
+        match.start()
+        match.frames(3)
+    assert wait_until(
+        lambda: all(len(read_log(tmp_path / f"{m.match}.tsflog")[0]) == len(m.sent) for m in matches)
+    )
+    recorder.send_signal(signal.SIGTERM)
+    assert recorder.wait(10) == 0
+    for match in matches:
+        recording = load(tmp_path / f"{match.match}.tsflog")
+        assert recording.clean and [s.frame for s in recording.states] == [0, 1, 2, 3]
+        assert records(recording.path) == match.sent

@@ -1,7 +1,10 @@
 """The recorder service: a thin shell that writes everything a match puts on the bus to its log.
 
-The zenoh callback only timestamps and queues the bytes (it never blocks the session's receive
-thread); a drain thread validates, writes and tracks gaps. Bad input is counted and dropped.
+One match given on the command line (run_recorder), or a pool's matches as their orders come
+(run_pool_recorder): the same per-match code (MatchRecording, _record) either way. The zenoh
+callbacks only timestamp and queue the bytes (they never block the session's receive thread); one
+drain thread validates, writes and tracks gaps for every match of the process. Bad input is
+counted and dropped.
 """
 
 from __future__ import annotations
@@ -11,6 +14,7 @@ import logging
 import queue
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import zenoh
@@ -19,17 +23,110 @@ from services.agent import library
 from services.provenance import provenance, sidecar
 from services.recorder.log import GapTracker, LogWriter, read_log
 from shared import keys
-from shared.bus import BusConfig, Drops, session, until_stopped
+from shared.bus import BusConfig, Drops, session, subscribe, until_stopped
 from shared.errors import Failure, UsageError
 from shared.game import ROLES, GameConfig
-from shared.messages import Message, MessageError, Start, State, Summary, decode_any
+from shared.messages import MatchOrder, Message, MessageError, Start, State, Summary, decode_any
 
 log = logging.getLogger("tsf.recorder")
 _DONE = object()
+SEEN_ORDERS = 4096  # match ids a pool recorder remembers (orders are re-put until it answers)
 
 
 def recording_path(directory: str | Path, match: str) -> Path:
     return Path(directory) / f"{keys.check_match(match)}.tsflog"
+
+
+class MatchRecording:
+    """One match's log, fed by the drain thread: what it hands in is validated against the match,
+    written, and its state frames tracked for gaps. Reopened during the match (a restarted recorder)
+    it appends after cutting any torn tail; the log of a finished match (one with a summary) is
+    refused (UsageError). `ended` is set by the summary, by a second start of the id (another match:
+    it and all that follows is not written, `second` holds it), or by whoever ends the recording."""
+
+    def __init__(self, match: str, path: Path, drops: Drops, ended: threading.Event | None = None) -> None:
+        if path.exists() and any(r.key == keys.summary(match) for r in read_log(path)[0]):
+            raise UsageError(
+                "--match", match, f"{path} holds a finished match of this id; give the new one another id"
+            )
+        self.match, self.path, self.drops = match, path, drops
+        self.ended = ended or threading.Event()
+        self.closed = threading.Event()
+        self.second: Start | None = None
+        self.writer = LogWriter(path)
+        if self.writer.cut_bytes:
+            log.warning("cut a torn tail of %d bytes from %s", self.writer.cut_bytes, path)
+        state = keys.state(match)
+        self.gaps = GapTracker(
+            max((_frame(r.data) for r in self.writer.last_records if r.key == state), default=-1)
+        )
+        self.started = any(r.key == keys.start(match) for r in self.writer.last_records)
+        self.writer.last_records = []  # read for the above only: a pool keeps many logs open for hours
+
+    def take(self, key: str, data: bytes, t: int) -> None:
+        if self.closed.is_set() or self.second is not None:
+            return
+        try:
+            message = decode_any(data)
+            _check_key(key, message, self.match)
+        except MessageError as error:
+            self.drops.drop(key, error)
+            return
+        if isinstance(message, Start):
+            if self.started:
+                self.second = message
+                self.ended.set()
+                return
+            self.started = True
+            _write_provenance(self.path, message)
+        if isinstance(message, State) and (gap := self.gaps.see(message.frame)):
+            self.writer.write_gap(*gap)
+        self.writer.write(key, data, t)
+        if isinstance(message, Summary):
+            self.ended.set()
+
+    def close(self) -> None:
+        self.writer.close()
+        self.closed.set()
+
+
+class Drain:
+    """The one thread that writes every match's log: zenoh callbacks queue (recording, key, bytes,
+    receive time) items, and a recording's close is queued behind what it received."""
+
+    def __init__(self) -> None:
+        self.inbox: queue.SimpleQueue = queue.SimpleQueue()
+        self.thread = threading.Thread(target=self._run, name="recorder-drain", daemon=True)
+
+    def feed(self, recording: MatchRecording) -> Callable[[zenoh.Sample], None]:
+        put = self.inbox.put
+        return lambda sample: put(
+            (recording, str(sample.key_expr), sample.payload.to_bytes(), time.time_ns())
+        )
+
+    def close(self, recording: MatchRecording) -> None:
+        """Close the log once everything queued before is written (call after undeclaring its feed)."""
+        self.inbox.put((recording, None, b"", 0))
+        recording.closed.wait()
+
+    def _run(self) -> None:
+        while (item := self.inbox.get()) is not _DONE:
+            recording, key, data, t = item
+            try:
+                recording.take(key, data, t) if key is not None else recording.close()
+            except OSError as error:  # a full disk, say: this match's recording ends, not the others'
+                log.error("recording %s failed: %s", recording.path, error)
+                recording.ended.set()
+                if key is None:
+                    recording.closed.set()
+
+    def __enter__(self) -> Drain:
+        self.thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.inbox.put(_DONE)
+        self.thread.join()
 
 
 def run_recorder(
@@ -39,76 +136,125 @@ def run_recorder(
     stop: threading.Event | None = None,
     wait_seats: float = 10.0,
 ) -> Path:
-    """Record `match` until its summary is written or `stop` is set; returns the log's path.
-    Restarted on the same directory during the match, it appends to the same log after cutting any
-    torn tail; the log of a finished match (one with a summary) is never appended to (UsageError),
-    and a second start of the id ends the recording before it is written (Failure): one log, one match.
+    """Record `match` until its summary is written, its sim's token goes away, or `stop` is set;
+    returns the log's path. Restarted on the same directory during the match, it appends to the same
+    log after cutting any torn tail; the log of a finished match (one with a summary) is never
+    appended to (UsageError), and a second start of the id ends the recording before it is written
+    (Failure): one log, one match."""
+    recording = MatchRecording(match, recording_path(directory, match), Drops("recorder"), stop)
+    with Drain() as drain, session(bus) as z:
+        _record(z, bus.mode == "client", recording, drain, wait_seats)
+    if recording.second is not None:
+        raise Failure(f"{recording.path}: a second match started under the id {match}; it was not recorded")
+    return recording.path
 
-    Its liveliness token (which the sim waits for) says that the seats' first actions will reach
-    it. A client (run_match's topology: the sim is the router) declares it as soon as it has
-    subscribed: every action passes the router, which has the subscription before the token
+
+def _record(
+    z: zenoh.Session, client: bool, recording: MatchRecording, drain: Drain, wait_seats: float
+) -> None:
+    """Record one match on `z` until `recording.ended`, then close its log; everything declared for
+    it is undeclared (a pool records for hours). The match also ends when the sim's token goes away
+    (a killed sim: the log stays as it is, incomplete).
+
+    The recorder's liveliness token (which the sim waits for) says that the seats' first actions will
+    reach it. A client (run_match's and a pool's topology: the sim is the router) declares it as soon
+    as it has subscribed: every action passes the router, which has the subscription before the token
     (declared in order on the one link), so the token can come long before the seats' players do,
     and a study can offer the trial without waiting for a person's Ready. A peer declares it once
     both seats' players are seen, or after `wait_seats` seconds: it learns of the other peers over
     gossip after the sim has seen them, so a token declared at once could start the match before
     the seats' first actions reach this recorder."""
-    stop = stop or threading.Event()
-    path = recording_path(directory, match)
-    if path.exists() and any(r.key == keys.summary(match) for r in read_log(path)[0]):
-        raise UsageError(
-            "--match", match, f"{path} holds a finished match of this id; give the new one another id"
-        )
-    inbox: queue.SimpleQueue = queue.SimpleQueue()
-    drops = Drops("recorder")
+    match, ended = recording.match, recording.ended
 
-    def on_sample(sample: zenoh.Sample) -> None:
-        inbox.put((str(sample.key_expr), sample.payload.to_bytes(), time.time_ns()))
+    def on_sim(sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.DELETE:
+            ended.set()
 
-    second: list[Start] = []  # a start after the log's first: another match under this id
-
-    def drain(writer: LogWriter, gaps: GapTracker, started: bool) -> None:
-        while True:
-            item = inbox.get()
-            if item is _DONE:
-                return
-            key, data, t = item
-            try:
-                message = decode_any(data)
-                _check_key(key, message, match)
-            except MessageError as error:
-                drops.drop(key, error)
-                continue
-            if isinstance(message, Start) and started:
-                second.append(message)
-                stop.set()
-                return
-            if isinstance(message, Start) and not started:
-                _write_provenance(path, message)
-            started = started or isinstance(message, Start)
-            if isinstance(message, State) and (gap := gaps.see(message.frame)):
-                writer.write_gap(*gap)
-            writer.write(key, data, t)
-            if isinstance(message, Summary):
-                stop.set()
-
-    with LogWriter(path) as writer:
-        last = max((_frame(r.data) for r in writer.last_records if r.key == keys.state(match)), default=-1)
-        if writer.cut_bytes:
-            log.warning("cut a torn tail of %d bytes from %s", writer.cut_bytes, path)
-        started = any(r.key == keys.start(match) for r in writer.last_records)
-        drainer = threading.Thread(target=drain, args=(writer, GapTracker(last), started), daemon=True)
-        drainer.start()
-        with session(bus) as z, z.declare_subscriber(keys.everything(match), on_sample):
-            if bus.mode != "client":
-                _wait_for_seats(z, match, wait_seats, stop)
+    try:
+        with (
+            z.declare_subscriber(keys.everything(match), drain.feed(recording)),
+            z.liveliness().declare_subscriber(keys.alive(match, "sim"), on_sim, history=True),
+        ):
+            if not client:
+                _wait_for_seats(z, match, wait_seats, ended)
             with z.liveliness().declare_token(keys.alive(match, "recorder")):
-                until_stopped(stop)
+                until_stopped(ended)
                 time.sleep(0.5)  # actions still in flight after the summary (they come over other links)
-        inbox.put(_DONE)
-        drainer.join()
-    if second:
-        raise Failure(f"{path}: a second match started under the id {match}; it was not recorded")
-    return path
+    finally:
+        drain.close(recording)
+
+
+class PoolRecorder:
+    """A pool's recorder: each new order's match is recorded by _record in a thread of its own, into
+    `<out>/<order.folder>/<match>.tsflog`. An order for a match it has or had is ignored (the
+    launcher re-puts orders until every service answers); it remembers the last SEEN_ORDERS ids."""
+
+    def __init__(self, z: zenoh.Session, client: bool, out: Path, drain: Drain, drops: Drops) -> None:
+        self.z, self.client, self.out, self.drain, self.drops = z, client, out, drain, drops
+        self.seen: dict[str, None] = {}  # insertion-ordered: the oldest id is forgotten first
+        self.open: dict[str, tuple[MatchRecording, threading.Thread]] = {}
+        self.closing = False
+        self.lock = threading.Lock()
+
+    def order(self, order: MatchOrder) -> None:
+        with self.lock:
+            if self.closing or order.match in self.seen:
+                return
+            self.seen[order.match] = None
+            if len(self.seen) > SEEN_ORDERS:
+                del self.seen[next(iter(self.seen))]
+        threading.Thread(
+            target=self._record, args=(order,), name=f"recorder-{order.match}", daemon=True
+        ).start()
+
+    def _record(self, order: MatchOrder) -> None:
+        try:
+            path = recording_path(self.out / order.folder, order.match)
+            recording = MatchRecording(order.match, path, self.drops)
+        except (UsageError, OSError) as error:
+            log.warning("match %s not recorded: %s", order.match, error)
+            return
+        with self.lock:
+            if self.closing:  # SIGTERM came while its log opened
+                recording.ended.set()
+            self.open[order.match] = (recording, threading.current_thread())
+        try:
+            _record(self.z, self.client, recording, self.drain, order.wait_players)
+        finally:
+            with self.lock:
+                del self.open[order.match]
+        if recording.second is not None:
+            log.warning("%s: a second match started under the id %s; it was not recorded", path, order.match)
+        log.info("match %s recorded to %s", order.match, path)
+
+    def close(self) -> None:
+        """End every open recording (each log flushed and closed) and take no more orders."""
+        with self.lock:
+            self.closing = True
+            now = list(self.open.values())
+        for recording, _ in now:
+            recording.ended.set()
+        for _, thread in now:
+            thread.join()
+
+
+def run_pool_recorder(
+    bus: BusConfig, pool: str, out: str | Path, stop: threading.Event | None = None
+) -> None:
+    """Record every match the pool `pool` orders until `stop` is set; then every open log is
+    flushed and closed. Its pool token is declared once it has subscribed to the orders."""
+    stop = stop or threading.Event()
+    drops = Drops("recorder")
+    with Drain() as drain, session(bus) as z:
+        recorder = PoolRecorder(z, bus.mode == "client", Path(out), drain, drops)
+        try:
+            with (
+                subscribe(z, keys.pool_order(pool), MatchOrder, recorder.order, drops),
+                z.liveliness().declare_token(keys.pool_alive(pool, "recorder")),
+            ):
+                until_stopped(stop)
+        finally:
+            recorder.close()
 
 
 def _wait_for_seats(z: zenoh.Session, match: str, timeout: float, stop: threading.Event) -> None:

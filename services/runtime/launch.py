@@ -221,7 +221,20 @@ def run_match(
         summary = [s for s in [load(path).summary] if s is not None]
     if not summary:
         raise Failure(f"match {plan.match} ended without a summary")
+    if problems := recording_problems(path):  # every process exited 0, yet (once) an 8-byte log
+        raise Failure(f"match {plan.match}: its recording {path} is incomplete: {'; '.join(problems)}")
     return summary[0], path
+
+
+def recording_problems(path: Path) -> list[str]:
+    """What makes the recording at `path` less than a complete match (Recording.problems), one
+    phrase each; a missing or unreadable file is one."""
+    try:
+        return load(path).problems()
+    except FileNotFoundError:
+        return ["no such file"]
+    except (OSError, ValueError) as error:
+        return [str(error)]
 
 
 def new_match_id() -> str:

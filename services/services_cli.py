@@ -114,10 +114,8 @@ def agent(
 @commands.command()
 @bus_options
 def recorder(
-    match: str = typer.Option(
-        "", "--match", envvar="TSF_MATCH", help="Match id: the key namespace tsf/<match>/..."
-    ),
-    pool: str = typer.Option("", "--pool", help="Record every match this pool orders (instead of --match)."),
+    match: Match = "",
+    pool: Pool = "",
     out: Path = output(Path("recordings"), "Directory of the recordings.", directory=True),
     *,
     bus: BusConfig,
@@ -125,15 +123,7 @@ def recorder(
     """Run the recorder service for one match, or for every match of a pool until stopped."""
     from services.recorder.service import run_pool_recorder, run_recorder
 
-    if bool(match) == bool(pool):
-        raise UsageError("--pool", pool or "(none)", "give either --match or --pool, not both or neither")
-    if pool:
-        try:
-            keys.check_match(pool)  # a pool's name is a key chunk, as a match id is
-        except UsageError:
-            raise UsageError(
-                "--pool", pool, "invalid pool name: use 1-64 letters, digits, '-' or '_'"
-            ) from None
+    if in_pool(match, pool):
         run_pool_recorder(bus, pool, out, stop_on_signals())
         return
     path = run_recorder(bus, match, out, stop_on_signals())

@@ -11,6 +11,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 
@@ -88,7 +89,6 @@ def test_a_trial_past_its_time_is_ended_and_offered_again_then_a_problem_is_show
     stop, url, server = study_server(config, tmp_path, Serving(trial_timeout=0.01, test_token=TEST))
     report = asyncio.run(stand_in(url, test=TEST))
     assert report.refused == PROBLEM and report.again == RETRIES - 1 and not report.done
-    assert not [p for p in _processes() if "late-P001" in p], "every match's processes were ended"
     stop.set()
     attempts = server.result(timeout=60).participants["P001"].attempts
     assert [(a["attempt"], a["status"]) for a in attempts] == [(n, "failed") for n in range(1, RETRIES + 1)]
@@ -169,10 +169,11 @@ def study_command(
 def test_sigterm_ends_the_study_server_and_every_match_it_started(tmp_path):
     with study_command(tmp_path) as (server, url):
         asyncio.run(stand_in(url, leave_after=30, test=TEST))  # the match runs out for ten minutes
-        assert len([p for p in _processes() if "long-P001" in p]) >= 3, "sim, agent and recorder run"
+        pool = _children(server.pid)
+        assert len(pool) >= 3 and all("--pool study-" in p for p in pool.values()), "sim, agent, recorder"
         server.send_signal(signal.SIGTERM)
         assert server.wait(60) == 0
-        assert not [p for p in _processes() if "long-P001" in p], "no match process is left behind"
+        assert not [pid for pid in pool if Path(f"/proc/{pid}").exists()], "no pool process is left behind"
 
 
 def test_ctrl_c_during_a_matchs_warm_up_ends_the_server_at_once(tmp_path):
@@ -197,17 +198,20 @@ def test_ctrl_c_during_a_matchs_warm_up_ends_the_server_at_once(tmp_path):
                 assert status == 0
                 assert waited < 10.0
 
+        pool = _children(server.pid)
         asyncio.run(consent())
-        assert not [p for p in _processes() if "long-P001" in p], "no match process is left behind"
+        assert not [pid for pid in pool if Path(f"/proc/{pid}").exists()], "no pool process is left behind"
 
 
-def _processes(pids: bool = False) -> list[str]:
-    """The command lines of every process running now (each after its pid, with `pids`)."""
-    found = []
-    for cmdline in Path("/proc").glob("[0-9]*/cmdline"):
-        with contextlib.suppress(OSError):
-            line = cmdline.read_bytes().replace(b"\0", b" ").decode(errors="replace")
-            found.append(f"{cmdline.parent.name} {line}" if pids else line)
+def _children(pid: int) -> dict[int, str]:
+    """The live child processes of `pid` (a study server's: its pool's services) and their command lines."""
+    found = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        with contextlib.suppress(OSError, IndexError):
+            if int(stat.read_text().rsplit(")", 1)[1].split()[1]) == pid:
+                found[int(stat.parent.name)] = (
+                    (stat.parent / "cmdline").read_bytes().replace(b"\0", b" ").decode()
+                )
     return found
 
 
@@ -404,7 +408,7 @@ def _killed_at(moment: str, url: str, server: subprocess.Popen, recordings: Path
     """Play the study as a participant until `moment` of the first trial, then SIGKILL the server:
     `set_up` (the trial offered, its match started, before Ready), `after_end` (the game's end
     shown, before the server has written the trial down), `read_back` (the recording complete on
-    disk, its recorder gone, and the server reading it back). Returns (participant, resume key)."""
+    disk, and the server about to read it back). Returns (participant, resume key)."""
     import websockets
 
     def kill() -> None:
@@ -412,14 +416,14 @@ def _killed_at(moment: str, url: str, server: subprocess.Popen, recordings: Path
             os.kill(server.pid, signal.SIGKILL)  # its matches' processes die with it
             server.wait()
 
-    def kill_at_read_back(recorder: int) -> None:
-        """Once the match's recorder has exited and been reaped, the server reads the recording."""
-        while Path(f"/proc/{recorder}").exists():
-            pass
+    def kill_at_read_back(path: Path) -> None:
+        """Once the pool's recorder has written the recording's summary, the server reads it back."""
+        while not (path.exists() and load(path).summary is not None):
+            time.sleep(0.001)
         kill()
 
     async def play() -> tuple[str, str]:
-        me, recorder = ("", ""), 0
+        me = ("", "")
         async with websockets.connect(url.replace("http", "ws", 1) + "ws") as ws:
             async for message in _consenting(ws):
                 if message["type"] == "participant":
@@ -427,14 +431,10 @@ def _killed_at(moment: str, url: str, server: subprocess.Popen, recordings: Path
                 elif message["type"] == "trial":
                     if moment == "set_up":
                         break
-                    match = f"kill-{me[0]}-s1t1"
-                    recorder = next(
-                        int(p.split()[0]) for p in _processes(pids=True) if "recorder" in p and match in p
-                    )
                     await ws.send(json.dumps({"type": "ready"}))
                 elif message["type"] == "end":
                     if moment == "read_back":
-                        await asyncio.to_thread(kill_at_read_back, recorder)
+                        await asyncio.to_thread(kill_at_read_back, recordings / f"kill-{me[0]}-s1t1.tsflog")
                     break
             kill()
         return me

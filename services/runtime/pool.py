@@ -186,11 +186,11 @@ class Pool:
                 if not watch.taken() and now - put_at >= ORDER_AGAIN:
                     self.z.put(keys.pool_order(self.name), order.encode())
                     put_at = now
-            if why:  # the sim ends it (with a summary) and the recorder closes its log
-                self.z.put(
-                    keys.pool_stop(self.name), MatchStop(match=match, frame=0, sender=self.sender).encode()
-                )
-            watch.closed.wait(CLOSE)
+            if why and put_at:  # the sim ends it (with a summary) and the recorder closes its log
+                ending = MatchStop(match=match, frame=0, sender=self.sender)
+                self.z.put(keys.pool_stop(self.name), ending.encode())
+            if put_at:  # else never ordered: nothing to close
+                watch.closed.wait(CLOSE)
         if why:
             raise Failure(why)
         return watch.summary, path
@@ -198,7 +198,8 @@ class Pool:
 
 class MatchWatch:
     """What a launcher sees of one pooled match: which of its services' tokens are up, which have
-    been, its summary, and whether its recorder has closed the log (its token gone after the summary)."""
+    been, its summary, and whether it is closed: its recorder's token gone after the summary (the
+    log closed), or every token it had gone (a killed service's match, or one stopped early)."""
 
     def __init__(self, needed: set[str]) -> None:
         self.needed, self.up, self.seen = needed, set[str](), set[str]()
@@ -214,15 +215,18 @@ class MatchWatch:
                 self.seen.add(key)
             else:
                 self.up.discard(key)
-            if self.summary is not None and not any("/alive/recorder" in k for k in self.up):
-                self.closed.set()
+            self._close()
 
     def on_summary(self, summary: Summary) -> None:
         with self.lock:
             self.summary = summary
-            if not any("/alive/recorder" in k for k in self.up):
-                self.closed.set()
+            self._close()
         self.ended.set()
+
+    def _close(self) -> None:
+        recording = any("/alive/recorder" in key for key in self.up)
+        if (self.summary is not None and not recording) or (self.seen and not self.up):
+            self.closed.set()
 
     def taken(self) -> bool:
         with self.lock:

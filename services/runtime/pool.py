@@ -27,7 +27,14 @@ from pathlib import Path
 import zenoh
 
 from services.recorder.service import recording_path
-from services.runtime.launch import RECORDER_NICE, SIM_RAISE, MatchPlan, match_buses, service_command
+from services.runtime.launch import (
+    RECORDER_NICE,
+    SIM_RAISE,
+    MatchPlan,
+    match_buses,
+    recording_problems,
+    service_command,
+)
 from services.runtime.processes import Processes
 from shared import keys
 from shared.bus import free_endpoint, subscribe
@@ -153,8 +160,8 @@ class Pool:
     def run(self, plan: MatchPlan, stop: threading.Event | None = None) -> tuple[Summary, Path]:
         """Play `plan` on the pool to its end, as run_match does with processes of its own: its
         summary and recording. A match that was stopped or ran past `plan.timeout`, one that some
-        service of the pool did not take or left before the end, and one without a summary is a
-        Failure (its recording, if any, is kept)."""
+        service of the pool did not take or left before the end, and one whose recording is not
+        complete is a Failure (its recording, if any, is kept)."""
         stop = stop or threading.Event()
         order = plan.order(self.sender, self.folder(plan))
         path = recording_path(plan.directory, plan.match)
@@ -193,6 +200,8 @@ class Pool:
                 watch.closed.wait(CLOSE)
         if why:
             raise Failure(why)
+        if problems := recording_problems(path):
+            raise Failure(f"match {match}: its recording {path} is incomplete: {'; '.join(problems)}")
         return watch.summary, path
 
 

@@ -9,6 +9,7 @@ counted and dropped.
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 import queue
@@ -291,11 +292,17 @@ def _frame(data: bytes) -> int:
 def _check_key(key: str, message: Message, match: str) -> None:
     """A valid message is still bad input on a key that does not carry its type, or for another match
     or seat (as the sim and agents judge it): recorded, it would pass for a state, action, ..."""
-    try:
-        parts = keys.parse(key)  # each kind of key is named for the type it carries
-    except ValueError:
-        parts = None
+    parts = _parsed(key)  # each kind of key is named for the type it carries
     if parts is None or parts.kind != message.TYPE:
         raise MessageError("type", f"{message.TYPE} on {key}")
     if message.match != match or (parts.role and getattr(message, "role", None) != parts.role):
         raise MessageError("mismatch", f"{message.TYPE} for {message.match} on {key}")
+
+
+@functools.lru_cache(maxsize=1024)
+def _parsed(key: str) -> keys.Key | None:
+    """keys.parse, once per key (a match puts a handful, each many times a second)."""
+    try:
+        return keys.parse(key)
+    except ValueError:
+        return None

@@ -31,6 +31,7 @@ from shared.messages import MatchOrder, Message, MessageError, Start, State, Sum
 
 log = logging.getLogger("tsf.recorder")
 _DONE = object()
+BATCH = 0.05  # seconds the drain lets messages gather
 SEEN_ORDERS = 4096  # match ids a pool recorder remembers (orders are re-put until it answers)
 
 
@@ -93,7 +94,9 @@ class MatchRecording:
 
 class Drain:
     """The one thread that writes every match's log: zenoh callbacks queue (recording, key, bytes,
-    receive time) items, and a recording's close is queued behind what it received."""
+    receive time) items, and a recording's close is queued behind what it received. Once the queue
+    is empty it sleeps BATCH seconds, so that it wakes for a batch, not for each message (measured
+    with bench/recorder_pool.py: 10-20% less CPU; a record reaches the OS that much later)."""
 
     def __init__(self) -> None:
         self.inbox: queue.SimpleQueue = queue.SimpleQueue()
@@ -120,6 +123,8 @@ class Drain:
                 recording.ended.set()
                 if key is None:
                     recording.closed.set()
+            if self.inbox.empty():
+                time.sleep(BATCH)
 
     def __enter__(self) -> Drain:
         self.thread.start()

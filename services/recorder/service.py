@@ -9,6 +9,7 @@ counted and dropped.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import logging
@@ -91,6 +92,14 @@ class MatchRecording:
         self.writer.close()
         self.closed.set()
 
+    def fail(self, error: OSError) -> None:
+        """The log cannot be written: the recording ends here (logged once; nothing more is taken)."""
+        log.error("recording %s failed: %s", self.path, error)
+        self.ended.set()
+        with contextlib.suppress(OSError):
+            self.writer.close()
+        self.closed.set()
+
 
 class Drain:
     """The one thread that writes every match's log: zenoh callbacks queue (recording, key, bytes,
@@ -119,10 +128,7 @@ class Drain:
             try:
                 recording.take(key, data, t) if key is not None else recording.close()
             except OSError as error:  # a full disk, say: this match's recording ends, not the others'
-                log.error("recording %s failed: %s", recording.path, error)
-                recording.ended.set()
-                if key is None:
-                    recording.closed.set()
+                recording.fail(error)
             if self.inbox.empty():
                 time.sleep(BATCH)
 

@@ -10,6 +10,7 @@ log once per reason. docs/contract.md lists the fields.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import hmac
 import math
@@ -77,15 +78,18 @@ def _bool(v: Any) -> bool:
     return isinstance(v, bool)
 
 
+_NUMBERS = frozenset((float, int))
+
+
 def _vector(n: int, lo: float = -1e6, hi: float = 1e6) -> Check:
     """A list of n finite numbers in [lo, hi]; C-speed builtins, since states carry hundreds."""
 
     def check(v: Any) -> bool:
-        if not isinstance(v, list) or len(v) != n or not {type(x) for x in v} <= {float, int}:
+        if not isinstance(v, list) or len(v) != n or not set(map(type, v)) <= _NUMBERS:
             return False
-        try:
-            finite = math.isfinite(math.fsum(v))  # NaN or an infinity anywhere makes the sum so
-        except (OverflowError, ValueError):
+        try:  # NaN or an infinity anywhere makes the sum so (and a sum past the floats, overflowing,
+            finite = math.isfinite(sum(v))  # is past [lo, hi] anyway); an int too big for a float raises
+        except OverflowError:
             return False
         return finite and (n == 0 or (lo <= min(v) and max(v) <= hi))
 
@@ -693,6 +697,14 @@ def _unpack(data: bytes | bytearray | memoryview) -> dict:
     return record
 
 
+@functools.cache
+def _fields(kind: type[Message]) -> tuple[dict[str, Check], frozenset[str]]:
+    """A type's checks, envelope included, and every field name a record of it may hold (built once:
+    every message that enters a service passes here)."""
+    checks = {**_ENVELOPE, kind.ID: _ID, **kind.CHECKS}
+    return checks, frozenset((*checks, "v", "type"))
+
+
 def _build(record: dict, expected: type[M]) -> M:
     if record.get("type") != expected.TYPE:
         raise MessageError("type", f"expected {expected.TYPE!r}, got {record.get('type')!r}")
@@ -700,10 +712,9 @@ def _build(record: dict, expected: type[M]) -> M:
         raise MessageError(
             "version", f"{expected.TYPE} of schema version {record['v']}, expected {SCHEMA_VERSION}"
         )
-    checks = {**_ENVELOPE, expected.ID: _ID, **expected.CHECKS}
-    extra = set(record) - set(checks) - {"v", "type"}
-    if extra:
-        raise MessageError("shape", f"unexpected fields {sorted(extra)}")
+    checks, names = _fields(expected)
+    if not names.issuperset(record):
+        raise MessageError("shape", f"unexpected fields {sorted(set(record) - names)}")
     for name, check in checks.items():
         if name not in record:
             raise MessageError("shape", f"missing field {name!r}")

@@ -208,6 +208,18 @@ def test_a_second_match_under_the_same_id_is_not_recorded(recorder, tmp_path):
     assert recording.starts == 1 and [s.frame for s in recording.states] == [0, 1, 2, 3]
 
 
+def test_the_recording_ends_when_the_sim_s_token_goes_away(recorder, tmp_path):
+    """A killed sim sends no summary: the recorder closes the log as it is (incomplete) and exits."""
+    match, start = recorder
+    sim = match.z.liveliness().declare_token(keys.alive(MATCH, "sim"))
+    future = start()
+    match.start()
+    match.frames(3)
+    sim.undeclare()
+    assert future.result(timeout=5) == recording_path(tmp_path, MATCH)
+    assert load(future.result()).problems() == ["no summary (last state: frame 3)"]
+
+
 def test_the_log_of_a_finished_match_is_never_appended_to(recorder, tmp_path):
     match, start = recorder
     first = start()

@@ -150,8 +150,10 @@ class LogWriter:
 
     def close(self) -> None:
         if not self._file.closed:
-            self.sync()
-            self._file.close()
+            try:
+                self.sync()
+            finally:  # closed even when the disk refuses the sync
+                self._file.close()
 
     def __enter__(self) -> LogWriter:
         return self

@@ -60,7 +60,7 @@ from services.recorder.recording import load
 from services.recorder.service import recording_path
 from services.runtime.launch import MatchPlan
 from services.runtime.pool import Pool, pool_name
-from services.study.core import SET_UP, Admission, Participant, Study, StudyConfig, Trial, worker_id
+from services.study.core import AROUND, SET_UP, Admission, Participant, Study, StudyConfig, Trial, worker_id
 from services.study.crowd import FAILS, attention_check, write_bonuses
 from services.study.dashboard import Dashboard, overview
 from services.study.remote import Remote
@@ -359,7 +359,7 @@ class TrialRunner:
         config = study.config
         self.recordings, self.practice = study.directory / "recordings", study.directory / "practice"
         self.practice_frames = round(config.practice_seconds * FPS)
-        self.match_seconds = config.trial_seconds + SET_UP
+        self.match_seconds = config.trial_seconds + AROUND  # a slot's time: a queue's estimated wait
         self.limit = config.trial_seconds + serving.trial_timeout  # seconds a trial may play
 
     async def slot(self, socket: Socket, match: str) -> bool:

@@ -3,6 +3,7 @@ each seat played as the single-match service plays it, every part of a match gon
 
 from __future__ import annotations
 
+import signal
 from collections import Counter
 
 import pytest
@@ -204,3 +205,24 @@ def test_the_adapter_pool_switches_an_ordered_match_as_the_single_adapter_does(
     for service in (adapters, agents):
         service.stop.set()
         assert service.result(timeout=5).total == 0
+
+
+def test_pool_processes_leave_on_sigterm_with_their_matches_tokens(bus, tap, spawn, wait_until) -> None:
+    z = bus.open(listen=True)
+    recorded = tap(z, "open")
+    config = AdapterConfig("shooter", window=100, strategy="cem", seed=1)
+    processes = [spawn(service, bus.config(), "--pool", POOL) for service in ("agent", "adapter")]
+    assert wait_until(lambda: pool_alive(z, "agent") and pool_alive(z, "adapter"), timeout=30)
+    made = order(
+        "open", 1, bait="B3", shooter=config.initial_policy(), adapter=config.name, adaptive="shooter"
+    )
+    z.put(keys.pool_order(POOL), made.encode(), **BLOCK)
+    assert wait_until(
+        lambda: recorded.is_alive("adapter") and all(recorded.is_alive("agent", r) for r in ROLES)
+    )
+    for process in processes:
+        process.send_signal(signal.SIGTERM)
+    assert [process.wait(10) for process in processes] == [0, 0]
+    assert wait_until(
+        lambda: not recorded.alive and not pool_alive(z, "agent") and not pool_alive(z, "adapter")
+    )

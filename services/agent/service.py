@@ -43,7 +43,7 @@ class Seats:
         drops: Drops,
         ended: threading.Event | None = None,
     ) -> None:
-        self.match, self.drops = match, drops
+        self.match = match
         self.ended = ended or threading.Event()
         self.lock, self.open = threading.Lock(), True
         with ExitStack() as declared:

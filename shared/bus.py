@@ -211,14 +211,14 @@ def serve_orders(
     drops: Drops,
     stop: threading.Event,
     every: float = 0.5,
-    tick: Callable[[P], None] = lambda part: None,
+    tick: Callable[[list[P]], None] = lambda parts: None,
 ) -> None:
     """Play the matches a pool's orders name until `stop` is set, then close every part still open.
     Each order's match gets the parts `start` makes (none: the service plays no part in it; a
     ValueError: the order is counted as a drop). The launcher re-puts an order until it sees the
     match's tokens, so the last ORDERS_KEPT ids are remembered and an order of one of them is
     ignored, a bad one's included. Once `every` seconds this thread closes the parts that ended and
-    calls `tick` on each of the others (zenoh's callback threads never undeclare). The pool's token
+    calls `tick` with the others (zenoh's callback threads never undeclare). The pool's token
     is declared once the order key is subscribed."""
     seen: OrderedDict[str, None] = OrderedDict()
     parts: list[P] = []
@@ -244,10 +244,10 @@ def serve_orders(
                 with lock:
                     ended = [part for part in parts if part.ended.is_set()]
                     parts[:] = [part for part in parts if not part.ended.is_set()]
+                    live = list(parts)
                 for part in ended:
                     part.close()
-                for part in list(parts):
-                    tick(part)
+                tick(live)
     finally:  # orders no longer arrive
         with lock:
             left, parts[:] = list(parts), []

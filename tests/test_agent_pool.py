@@ -3,6 +3,7 @@ each seat played as the single-match service plays it, every part of a match gon
 
 from __future__ import annotations
 
+import signal
 from collections import Counter
 
 import pytest
@@ -89,8 +90,8 @@ def agents(bus, background, wait_until):
 def test_the_pool_plays_each_ordered_seat_as_a_single_agent_does(agents, tap, wait_until) -> None:
     z, pool = agents
     both, shooter_only = tap(z, "both"), tap(z, "person")
-    z.put(keys.pool_order(POOL), order("both", 3, bait="circle", shooter="S5").encode(), **BLOCK)
-    z.put(keys.pool_order(POOL), order("person", 4, shooter="mirror").encode(), **BLOCK)
+    z.put(keys.pool_order(POOL), order("both", 3, bait="B3", shooter="S1").encode(), **BLOCK)
+    z.put(keys.pool_order(POOL), order("person", 4, shooter="S1").encode(), **BLOCK)
     assert wait_until(
         lambda: all(both.is_alive("agent", r) for r in ROLES) and shooter_only.is_alive("agent", "shooter")
     )
@@ -100,9 +101,9 @@ def test_the_pool_plays_each_ordered_seat_as_a_single_agent_does(agents, tap, wa
         b.step(("shooter",), wait_until)
     assert not shooter_only.is_alive("agent", "bait") and not b.actions("bait")  # a person's seat
     for played, role, policy, seed in (
-        (a, "bait", "circle", 3),
-        (a, "shooter", "S5", 3),
-        (b, "shooter", "mirror", 4),
+        (a, "bait", "B3", 3),
+        (a, "shooter", "S1", 3),
+        (b, "shooter", "S1", 4),  # one library policy's weights, two seats: each its own stream
     ):
         actions = played.actions(role)
         assert [x.frame for x in actions] == list(range(6))
@@ -204,3 +205,24 @@ def test_the_adapter_pool_switches_an_ordered_match_as_the_single_adapter_does(
     for service in (adapters, agents):
         service.stop.set()
         assert service.result(timeout=5).total == 0
+
+
+def test_pool_processes_leave_on_sigterm_with_their_matches_tokens(bus, tap, spawn, wait_until) -> None:
+    z = bus.open(listen=True)
+    recorded = tap(z, "open")
+    config = AdapterConfig("shooter", window=100, strategy="cem", seed=1)
+    processes = [spawn(service, bus.config(), "--pool", POOL) for service in ("agent", "adapter")]
+    assert wait_until(lambda: pool_alive(z, "agent") and pool_alive(z, "adapter"), timeout=30)
+    made = order(
+        "open", 1, bait="B3", shooter=config.initial_policy(), adapter=config.name, adaptive="shooter"
+    )
+    z.put(keys.pool_order(POOL), made.encode(), **BLOCK)
+    assert wait_until(
+        lambda: recorded.is_alive("adapter") and all(recorded.is_alive("agent", r) for r in ROLES)
+    )
+    for process in processes:
+        process.send_signal(signal.SIGTERM)
+    assert [process.wait(10) for process in processes] == [0, 0]
+    assert wait_until(
+        lambda: not recorded.alive and not pool_alive(z, "agent") and not pool_alive(z, "adapter")
+    )

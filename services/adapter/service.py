@@ -8,12 +8,15 @@ switches only once it has an estimate. If it dies, the agent keeps its current p
 
 from __future__ import annotations
 
+import itertools
 import logging
 import threading
 import time
+from collections.abc import Callable
 from contextlib import ExitStack
 from pathlib import Path
 
+import numpy as np
 import zenoh
 
 from services.adapter.core import Adapter, AdapterConfig, Pairing, Payoff, Scorer
@@ -22,11 +25,13 @@ from services.agent import networks
 from services.table.table import DEFAULT_TABLE
 from shared import keys
 from shared.bus import BusConfig, Drops, on_match_end, serve_orders, session, subscribe
+from shared.game import FPS
 from shared.messages import Action, AdapterStatus, MatchOrder, MessageError, PolicySwitch, State, seat_actions
 
 log = logging.getLogger("tsf.adapter")
 SENDER = "adapter"
 RESEND_FRAMES = 30  # ask again if the agent still plays another policy this many frames later
+SCORE_HZ = FPS  # how often the paired frames are scored, in one batch
 
 
 def seat_of(role: str, table: Path = DEFAULT_TABLE) -> tuple[Payoff, Scorer]:
@@ -69,6 +74,7 @@ class AdapterShell:
         self.reported_frames = -1  # the core's frames at the last status
         self.reported_partner = ""  # and its estimate
         self.latest = 0  # the newest frame scored
+        self.paired: list[tuple[tuple[list[float], int], int]] = []  # (values, action), frame: not scored yet
         with ExitStack() as declared:
             self.switch = declared.enter_context(z.declare_publisher(keys.policy(match, config.role)))
             self.status = declared.enter_context(
@@ -101,14 +107,22 @@ class AdapterShell:
                 self.report(self.latest)
 
     def feed(self, pair: tuple[list[float], int] | None, frame: int) -> None:
-        """Score one paired frame, and switch the agent when due (under `lock`)."""
-        adapter = self.adapter
+        """Keep a paired frame for the next batch (score_paired), and switch the agent when due
+        (under `lock`)."""
         if pair is not None:
-            began = time.perf_counter()
-            adapter.update(self.scorer(*pair), pair[0])
-            self.latest = frame
-            if self.costs is not None:
-                self.costs.append(time.perf_counter() - began)
+            self.paired.append((pair, frame))
+        self.decide(frame)
+
+    def scored(self, scores: np.ndarray, values: list[float], frame: int) -> None:
+        """Update the core with one paired frame's scores, and switch the agent when due (under `lock`)."""
+        self.adapter.update(scores, values)
+        self.latest = frame
+        self.decide(frame)
+
+    def decide(self, frame: int) -> None:
+        """Switch the agent when the core's choice differs from what it plays (again after
+        RESEND_FRAMES if it has not followed); report a new estimate at once."""
+        adapter = self.adapter
         due = adapter.partner and adapter.policy != self.playing
         if due and (adapter.policy != self.asked or frame - self.asked_at >= RESEND_FRAMES):
             reason = f"partner plays like {adapter.partner}" + (
@@ -146,6 +160,45 @@ class AdapterShell:
                 self.feed(self.pairing.action(action.frame, action.action), action.frame)
 
 
+def score_paired(shells: list[AdapterShell]) -> None:
+    """Score every frame the shells have paired since the last call, in one batch per scorer (a
+    pool's matches of one seat share it: the networks' passes cost per call far more than per
+    row), and update each shell's core in its frames' order. A shell's `costs` receives each
+    frame's share of the batch and its own update."""
+    batches: dict[int, list[tuple[AdapterShell, tuple[list[float], int], int]]] = {}
+    for shell in shells:
+        with shell.lock:
+            rows, shell.paired = shell.paired, []
+        if rows:
+            batches.setdefault(id(shell.scorer), []).extend((shell, pair, frame) for pair, frame in rows)
+    for rows in batches.values():
+        began = time.perf_counter()
+        scores = rows[0][0].scorer.batch([pair[0] for _, pair, _ in rows], [pair[1] for _, pair, _ in rows])
+        share = (time.perf_counter() - began) / len(rows)
+        for (shell, (values, _), frame), row in zip(rows, scores, strict=True):
+            began = time.perf_counter()
+            with shell.lock:
+                if shell.open:
+                    shell.scored(row, values, frame)
+            if shell.costs is not None:
+                shell.costs.append(share + time.perf_counter() - began)
+
+
+def adapting(status_hz: float) -> Callable[[list[AdapterShell]], None]:
+    """The adapter's one loop, called SCORE_HZ times a second: score what was paired since (so a
+    switch is at most a frame later than with a score per frame), and at `status_hz` report each
+    core that saw frames since its last status."""
+    calls, every = itertools.count(), max(1, round(SCORE_HZ / status_hz))
+
+    def tick(shells: list[AdapterShell]) -> None:
+        score_paired(shells)
+        if next(calls) % every == 0:
+            for shell in shells:
+                shell.report_if_new()
+
+    return tick
+
+
 def run_adapter(
     bus: BusConfig,
     match: str,
@@ -160,11 +213,12 @@ def run_adapter(
     update)."""
     stop = stop or threading.Event()
     drops = Drops(SENDER)
+    tick = adapting(status_hz)
     with session(bus) as z:
         shell = AdapterShell(z, match, config, seat_of(config.role, table), drops, costs, stop)
         try:
-            while not stop.wait(1.0 / status_hz):  # a modest report rate, whatever the frame rate
-                shell.report_if_new()
+            while not stop.wait(1.0 / SCORE_HZ):
+                tick([shell])
         finally:
             shell.close()
     if drops.total:
@@ -210,7 +264,7 @@ def run_adapter_pool(
             log.info("match %s: adapting the %s as %s", order.match, config.role, config.name)
             return [AdapterShell(z, order.match, config, seats[config.role], drops)]
 
-        serve_orders(z, pool, SENDER, start, drops, stop, 1.0 / status_hz, AdapterShell.report_if_new)
+        serve_orders(z, pool, SENDER, start, drops, stop, 1.0 / SCORE_HZ, adapting(status_hz))
     if drops.total:
         log.info("adapter dropped %d bad inputs: %s", drops.total, dict(drops.counts))
     return drops

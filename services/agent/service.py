@@ -1,12 +1,14 @@
 """The agent service: a thin shell that answers each state of a match with its seat's action.
 
-One seat of one match is a `Seat`; `run_agent` plays the seat a command line names, `run_agent_pool`
-the seats of every match a pool's orders name (shared.bus.serve_orders), with the same class.
+An agent's seats in one match are a `Seats`; `run_agent` plays the seat a command line names,
+`run_agent_pool` the seats of every match a pool's orders name (shared.bus.serve_orders), with the
+same class.
 """
 
 from __future__ import annotations
 
 import copy
+import functools
 import logging
 import threading
 from contextlib import ExitStack
@@ -26,54 +28,72 @@ from shared.messages import MatchOrder, MessageError, PolicySwitch, State
 log = logging.getLogger("tsf.agent")
 
 
-class Seat:
-    """One seat of a live match: answers each state but the last with the player's action, plays
-    the policy a switch names from the next state, and holds the seat's token. `ended` is set when
-    the match is over (its summary, or its sim gone); `close` undeclares everything, and no answer
-    is put after it (a state's callback may still be running)."""
+class Seats:
+    """The seats an agent service plays in one live match (one player a seat): answers each state
+    but the last with every player's action (the state decoded once for all), plays the policy a
+    switch names from the next state, and holds each seat's token. `ended` is set when the match is
+    over (its summary, or its sim gone); `close` undeclares everything, and no answer is put after
+    it (a state's callback may still be running)."""
 
     def __init__(
-        self, z: zenoh.Session, match: str, player: Player, drops: Drops, ended: threading.Event | None = None
+        self,
+        z: zenoh.Session,
+        match: str,
+        players: list[Player],
+        drops: Drops,
+        ended: threading.Event | None = None,
     ) -> None:
-        self.match, self.player, self.drops = match, player, drops
-        self.role, self.sender = player.role, f"agent/{player.role}"
+        self.match = match
         self.ended = ended or threading.Event()
         self.lock, self.open = threading.Lock(), True
         with ExitStack() as declared:
-            self.publisher = declared.enter_context(
-                z.declare_publisher(
-                    keys.action(match, self.role),
-                    congestion_control=zenoh.CongestionControl.DROP,
-                    express=True,
+            self.players = [
+                (
+                    player,
+                    f"agent/{player.role}",
+                    declared.enter_context(
+                        z.declare_publisher(
+                            keys.action(match, player.role),
+                            congestion_control=zenoh.CongestionControl.DROP,
+                            express=True,
+                        )
+                    ),
                 )
-            )
+                for player in players
+            ]
             declared.enter_context(subscribe(z, keys.state(match), State, self.on_state, drops))
-            declared.enter_context(
-                subscribe(z, keys.policy(match, self.role), PolicySwitch, self.on_switch, drops)
-            )
+            for player in players:
+                switch = functools.partial(self.on_switch, player)
+                declared.enter_context(
+                    subscribe(z, keys.policy(match, player.role), PolicySwitch, switch, drops)
+                )
             declared.enter_context(on_match_end(z, match, self.ended, drops))
-            declared.enter_context(z.liveliness().declare_token(keys.alive(match, "agent", self.role)))
+            for player in players:
+                declared.enter_context(z.liveliness().declare_token(keys.alive(match, "agent", player.role)))
             self.declared = declared.pop_all()
 
     def on_state(self, state: State) -> None:
         if state.last:
             return
-        action = self.player.act(state, self.sender)
-        if action.failure and action.failures == 1:  # one line a match; the sim counts the rest
-            log.error("%s: the policy failed and plays no-op on such frames: %s", self.sender, action.failure)
-        data = action.encode()
-        with self.lock:
-            if self.open:
-                self.publisher.put(data)
+        for player, sender, publisher in self.players:
+            action = player.act(state, sender)
+            if action.failure and action.failures == 1:  # one line a match; the sim counts the rest
+                log.error("%s: the policy failed and plays no-op on such frames: %s", sender, action.failure)
+            data = action.encode()
+            with self.lock:
+                if self.open:
+                    publisher.put(data)
 
-    def on_switch(self, message: PolicySwitch) -> None:
-        if message.role != self.role:
-            raise MessageError("mismatch", f"switch for {message.role} on {self.role}'s key")
+    def on_switch(self, player: Player, message: PolicySwitch) -> None:
+        if message.role != player.role:
+            raise MessageError("mismatch", f"switch for {message.role} on {player.role}'s key")
         try:
-            self.player.switch(message.policy)
+            player.switch(message.policy)
         except ValueError as error:  # a key this seat cannot play
             raise MessageError("policy", str(error)) from error
-        log.info("%s switches to %s from the next frame (%s)", self.sender, message.policy, message.reason)
+        log.info(
+            "agent/%s switches to %s from the next frame (%s)", player.role, message.policy, message.reason
+        )
 
     def close(self) -> None:
         with self.lock:
@@ -90,11 +110,11 @@ def run_agent(
     drops = Drops(f"agent/{role}")
     player = Player(role, policy, seed)
     with session(bus) as z:
-        seat = Seat(z, match, player, drops, stop)
+        seats = Seats(z, match, [player], drops, stop)
         try:
             until_stopped(stop)
         finally:
-            seat.close()
+            seats.close()
     return drops
 
 
@@ -119,11 +139,11 @@ class Library:
             return copy.copy(self.loaded[key])
 
 
-def seats_of(order: MatchOrder, load: PolicyLoader) -> dict[str, Player]:
+def players_of(order: MatchOrder, load: PolicyLoader) -> list[Player]:
     """A player for each seat of the order an agent plays ("" names a person's seat); an order
     naming a policy that cannot play its seat is a MessageError."""
     try:
-        return {role: Player(role, key, order.seed, load) for role in ROLES if (key := order.policy(role))}
+        return [Player(role, key, order.seed, load) for role in ROLES if (key := order.policy(role))]
     except Exception as error:  # noqa: BLE001 - a policy from outside may raise anything as it loads
         raise MessageError("policy", f"{order.match}: {type(error).__name__}: {error}") from error
 
@@ -135,10 +155,12 @@ def run_agent_pool(bus: BusConfig, pool: str, stop: threading.Event | None = Non
     drops, load = Drops("agent"), Library()
     with session(bus) as z:
 
-        def start(order: MatchOrder) -> list[Seat]:
-            players = seats_of(order, load)
-            log.info("match %s: playing %s", order.match, {r: p.key for r, p in players.items()} or "no seat")
-            return [Seat(z, order.match, player, drops) for player in players.values()]
+        def start(order: MatchOrder) -> list[Seats]:
+            players = players_of(order, load)
+            if not players:
+                return []
+            log.info("match %s: playing %s", order.match, {p.role: p.key for p in players})
+            return [Seats(z, order.match, players, drops)]
 
         serve_orders(z, pool, "agent", start, drops, stop)
     return drops

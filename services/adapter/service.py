@@ -89,6 +89,10 @@ class AdapterShell:
             self.declared = declared.pop_all()
 
     def close(self) -> None:
+        """End the match's part: the frames paired since the last batch scored and a last status
+        sent if they changed it (a short match may end between two reports), then undeclare all."""
+        score_paired([self])
+        self.report_if_new()
         with self.lock:
             self.open = False
         self.declared.close()

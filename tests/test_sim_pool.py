@@ -3,7 +3,9 @@ clock, each with its own traffic on its own keys."""
 
 from __future__ import annotations
 
+import os
 import signal
+from pathlib import Path
 
 import msgpack
 import pytest
@@ -14,6 +16,7 @@ from shared import keys
 from shared.bus import BusConfig
 from shared.game import ROLES
 from shared.messages import GameEvent, MatchOrder, MatchStop, Start, State, Summary
+from tests.test_match_processes import may_raise_priority, nice
 from tests.test_sim_contract import Hands, act
 
 POOL = "lab"
@@ -116,10 +119,14 @@ def test_a_bad_order_is_dropped_and_counted(pool, tap, wait_until):
 
 
 def test_sigterm_ends_the_running_matches_and_exits_0(endpoint, bus, spawn, tap, wait_until):
+    """Also: the pool raises every thread's priority at once (where permitted), before any match."""
     router = BusConfig("router", (endpoint,))
-    process = spawn("sim", router, "--pool", POOL, "--priority", "0")
+    process = spawn("sim", router, "--pool", POOL, "--priority", "3")
     z = bus.open()  # a peer that connects to the pool's router
     assert pool_ready(z, wait_until)
+    raised = nice(os.getpid()) - 3 if may_raise_priority() else nice(os.getpid())
+    threads = [int(task.name) for task in (Path("/proc") / str(process.pid) / "task").iterdir()]
+    assert {nice(process.pid, thread) for thread in threads} == {raised}
     recorded = tap(z, "long")
     put(z, keys.pool_order(POOL), order("long", 900).encode())
     assert wait_until(lambda: len(recorded.of(State)) > 3)

@@ -127,6 +127,7 @@ class MatchSim:
         self.deadline: float | None = None  # of the first wait left, from when it began
         self.started: float | None = None  # monotonic time of the first frame
         self.sent: dict[int, int] = {}  # frame -> when its state was put (perf_counter_ns)
+        self.sent_at = self.summary_at = 0.0  # monotonic time of the last state put, and of the summary
         self.ticks: list[float] = []  # monotonic time of each real-time tick
         self.applied = (0, 0)
         self.ended = False

@@ -114,7 +114,8 @@ def main() -> None:
                 if time.monotonic() > deadline:
                     sys.exit("the pool sim did not come up")
             stagger = ", staggered" if args.stagger else ""
-            print(f"pool sim, {args.seconds:.0f}-s matches{stagger}, seats {args.seats}, +{args.priority}")
+            head = f"{args.seconds:.0f}-s matches{stagger}, seats {args.seats}"
+            print(f"pool sim raised {args.priority} nice steps; {head}")
             print(
                 "matches | jitter p99 worst / median (ms) | over 5 ms | round trip p99 (ms) | CPU s/s/match"
             )

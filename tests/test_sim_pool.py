@@ -3,6 +3,7 @@ clock, each with its own traffic on its own keys."""
 
 from __future__ import annotations
 
+import gc
 import os
 import signal
 from pathlib import Path
@@ -12,6 +13,7 @@ import pytest
 import zenoh
 
 from services.sim.pool import run_pool
+from services.sim.service import MatchSim
 from shared import keys
 from shared.bus import BusConfig
 from shared.game import ROLES
@@ -77,6 +79,9 @@ def test_a_pool_plays_overlapping_matches_each_on_its_own_keys(pool, tap, wait_u
     # An ended match leaves nothing declared: its token goes; later orders start nothing more.
     assert wait_until(lambda: not a.is_alive("sim") and not b.is_alive("sim"))
     assert len(a.of(Start)) == len(b.of(Start)) == 1
+    assert wait_until(
+        lambda: gc.collect() >= 0 and not any(isinstance(o, MatchSim) for o in gc.get_objects())
+    )
     sim.stop.set()
     assert sim.result(timeout=5).drops.total == 0
 

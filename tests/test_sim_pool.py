@@ -138,3 +138,13 @@ def test_sigterm_ends_the_running_matches_and_exits_0(endpoint, bus, spawn, tap,
     process.send_signal(signal.SIGTERM)
     assert process.wait(timeout=10) == 0
     assert played(recorded, recorded.of(Summary)[0].frame).frame < 900
+
+
+def test_a_lockstep_order_steps_on_its_seats_answers(pool, tap, wait_until):
+    z, sim = pool
+    recorded, hands = tap(z, "lock"), Hands(z, "lock")
+    put(z, keys.pool_order(POOL), order("lock", 40, mode="lockstep", wait_players=5.0).encode())
+    states = hands.play(40)
+    assert wait_until(lambda: recorded.of(Summary))
+    assert played(recorded, 40).frame == 40 and recorded.of(Start)[0].mode == "lockstep"
+    assert all(s.applied == [act(r, s.frame - 1) for r in ROLES] for s in states[1:])

@@ -13,16 +13,20 @@ import re
 import signal
 import socket
 import threading
+import weakref
 from collections import Counter
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import TypeVar
 
 import zenoh
 
 from shared import keys
 from shared.errors import UsageError
 from shared.messages import M, Summary, decode
+
+T = TypeVar("T")
 
 log = logging.getLogger("tsf.bus")
 
@@ -176,6 +180,21 @@ def subscribe(
 def stop_on_summary(z: zenoh.Session, match: str, stop: threading.Event, drops: Drops) -> zenoh.Subscriber:
     """Set `stop` when the match's valid summary arrives (the match is over)."""
     return subscribe(z, keys.summary(match), Summary, lambda _: stop.set(), drops)
+
+
+def weakly(method: Callable[[T], None]) -> Callable[[T], None]:
+    """A bound method as a bus callback that does not keep its object alive: zenoh-python (1.10)
+    may keep a callback for a while after its subscriber is undeclared (a liveliness
+    subscriber's), and a long-lived service that subscribes per match (a pool's) must not keep an
+    ended match with it. Only this small function stays."""
+    ref = weakref.WeakMethod(method)
+
+    def call(arg: T) -> None:
+        bound = ref()
+        if bound is not None:
+            bound(arg)
+
+    return call
 
 
 def until_stopped(stop: threading.Event) -> None:

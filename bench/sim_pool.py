@@ -1,14 +1,16 @@
 """A pool's sim playing N matches at once on its one clock: each match's tick jitter and the sim's CPU.
 
 Starts `tsf sim --pool` (a router on a free loopback port, at `--priority`), then for each N orders
-N matches of `--seconds` at once (no waits) and reads each match's summary. Seats are absent (they
-play no-op) or, with `--seats echo`, held by this process, which answers every state at once (the
-round trips then come from a peer on another core). Prints per N: the worst and the median match's
-tick-jitter p99 and the matches over 5 ms, the median round trip's p99 (echo), and the sim's CPU-s
-per second of play per match (its process's user+system time over the run, start-ups included).
-Targets (issue 33, 2 cores): every match's jitter p99 <= 5 ms at N = 12; CPU well under 0.01.
+N matches of `--seconds` at once (no waits; with `--stagger` spread over one frame) and reads each
+match's summary. Seats are absent (they play no-op) or, with `--seats echo`, held by this process,
+which answers every state at once (the round trips then come from a peer on another core). Prints
+per N: the worst and the median match's tick-jitter p99 and the matches over 5 ms, the median
+round trip's p99 (echo), and the sim's CPU-s per second of play per match (its process's
+user+system time over the run, start-ups included). Targets (issue 33, 2 cores): every match's
+jitter p99 <= 5 ms at N = 12; CPU well under 0.01.
 
-    .venv/bin/python bench/sim_pool.py [--matches 1,4,12] [--seconds 20] [--seats none|echo] [--priority 10]
+    .venv/bin/python bench/sim_pool.py [--matches 1,4,12] [--seconds 20] [--seats none|echo] [--stagger]
+        [--priority 10]
 """
 
 from __future__ import annotations
@@ -35,7 +37,8 @@ NAMES = {"bait": "idle", "shooter": "idle"}  # what the Start records call the s
 
 def cpu_seconds(pid: int) -> float:
     """User + system CPU time of a process so far (Linux's /proc)."""
-    fields = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()
+    with open(f"/proc/{pid}/stat") as stat:
+        fields = stat.read().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
@@ -79,9 +82,11 @@ class Run:
             )
             self.z.put(keys.action(state.match, role), action.encode())
 
-    def play(self, timeout: float) -> list[Summary]:
+    def play(self, timeout: float, stagger: bool) -> list[Summary]:
         for order in self.orders:
             self.z.put(keys.pool_order(POOL), order.encode())
+            if stagger:  # orders spread over one frame, as matches that start at any time
+                time.sleep(1 / FPS / len(self.orders))
         if not self.done.wait(timeout):
             sys.exit(f"only {len(self.summaries)} of {len(self.matches)} summaries within {timeout:.0f} s")
         for held in self.held:
@@ -94,6 +99,7 @@ def main() -> None:
     parser.add_argument("--matches", default="1,4,12", help="numbers of matches at once, comma-separated")
     parser.add_argument("--seconds", type=float, default=20.0, help="each match's length")
     parser.add_argument("--seats", choices=("none", "echo"), default="none")
+    parser.add_argument("--stagger", action="store_true", help="spread each N's orders over one frame")
     parser.add_argument("--priority", type=int, default=10, help="the pool sim's --priority (nice steps)")
     args = parser.parse_args()
     frames = round(args.seconds * FPS)
@@ -107,14 +113,16 @@ def main() -> None:
             while not any(r.ok for r in z.liveliness().get(alive, timeout=1)):
                 if time.monotonic() > deadline:
                     sys.exit("the pool sim did not come up")
-            print(f"pool sim, {args.seconds:.0f}-s matches, seats {args.seats}, priority {args.priority}")
+            stagger = ", staggered" if args.stagger else ""
+            head = f"{args.seconds:.0f}-s matches{stagger}, seats {args.seats}"
+            print(f"pool sim raised {args.priority} nice steps; {head}")
             print(
-                "matches | jitter p99 worst / median (ms) | over 5 ms | round trip p99 median (ms) | CPU-s/s/match"
+                "matches | jitter p99 worst / median (ms) | over 5 ms | round trip p99 (ms) | CPU s/s/match"
             )
             for round_, n in enumerate(int(v) for v in args.matches.split(",")):
                 run = Run(z, n, frames, args.seats == "echo", round_)
                 before = cpu_seconds(sim.pid)
-                summaries = run.play(args.seconds * 3 + 10)
+                summaries = run.play(args.seconds * 3 + 10, args.stagger)
                 cpu = (cpu_seconds(sim.pid) - before) / (n * args.seconds)
                 jitter = sorted(s.timing.get("tick_jitter_ms_p99", float("nan")) for s in summaries)
                 trips = [s.timing["round_trip_ms_p99"] for s in summaries if "round_trip_ms_p99" in s.timing]

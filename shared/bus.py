@@ -13,6 +13,7 @@ import re
 import signal
 import socket
 import threading
+import weakref
 from collections import Counter, OrderedDict
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
@@ -24,6 +25,8 @@ import zenoh
 from shared import keys
 from shared.errors import UsageError
 from shared.messages import M, MatchOrder, Summary, decode
+
+T = TypeVar("T")
 
 log = logging.getLogger("tsf.bus")
 
@@ -253,6 +256,21 @@ def serve_orders(
             left, parts[:] = list(parts), []
         for part in left:
             part.close()
+
+
+def weakly(method: Callable[[T], None]) -> Callable[[T], None]:
+    """A bound method as a bus callback that does not keep its object alive: zenoh-python (1.10)
+    may keep a callback for a while after its subscriber is undeclared (a liveliness
+    subscriber's), and a long-lived service that subscribes per match (a pool's) must not keep an
+    ended match with it. Only this small function stays."""
+    ref = weakref.WeakMethod(method)
+
+    def call(arg: T) -> None:
+        bound = ref()
+        if bound is not None:
+            bound(arg)
+
+    return call
 
 
 def until_stopped(stop: threading.Event) -> None:

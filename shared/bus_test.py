@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import weakref
 from pathlib import Path
+
+from shared.bus import weakly
 
 ROOT = Path(__file__).parent.parent
 
@@ -26,3 +29,21 @@ def test_a_signal_sets_the_stop_event_even_while_the_main_thread_holds_its_lock(
         [sys.executable, "-c", HOLDING_THE_LOCK], cwd=ROOT, capture_output=True, text=True, timeout=20
     )
     assert done.stdout.strip() == "True", done.stderr
+
+
+def test_a_weak_callback_calls_its_object_while_it_lives_and_keeps_it_not() -> None:
+    class Match:
+        def __init__(self) -> None:
+            self.seen: list[int] = []
+
+        def on(self, value: int) -> None:
+            self.seen.append(value)
+
+    match = Match()
+    callback = weakly(match.on)
+    callback(1)
+    assert match.seen == [1]
+    kept = weakref.ref(match)
+    del match
+    assert kept() is None  # the callback alone does not keep it
+    callback(2)  # a late sample: nothing to call

@@ -3,17 +3,22 @@ clock, each with its own traffic on its own keys."""
 
 from __future__ import annotations
 
+import gc
+import os
 import signal
+from pathlib import Path
 
 import msgpack
 import pytest
 import zenoh
 
 from services.sim.pool import run_pool
+from services.sim.service import MatchSim
 from shared import keys
 from shared.bus import BusConfig
 from shared.game import ROLES
 from shared.messages import GameEvent, MatchOrder, MatchStop, Start, State, Summary
+from tests.test_match_processes import may_raise_priority, nice
 from tests.test_sim_contract import Hands, act
 
 POOL = "lab"
@@ -43,6 +48,12 @@ def pool(bus, background, wait_until):
     return z, sim
 
 
+def live_matches(*ids: str) -> list[MatchSim]:
+    """The matches of these ids still in memory (a pool that runs for hours must keep none)."""
+    gc.collect()
+    return [o for o in gc.get_objects() if isinstance(o, MatchSim) and o.match in ids]
+
+
 def played(recorded, frames: int) -> Summary:  # noqa: ANN001 - a Tap
     """One start first, one state per frame in order, one summary last (returned)."""
     messages = [m for _, _, m in recorded.samples if isinstance(m, (Start, State, GameEvent, Summary))]
@@ -62,7 +73,7 @@ def test_a_pool_plays_overlapping_matches_each_on_its_own_keys(pool, tap, wait_u
     put(z, keys.pool_order(POOL), order("a", 60).encode())  # a launcher re-puts until it sees the tokens
     hands.answer(first)
     hands.play(60)
-    assert wait_until(lambda: a.of(Summary) and b.of(Summary))
+    assert wait_until(lambda: a.of(Summary) and b.of(Summary), timeout=10)
     put(z, keys.pool_order(POOL), order("b", 30).encode())  # a match it had: ignored too
     summary_a, summary_b = played(a, 60), played(b, 30)
     assert (summary_a.frame, summary_b.frame) == (60, 30)
@@ -74,6 +85,7 @@ def test_a_pool_plays_overlapping_matches_each_on_its_own_keys(pool, tap, wait_u
     # An ended match leaves nothing declared: its token goes; later orders start nothing more.
     assert wait_until(lambda: not a.is_alive("sim") and not b.is_alive("sim"))
     assert len(a.of(Start)) == len(b.of(Start)) == 1
+    assert wait_until(lambda: not live_matches("a", "b"), timeout=10)
     sim.stop.set()
     assert sim.result(timeout=5).drops.total == 0
 
@@ -116,13 +128,27 @@ def test_a_bad_order_is_dropped_and_counted(pool, tap, wait_until):
 
 
 def test_sigterm_ends_the_running_matches_and_exits_0(endpoint, bus, spawn, tap, wait_until):
+    """Also: the pool raises every thread's priority at once (where permitted), before any match."""
     router = BusConfig("router", (endpoint,))
-    process = spawn("sim", router, "--pool", POOL, "--priority", "0")
+    process = spawn("sim", router, "--pool", POOL, "--priority", "3")
     z = bus.open()  # a peer that connects to the pool's router
     assert pool_ready(z, wait_until)
+    raised = nice(os.getpid()) - 3 if may_raise_priority() else nice(os.getpid())
+    threads = [int(task.name) for task in (Path("/proc") / str(process.pid) / "task").iterdir()]
+    assert {nice(process.pid, thread) for thread in threads} == {raised}
     recorded = tap(z, "long")
     put(z, keys.pool_order(POOL), order("long", 900).encode())
     assert wait_until(lambda: len(recorded.of(State)) > 3)
     process.send_signal(signal.SIGTERM)
     assert process.wait(timeout=10) == 0
     assert played(recorded, recorded.of(Summary)[0].frame).frame < 900
+
+
+def test_a_lockstep_order_steps_on_its_seats_answers(pool, tap, wait_until):
+    z, sim = pool
+    recorded, hands = tap(z, "lock"), Hands(z, "lock")
+    put(z, keys.pool_order(POOL), order("lock", 40, mode="lockstep", wait_players=5.0).encode())
+    states = hands.play(40)
+    assert wait_until(lambda: recorded.of(Summary))
+    assert played(recorded, 40).frame == 40 and recorded.of(Start)[0].mode == "lockstep"
+    assert all(s.applied == [act(r, s.frame - 1) for r in ROLES] for s in states[1:])

@@ -66,6 +66,11 @@ class Clock:
                 if not dues or dues[0][0] > now:
                     changed.wait(min(dues[0][0] - now, POLL) if dues else POLL)
                     continue
-            for due, _, match in dues:
-                if due <= now:
-                    match.tick()
+            self._play([match for due, _, match in dues if due <= now])
+
+    @staticmethod
+    def _play(due: list[Played]) -> None:
+        """Tick each match in `due`: a function of its own, so that no local of the loop holds an
+        ended match."""
+        for match in due:
+            match.tick()

@@ -25,7 +25,7 @@ from services.sim.clock import Clock
 from services.sim.engine import Game
 from services.sim.match import Seats, event_messages, start_message, state_message, summary_message
 from shared import keys
-from shared.bus import BusConfig, Drops, session, subscribe
+from shared.bus import BusConfig, Drops, session, subscribe, weakly
 from shared.errors import UsageError
 from shared.game import ROLES, GameConfig
 from shared.messages import Action, Summary, seat_actions
@@ -127,6 +127,7 @@ class MatchSim:
         self.deadline: float | None = None  # of the first wait left, from when it began
         self.started: float | None = None  # monotonic time of the first frame
         self.sent: dict[int, int] = {}  # frame -> when its state was put (perf_counter_ns)
+        self.sent_at = self.summary_at = 0.0  # monotonic time of the last state put, and of the summary
         self.ticks: list[float] = []  # monotonic time of each real-time tick
         self.applied = (0, 0)
         self.ended = False
@@ -144,9 +145,9 @@ class MatchSim:
         self.declared.callback(self.event_pub.undeclare)
         liveliness = z.liveliness()
         on(liveliness.declare_token(keys.alive(match, "sim")))
-        on(subscribe(z, keys.actions(match), seat_actions(match), self._on_action, self.drops))
+        on(subscribe(z, keys.actions(match), seat_actions(match), weakly(self._on_action), self.drops))
         for key in (keys.seats_alive(match), keys.alive(match, "recorder"), keys.alive(match, "adapter")):
-            on(liveliness.declare_subscriber(key, self._on_alive, history=True))
+            on(liveliness.declare_subscriber(key, weakly(self._on_alive), history=True))
 
     def end(self) -> None:
         self.ended = True

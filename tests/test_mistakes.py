@@ -108,8 +108,8 @@ MISTAKES = [
         "tsf table: Invalid value for 'path': file '{tmp}/none.json' does not exist.",
     ),
     ("sim --match a/b", 2, "tsf sim: --match a/b: invalid match id: use 1-64 letters, digits, '-' or '_'"),
-    ("sim --match x --pool p", 2, "tsf sim: --pool p: give either --match (one match) or --pool"),
-    ("sim", 2, "tsf sim: --pool '': give either --match (one match) or --pool (a pool's matches)"),
+    ("sim --match x --pool p", 2, "tsf sim: --pool p: give --pool or --match, not both"),
+    ("sim", 2, "tsf sim: --match (none): give --match (one match) or --pool (a pool's matches)"),
     ("sim --pool a/b", 2, "tsf sim: --pool a/b: invalid pool name: use 1-64 letters, digits, '-' or '_'"),
     (
         "sim --match x --sim-mode fast",
@@ -145,8 +145,8 @@ MISTAKES = [
     ("adapter --pool 'a b'", 2, "tsf adapter: --pool a b: invalid pool name"),
     ("agent --match 'bad id' --role bait --policy circle", 2, "--match bad id: invalid match id"),
     ("recorder --match x/y", 2, "tsf recorder: --match x/y: invalid match id"),
-    ("recorder", 2, "tsf recorder: --pool (none): give either --match or --pool, not both or neither"),
-    ("recorder --match x --pool p", 2, "tsf recorder: --pool p: give either --match or --pool, not both"),
+    ("recorder", 2, "tsf recorder: --match (none): give --match (one match) or --pool (a pool's matches)"),
+    ("recorder --match x --pool p", 2, "tsf recorder: --pool p: give --pool or --match, not both"),
     ("recorder --pool p/q", 2, "tsf recorder: --pool p/q: invalid pool name"),
     ("recorder --match " + M + " --out {tmp}", 2, f"--match {M}: {{done}} holds a finished match of this id"),
     (

@@ -12,7 +12,7 @@ from collections import OrderedDict
 import zenoh
 
 from services.sim.clock import Clock
-from services.sim.service import MatchSim, _raise_priority
+from services.sim.service import MatchSim, _raise_priority, real_time
 from shared import keys
 from shared.bus import BusConfig, Drops, session, subscribe
 from shared.errors import UsageError
@@ -79,8 +79,9 @@ class PoolSim:
 def run_pool(bus: BusConfig, pool: str, stop: threading.Event, priority: int = 0) -> PoolSim:
     """Play the pool's matches until `stop` is set, then end those running (their summaries are
     published) and return. Raises the priority by `priority` nice steps at once (every thread of
-    the process, the session's included), and offers the GIL more often so that the bus's
-    callbacks delay the clock less."""
+    the process, the session's included) and, if it raises it at all, runs the clock in the
+    real-time class (service.real_time); offers the GIL more often so that the bus's callbacks
+    delay the clock less."""
     try:
         keys.check_match(pool)
     except UsageError:
@@ -89,6 +90,8 @@ def run_pool(bus: BusConfig, pool: str, stop: threading.Event, priority: int = 0
         clock = Clock()
         sim = PoolSim(z, pool, clock)
         _raise_priority(priority)
+        if priority > 0:
+            real_time()
         sys.setswitchinterval(SWITCH_INTERVAL)
         sim.declare(stack)
         log.info("pool %s: the sim is ready for orders", pool)

@@ -63,6 +63,8 @@ from shared.bus import BusConfig, free_endpoint
 TOKEN = "bench"
 HOST_SECRET = b"the-bench-host-secret"  # shared by the server and its match host
 JITTER_MS = 5.0
+# Every stand-in comes from this machine's one address, as every person does behind a reverse
+# proxy: the servers below take arrivals from one address without its own limit (arrivals_per_address=0).
 CONFIGS = Path(__file__).resolve().parent.parent / "services" / "study" / "configs"
 
 
@@ -155,7 +157,7 @@ def load_test(counts: list[int], trials: int, seconds: float, adaptive: bool = F
         children, marks = Children(), []
         began = time.monotonic()
         reports, attempts, jitters = serve(
-            config, Serving(max_matches=count, test_token=TOKEN), [0.0] * count,
+            config, Serving(max_matches=count, test_token=TOKEN, arrivals_per_address=0.0), [0.0] * count,
             lambda marks=marks, children=children: marks.append((time.monotonic(), children.used())),
         )  # fmt: skip
         children.stop.set()
@@ -237,7 +239,9 @@ def arrival_test(
     )
     print(f"arrivals: {n} participants at random over {over:g} s, one {seconds:g} s trial each, {where}")
     load = os.getloadavg()[0]
-    serving = Serving(max_matches=cap, test_token=TOKEN, hosts=hosts, host_secret=HOST_SECRET)
+    serving = Serving(
+        max_matches=cap, test_token=TOKEN, hosts=hosts, host_secret=HOST_SECRET, arrivals_per_address=0.0
+    )
     reports, attempts, _ = serve(config, serving, arrivals)
     completed = sum(r.done for r in reports)
     waits = [w for r in reports for w in r.waits] or [0.0]

@@ -78,13 +78,17 @@ class Children:
 
     def __init__(self) -> None:
         self.peak, self.cpu, self.stop = 0, dict[int, float](), threading.Event()
+        self.service: dict[int, str] = {}  # pid -> the pool service it runs
         self.page, self.tick = os.sysconf("SC_PAGE_SIZE"), os.sysconf("SC_CLK_TCK")
         self.thread = threading.Thread(target=self._sample, daemon=True)
         self.thread.start()
 
-    def used(self) -> float:
-        """CPU seconds used by every child seen so far (an ended one: until its last sample)."""
-        return sum(self.cpu.values())
+    def used(self) -> dict[str, float]:
+        """CPU seconds used so far by each pool service (an ended process: until its last sample)."""
+        used: dict[str, float] = {}
+        for pid, seconds in self.cpu.items():
+            used[self.service[pid]] = used.get(self.service[pid], 0.0) + seconds
+        return used
 
     def _sample(self) -> None:
         while not self.stop.wait(0.2):
@@ -95,7 +99,11 @@ class Children:
                     if int(fields[1]) != os.getpid():
                         continue
                     total += int((stat.parent / "statm").read_text().split()[1]) * self.page
-                    self.cpu[int(stat.parent.name)] = (int(fields[11]) + int(fields[12])) / self.tick
+                    pid = int(stat.parent.name)
+                    if pid not in self.service:
+                        words = (stat.parent / "cmdline").read_bytes().split(b"\0")
+                        self.service[pid] = words[words.index(b"services.cli") + 1].decode()
+                    self.cpu[pid] = (int(fields[11]) + int(fields[12])) / self.tick
                 except (OSError, IndexError, ValueError):
                     continue
             self.peak = max(self.peak, total)
@@ -162,6 +170,8 @@ def load_test(counts: list[int], trials: int, seconds: float, adaptive: bool = F
         )  # fmt: skip
         children.stop.set()
         (up, at_up), (_, at_end) = marks
+        played = count * each * seconds
+        cost = {name: (at_end[name] - at_up.get(name, 0.0)) / played for name in at_end}
         done = sum(a["status"] == "done" for a in attempts)
         first = [f for r in reports for f in r.first_frames]
         jitter = max(jitters, default=float("nan"))
@@ -180,9 +190,10 @@ def load_test(counts: list[int], trials: int, seconds: float, adaptive: bool = F
             f"load average {load:.1f} at the start, {os.getloadavg()[0]:.1f} at the end"
         )
         print(
-            f"       per participant {(at_end - at_up) / (count * each * seconds):.4f} CPU s per s of play, "
+            f"       per participant {sum(cost.values()):.4f} CPU s per s of play "
+            f"({', '.join(f'{name} {value:.4f}' for name, value in cost.items())}), "
             f"{children.peak / count / 2**20:.1f} MiB (the pool {children.peak / 2**20:.0f} MiB at its peak; "
-            f"its start-up {up - began:.1f} s, {at_up:.1f} CPU s, once per server)"
+            f"its start-up {up - began:.1f} s, {sum(at_up.values()):.1f} CPU s, once per server)"
         )
     print(f"most participants served with every trial done and tick jitter p99 <= {JITTER_MS:g} ms: {served}")
 

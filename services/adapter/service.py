@@ -73,7 +73,7 @@ class AdapterShell:
         adapter = self.adapter
         if pair is not None:
             began = time.perf_counter()
-            adapter.update(self.scorer(*pair), pair[0])
+            adapter.update(self.scorer(*pair), *pair)
             self.latest = frame
             if self.costs is not None:
                 self.costs.append(time.perf_counter() - began)

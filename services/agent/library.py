@@ -207,10 +207,10 @@ def recipe_hash(recipe: Recipe) -> str:
 
 
 def copy(to: Path) -> Path:
-    """A library at `to` that starts as the shipped one (registry, manifest, weights; not the table
-    or the adapter's calibration and skill model, which a retrained policy would make stale): where `tsf train`
-    writes unless it is told to write the shipped library. A directory that already holds a registry
-    is left as it is."""
+    """A library at `to` that starts as the shipped one (registry, manifest, weights; not the table,
+    the adapter's calibration or its skill model, which a retrained policy would make stale): where
+    `tsf train` writes unless it is told to write the shipped library. A directory that already
+    holds a registry is left as it is."""
     if not (to / "registry.toml").exists():
         shutil.copytree(
             LIBRARY,

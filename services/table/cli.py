@@ -173,9 +173,16 @@ def skill_model_command(
     (docs/adapter.md). Plays 12 games of each (seeds 64-75) with the table's best static teammate."""
     import sys
 
+    from services.agent import library
     from services.table.skills import SkillTable, skill_model
 
-    model = skill_model(SkillTable.load(table), window)
+    try:
+        skills = SkillTable.load(table)
+    except (KeyError, TypeError, ValueError) as error:
+        raise UsageError("--table", table, f"not a skill table of tsf skill-table ({error})") from None
+    if set(skills.styles) != set(library.keys(other(skills.role))):
+        raise UsageError("--table", table, "its styles are not the partner library in use")
+    model = skill_model(skills, window)
     console.print(f"skill model written to {model.save(out, ' '.join(['tsf', *sys.argv[1:]]))}")
 
 

@@ -29,6 +29,7 @@ from services.agent.policy import end_round_batch
 from services.provenance import provenance
 from services.sim import observation as ob
 from services.table.table import stderr
+from shared.errors import UsageError
 from shared.game import ROLES, GameConfig
 
 VERSION = 1
@@ -224,7 +225,7 @@ def skill_model(
     the table's best static teammate, over `seeds`)."""
     payoff = setup(table.role).payoff
     if set(payoff.partners) != set(table.styles) or not set(payoff.ours) <= set(table.teammates):
-        raise ValueError("the skill table's styles and teammates are not the libraries' in use")
+        raise UsageError("--table", table.role, "its styles and teammates are not the libraries' in use")
     teammate, first = table.best_static(), AdapterConfig(window=window).warmup_frames
     mean = np.zeros((len(payoff.partners), len(LEVELS), len(FEATURES)))
     sd = np.zeros_like(mean)

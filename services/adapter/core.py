@@ -17,9 +17,9 @@ at once; one game's `Adapter` is its one-lane view):
   switch doubles the dwell, so switching is bounded.
 - `-skill`: the partner's skill is estimated from the same window (skill.py: the holds, key
   changes, lapses and how policy-like the keys are); where the partner is a person of some skill
-  with a posterior of at least CONFIDENT, D maximises the skill table's expected entry under the
-  style belief and the skill posterior instead of P's; otherwise (a library policy, or not sure)
-  P's choice stands.
+  with a posterior of at least CONFIDENT, in a window like those the model measured, D maximises
+  the skill table's expected entry under the style belief and the skill posterior instead of
+  P's; otherwise (a library policy, or not sure) P's choice stands.
 - `-memory`: across the trials of a session with the same partner, the adapter goes on from the
   previous trial (`next_trial`): its belief, window, policy and the guard's record carry over, and
   the next trial needs no warm-up. Within one game it is the strategy without it.
@@ -422,6 +422,7 @@ class AdapterLanes:
         self.expected = np.zeros((lanes, len(payoff.ours)))  # the entries the choice maximised
         self.keys = Keys(lanes, config.window) if skill is not None else None
         self.levels = np.zeros((lanes, len(LEVELS)))  # the skill posterior, 0 until estimated
+        self.plausible = np.zeros(lanes, bool)  # the window is like a level the model knows
 
     @property
     def bayes(self) -> bool:
@@ -459,8 +460,9 @@ class AdapterLanes:
             self.expected = self.payoff.values[self.partner]
         if self.skill is not None:
             if self.keys.filled and self.frames % EVERY == 0:
-                self.levels = self.skill.posterior(self.keys.features(means.max(axis=1)), belief)
-            person = self.levels[:, :-1].sum(axis=1) >= CONFIDENT
+                features = self.keys.features(means.max(axis=1))
+                self.levels, self.plausible = self.skill.posterior(features, belief)
+            person = self.plausible & (self.levels[:, :-1].sum(axis=1) >= CONFIDENT)
             self.expected = np.where(person[:, None], self.skill.expected(belief, self.levels), self.expected)
         choice = np.argmax(self.expected, axis=1)
         if self.threshold is not None:

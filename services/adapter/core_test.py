@@ -37,9 +37,8 @@ def toy_model(window: int = 60) -> SkillModel:
     mean = np.zeros((3, len(LEVELS), len(FEATURES)))
     mean[:, :, 0] = [HOLDS[level] for level in LEVELS]
     values = np.tile([1.0, 6.0, 2.0], (3, len(LEVELS) - 1, 1))
-    return SkillModel(
-        "shooter", PAYOFF.partners, PAYOFF.ours, window, values, mean, np.ones_like(mean), (), ""
-    )
+    spread = np.tile([1.0, 100.0, 1.0, 100.0], (3, len(LEVELS), 1))  # any key changes, scores
+    return SkillModel("shooter", PAYOFF.partners, PAYOFF.ours, window, values, mean, spread, (), "")
 
 
 def keys_held(frames: int, hold: int) -> np.ndarray:

@@ -16,7 +16,7 @@ Each level (novice, typical, practised, or a library policy) is a Gaussian over 
 fitted on windows of stand-ins' games (`tsf skill-model`); the posterior over levels mixes the
 styles by the style estimate's belief. Typical and practised hands share their shortest press, so
 the window tells them apart only by small differences: the choice reads the skill table under the
-posterior, not one level.
+posterior, not one level. A window far from every level it knows (PLAUSIBLE) is no estimate.
 """
 
 from __future__ import annotations
@@ -38,6 +38,7 @@ FEATURES = ("hold_ms", "key_changes_per_s", "still_share", "best_score")
 SPREAD = np.array([5.0, 0.5, 0.01, 0.05])  # the least standard deviation of each feature (ours)
 EVERY = 30  # frames between estimates (1 s): reading the keys costs more than a frame's update
 CONFIDENT = 0.9  # the posterior of a person (any skill) above which the skill table chooses
+PLAUSIBLE = 4.0  # standard deviations: how far a window may be from its likeliest level in any feature
 VERSION = 1
 
 
@@ -95,15 +96,21 @@ class SkillModel:
     seeds: tuple[int, ...]  # the games its features were measured on
     library: str
 
-    def posterior(self, features: np.ndarray, belief: np.ndarray) -> np.ndarray:
+    def posterior(self, features: np.ndarray, belief: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(n, LEVELS) posterior of each lane's level from its (n, FEATURES) window and (n, styles)
-        belief about the style, from a uniform prior."""
+        belief about the style, from a uniform prior; and (n,) whether the window is within
+        PLAUSIBLE deviations in every feature of its likeliest (style, level). A posterior only
+        ranks the levels it knows: a scripted partner or a wrapped policy that changes keys
+        frame by frame but rarely, like nothing measured, would otherwise be sure of some level."""
         sd = np.maximum(self.sd, SPREAD)
         z = (features[:, None, None, :] - self.mean[None]) / sd[None]
         log_like = (-0.5 * z**2 - np.log(sd)[None]).sum(axis=-1)  # (n, styles, LEVELS)
         top = log_like.max(axis=(1, 2), keepdims=True)
-        mixed = np.einsum("ns,nsl->nl", belief, np.exp(log_like - top))
-        return mixed / np.maximum(mixed.sum(axis=1, keepdims=True), 1e-300)
+        joint = belief[:, :, None] * np.exp(log_like - top)
+        likeliest = joint.reshape(len(joint), -1).argmax(axis=1)
+        far = np.abs(z).max(axis=-1).reshape(len(z), -1)[np.arange(len(z)), likeliest]
+        mixed = joint.sum(axis=1)
+        return mixed / np.maximum(mixed.sum(axis=1, keepdims=True), 1e-300), far <= PLAUSIBLE
 
     def expected(self, belief: np.ndarray, posterior: np.ndarray) -> np.ndarray:
         """(n, teammates) the skill table's expected kills/min under the style belief and the

@@ -32,6 +32,9 @@ def test_a_person_gets_the_skill_tables_choice_and_a_policy_ps() -> None:
     assert lanes.levels[1, 1:3].sum() > 0.99  # a hold of 2 frames: typical or practised
     assert [PAYOFF.ours[p] for p in lanes.policy] == ["b", "b", "a"]
     assert lanes.switches.tolist() == [1, 1, 1]  # once, from the best average
+    held = np.array([[100.0, 12.0, 0.0, -0.2], [250.0, 12.0, 0.0, -0.2]])  # 3 frames; 7.5 (no level's)
+    posterior, plausible = toy_model().posterior(held, np.full((2, 3), 1 / 3))
+    assert posterior[:, 0].tolist() == pytest.approx([1.0, 1.0]) and plausible.tolist() == [True, False]
 
 
 def test_a_model_of_other_libraries_or_windows_is_refused_with_the_remedy(tmp_path) -> None:

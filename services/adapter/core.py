@@ -209,19 +209,24 @@ class AdapterConfig:
         if "skill" not in self.strategy:
             return None
         path = path or skill_path()
-        remedy = f"measure it with `tsf skill-model --out {path}`, or a strategy without -skill"
+        remedy = (
+            f"measure it with `tsf skill-model --table SKILL_TABLE.json --window {self.window} --out {path}`"
+            ", or a strategy without -skill"
+        )
         try:
             model = SkillModel.load(path)
         except (OSError, ValueError) as error:
             raise UsageError("--strategy", self.strategy, f"no skill model ({error}): {remedy}") from None
-        found = (model.library, model.role, model.styles, model.teammates, model.window)
-        wanted = (library.manifest_hash(), self.role, payoff.partners, payoff.ours, self.window)
-        if found != wanted:
+        found = {
+            "library": (model.library, library.manifest_hash()),
+            "seat": (model.role, self.role),
+            "partners": (model.styles, payoff.partners),
+            "teammates": (model.teammates, payoff.ours),
+            "window": (model.window, self.window),
+        }
+        if differ := [f"{k} {was}, not {now}" for k, (was, now) in found.items() if was != now]:
             raise UsageError(
-                "--strategy",
-                self.strategy,
-                f"{path} was measured for (library, seat, styles, teammates, window) {found}, "
-                f"not {wanted}: {remedy}",
+                "--strategy", self.strategy, f"{path} was measured for {'; '.join(differ)}: {remedy}"
             )
         return model
 

@@ -27,7 +27,8 @@ from shared.errors import UsageError
 BAITS = "B1, B2, B3, B4, B5, B6, B7, B8, B9, circle, idle, random"
 SHOOTERS = "S1, S2, S3, S4, S5, S6, S7, mirror, idle, random"
 STRATEGIES = (
-    "cem, cem-dwell, cem-ood, bayes, bayes-dwell-ood, bayes-dwell-ood-guard, bayes-dwell-ood-guard-memory"
+    "cem, cem-dwell, cem-ood, bayes, bayes-dwell-ood, bayes-dwell-ood-guard, bayes-dwell-ood-guard-memory, "
+    "bayes-dwell-ood-guard-skill"
 )
 SEED_RANGE = "0 to 4294967295"
 

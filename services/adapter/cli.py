@@ -76,7 +76,9 @@ def eval_command(
         number(..., WINDOWS, "A window T of the study's CEM agent, repeatable (default: 150, 400, 800)."),
     ] = None,
     strategy: list[Strategies] | None = typer.Option(
-        None, help="A strategy compared at --strategy-window, repeatable (default: all)."
+        None,
+        help="A strategy compared at --strategy-window, repeatable (default: all; a -skill one only "
+        "where its skill model was measured for the seat and window).",
     ),
     strategy_window: int = number(
         AdapterConfig.window, WINDOWS, "The window of the strategies other than cem."
@@ -149,7 +151,7 @@ def eval_command(
         partners = list(people.values())
     plan = EvalPlan(
         role, tuple(partners), seeds, tuple(window or EvalPlan.windows),
-        tuple(s.value for s in strategy or Strategies), strategy_window, identify_seeds, identify,
+        tuple(s.value for s in strategy or ()), strategy_window, identify_seeds, identify,
         performance, sessions, job_games,
     )  # fmt: skip
     columns = (BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())

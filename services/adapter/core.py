@@ -15,6 +15,11 @@ at once; one game's `Adapter` is its one-lane view):
 - `-guard`: when the team's realised kills under the adapted policy fall short of what the table
   promised (guard.py), fall back to the best static policy for the rest of the game; and every
   switch doubles the dwell, so switching is bounded.
+- `-skill`: the partner's skill is estimated from the same window (skill.py: the holds, key
+  changes, lapses and how policy-like the keys are); where the partner is a person of some skill
+  with a posterior of at least CONFIDENT, in a window like those the model measured, D maximises
+  the skill table's expected entry under the style belief and the skill posterior instead of
+  P's; otherwise (a library policy, or not sure) P's choice stands.
 - `-memory`: across the trials of a session with the same partner, the adapter goes on from the
   previous trial (`next_trial`): its belief, window, policy and the guard's record carry over, and
   the next trial needs no warm-up. Within one game it is the strategy without it.
@@ -41,8 +46,10 @@ import numpy as np
 
 from services.adapter.cem import log_probs, observed_log_probs
 from services.adapter.guard import Guard
+from services.adapter.skill import CONFIDENT, EVERY, LEVELS, Keys, SkillModel, skill_path
 from services.agent import library
 from services.agent.policy import end_round_batch
+from services.sim import observation as ob
 from services.table.table import DEFAULT_TABLE, Table
 from shared.errors import UsageError
 from shared.game import FRAMES, N_ACTIONS, ROLES, SEEDS, Policy, Range, other
@@ -55,6 +62,7 @@ STRATEGIES = (
     "bayes-dwell-ood",
     "bayes-dwell-ood-guard",
     "bayes-dwell-ood-guard-memory",
+    "bayes-dwell-ood-guard-skill",
 )
 INITIAL = ("best-average", "random")
 WINDOWS = Range(1, FRAMES.high)  # T: a window longer than a game never fills
@@ -183,7 +191,8 @@ class AdapterConfig:
 
     def build_lanes(self, lanes: int, payoff: Payoff | None = None) -> AdapterLanes:
         """The adapter core of `lanes` games at once (bulk evaluation)."""
-        return AdapterLanes(self, payoff or Payoff.load(self.role), lanes, self.threshold())
+        payoff = payoff or Payoff.load(self.role)
+        return AdapterLanes(self, payoff, lanes, self.threshold(), self.skill_model(payoff))
 
     def threshold(self) -> float | None:
         """The out-of-library threshold, for the strategies that have one."""
@@ -193,6 +202,33 @@ class AdapterConfig:
             return ood_threshold(self.partner_role, self.window)
         except StaleCalibration as error:
             raise UsageError("--strategy", self.strategy, str(error)) from None
+
+    def skill_model(self, payoff: Payoff, path: Path | None = None) -> SkillModel | None:
+        """The skill model, for the strategies that estimate skill: measured on the libraries in
+        use, for our seat, at this window (a UsageError that names the remedy otherwise)."""
+        if "skill" not in self.strategy:
+            return None
+        path = path or skill_path()
+        remedy = (
+            f"measure it with `tsf skill-model --table SKILL_TABLE.json --window {self.window} --out {path}`"
+            ", or a strategy without -skill"
+        )
+        try:
+            model = SkillModel.load(path)
+        except (OSError, ValueError) as error:
+            raise UsageError("--strategy", self.strategy, f"no skill model ({error}): {remedy}") from None
+        found = {
+            "library": (model.library, library.manifest_hash()),
+            "seat": (model.role, self.role),
+            "partners": (model.styles, payoff.partners),
+            "teammates": (model.teammates, payoff.ours),
+            "window": (model.window, self.window),
+        }
+        if differ := [f"{k} {was}, not {now}" for k, (was, now) in found.items() if was != now]:
+            raise UsageError(
+                "--strategy", self.strategy, f"{path} was measured for {'; '.join(differ)}: {remedy}"
+            )
+        return model
 
 
 @dataclass(frozen=True)
@@ -365,11 +401,18 @@ class AdapterLanes:
     are indices into the payoff's partners and ours."""
 
     def __init__(
-        self, config: AdapterConfig, payoff: Payoff, lanes: int, threshold: float | None = None
+        self,
+        config: AdapterConfig,
+        payoff: Payoff,
+        lanes: int,
+        threshold: float | None = None,
+        skill: SkillModel | None = None,
     ) -> None:
         if "ood" in config.strategy and threshold is None:
             raise ValueError(f"strategy {config.strategy} needs an out-of-library threshold")
-        self.config, self.payoff, self.threshold = config, payoff, threshold
+        if "skill" in config.strategy and skill is None:
+            raise ValueError(f"strategy {config.strategy} needs a skill model")
+        self.config, self.payoff, self.threshold, self.skill = config, payoff, threshold, skill
         k = len(payoff.partners)
         self.window = Window(lanes, k, config.window)
         self.frames = 0
@@ -378,22 +421,30 @@ class AdapterLanes:
         self.partner = np.full(lanes, -1)  # the estimated type, -1 until warmup ends
         self.out_of_library = np.zeros(lanes, bool)
         self.candidate, self.held = self.policy.copy(), np.zeros(lanes, np.int64)
-        self.responses = np.array([payoff.best_response(i) for i in range(k)])
         self.fallback = payoff.best_average()  # out of library, or the guard tripped
         self.guard = Guard(self.fallback, lanes) if "guard" in config.strategy else None
         self.switches = np.zeros(lanes, np.int64)
+        self.expected = np.zeros((lanes, len(payoff.ours)))  # the entries the choice maximised
+        self.keys = Keys(lanes, config.window) if skill is not None else None
+        self.levels = np.zeros((lanes, len(LEVELS)))  # the skill posterior, 0 until estimated
+        self.plausible = np.zeros(lanes, bool)  # the window is like a level the model knows
 
     @property
     def bayes(self) -> bool:
         return self.config.strategy.startswith("bayes")
 
-    def update(self, scores: np.ndarray, values: np.ndarray | None = None) -> np.ndarray:
+    def update(
+        self, scores: np.ndarray, values: np.ndarray | None = None, actions: np.ndarray | None = None
+    ) -> np.ndarray:
         """Take every lane's scores of one frame, (n, K) log-probabilities in library order, and,
-        for the guard and the stalled rounds, the lanes' world-view states, (n, D); True where a
-        lane's policy changes."""
+        for the guard, the stalled rounds and the skill estimate, the lanes' world-view states,
+        (n, D), and for the skill estimate the partner's actions, (n,); True where a lane's policy
+        changes."""
         self.frames += 1
         if self.guard is not None and values is not None:
             self.guard.watch(values)
+        if self.keys is not None and values is not None and actions is not None:
+            self.keys.push(actions, np.asarray(values)[:, ob.SELF + ob.ALIVE] > 0.5)
         # In a stalled round every library policy plays the same end-round rule (policy.stalled):
         # the frame says nothing about the partner's type, and a partner who does not follow the
         # rule would otherwise look out of library whenever our ship is dead.
@@ -407,10 +458,18 @@ class AdapterLanes:
         if self.bayes:
             belief = np.exp(self.log_belief)
             self.partner = np.argmax(belief, axis=1)
-            choice = np.argmax(belief @ self.payoff.values, axis=1)
+            self.expected = belief @ self.payoff.values
         else:
             self.partner = np.argmax(means, axis=1)
-            choice = self.responses[self.partner]
+            belief = np.eye(len(self.payoff.partners))[self.partner]
+            self.expected = self.payoff.values[self.partner]
+        if self.skill is not None:
+            if self.keys.filled and self.frames % EVERY == 0:
+                features = self.keys.features(means.max(axis=1))
+                self.levels, self.plausible = self.skill.posterior(features, belief)
+            person = self.plausible & (self.levels[:, :-1].sum(axis=1) >= CONFIDENT)
+            self.expected = np.where(person[:, None], self.skill.expected(belief, self.levels), self.expected)
+        choice = np.argmax(self.expected, axis=1)
         if self.threshold is not None:
             self.out_of_library = means.max(axis=1) < self.threshold
         fallback = self.out_of_library.copy()
@@ -449,20 +508,15 @@ class AdapterLanes:
         return switch
 
     def _start_guard(self, lanes: np.ndarray) -> None:
-        """The guard's watch of the lanes that switched, against what the table promises the new
-        policy: with the belief (bayes) or with the estimated type."""
-        values = self.payoff.values
-        promises = []
-        for i in lanes.tolist():
-            promised = np.exp(self.log_belief[i]) @ values if self.bayes else values[self.partner[i]]
-            promises.append(float(promised[self.policy[i]]))
-        self.guard.start(lanes, self.policy[lanes], np.array(promises))
+        """The guard's watch of the lanes that switched, against what the table (P, or the skill
+        table) promises the new policy: the entry the choice maximised."""
+        self.guard.start(lanes, self.policy[lanes], self.expected[lanes, self.policy[lanes]])
 
     def next_trial(self) -> AdapterLanes:
         """The adapters for the next trial of sessions with the same partners: these going on
         (`-memory`), or fresh ones."""
         if "memory" not in self.config.strategy:
-            return AdapterLanes(self.config, self.payoff, len(self.policy), self.threshold)
+            return AdapterLanes(self.config, self.payoff, len(self.policy), self.threshold, self.skill)
         if self.guard is not None:
             self.guard.last = None  # a new game: no kill across the gap
         return self
@@ -483,11 +537,14 @@ class Adapter:
     def payoff(self) -> Payoff:
         return self.lanes.payoff
 
-    def update(self, scores: np.ndarray, values: list[float] | None = None) -> bool:
-        """Take one frame's (K,) scores and, for the guard, the frame's world-view state values;
-        True when our policy changes."""
+    def update(
+        self, scores: np.ndarray, values: list[float] | None = None, action: int | None = None
+    ) -> bool:
+        """Take one frame's (K,) scores and, for the guard and the skill estimate, the frame's
+        world-view state values and the partner's action; True when our policy changes."""
         states = None if values is None else np.asarray(values, np.float64)[None]
-        return bool(self.lanes.update(np.asarray(scores)[None], states)[0])
+        actions = None if action is None else np.array([action])
+        return bool(self.lanes.update(np.asarray(scores)[None], states, actions)[0])
 
     @property
     def frames(self) -> int:

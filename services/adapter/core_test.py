@@ -13,6 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from services.adapter.core import Adapter, AdapterConfig, AdapterLanes, Payoff, Scorer, Window, ood_threshold
+from services.adapter.skill import FEATURES, LEVELS, SkillModel
 from services.agent import library, networks
 from services.agent.library_test import empty_library
 from services.agent.seats import policy_for
@@ -20,17 +21,35 @@ from services.sim import observation as ob
 from services.sim.engine import Game
 from services.sim.observation import world_values
 from shared.errors import UsageError
+from shared.game import join_action
 
 # A hand-made table: partner types X, Y, Z (rows) against our policies a, b, c (columns).
 PAYOFF = Payoff(
     ("X", "Y", "Z"), ("a", "b", "c"), np.array([[5.0, 1.0, 2.0], [0.0, 4.0, 3.0], [1.0, 1.0, 3.5]])
 )
 LOW, HIGH = math.log(0.05), math.log(0.8)
+HOLDS = {"novice": 100.0, "typical": 200 / 3, "practised": 200 / 3, "library": 100 / 3}
+
+
+def toy_model(window: int = 60) -> SkillModel:
+    """A skill model on the hand-made table: levels told apart by their holds alone (the other
+    features alike at every level); with people of any style, b is best."""
+    mean = np.zeros((3, len(LEVELS), len(FEATURES)))
+    mean[:, :, 0] = [HOLDS[level] for level in LEVELS]
+    values = np.tile([1.0, 6.0, 2.0], (3, len(LEVELS) - 1, 1))
+    spread = np.tile([1.0, 100.0, 1.0, 100.0], (3, len(LEVELS), 1))  # any key changes, scores
+    return SkillModel("shooter", PAYOFF.partners, PAYOFF.ours, window, values, mean, spread, (), "")
+
+
+def keys_held(frames: int, hold: int) -> np.ndarray:
+    """Turning left and right in turn, each for `hold` frames."""
+    return np.where(np.arange(frames) // hold % 2 == 0, join_action(1, 0, 0), join_action(2, 0, 0))
 
 
 def one(config: AdapterConfig, threshold: float | None = None) -> Adapter:
-    """One game's adapter on the hand-made table."""
-    return Adapter(AdapterLanes(config, PAYOFF, 1, threshold))
+    """One game's adapter on the hand-made table (and, for -skill, a hand-made skill model)."""
+    skill = toy_model(config.window) if "skill" in config.strategy else None
+    return Adapter(AdapterLanes(config, PAYOFF, 1, threshold, skill))
 
 
 def frame(best: int, k: int = 3) -> np.ndarray:
@@ -221,14 +240,19 @@ def test_lanes_decide_apart_with_the_guard_and_stalled_rounds() -> None:
     values[..., ob.SELF + ob.ALIVE] = values[..., ob.FORTRESS + ob.F_ALIVE] = 1.0
     values[..., ob.PARTNER + ob.ALIVE] = (np.arange(frames)[:, None] // 40 + np.arange(lanes)) % 5 != 0
     values[::150, :3, ob.FORTRESS + ob.F_ALIVE] = 0.0  # lanes 0-2 kill every 5 s; the rest never
-    for strategy in ("bayes-dwell-ood-guard", "cem-dwell", "bayes"):
+    actions = np.stack([keys_held(frames, 1 + lane % 3) for lane in range(lanes)], axis=1)  # skill
+    actions[1200:, 4] = keys_held(frames - 1200, 1)  # a person's hand, then a policy's
+    for strategy in ("bayes-dwell-ood-guard", "cem-dwell", "bayes", "bayes-dwell-ood-guard-skill"):
         config = AdapterConfig("shooter", 60, strategy, warmup=30, dwell=10)
         threshold = 2 * LOW if "ood" in strategy else None
         scalar = [one(config, threshold) for _ in range(lanes)]
-        together = AdapterLanes(config, PAYOFF, lanes, threshold)
+        together = AdapterLanes(config, PAYOFF, lanes, threshold, one(config, threshold).lanes.skill)
         for t in range(frames):
-            switched = together.update(scores[t], values[t])
-            alone = [a.update(scores[t, i], values[t, i].tolist()) for i, a in enumerate(scalar)]
+            switched = together.update(scores[t], values[t], actions[t])
+            alone = [
+                a.update(scores[t, i], values[t, i].tolist(), int(actions[t, i]))
+                for i, a in enumerate(scalar)
+            ]
             assert switched.tolist() == alone, (strategy, t)
             assert [PAYOFF.ours[p] for p in together.policy] == [a.policy for a in scalar], (strategy, t)
         assert together.guarded.tolist() == [a.guarded for a in scalar]
@@ -236,3 +260,15 @@ def test_lanes_decide_apart_with_the_guard_and_stalled_rounds() -> None:
         if "guard" in strategy:
             assert 0 < sum(a.guarded for a in scalar) < lanes and max(a.switches for a in scalar) >= 2
             assert not any(a.guarded for a in scalar[:3])  # the lanes that kept the promise
+        if "skill" in strategy:  # holds of 1, 2, 3 frames by lane; lane 4 a policy from frame 1200
+            read = [LEVELS[i] for i in together.levels.argmax(axis=1)]
+            assert read == [
+                "library",
+                "typical",
+                "novice",
+                "library",
+                "library",
+                "novice",
+                "library",
+                "typical",
+            ]

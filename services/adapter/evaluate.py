@@ -121,8 +121,9 @@ def play_games(
         if len(scored):
             now = s.scorer.observed({v: observed(v)[scored] for v in s.scorer.views}, partner_actions[scored])
             states = observed("world")[scored]  # what AdapterLanes.update reads: stalls, the guard's kills
+            acted = partner_actions[scored]  # and the skill estimate
         for lanes, rows, adapter in groups:
-            for j in np.flatnonzero(adapter.update(now[rows], states[rows])).tolist():
+            for j in np.flatnonzero(adapter.update(now[rows], states[rows], acted[rows])).tolist():
                 seat.choice[lanes[j]] = adapter.policy[j]
                 outcomes[lanes[j]].switches += 1
                 chosen = (s.payoff.partners[adapter.partner[j]], s.payoff.ours[adapter.policy[j]])

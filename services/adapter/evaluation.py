@@ -13,11 +13,12 @@ from pathlib import Path
 import numpy as np
 
 from services.adapter import figures, identification, results, team
-from services.adapter.core import STRATEGIES, AdapterConfig
+from services.adapter.core import STRATEGIES, AdapterConfig, Payoff
 from services.adapter.partners import SWITCH_AT, check_partner, population
 from services.adapter.results import TeamGame
 from services.agent import library
 from services.jobs.kinds import Progress, Runner, in_process
+from shared.errors import UsageError
 from shared.game import FPS, other
 
 
@@ -30,7 +31,7 @@ class EvalPlan:
     partners: tuple[str, ...] = ()  # by name; none given: the population of the other seat
     seeds: int = 5  # seeded one-minute games per partner and agent (people, with `sessions`)
     windows: tuple[int, ...] = (150, 400, 800)  # the study's CEM agent at each
-    strategies: tuple[str, ...] = STRATEGIES  # each compared at `strategy_window`
+    strategies: tuple[str, ...] = ()  # each compared at `strategy_window`; none: all the seat has
     strategy_window: int = AdapterConfig.window
     identify_seeds: int = 3  # games per library partner for identification
     identify: bool = True
@@ -44,6 +45,24 @@ class EvalPlan:
             object.__setattr__(self, "partners", everyone)
         for name in dict.fromkeys(self.partners):
             check_partner(name, self.partner_role)
+        if not self.strategies:  # a -skill strategy only where a skill model fits seat and window
+            object.__setattr__(self, "strategies", tuple(s for s in STRATEGIES if self._has_model(s)))
+        for strategy in self.strategies:  # a model asked for and missing: one line, before any worker
+            self._has_model(strategy, say=True)
+
+    def _has_model(self, strategy: str, say: bool = False) -> bool:
+        """Whether the strategy has what it needs at this seat and window (a -skill strategy its
+        skill model); with `say`, the UsageError that says what is missing instead of False."""
+        if "skill" not in strategy:
+            return True
+        config = AdapterConfig(self.role, self.strategy_window, strategy)
+        try:
+            config.skill_model(Payoff.load(self.role))
+        except UsageError:
+            if say:
+                raise
+            return False
+        return True
 
     @property
     def partner_role(self) -> str:

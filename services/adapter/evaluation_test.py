@@ -8,6 +8,7 @@ import json
 
 import pytest
 
+from services.adapter.core import STRATEGIES
 from services.adapter.evaluation import EvalPlan, evaluate
 from services.adapter.partners import population
 from services.agent import library
@@ -20,6 +21,15 @@ def test_a_plan_without_partners_plays_the_population_and_checks_every_partner()
     assert plan.agents == [*library.keys("bait"), "adaptive-T150-cem", "adaptive-T400-bayes"]
     with pytest.raises(UsageError, match="nope"):
         EvalPlan("shooter", partners=("B1", "nope(B1)"))
+
+
+def test_a_plan_names_a_skill_strategy_only_where_its_model_fits_and_refuses_one_asked_for() -> None:
+    skill = "bayes-dwell-ood-guard-skill"  # the shipped skill model: shooter seat, T = 400
+    assert EvalPlan("shooter", ("B1",)).strategies == STRATEGIES
+    assert EvalPlan("bait", ("S1",)).strategies == tuple(s for s in STRATEGIES if s != skill)
+    assert skill not in EvalPlan("shooter", ("B1",), strategy_window=150).strategies
+    with pytest.raises(UsageError, match=f"--strategy {skill}: .* seat shooter, not bait"):
+        EvalPlan("bait", ("S1",), strategies=(skill,))
 
 
 def test_an_evaluation_plays_every_partner_with_every_agent_and_writes_its_report(tmp_path) -> None:

@@ -30,6 +30,7 @@ from services.adapter.human_like import (
     predict,
     rules_of,
 )
+from services.adapter.keys import LAPSE, changes, fire_presses, shortest_runs, still
 from services.agent import library, networks
 from services.proxy.data import pairs, person_seats, study_record
 from services.recorder.recording import load
@@ -98,24 +99,8 @@ def calibration(
 
 FIT_SKILLS = np.linspace(0.0, 1.0, 6)  # the skills simulated; the fit interpolates between them
 FIT_SEEDS = 12  # simulated games per skill and person
-FROZEN = 15  # frames (0.5 s) without a key change: a lapse, or a long hold
+FROZEN = LAPSE  # frames (0.5 s) without a key change: a lapse, or a long hold
 STATISTICS = ("key_changes_per_s", "frozen_share", "response_ms", "fires_per_s", "kills_per_minute")
-
-
-def changes(keys: np.ndarray) -> np.ndarray:
-    """The frames at which any of the keys (3, frames) changes."""
-    return np.flatnonzero((np.diff(keys, axis=1) != 0).any(axis=0)) + 1
-
-
-def still(when: np.ndarray, frames: int) -> np.ndarray:
-    """Each frame's run without a key change (frames), from the changes `when`."""
-    lengths = np.diff(np.concatenate([[0], when, [frames]]))
-    return np.repeat(lengths, lengths)
-
-
-def fire_presses(keys: np.ndarray) -> np.ndarray:
-    """The frames at which the fire key goes down (a press held from the first frame counts)."""
-    return np.flatnonzero(np.diff(np.concatenate([[0], keys[2]])) == 1)
 
 
 def statistics(actions: np.ndarray, opened: np.ndarray, kills_per_minute: float) -> dict[str, float]:
@@ -190,7 +175,6 @@ def read_trial(path: Path, role: str) -> Trial:
     )  # fmt: skip
 
 
-LAPSE = FROZEN  # frames (0.5 s) alive without a key change: a lapse
 KEYS = ("turn", "thrust", "fire")
 
 
@@ -361,29 +345,6 @@ SIGNATURE = (
     "kills_per_minute",
     *HOLDS,
 )
-
-
-def shortest_runs(actions: list[np.ndarray]) -> dict[str, float]:
-    """The holds, read directly, in ms over all games: the turn and thrust keys' commonest inner
-    run (`hold_ms`: the model changes a dithering key as soon as its hold allows, so most runs are
-    the hold, and a run the page's timing cuts a frame short, as in a study's recordings, does not
-    move it); the fire key's shortest run down (`fire_ms`: a burst) and up (`fire_gap_ms`). A hold
-    the keys never show is left to its longest bound."""
-    found: dict[str, list[int]] = {"hold_ms": [], "fire_ms": [], "fire_gap_ms": []}
-    for game in actions:
-        for k, key in enumerate(split_action(game)):
-            changes = np.flatnonzero(np.diff(key)) + 1
-            runs, pressed = np.diff(changes), key[changes[:-1]] != 0
-            if k < 2:
-                found["hold_ms"] += runs.tolist()
-            else:
-                found["fire_ms"] += runs[pressed].tolist()
-                found["fire_gap_ms"] += runs[~pressed].tolist()
-    read = {"hold_ms": lambda runs: np.bincount(runs).argmax(), "fire_ms": min, "fire_gap_ms": min}
-    return {
-        name: float(read[name](runs) * FRAME_MS) if runs else PARAMETERS[name][1]
-        for name, runs in found.items()
-    }
 
 
 def signature(actions: np.ndarray, obs: np.ndarray, kills_per_minute: float, policy) -> np.ndarray:

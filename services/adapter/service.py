@@ -117,9 +117,10 @@ class AdapterShell:
             self.paired.append((pair, frame))
         self.decide(frame)
 
-    def scored(self, scores: np.ndarray, values: list[float], frame: int) -> None:
-        """Update the core with one paired frame's scores, and switch the agent when due (under `lock`)."""
-        self.adapter.update(scores, values)
+    def scored(self, scores: np.ndarray, pair: tuple[list[float], int], frame: int) -> None:
+        """Update the core with one paired frame (the partner's values and action) and its scores,
+        and switch the agent when due (under `lock`)."""
+        self.adapter.update(scores, *pair)
         self.latest = frame
         self.decide(frame)
 
@@ -179,11 +180,11 @@ def score_paired(shells: list[AdapterShell]) -> None:
         began = time.perf_counter()
         scores = rows[0][0].scorer.batch([pair[0] for _, pair, _ in rows], [pair[1] for _, pair, _ in rows])
         share = (time.perf_counter() - began) / len(rows)
-        for (shell, (values, _), frame), row in zip(rows, scores, strict=True):
+        for (shell, pair, frame), row in zip(rows, scores, strict=True):
             began = time.perf_counter()
             with shell.lock:
                 if shell.open:
-                    shell.scored(row, values, frame)
+                    shell.scored(row, pair, frame)
             if shell.costs is not None:
                 shell.costs.append(share + time.perf_counter() - began)
 

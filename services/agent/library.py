@@ -207,15 +207,15 @@ def recipe_hash(recipe: Recipe) -> str:
 
 
 def copy(to: Path) -> Path:
-    """A library at `to` that starts as the shipped one (registry, manifest, weights; not the table
-    or the adapter's calibration, which a retrained policy would make stale): where `tsf train`
-    writes unless it is told to write the shipped library. A directory that already holds a registry
-    is left as it is."""
+    """A library at `to` that starts as the shipped one (registry, manifest, weights; not the table,
+    the adapter's calibration or its skill model, which a retrained policy would make stale): where
+    `tsf train` writes unless it is told to write the shipped library. A directory that already
+    holds a registry is left as it is."""
     if not (to / "registry.toml").exists():
         shutil.copytree(
             LIBRARY,
             to,
-            ignore=shutil.ignore_patterns("table.json*", "calibration.json", ".*"),
+            ignore=shutil.ignore_patterns("table.json*", "calibration.json", "skill.json", ".*"),
             dirs_exist_ok=True,
         )
     return to

@@ -157,6 +157,35 @@ def skill_table(
         console.print(f"heatmap written to {skill_heatmap(table, plot, _p_best(table))}")
 
 
+@commands.command("skill-model")
+def skill_model_command(
+    table: Path = typer.Option(
+        ..., exists=True, dir_okay=False, help="The skill table (tsf skill-table) the adapter picks from."
+    ),
+    window: int = number(400, Range(1, 1800), "The adapter's window T the features are read over."),
+    out: Path = output(
+        Path("tsf-skill.json"),
+        "Where the model goes (the shipped one: services/agent/library/skill.json).",
+    ),
+) -> None:
+    """Measure the adaptive agent's skill model (strategies with -skill): the skill table's means,
+    and what the window of a stand-in of each style and skill, and of each library policy, shows
+    (docs/adapter.md). Plays 12 games of each (seeds 64-75) with the table's best static teammate."""
+    import sys
+
+    from services.agent import library
+    from services.table.skills import SkillTable, skill_model
+
+    try:
+        skills = SkillTable.load(table)
+    except (KeyError, TypeError, ValueError) as error:
+        raise UsageError("--table", table, f"not a skill table of tsf skill-table ({error})") from None
+    if set(skills.styles) != set(library.keys(other(skills.role))):
+        raise UsageError("--table", table, "its styles are not the partner library in use")
+    model = skill_model(skills, window)
+    console.print(f"skill model written to {model.save(out, ' '.join(['tsf', *sys.argv[1:]]))}")
+
+
 def _p_best(table) -> dict[str, str]:  # noqa: ANN001 - a services.table.skills.SkillTable
     """P's best response to each style of the skill table ({} without a current P)."""
     from services.table.table import DEFAULT_TABLE, StaleTable

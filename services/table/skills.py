@@ -19,14 +19,22 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from services.adapter.evaluate import batches, play_teams
+import numpy as np
+
+from services.adapter.core import AdapterConfig, Window
+from services.adapter.evaluate import batches, play_games, play_teams, setup
+from services.adapter.skill import EVERY, FEATURES, LEVELS, Keys, SkillModel
 from services.agent import library
+from services.agent.policy import end_round_batch
 from services.provenance import provenance
+from services.sim import observation as ob
 from services.table.table import stderr
+from shared.errors import UsageError
 from shared.game import ROLES, GameConfig
 
 VERSION = 1
-SKILLS = ("novice", "typical", "practised")  # human_like.SKILLS, in order of practice
+SKILLS = LEVELS[:-1]  # human_like.SKILLS, in order of practice
+MODEL_SEEDS = tuple(range(64, 76))  # 4 people x 3 trials, past the evaluation's 0-63 and the table's
 LANES = 1024  # games per batch at most
 
 
@@ -206,3 +214,39 @@ def summary(table: SkillTable, p_best: dict[str, str]) -> str:
         over_p = table.held_out(chosen_by_p)
         lines[-1] += f" Held-out best response minus P's best response to the style: {over_p:.2f}."
     return "\n".join(lines) + "\n"
+
+
+def skill_model(
+    table: SkillTable, window: int = AdapterConfig.window, seeds: tuple = MODEL_SEEDS
+) -> SkillModel:
+    """The adapter's skill model for the table's seat: the table's means, and each level's FEATURES
+    per style (mean and standard deviation over the windows the adapter reads: every EVERY frames
+    from the end of its warm-up, of games of each stand-in and of the library policy itself, with
+    the table's best static teammate, over `seeds`)."""
+    payoff = setup(table.role).payoff
+    if set(payoff.partners) != set(table.styles) or not set(payoff.ours) <= set(table.teammates):
+        raise UsageError("--table", table.role, "its styles and teammates are not the libraries' in use")
+    teammate, first = table.best_static(), AdapterConfig(window=window).warmup_frames
+    mean = np.zeros((len(payoff.partners), len(LEVELS), len(FEATURES)))
+    sd = np.zeros_like(mean)
+    for i, style in enumerate(payoff.partners):  # one batch per style
+        names = [stand_in(style, skill) for skill in SKILLS] + [style]
+        games = [(name, teammate, seed) for name in names for seed in seeds]
+        played = play_games(games, table.role, record=True, score=True)
+        scores, states = np.stack([o.scores for o in played]), np.stack([o.values for o in played])
+        actions = np.stack([o.actions for o in played])
+        means, keys, read = Window(len(games), len(payoff.partners), window), Keys(len(games), window), []
+        for frame in range(actions.shape[1]):  # as AdapterLanes.update reads them
+            keys.push(actions[:, frame], states[:, frame, ob.SELF + ob.ALIVE] > 0.5)
+            pushed = np.flatnonzero(~end_round_batch(states[:, frame].astype(np.float32), "world")[0])
+            means.push(pushed, scores[pushed, frame])
+            if frame + 1 >= first and (frame + 1) % EVERY == 0:
+                read.append(keys.features(means.means().max(axis=1)))
+        windows = np.stack(read, axis=1).reshape(len(names), len(seeds) * len(read), len(FEATURES))
+        mean[i], sd[i] = windows.mean(axis=1), windows.std(axis=1)
+    values = np.array(
+        [[[table.mean(stand_in(s, k), t) for t in payoff.ours] for k in SKILLS] for s in payoff.partners]
+    )
+    return SkillModel(
+        table.role, payoff.partners, payoff.ours, window, values, mean, sd, tuple(seeds), table.library
+    )

@@ -206,6 +206,23 @@ P = TypeVar("P", bound=Part)
 ORDERS_KEPT = 4096  # match ids a pool service remembers, so that a re-put order is ignored
 
 
+class Seen:
+    """The last ORDERS_KEPT match ids a pool service was ordered (or stopped), oldest forgotten
+    first: the launcher re-puts an order until the match's tokens are up, and a pool runs for hours."""
+
+    def __init__(self, size: int = ORDERS_KEPT) -> None:
+        self.size, self.ids = size, OrderedDict[str, None]()
+
+    def add(self, match: str) -> bool:
+        """Remember `match`; whether it is new."""
+        if match in self.ids:
+            return False
+        self.ids[match] = None
+        if len(self.ids) > self.size:
+            self.ids.popitem(last=False)
+        return True
+
+
 def serve_orders(
     z: zenoh.Session,
     pool: str,
@@ -223,17 +240,14 @@ def serve_orders(
     ignored, a bad one's included. Once `every` seconds this thread closes the parts that ended and
     calls `tick` with the others (zenoh's callback threads never undeclare). The pool's token
     is declared once the order key is subscribed."""
-    seen: OrderedDict[str, None] = OrderedDict()
+    seen = Seen()
     parts: list[P] = []
     lock = threading.Lock()
 
     def on_order(order: MatchOrder) -> None:
         with lock:
-            if order.match in seen:
+            if not seen.add(order.match):
                 return
-            seen[order.match] = None
-            if len(seen) > ORDERS_KEPT:
-                seen.popitem(last=False)
         made = start(order)
         with lock:
             parts.extend(made)

@@ -47,3 +47,11 @@ def test_a_weak_callback_calls_its_object_while_it_lives_and_keeps_it_not() -> N
     del match
     assert kept() is None  # the callback alone does not keep it
     callback(2)  # a late sample: nothing to call
+
+
+def test_a_pool_service_remembers_the_last_orders_it_saw_and_forgets_the_oldest() -> None:
+    from shared.bus import Seen
+
+    seen = Seen(2)
+    assert [seen.add(m) for m in ("a", "b", "a", "c")] == [True, True, False, True]
+    assert seen.add("a") and not seen.add("c"), "a, the oldest, was forgotten; c is still known"

@@ -25,7 +25,7 @@ from services.agent import library
 from services.provenance import provenance, sidecar
 from services.recorder.log import GapTracker, LogWriter, read_log
 from shared import keys
-from shared.bus import BusConfig, Drops, session, subscribe, until_stopped
+from shared.bus import BusConfig, Drops, Seen, session, subscribe, until_stopped
 from shared.errors import Failure, UsageError
 from shared.game import ROLES, GameConfig
 from shared.messages import MatchOrder, Message, MessageError, Start, State, Summary, decode_any
@@ -33,7 +33,6 @@ from shared.messages import MatchOrder, Message, MessageError, Start, State, Sum
 log = logging.getLogger("tsf.recorder")
 _DONE = object()
 BATCH = 0.05  # seconds the drain lets messages gather
-SEEN_ORDERS = 4096  # match ids a pool recorder remembers (orders are re-put until it answers)
 
 
 def recording_path(directory: str | Path, match: str) -> Path:
@@ -199,22 +198,19 @@ def _record(
 class PoolRecorder:
     """A pool's recorder: each new order's match is recorded by _record in a thread of its own, into
     `<out>/<order.folder>/<match>.tsflog`. An order for a match it has or had is ignored (the
-    launcher re-puts orders until every service answers); it remembers the last SEEN_ORDERS ids."""
+    launcher re-puts orders until every service answers; shared.bus.Seen)."""
 
     def __init__(self, z: zenoh.Session, client: bool, out: Path, drain: Drain, drops: Drops) -> None:
         self.z, self.client, self.out, self.drain, self.drops = z, client, out, drain, drops
-        self.seen: dict[str, None] = {}  # insertion-ordered: the oldest id is forgotten first
+        self.seen = Seen()
         self.open: dict[str, tuple[MatchRecording, threading.Thread]] = {}
         self.closing = False
         self.lock = threading.Lock()
 
     def order(self, order: MatchOrder) -> None:
         with self.lock:
-            if self.closing or order.match in self.seen:
+            if self.closing or not self.seen.add(order.match):
                 return
-            self.seen[order.match] = None
-            if len(self.seen) > SEEN_ORDERS:
-                del self.seen[next(iter(self.seen))]
         threading.Thread(
             target=self._record, args=(order,), name=f"recorder-{order.match}", daemon=True
         ).start()

@@ -7,37 +7,19 @@ import contextlib
 import logging
 import sys
 import threading
-from collections import OrderedDict
 
 import zenoh
 
 from services.sim.clock import Clock
 from services.sim.service import MatchSim, _raise_priority, real_time
 from shared import keys
-from shared.bus import BusConfig, Drops, session, subscribe
+from shared.bus import BusConfig, Drops, Seen, session, subscribe
 from shared.errors import UsageError
 from shared.game import GameConfig
 from shared.messages import MatchOrder, MatchStop
 
 log = logging.getLogger("tsf.sim")
-REMEMBERED = 10_000  # match ids a pool remembers, to ignore a re-put order (hours of matches)
 SWITCH_INTERVAL = 0.001  # seconds a thread holds the GIL before it must offer it (Python's: 0.005)
-
-
-class Seen:
-    """The last `size` ids seen, oldest forgotten first: bounded memory for a pool that runs hours."""
-
-    def __init__(self, size: int = REMEMBERED) -> None:
-        self.size, self.ids = size, OrderedDict[str, None]()
-
-    def add(self, id: str) -> bool:
-        """Remember `id`; whether it is new."""
-        if id in self.ids:
-            return False
-        self.ids[id] = None
-        if len(self.ids) > self.size:
-            self.ids.popitem(last=False)
-        return True
 
 
 class PoolSim:

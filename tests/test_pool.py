@@ -70,7 +70,12 @@ def test_a_match_outside_the_pools_directory_or_of_a_used_id_is_refused(pool: Po
         pool.run(plan("pool-once", pool.directory, frames=9))
 
 
-@pytest.mark.parametrize("service", ["agent", "sim", "recorder"])
+SLOW = pytest.mark.slow  # the sim's (the router's) restart runs by default, the others with -m slow
+
+
+@pytest.mark.parametrize(
+    "service", ["sim", pytest.param("agent", marks=SLOW), pytest.param("recorder", marks=SLOW)]
+)
 def test_a_killed_service_fails_its_matches_and_the_next_match_plays(pool: Pool, service: str) -> None:
     victim = pool.processes.children[service]
     failure: list[BaseException] = []

@@ -11,6 +11,8 @@ from pathlib import Path
 import msgpack
 import pytest
 import zenoh
+from test_match_processes import may_raise_priority, nice
+from test_sim_contract import Hands, act
 
 from services.sim.pool import run_pool
 from services.sim.service import MatchSim
@@ -18,8 +20,6 @@ from shared import keys
 from shared.bus import BusConfig
 from shared.game import ROLES
 from shared.messages import GameEvent, MatchOrder, MatchStop, Start, State, Summary
-from tests.test_match_processes import may_raise_priority, nice
-from tests.test_sim_contract import Hands, act
 
 POOL = "lab"
 NAMES = {"bait": "B1", "shooter": "human"}

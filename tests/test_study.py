@@ -88,7 +88,7 @@ def test_a_trial_past_its_time_is_ended_and_offered_again_then_a_problem_is_show
     # 10 ms beyond its length from Ready: no match ends that soon (its summary comes after its last frame)
     stop, url, server = study_server(config, tmp_path, Serving(trial_timeout=0.01, test_token=TEST))
     report = asyncio.run(stand_in(url, test=TEST))
-    assert report.refused == PROBLEM and report.again == RETRIES - 1 and not report.done
+    assert report.refused == PROBLEM and report.again == RETRIES - 1 and not report.done, report
     stop.set()
     attempts = server.result(timeout=60).participants["P001"].attempts
     assert [(a["attempt"], a["status"]) for a in attempts] == [(n, "failed") for n in range(1, RETRIES + 1)]

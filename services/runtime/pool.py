@@ -198,6 +198,8 @@ class Pool:
                 self.z.put(keys.pool_stop(self.name), ending.encode())
             if put_at:  # else never ordered: nothing to close
                 watch.closed.wait(CLOSE)
+        if stop.is_set() and not why:  # as run_match: a stop before the recording is closed fails it
+            why = f"match {match} was stopped before its end"
         if why:
             raise Failure(why)
         if problems := recording_problems(path):

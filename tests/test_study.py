@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pytest
 from conftest import STAND_IN_TOKEN
+from test_match_processes import children
 
 from services.recorder.recording import load
 from services.study.core import StudyConfig, Variant
@@ -169,7 +170,7 @@ def study_command(
 def test_sigterm_ends_the_study_server_and_every_match_it_started(tmp_path):
     with study_command(tmp_path) as (server, url):
         asyncio.run(stand_in(url, leave_after=30, test=TEST))  # the match runs out for ten minutes
-        pool = _children(server.pid)
+        pool = children(server.pid)
         assert len(pool) >= 3 and all("--pool study-" in p for p in pool.values()), "sim, agent, recorder"
         server.send_signal(signal.SIGTERM)
         assert server.wait(60) == 0
@@ -198,21 +199,9 @@ def test_ctrl_c_during_a_matchs_warm_up_ends_the_server_at_once(tmp_path):
                 assert status == 0
                 assert waited < 10.0
 
-        pool = _children(server.pid)
+        pool = children(server.pid)
         asyncio.run(consent())
         assert not [pid for pid in pool if Path(f"/proc/{pid}").exists()], "no pool process is left behind"
-
-
-def _children(pid: int) -> dict[int, str]:
-    """The live child processes of `pid` (a study server's: its pool's services) and their command lines."""
-    found = {}
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        with contextlib.suppress(OSError, IndexError):
-            if int(stat.read_text().rsplit(")", 1)[1].split()[1]) == pid:
-                found[int(stat.parent.name)] = (
-                    (stat.parent / "cmdline").read_bytes().replace(b"\0", b" ").decode()
-                )
-    return found
 
 
 def test_attempts_an_earlier_server_left_are_settled_by_their_recordings(tmp_path):

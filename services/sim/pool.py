@@ -14,7 +14,6 @@ from services.sim.clock import Clock
 from services.sim.service import MatchSim, _raise_priority, real_time
 from shared import keys
 from shared.bus import BusConfig, Drops, Seen, session, subscribe
-from shared.errors import UsageError
 from shared.game import GameConfig
 from shared.messages import MatchOrder, MatchStop
 
@@ -61,13 +60,9 @@ class PoolSim:
 def run_pool(bus: BusConfig, pool: str, stop: threading.Event, priority: int = 0) -> PoolSim:
     """Play the pool's matches until `stop` is set, then end those running (their summaries are
     published) and return. Raises the priority by `priority` nice steps at once (every thread of
-    the process, the session's included) and, if it raises it at all, runs the clock in the
-    real-time class (service.real_time); offers the GIL more often so that the bus's callbacks
-    delay the clock less."""
-    try:
-        keys.check_match(pool)
-    except UsageError:
-        raise UsageError("--pool", pool, "invalid pool name: use 1-64 letters, digits, '-' or '_'") from None
+    the process, the session's included) and, if it raises it at all, puts them in the real-time
+    class (service.real_time); offers the GIL more often so that the bus's callbacks delay the
+    clock less. The pool's name is checked where it enters (options.in_pool)."""
     with session(bus) as z, contextlib.ExitStack() as stack:
         clock = Clock()
         sim = PoolSim(z, pool, clock)

@@ -1,10 +1,19 @@
 """One clock for every match of a sim process: a single loop that plays each match's tick when it
-is due, so many matches cost one thread, and none can stall another by a loop of its own."""
+is due, so many matches cost one thread, and none can stall another by a loop of its own.
+
+Matches tick in a few phases of the period (`phases`): each match is put in the least used, and its
+ticks fall on that phase of the monotonic clock's grid. The matches of a phase are played in one pass
+of the loop, so their states leave together: one wake-up of the clock and of each receiver's
+network thread serves several matches. A pool's 12 matches cost 20 % less CPU in 4 phases than each
+on its own (bench/study.py: 0.060 -> 0.048 CPU-s per second of play per participant) with the same
+tick jitter (p99 2.5 ms at worst); all in one phase is a little cheaper still, but the last match
+of a pass then waits for eleven others and jitter reached 5 ms."""
 
 from __future__ import annotations
 
 import threading
 import time
+from collections import Counter
 from typing import Protocol
 
 POLL = 0.05  # seconds between looks at the stop event while nothing is due
@@ -15,6 +24,7 @@ class Played(Protocol):
 
     match: str
     closed: bool
+    phase: float  # where in the period its ticks fall (0 <= phase < 1); set by the clock that plays it
 
     def due(self, now: float) -> float:
         """When the match's next tick is due (monotonic seconds; `now` or earlier: at once)."""
@@ -26,18 +36,28 @@ class Played(Protocol):
         """End the match at its next tick (its summary is published)."""
 
 
+def on_phase(now: float, period: float, phase: float) -> float:
+    """The latest time at or before `now` on `phase` of the period's grid (monotonic seconds): a
+    match whose ticks count from it ticks on its phase, its next tick at most a period away."""
+    return now - (now - phase * period) % period
+
+
 class Clock:
     """Plays every match it holds: sleeps until the earliest due tick (woken early by `changed`,
     which the bus's callbacks notify when a match may be due sooner: a seat arrives, a lockstep
     answer, an order) and plays each due match's tick, earliest first. A match's ticks are due on
     its own schedule, so lateness never accumulates; a closed match is dropped."""
 
-    def __init__(self) -> None:
+    def __init__(self, phases: int = 1) -> None:
         self.changed = threading.Condition()
         self.matches: list[Played] = []
+        self.phases = phases
 
     def add(self, match: Played) -> None:
+        """Play `match` from now on, in the phase that the fewest of the matches held use."""
         with self.changed:
+            used = Counter(round(m.phase * self.phases) for m in self.matches if not m.closed)
+            match.phase = min(range(self.phases), key=lambda phase: (used[phase], phase)) / self.phases
             self.matches.append(match)
             self.changed.notify_all()
 

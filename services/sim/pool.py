@@ -18,6 +18,7 @@ from shared.game import GameConfig
 from shared.messages import MatchOrder, MatchStop
 
 log = logging.getLogger("tsf.sim")
+PHASES = 4  # of the period, in which the pool's matches tick (clock.py: measured against 1 and 12)
 SWITCH_INTERVAL = 0.001  # seconds a thread holds the GIL before it must offer it (Python's: 0.005)
 
 
@@ -64,7 +65,7 @@ def run_pool(bus: BusConfig, pool: str, stop: threading.Event, priority: int = 0
     class (service.real_time); offers the GIL more often so that the bus's callbacks delay the
     clock less. The pool's name is checked where it enters (options.in_pool)."""
     with session(bus) as z, contextlib.ExitStack() as stack:
-        clock = Clock()
+        clock = Clock(PHASES)
         sim = PoolSim(z, pool, clock)
         _raise_priority(priority)
         if priority > 0:

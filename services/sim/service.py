@@ -21,7 +21,7 @@ from collections.abc import Callable
 
 import zenoh
 
-from services.sim.clock import Clock
+from services.sim.clock import Clock, on_phase
 from services.sim.engine import Game
 from services.sim.match import Seats, event_messages, start_message, state_message, summary_message
 from shared import keys
@@ -125,7 +125,8 @@ class MatchSim:
             (lambda: self.observers["adapter"] > 0, wait_adapter),
         ]
         self.deadline: float | None = None  # of the first wait left, from when it began
-        self.started: float | None = None  # monotonic time of the first frame
+        self.started: float | None = None  # monotonic time of the first frame, on the clock's phase
+        self.phase = 0.0  # clock.Played.phase
         self.sent: dict[int, int] = {}  # frame -> when its state was put (perf_counter_ns)
         self.sent_at = self.summary_at = 0.0  # monotonic time of the last state put, and of the summary
         self.ticks: list[float] = []  # monotonic time of each real-time tick
@@ -192,7 +193,7 @@ class MatchSim:
         start = start_message(self.game, self.match, "sim", self.mode, self.policies)
         self.z.put(keys.start(self.match), start.encode(), priority=zenoh.Priority.REAL_TIME)
         self.on_first_frame()
-        self.started = time.monotonic()
+        self.started = on_phase(time.monotonic(), self.period, self.phase)  # the first frame is put now
         self._publish()
 
     def _publish(self) -> None:

@@ -17,7 +17,12 @@ from services.adapter.seat import SeatSpec
 from services.recorder.recording import load
 from services.runtime.launch import MatchPlan
 from services.runtime.pool import Pool
+from services.sim.engine import Counters
+from services.study.runner import run_trial
+from shared import keys
 from shared.errors import Failure, UsageError
+from shared.game import ROLES
+from shared.messages import Summary
 
 
 def plan(match: str, directory: Path, frames: int = 90, **seats: str) -> MatchPlan:
@@ -45,12 +50,12 @@ def test_a_pool_plays_matches_at_once_each_recorded_complete(pool: Pool) -> None
     plans.append(plan("pool-adaptive", folder, shooter="adaptive-T30-cem"))
     with ThreadPoolExecutor(len(plans)) as threads:
         results = list(threads.map(pool.run, plans))
-    for (summary, path), one in zip(results, plans, strict=True):
-        assert path == folder / f"{one.match}.tsflog" and summary.frame == one.frames
-        complete(path, one.frames)
+    for recording, one in zip(results, plans, strict=True):
+        assert recording.path == folder / f"{one.match}.tsflog" and recording.summary.frame == one.frames
+        complete(recording.path, one.frames)
     adaptive = load(folder / "pool-adaptive.tsflog")
     assert adaptive.start.policies["shooter"] == "adaptive-T30-cem" and adaptive.adapter, "the adapter played"
-    assert {load(p).start.policies["shooter"] for _, p in results[:3]} == {"S5", "S4", "S1"}
+    assert {r.start.policies["shooter"] for r in results[:3]} == {"S5", "S4", "S1"}
 
 
 def test_a_stopped_match_is_a_failure_and_its_recording_is_kept(pool: Pool) -> None:
@@ -96,5 +101,23 @@ def test_a_killed_service_fails_its_matches_and_the_next_match_plays(pool: Pool,
     while pool.processes.children[service] is victim or pool.restarts[service] == 0:
         assert time.monotonic() < deadline, f"the {service} was not started again"
         time.sleep(0.1)
-    summary, path = pool.run(plan(f"pool-after-{service}", pool.directory, frames=60))
-    complete(path, 60)
+    complete(pool.run(plan(f"pool-after-{service}", pool.directory, frames=60)).path, 60)
+
+
+def test_a_pooled_trial_whose_recording_is_incomplete_lists_each_problem_once(pool: Pool) -> None:
+    """A summary put early on a match's key (as a broken sim would) ends its recording there: the
+    pool reads it back incomplete, and the trial's verdict (services/study/runner.py) lists each of
+    its problems once, from that one reading, then the trial's own (no person played the bait)."""
+    match, stop = "pool-trial-cut", threading.Event()
+    done = ThreadPoolExecutor(1).submit(
+        run_trial, plan(match, pool.directory, frames=300), "bait", stop, pool
+    )
+    deadline = time.monotonic() + 30
+    while not any(r.ok for r in pool.z.liveliness().get(keys.alive(match, "recorder"), timeout=1.0)):
+        assert time.monotonic() < deadline, "the recorder did not take the match"
+    counters = {role: Counters().to_dict() for role in ROLES}
+    pool.z.put(keys.summary(match), Summary(match=match, frame=5, sender="sim", counters=counters).encode())
+    kills, problems = done.result(timeout=60)
+    assert kills == 0 and len(problems) == len(set(problems)), problems
+    assert problems[0] == "stopped at frame 5 of 300" and not any("incomplete" in p for p in problems)
+    assert problems[-1] == "no action of the participant's bait seat was recorded", problems

@@ -26,13 +26,14 @@ from pathlib import Path
 
 import zenoh
 
+from services.recorder.recording import Recording
 from services.recorder.service import recording_path
 from services.runtime.launch import (
     RECORDER_NICE,
     SIM_RAISE,
     MatchPlan,
     match_buses,
-    recording_problems,
+    read_back,
     service_command,
 )
 from services.runtime.processes import Processes
@@ -157,11 +158,14 @@ class Pool:
             raise UsageError("--out", plan.directory, f"a pooled match records into {root} or a folder in it")
         return directory.name
 
-    def run(self, plan: MatchPlan, stop: threading.Event | None = None) -> tuple[Summary, Path]:
-        """Play `plan` on the pool to its end, as run_match does with processes of its own: its
-        summary and recording. A match that was stopped or ran past `plan.timeout`, one that some
-        service of the pool did not take or left before the end, and one whose recording is not
-        complete is a Failure (its recording, if any, is kept)."""
+    def run(self, plan: MatchPlan, stop: threading.Event | None = None) -> Recording:
+        """Play `plan` on the pool to its end, as run_match does with processes of its own, and
+        return its complete recording (its summary, its path), read back once. A match that was
+        stopped or ran past `plan.timeout`, or that some service of the pool did not take or left
+        before the end, is a Failure; one whose recording is not complete is Incomplete, which
+        carries what was read. The recording, not its path, is returned (and carried) because a
+        pool's launcher judges it further (the study's judge: the participant's seat): one reading
+        of the file, and each of its problems said once. Any recording is kept."""
         stop = stop or threading.Event()
         order = plan.order(self.sender, self.folder(plan))
         path = recording_path(plan.directory, plan.match)
@@ -202,9 +206,7 @@ class Pool:
             why = f"match {match} was stopped before its end"
         if why:
             raise Failure(why)
-        if problems := recording_problems(path):
-            raise Failure(f"match {match}: its recording {path} is incomplete: {'; '.join(problems)}")
-        return watch.summary, path
+        return read_back(path, match)
 
 
 class MatchWatch:
@@ -235,7 +237,7 @@ class MatchWatch:
         self.ended.set()
 
     def _close(self) -> None:
-        recording = any("/alive/recorder" in key for key in self.up)
+        recording = any(keys.parse(key).service == "recorder" for key in self.up)
         if (self.summary is not None and not recording) or (self.seen and not self.up):
             self.closed.set()
 

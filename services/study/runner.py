@@ -56,9 +56,9 @@ from websockets.protocol import State
 from services.adapter.seat import PERSON, SeatSpec
 from services.human.core import BadInput, Controls, PerAddress, RateLimit
 from services.human.gateway import Bridge, Gateway, Outbox, Web, receive_first, refuse
-from services.recorder.recording import load
+from services.recorder.recording import Recording
 from services.recorder.service import recording_path
-from services.runtime.launch import MatchPlan
+from services.runtime.launch import Incomplete, MatchPlan, read_recording
 from services.runtime.pool import Pool, pool_name
 from services.study.core import AROUND, SET_UP, Admission, Participant, Study, StudyConfig, Trial, worker_id
 from services.study.crowd import FAILS, attention_check, write_bonuses
@@ -205,30 +205,36 @@ def run_trial(
     host: str = "",
 ) -> tuple[int | None, list[str]]:
     """Run a trial's match (on this server's `pool`, or on match `host`, whose recording `remote`
-    fetches) and read its recording back: (kills, problems), no problems for a complete recording
-    with the participant's seat played from this server. The kills are the recording's, when it
-    has a summary (a stopped match's sim still sends one)."""
-    problems = []
+    fetches) and judge its recording: (kills, problems), no problems for a complete recording
+    with the participant's seat played from this server. The recording is read once: the pool
+    hands over what it read back (Pool.run, complete or Incomplete), and a match that failed before
+    that (stopped, past its time, a service gone) or ran on a host is read here."""
+    path = recording_path(plan.directory, plan.match)
     try:
-        if host and remote is not None:
-            remote.run(host, plan, stop)
-        else:
-            pool.run(plan, stop)
+        if not (host and remote is not None):
+            return verdict(pool.run(plan, stop), [], role)
+        remote.run(host, plan, stop)
+    except Incomplete as error:  # its problems are the recording's: listed by the verdict, once
+        return verdict(error.recording, error.problems, role)
     except Exception as error:  # noqa: BLE001 - any failure fails the trial, never the server
-        problems.append(str(error) or type(error).__name__)
-    kills, found = judge(recording_path(plan.directory, plan.match), role)
-    return kills, [*problems, *found]
+        kills, found = judge(path, role)
+        return kills, [str(error) or type(error).__name__, *found]
+    return judge(path, role)
 
 
 def judge(path: Path, role: str) -> tuple[int | None, list[str]]:
-    """A trial's recording read back: (kills, problems); no problems for a complete recording of
-    the planned length with the participant's seat played from this server to its last second.
-    The kills are the recording's, when it has a summary (a stopped match's sim still sends one)."""
-    try:
-        recording = load(path)
-    except (OSError, ValueError) as error:  # none, or not a recording
-        return None, [f"no recording: {error}"]
-    problems = recording.problems()
+    """A trial's recording read back from `path` and judged (verdict)."""
+    return verdict(*read_recording(path), role)
+
+
+def verdict(recording: Recording | None, problems: list[str], role: str) -> tuple[int | None, list[str]]:
+    """A trial's recording as read (None: none), given what makes it less than a complete match
+    (read_recording), judged: (kills, problems); no problems for a complete recording of the
+    planned length with the participant's seat played from this server to its last second. The
+    kills are the recording's, when it has a summary (a stopped match's sim still sends one)."""
+    if recording is None:
+        return None, [f"no recording: {'; '.join(problems)}"]
+    problems = list(problems)
     answered = [a.frame for _, a in recording.actions if a.role == role and a.sender == f"human/{role}"]
     if not answered:
         problems.append(f"no action of the participant's {role} seat was recorded")

@@ -16,7 +16,7 @@ import pytest
 from services.adapter.seat import SeatSpec
 from services.recorder.recording import load
 from services.runtime.launch import MatchPlan
-from services.runtime.pool import Pool
+from services.runtime.pool import Pool, Tokens
 from services.sim.engine import Counters
 from services.study.runner import run_trial
 from shared import keys
@@ -121,3 +121,25 @@ def test_a_pooled_trial_whose_recording_is_incomplete_lists_each_problem_once(po
     assert kills == 0 and len(problems) == len(set(problems)), problems
     assert problems[0] == "stopped at frame 5 of 300" and not any("incomplete" in p for p in problems)
     assert problems[-1] == "no action of the participant's bait seat was recorded", problems
+
+
+def test_the_one_wait_for_tokens_ends_when_all_are_up_at_its_timeout_or_on_abort(bus, wait_until) -> None:
+    """Tokens: the wait of every launcher (a pool's services, a pooled match's, a hosted match's
+    over the study's router) and its watch of them: `on_taken` once, a token gone is `lost`."""
+    watcher, services = bus.open(listen=True), bus.open()
+    needed = [keys.alive("tk", "agent", "bait"), keys.alive("tk", "sim")]
+    taken: list[bool] = []
+    with Tokens(watcher, keys.services_alive("tk"), needed, on_taken=lambda: taken.append(True)) as tokens:
+        began = time.monotonic()
+        assert not tokens.wait(0.3) and time.monotonic() - began >= 0.3 and tokens.missing() == needed
+        began = time.monotonic()
+        assert not tokens.wait(60, abort=lambda: True) and time.monotonic() - began < 5
+        sim = services.liveliness().declare_token(needed[1])
+        agent = services.liveliness().declare_token(needed[0])
+        assert tokens.wait(10) and tokens.taken() and taken == [True] and tokens.lost() == []
+        agent.undeclare()
+        assert wait_until(lambda: tokens.lost() == [needed[0]]) and tokens.missing() == [needed[0]]
+        agent = services.liveliness().declare_token(needed[0])
+        assert tokens.wait(10) and taken == [True], "taken is told once"
+        for token in (sim, agent):
+            token.undeclare()

@@ -106,6 +106,15 @@ class MatchPlan:
             wait_players=self.wait_players, wait_services=self.wait_services, folder=folder,
         )  # fmt: skip
 
+    def tokens(self) -> set[str]:
+        """The liveliness tokens of every service that plays a part of this match (a person's seat
+        is no service's): once all are up, the match is ready for its people."""
+        match = self.match
+        tokens = {keys.alive(match, "sim"), keys.alive(match, "recorder")}
+        agents = [role for role, spec in self.seats.items() if spec.kind != PERSON]
+        tokens |= {keys.alive(match, "agent", role) for role in agents}
+        return tokens | ({keys.alive(match, "adapter")} if self.adapter is not None else set())
+
     def policies(self) -> dict[str, str]:
         """Each seat's starting policy key; an adaptive seat starts with the adapter's initial policy."""
         keys_ = {role: str(spec) for role, spec in self.seats.items()}

@@ -109,15 +109,15 @@ def test_a_pooled_trial_whose_recording_is_incomplete_lists_each_problem_once(po
     pool reads it back incomplete, and the trial's verdict (services/study/runner.py) lists each of
     its problems once, from that one reading, then the trial's own (no person played the bait)."""
     match, stop = "pool-trial-cut", threading.Event()
-    done = ThreadPoolExecutor(1).submit(
-        run_trial, plan(match, pool.directory, frames=300), "bait", stop, pool
-    )
-    deadline = time.monotonic() + 30
-    while not any(r.ok for r in pool.z.liveliness().get(keys.alive(match, "recorder"), timeout=1.0)):
-        assert time.monotonic() < deadline, "the recorder did not take the match"
-    counters = {role: Counters().to_dict() for role in ROLES}
-    pool.z.put(keys.summary(match), Summary(match=match, frame=5, sender="sim", counters=counters).encode())
-    kills, problems = done.result(timeout=60)
+    with ThreadPoolExecutor(1) as threads:
+        trial = threads.submit(run_trial, plan(match, pool.directory, frames=300), "bait", stop, pool)
+        playing = threading.Event()
+        with pool.z.declare_subscriber(keys.state(match), lambda _: playing.set()):
+            assert playing.wait(30), "the match did not start"  # its recorder has long been subscribed
+        counters = {role: Counters().to_dict() for role in ROLES}
+        early = Summary(match=match, frame=5, sender="sim", counters=counters)
+        pool.z.put(keys.summary(match), early.encode())
+        kills, problems = trial.result(timeout=60)
     assert kills == 0 and len(problems) == len(set(problems)), problems
     assert problems[0] == "stopped at frame 5 of 300" and not any("incomplete" in p for p in problems)
     assert problems[-1] == "no action of the participant's bait seat was recorded", problems

@@ -570,8 +570,9 @@ class MatchOrder(MatchMessage):
 
 @dataclass(frozen=True, kw_only=True)
 class MatchDone(MatchMessage):
-    """A match host's match has ended: `error` says why it failed ("" if it did not), and `size` and
-    `sha256` describe its recording (size 0: none), which the server then fetches in chunks."""
+    """A match host's match has ended: `error` says why it failed ("" if it did not, or if only its
+    recording is incomplete: the server judges the recording it fetches), and `size` and `sha256`
+    describe its recording (size 0: none), which the server then fetches in chunks."""
 
     TYPE: ClassVar[str] = "match_done"
     CHECKS: ClassVar[dict[str, Check]] = {

@@ -16,6 +16,7 @@ import signal
 import subprocess
 import sys
 import threading
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import msgpack
@@ -26,15 +27,16 @@ from conftest import STAND_IN_TOKEN, wait_until
 from services.adapter.seat import SeatSpec
 from services.recorder.recording import load
 from services.runtime.launch import MatchPlan
+from services.sim.engine import Counters
 from services.study.core import StudyConfig, Variant
 from services.study.host import Host, offer_of, sha256
 from services.study.remote import Remote
-from services.study.runner import Serving
+from services.study.runner import Serving, run_trial
 from services.study.standin import stand_in
 from shared import keys
 from shared.bus import BusConfig, free_endpoint, session
 from shared.errors import Failure
-from shared.game import HUMAN
+from shared.game import HUMAN, ROLES
 from shared.messages import (
     HostStatus,
     MatchAnswer,
@@ -42,6 +44,7 @@ from shared.messages import (
     MatchOffer,
     Message,
     RecordingChunk,
+    Summary,
     decode,
     recording_query,
     sealed,
@@ -266,3 +269,37 @@ def test_a_match_host_of_schema_version_1_is_refused_as_such() -> None:
             assert remote.hosts() == {} and remote.drops.counts["unauthenticated"] == 0
     finally:
         remote.close()
+
+
+def test_a_hosted_trial_whose_recording_is_incomplete_lists_each_problem_once(tmp_path, match_host):
+    """A summary put early on the router (as a broken sim would) ends the host's recording there:
+    the server is told once every service of the host has taken the match (over the router), and
+    the trial's failure lists each problem of the recording it fetched once, from its own verdict
+    (the host leaves the judging to it), then the trial's own (no person played the bait)."""
+    endpoint = free_endpoint()
+    remote = Remote(BusConfig("router", (endpoint,)), SECRET)
+    try:
+        match_host("lab-1", endpoint)
+        assert wait_until(lambda: remote.hosts() == {"lab-1": 1}, timeout=60)
+        seats = {"bait": SeatSpec.parse("B5"), "shooter": SeatSpec.parse("S5")}
+        plan = MatchPlan("cut", 7, 300, directory=tmp_path, wait_services=10.0, timeout=60, **seats)
+        taken = threading.Event()
+        with ThreadPoolExecutor(1) as threads:  # no pool here: the trial runs on the host
+            trial = threads.submit(
+                run_trial, plan, "bait", threading.Event(), None, remote, "lab-1", taken.set
+            )
+            assert taken.wait(60), "every service of the host took the match"
+            playing = threading.Event()
+            with remote.z.declare_subscriber(keys.state("cut"), lambda _: playing.set()):
+                assert playing.wait(30), "the match did not start"  # its recorder has long been subscribed
+            counters = {role: Counters().to_dict() for role in ROLES}
+            remote.z.put(
+                keys.summary("cut"), Summary(match="cut", frame=5, sender="sim", counters=counters).encode()
+            )
+            kills, problems = trial.result(timeout=120)
+    finally:
+        remote.close()
+    assert kills == 0 and len(problems) == len(set(problems)), problems
+    assert problems[0] == "stopped at frame 5 of 300" and not any("incomplete" in p for p in problems)
+    assert problems[-1] == "no action of the participant's bait seat was recorded", problems
+    assert (tmp_path / "cut.tsflog").read_bytes() == (tmp_path / "lab-1" / "cut.tsflog").read_bytes()

@@ -16,8 +16,13 @@ import pytest
 from services.adapter.seat import SeatSpec
 from services.recorder.recording import load
 from services.runtime.launch import MatchPlan
-from services.runtime.pool import Pool
+from services.runtime.pool import Pool, Tokens
+from services.sim.engine import Counters
+from services.study.runner import run_trial
+from shared import keys
 from shared.errors import Failure, UsageError
+from shared.game import ROLES
+from shared.messages import Summary
 
 
 def plan(match: str, directory: Path, frames: int = 90, **seats: str) -> MatchPlan:
@@ -45,12 +50,12 @@ def test_a_pool_plays_matches_at_once_each_recorded_complete(pool: Pool) -> None
     plans.append(plan("pool-adaptive", folder, shooter="adaptive-T30-cem"))
     with ThreadPoolExecutor(len(plans)) as threads:
         results = list(threads.map(pool.run, plans))
-    for (summary, path), one in zip(results, plans, strict=True):
-        assert path == folder / f"{one.match}.tsflog" and summary.frame == one.frames
-        complete(path, one.frames)
+    for recording, one in zip(results, plans, strict=True):
+        assert recording.path == folder / f"{one.match}.tsflog" and recording.summary.frame == one.frames
+        complete(recording.path, one.frames)
     adaptive = load(folder / "pool-adaptive.tsflog")
     assert adaptive.start.policies["shooter"] == "adaptive-T30-cem" and adaptive.adapter, "the adapter played"
-    assert {load(p).start.policies["shooter"] for _, p in results[:3]} == {"S5", "S4", "S1"}
+    assert {r.start.policies["shooter"] for r in results[:3]} == {"S5", "S4", "S1"}
 
 
 def test_a_stopped_match_is_a_failure_and_its_recording_is_kept(pool: Pool) -> None:
@@ -96,5 +101,45 @@ def test_a_killed_service_fails_its_matches_and_the_next_match_plays(pool: Pool,
     while pool.processes.children[service] is victim or pool.restarts[service] == 0:
         assert time.monotonic() < deadline, f"the {service} was not started again"
         time.sleep(0.1)
-    summary, path = pool.run(plan(f"pool-after-{service}", pool.directory, frames=60))
-    complete(path, 60)
+    complete(pool.run(plan(f"pool-after-{service}", pool.directory, frames=60)).path, 60)
+
+
+def test_a_pooled_trial_whose_recording_is_incomplete_lists_each_problem_once(pool: Pool) -> None:
+    """A summary put early on a match's key (as a broken sim would) ends its recording there: the
+    pool reads it back incomplete, and the trial's verdict (services/study/runner.py) lists each of
+    its problems once, from that one reading, then the trial's own (no person played the bait)."""
+    match, stop = "pool-trial-cut", threading.Event()
+    with ThreadPoolExecutor(1) as threads:
+        trial = threads.submit(run_trial, plan(match, pool.directory, frames=300), "bait", stop, pool)
+        playing = threading.Event()
+        with pool.z.declare_subscriber(keys.state(match), lambda _: playing.set()):
+            assert playing.wait(30), "the match did not start"  # its recorder has long been subscribed
+        counters = {role: Counters().to_dict() for role in ROLES}
+        early = Summary(match=match, frame=5, sender="sim", counters=counters)
+        pool.z.put(keys.summary(match), early.encode())
+        kills, problems = trial.result(timeout=60)
+    assert kills == 0 and len(problems) == len(set(problems)), problems
+    assert problems[0] == "stopped at frame 5 of 300" and not any("incomplete" in p for p in problems)
+    assert problems[-1] == "no action of the participant's bait seat was recorded", problems
+
+
+def test_the_one_wait_for_tokens_ends_when_all_are_up_at_its_timeout_or_on_abort(bus, wait_until) -> None:
+    """Tokens: the wait of every launcher (a pool's services, a pooled match's, a hosted match's
+    over the study's router) and its watch of them: `on_taken` once, a token gone is `lost`."""
+    watcher, services = bus.open(listen=True), bus.open()
+    needed = [keys.alive("tk", "agent", "bait"), keys.alive("tk", "sim")]
+    taken: list[bool] = []
+    with Tokens(watcher, keys.services_alive("tk"), needed, on_taken=lambda: taken.append(True)) as tokens:
+        began = time.monotonic()
+        assert not tokens.wait(0.3) and time.monotonic() - began >= 0.3 and tokens.missing() == needed
+        began = time.monotonic()
+        assert not tokens.wait(60, abort=lambda: True) and time.monotonic() - began < 5
+        sim = services.liveliness().declare_token(needed[1])
+        agent = services.liveliness().declare_token(needed[0])
+        assert tokens.wait(10) and tokens.taken() and taken == [True] and tokens.lost() == []
+        agent.undeclare()
+        assert wait_until(lambda: tokens.lost() == [needed[0]]) and tokens.missing() == [needed[0]]
+        agent = services.liveliness().declare_token(needed[0])
+        assert tokens.wait(10) and taken == [True], "taken is told once"
+        for token in (sim, agent):
+            token.undeclare()

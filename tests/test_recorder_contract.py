@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import signal
+import subprocess
 from concurrent.futures import Future
 
 import msgpack
@@ -15,6 +16,7 @@ from services.provenance import read_sidecar
 from services.recorder.log import LogWriter, read_log
 from services.recorder.recording import load
 from services.recorder.service import recording_path, run_pool_recorder, run_recorder
+from services.runtime.launch import service_command
 from services.sim.engine import Game
 from services.sim.match import start_message, state_message, summary_message
 from shared import keys
@@ -376,3 +378,42 @@ def test_sigterm_closes_every_open_log(pool_router, spawn, tmp_path, wait_until)
         recording = load(tmp_path / f"{match.match}.tsflog")
         assert recording.clean and [s.frame for s in recording.states] == [0, 1, 2, 3]
         assert records(recording.path) == match.sent
+
+
+def test_a_disk_error_fails_that_match_s_recording_alone_with_one_line(
+    pool_router, tmp_path, wait_until, capfd
+):
+    """A disk error mid-match (here a file size limit, which binds root too: EFBIG) ends that
+    match's recording with one line, as it stands; the recorder process serves on and records the
+    next match complete."""
+    made = pool_router
+    command = service_command("recorder", made.client, "--pool", POOL, "--out", str(tmp_path))
+    recorder = subprocess.Popen(["prlimit", f"--fsize={16 * 1024}", "--", *command], stdin=subprocess.DEVNULL)
+    try:
+        assert wait_until(lambda: made.pool_alive == [zenoh.SampleKind.PUT], timeout=30)
+        full = made.order("full")
+        full.start()
+        full.frames(19)  # about 40 KB: past the limit near frame 7
+        assert made.ended("full")
+        fits = made.order("fits")
+        fits.start()
+        fits.frames(3)  # about 10 KB
+        fits.summary()
+        assert made.ended("fits") and records(tmp_path / "fits.tsflog") == fits.sent
+        assert recorder.poll() is None, "the recorder serves on"
+        recorder.send_signal(signal.SIGTERM)
+        assert recorder.wait(10) == 0
+    finally:
+        if recorder.poll() is None:
+            recorder.kill()
+        recorder.wait()
+    failed = [line for line in capfd.readouterr().err.splitlines() if "failed" in line]
+    assert len(failed) == 1 and failed[0].endswith(
+        f"tsf.recorder ERROR recording {tmp_path / 'full.tsflog'} failed: [Errno 27] File too large"
+    ), failed
+    cut = load(tmp_path / "full.tsflog")  # as it stood: the records written before the error
+    assert cut.summary is None and [s.frame for s in cut.states] == list(range(len(cut.states)))
+    assert (
+        0 < len(cut.states) < 20
+        and records(tmp_path / "full.tsflog") == full.sent[: len(read_log(cut.path)[0])]
+    )

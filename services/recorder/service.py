@@ -167,6 +167,9 @@ def _record(
     it is undeclared (a pool records for hours). The match also ends when the sim's token goes away
     (a killed sim: the log stays as it is, incomplete).
 
+    Its token goes only once the log is closed (a launcher that sees it go reads the log whole:
+    samples still queued when the subscriptions end are written first).
+
     The recorder's liveliness token (which the sim waits for) says that the seats' first actions will
     reach it. A client (run_match's and a pool's topology: the sim is the router) declares it as soon
     as it has subscribed: every action passes the router, which has the subscription before the token
@@ -181,18 +184,19 @@ def _record(
         if sample.kind == zenoh.SampleKind.DELETE:
             ended.set()
 
-    try:
-        with (
-            z.declare_subscriber(keys.everything(match), drain.feed(recording)),
-            z.liveliness().declare_subscriber(keys.alive(match, "sim"), on_sim, history=True),
-        ):
-            if not client:
-                _wait_for_seats(z, match, wait_seats, ended)
-            with z.liveliness().declare_token(keys.alive(match, "recorder")):
+    with contextlib.ExitStack() as token:  # undeclared last: once it goes, the log is closed
+        try:
+            with (
+                z.declare_subscriber(keys.everything(match), drain.feed(recording)),
+                z.liveliness().declare_subscriber(keys.alive(match, "sim"), on_sim, history=True),
+            ):
+                if not client:
+                    _wait_for_seats(z, match, wait_seats, ended)
+                token.enter_context(z.liveliness().declare_token(keys.alive(match, "recorder")))
                 until_stopped(ended)
                 time.sleep(0.5)  # actions still in flight after the summary (they come over other links)
-    finally:
-        drain.close(recording)
+        finally:
+            drain.close(recording)
 
 
 class PoolRecorder:

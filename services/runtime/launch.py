@@ -23,7 +23,7 @@ from services.adapter.core import AdapterConfig
 from services.adapter.seat import ADAPTIVE_KIND, KEY, PERSON, SeatSpec, check_live
 from services.agent.outside import record_name
 from services.recorder.log import make_way
-from services.recorder.recording import load
+from services.recorder.recording import Recording, load
 from services.recorder.service import recording_path
 from services.runtime.processes import Processes
 from shared import keys
@@ -106,6 +106,15 @@ class MatchPlan:
             wait_players=self.wait_players, wait_services=self.wait_services, folder=folder,
         )  # fmt: skip
 
+    def tokens(self) -> set[str]:
+        """The liveliness tokens of every service that plays a part of this match (a person's seat
+        is no service's): once all are up, the match is ready for its people."""
+        match = self.match
+        tokens = {keys.alive(match, "sim"), keys.alive(match, "recorder")}
+        agents = [role for role, spec in self.seats.items() if spec.kind != PERSON]
+        tokens |= {keys.alive(match, "agent", role) for role in agents}
+        return tokens | ({keys.alive(match, "adapter")} if self.adapter is not None else set())
+
     def policies(self) -> dict[str, str]:
         """Each seat's starting policy key; an adaptive seat starts with the adapter's initial policy."""
         keys_ = {role: str(spec) for role, spec in self.seats.items()}
@@ -147,21 +156,15 @@ def run_match(
     adapter's reports (for a live scoreboard). A recording of the same id is never appended to:
     refused, or with `overwrite` renamed aside (log.make_way). `stop` (stop_on_signals: SIGINT,
     SIGTERM, SIGHUP) ends the match and every process it started, as does running past
-    `plan.timeout`. A match that was stopped or timed out, ended without a summary, or one of whose
-    services failed is a Failure."""
+    `plan.timeout`. A match that was stopped or timed out, or one of whose services failed, is a
+    Failure; one whose recording is not complete (a summary included) is Incomplete."""
     stop = stop or threading.Event()
     path = recording_path(plan.directory, plan.match)
     make_way(path, overwrite)
     deadline = time.monotonic() + plan.timeout if plan.timeout else float("inf")
     endpoint = plan.endpoint or free_endpoint()
     sim_bus, peer_bus = match_buses(endpoint, plan.low_latency, plan.peers)
-    summary: list[Summary] = []
-    done = threading.Event()
-
-    def on_summary(message: Summary) -> None:
-        summary.append(message)
-        done.set()
-
+    done = threading.Event()  # the summary came
     shown = [0.0]
 
     def on_state_shown(state: State) -> None:
@@ -200,7 +203,7 @@ def run_match(
         with (
             session(watcher_bus(endpoint, plan.low_latency)) as z,
             subscribe(z, keys.state(plan.match), State, on_state_shown),
-            subscribe(z, keys.summary(plan.match), Summary, on_summary),
+            subscribe(z, keys.summary(plan.match), Summary, lambda _: done.set()),
             subscribe(z, keys.adapter(plan.match), AdapterStatus, on_adapter),
         ):
             while not done.wait(0.2) and not stop.is_set() and time.monotonic() < deadline:
@@ -217,24 +220,40 @@ def run_match(
     if failed := processes.failed():
         statuses = ", ".join(f"{name} exited with status {code}" for name, code in failed.items())
         raise Failure(f"match {plan.match}: {statuses}")
-    if not summary and path.exists():  # the live view can miss it; the recording cannot
-        summary = [s for s in [load(path).summary] if s is not None]
-    if not summary:
-        raise Failure(f"match {plan.match} ended without a summary")
-    if problems := recording_problems(path):  # every process exited 0, yet (once) an 8-byte log
-        raise Failure(f"match {plan.match}: its recording {path} is incomplete: {'; '.join(problems)}")
-    return summary[0], path
+    recording = read_back(path, plan.match)  # complete: with its summary (the live view can miss it)
+    return recording.summary, path
 
 
-def recording_problems(path: Path) -> list[str]:
-    """What makes the recording at `path` less than a complete match (Recording.problems), one
-    phrase each; a missing or unreadable file is one."""
+def read_recording(path: Path) -> tuple[Recording | None, list[str]]:
+    """The recording at `path`, read once, and what makes it less than a complete match
+    (Recording.problems), one phrase each; (None, [why]) for a missing or unreadable file. The one
+    check of a recording: the launchers' (read_back) and the study's judge."""
     try:
-        return load(path).problems()
+        recording = load(path)
     except FileNotFoundError:
-        return ["no such file"]
+        return None, ["no such file"]
     except (OSError, ValueError) as error:
-        return [str(error)]
+        return None, [str(error)]
+    return recording, recording.problems()
+
+
+class Incomplete(Failure):
+    """A match that ended, but whose recording is not complete: what was read of it (None: no file,
+    or no recording) and its problems. They travel with the failure so that whoever judges the
+    recording further (the study's judge) reads it once and lists each problem once."""
+
+    def __init__(self, match: str, path: Path, recording: Recording | None, problems: list[str]) -> None:
+        super().__init__(f"match {match}: its recording {path} is incomplete: {'; '.join(problems)}")
+        self.recording, self.problems = recording, problems
+
+
+def read_back(path: Path, match: str) -> Recording:
+    """A launcher's last check of an ended match: its complete recording, else Incomplete (once,
+    every process exited 0 and a recorder cut off under load had left an 8-byte log)."""
+    recording, problems = read_recording(path)
+    if problems:
+        raise Incomplete(match, path, recording, problems)
+    return recording
 
 
 def new_match_id() -> str:

@@ -17,29 +17,31 @@ and are offered again by whoever ran them.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import secrets
 import threading
 import time
 from collections import Counter
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 import zenoh
 
+from services.recorder.recording import Recording
 from services.recorder.service import recording_path
 from services.runtime.launch import (
     RECORDER_NICE,
     SIM_RAISE,
     MatchPlan,
     match_buses,
-    recording_problems,
+    read_back,
     service_command,
 )
 from services.runtime.processes import Processes
 from shared import keys
 from shared.bus import free_endpoint, subscribe
 from shared.errors import Failure, UsageError
-from shared.game import ROLES
 from shared.messages import MatchStop, Summary
 
 log = logging.getLogger("tsf.pool")
@@ -96,9 +98,9 @@ class Pool:
             for service in self.services:
                 self._start(service)
             self.z = zenoh.open(self.client_bus.to_zenoh())
-            missing = self._wait_up(READY)
-            if missing:
-                raise Failure(f"pool {self.name}: {', '.join(missing)} not up after {READY:g} s")
+            with Tokens(self.z, keys.pool_alive(self.name), self.services, _service) as up:
+                if not up.wait(READY, abort=self._died):  # a service that died will not come up
+                    raise Failure(f"pool {self.name}: {', '.join(up.missing())} not up after {READY:g} s")
         except BaseException:
             self.__exit__()
             raise
@@ -114,25 +116,8 @@ class Pool:
             self.z.close()
         self.processes.__exit__()
 
-    def _wait_up(self, timeout: float) -> list[str]:
-        """The services whose pool token is still missing after `timeout` seconds."""
-        up: set[str] = set()
-        changed = threading.Condition()
-
-        def on_alive(sample: zenoh.Sample) -> None:
-            with changed:
-                service = keys.parse(sample.key_expr).service
-                (up.add if sample.kind == zenoh.SampleKind.PUT else up.discard)(service)
-                changed.notify_all()
-
-        with self.z.liveliness().declare_subscriber(keys.pool_alive(self.name), on_alive, history=True):
-            deadline = time.monotonic() + timeout
-            with changed:
-                while not up >= set(self.services) and time.monotonic() < deadline:
-                    if any(c.poll() is not None for c in self.processes.children.values()):
-                        break
-                    changed.wait(0.1)
-                return [s for s in self.services if s not in up]
+    def _died(self) -> bool:
+        return any(child.poll() is not None for child in self.processes.children.values())
 
     def _supervise(self) -> None:
         """Start again, at once, any service of the pool that ends while the pool runs."""
@@ -157,26 +142,29 @@ class Pool:
             raise UsageError("--out", plan.directory, f"a pooled match records into {root} or a folder in it")
         return directory.name
 
-    def run(self, plan: MatchPlan, stop: threading.Event | None = None) -> tuple[Summary, Path]:
-        """Play `plan` on the pool to its end, as run_match does with processes of its own: its
-        summary and recording. A match that was stopped or ran past `plan.timeout`, one that some
-        service of the pool did not take or left before the end, and one whose recording is not
-        complete is a Failure (its recording, if any, is kept)."""
+    def run(
+        self,
+        plan: MatchPlan,
+        stop: threading.Event | None = None,
+        on_taken: Callable[[], None] = lambda: None,
+    ) -> Recording:
+        """Play `plan` on the pool to its end, as run_match does with processes of its own, and
+        return its complete recording (its summary, its path), read back once. `on_taken` is called
+        once (on zenoh's thread) when every service has taken the match: it is ready for its people
+        (the study offers the trial then). A match that was stopped or ran past `plan.timeout`, or
+        that some service of the pool did not take or left before the end, is a Failure; one whose
+        recording is not complete is Incomplete, which carries what was read. The recording, not
+        its path, is returned (and carried) because a pool's launcher judges it further (the
+        study's judge: the participant's seat): one reading of the file, and each of its problems
+        said once. Any recording is kept."""
         stop = stop or threading.Event()
         order = plan.order(self.sender, self.folder(plan))
         path = recording_path(plan.directory, plan.match)
         if path.exists():
             raise UsageError("--match", plan.match, f"{path} exists: a pooled match needs a new id")
         match = plan.match
-        needed = {keys.alive(match, "sim"), keys.alive(match, "recorder")}
-        needed |= {keys.alive(match, "agent", role) for role in ROLES if order.policy(role)}
-        needed |= {keys.alive(match, "adapter")} if order.adapter else set()
-        watch = MatchWatch(needed)
         deadline = time.monotonic() + plan.timeout if plan.timeout else float("inf")
-        with (
-            self.z.liveliness().declare_subscriber(keys.services_alive(match), watch.on_alive, history=True),
-            subscribe(self.z, keys.summary(match), Summary, watch.on_summary),
-        ):
+        with MatchWatch(self.z, match, plan.tokens(), on_taken) as watch:
             ordered, put_at, why = time.monotonic(), 0.0, ""
             while not watch.ended.wait(0.05):
                 now = time.monotonic()
@@ -186,11 +174,12 @@ class Pool:
                     why = f"match {match} ran past its {plan.timeout:g} s"
                 elif lost := watch.lost():
                     why = f"match {match}: the pool's {lost} left it before its end"
-                elif not watch.taken() and now - ordered > plan.wait_services + TAKE:
-                    why = f"match {match}: not every service of pool {self.name} took it ({watch.missing()})"
+                elif not watch.tokens.taken() and now - ordered > plan.wait_services + TAKE:
+                    missing = ", ".join(watch.tokens.missing())
+                    why = f"match {match}: not every service of pool {self.name} took it ({missing})"
                 if why:
                     break
-                if not watch.taken() and now - put_at >= ORDER_AGAIN:
+                if not watch.tokens.taken() and now - put_at >= ORDER_AGAIN:
                     self.z.put(keys.pool_order(self.name), order.encode())
                     put_at = now
             if why and put_at:  # the sim ends it (with a summary) and the recorder closes its log
@@ -202,53 +191,125 @@ class Pool:
             why = f"match {match} was stopped before its end"
         if why:
             raise Failure(why)
-        if problems := recording_problems(path):
-            raise Failure(f"match {match}: its recording {path} is incomplete: {'; '.join(problems)}")
-        return watch.summary, path
+        return read_back(path, match)
+
+
+def _service(key: str) -> str:
+    """The service a token names: `sim`, `recorder`, ... (`agent/bait` for a seat's)."""
+    parsed = keys.parse(key)
+    return f"{parsed.service}/{parsed.role}" if parsed.role else parsed.service
+
+
+class Tokens:
+    """The liveliness tokens under `key_expr` that are up and those that have been, each known by
+    `name(key)` (the key by default), against the `needed` ones: the one wait of a launcher for
+    services to come up (`wait`), and what it watches of them (`taken`, `lost`). `on_change` runs
+    after each change and `on_taken` once, when every needed token has been up, both on zenoh's
+    thread outside the lock. A context manager: its subscriber is declared and undeclared on the
+    calling thread, never on zenoh's."""
+
+    def __init__(
+        self,
+        z: zenoh.Session,
+        key_expr: str,
+        needed: Iterable[str],
+        name: Callable[[str], str] = str,
+        on_change: Callable[[], None] = lambda: None,
+        on_taken: Callable[[], None] = lambda: None,
+    ) -> None:
+        self.z, self.key_expr, self.needed, self.name = z, key_expr, set(needed), name
+        self.on_change, self.on_taken, self.told = on_change, on_taken, False
+        self.up, self.seen = set[str](), set[str]()
+        self.changed = threading.Condition()
+        self.subscriber: zenoh.Subscriber | None = None
+
+    def __enter__(self) -> Tokens:
+        self.subscriber = self.z.liveliness().declare_subscriber(self.key_expr, self._on_alive, history=True)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.subscriber.undeclare()
+
+    def _on_alive(self, sample: zenoh.Sample) -> None:
+        name = self.name(str(sample.key_expr))
+        with self.changed:
+            if sample.kind == zenoh.SampleKind.PUT:
+                self.up.add(name)
+                self.seen.add(name)
+            else:
+                self.up.discard(name)
+            tell = not self.told and self.seen >= self.needed
+            self.told |= tell
+            self.changed.notify_all()
+        self.on_change()
+        if tell:
+            self.on_taken()
+
+    def wait(self, timeout: float, abort: Callable[[], bool] = lambda: False) -> bool:
+        """Wait until every needed token is up: False if some are still missing after `timeout`
+        seconds, or once `abort()` is true (asked every tenth of a second)."""
+        deadline = time.monotonic() + timeout
+        with self.changed:
+            while not self.up >= self.needed:
+                if abort() or time.monotonic() >= deadline:
+                    return False
+                self.changed.wait(0.1)
+            return True
+
+    def state(self) -> tuple[set[str], set[str]]:
+        """Copies of the tokens up and of those seen."""
+        with self.changed:
+            return set(self.up), set(self.seen)
+
+    def taken(self) -> bool:
+        """Whether every needed token has been up (each service took the match)."""
+        with self.changed:
+            return self.seen >= self.needed
+
+    def missing(self) -> list[str]:
+        """The needed tokens not up, sorted."""
+        with self.changed:
+            return sorted(self.needed - self.up)
+
+    def lost(self) -> list[str]:
+        """The needed tokens that were up and went, sorted."""
+        with self.changed:
+            return sorted((self.needed & self.seen) - self.up)
 
 
 class MatchWatch:
-    """What a launcher sees of one pooled match: which of its services' tokens are up, which have
-    been, its summary, and whether it is closed: its recorder's token gone after the summary (the
-    log closed), or every token it had gone (a killed service's match, or one stopped early)."""
+    """What a launcher sees of one pooled match: its services' tokens (Tokens), its summary, and
+    whether it is closed: its recorder's token gone after the summary (the log closed), or every
+    token it had gone (a killed service's match, or one stopped early). A context manager."""
 
-    def __init__(self, needed: set[str]) -> None:
-        self.needed, self.up, self.seen = needed, set[str](), set[str]()
+    def __init__(self, z: zenoh.Session, match: str, needed: set[str], on_taken: Callable[[], None]) -> None:
+        self.z, self.match = z, match
+        self.tokens = Tokens(z, keys.services_alive(match), needed, on_change=self._close, on_taken=on_taken)
         self.summary: Summary | None = None
         self.ended, self.closed = threading.Event(), threading.Event()
-        self.lock = threading.Lock()
+        self.stack = contextlib.ExitStack()
 
-    def on_alive(self, sample: zenoh.Sample) -> None:
-        key = str(sample.key_expr)
-        with self.lock:
-            if sample.kind == zenoh.SampleKind.PUT:
-                self.up.add(key)
-                self.seen.add(key)
-            else:
-                self.up.discard(key)
-            self._close()
+    def __enter__(self) -> MatchWatch:
+        self.stack.enter_context(self.tokens)
+        self.stack.enter_context(subscribe(self.z, keys.summary(self.match), Summary, self.on_summary))
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stack.close()
 
     def on_summary(self, summary: Summary) -> None:
-        with self.lock:
-            self.summary = summary
-            self._close()
+        self.summary = summary
+        self._close()
         self.ended.set()
 
     def _close(self) -> None:
-        recording = any("/alive/recorder" in key for key in self.up)
-        if (self.summary is not None and not recording) or (self.seen and not self.up):
+        """Either callback reads what the other wrote before its own _close (the tokens under their
+        lock, the summary at once): the last of the two sees both."""
+        up, seen = self.tokens.state()
+        if (self.summary is not None and keys.alive(self.match, "recorder") not in up) or (seen and not up):
             self.closed.set()
-
-    def taken(self) -> bool:
-        with self.lock:
-            return self.seen >= self.needed
-
-    def missing(self) -> str:
-        with self.lock:
-            return ", ".join(sorted(self.needed - self.seen))
 
     def lost(self) -> str:
         """The first service (`agent/bait`, `recorder`, ...) whose token went before the summary."""
-        with self.lock:
-            gone = sorted((self.needed & self.seen) - self.up)
-        return gone[0].split("/alive/", 1)[1] if gone else ""
+        gone = self.tokens.lost()
+        return _service(gone[0]) if gone else ""

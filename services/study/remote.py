@@ -26,6 +26,7 @@ import zenoh
 
 from services.recorder.service import recording_path
 from services.runtime.launch import MatchPlan
+from services.runtime.pool import Tokens
 from services.study.host import offer_of
 from shared import keys
 from shared.bus import BusConfig, Drops, subscribe, why
@@ -114,22 +115,27 @@ class Remote:
             self.done[done.match] = done
             self.changed.notify_all()
 
-    def run(self, host: str, plan: MatchPlan, stop: threading.Event) -> None:
+    def run(
+        self, host: str, plan: MatchPlan, stop: threading.Event, on_taken: Callable[[], None] = lambda: None
+    ) -> None:
         """Run `plan` on `host` and put its recording into `plan.directory`, hash checked; a
-        Failure says why the match or its recording failed (the recording, if whole, is kept)."""
+        Failure says why the match or its recording failed (the recording, if whole, is kept).
+        `on_taken` is called once (on zenoh's thread) when every service of the host's pool has
+        taken the match: their tokens, seen over the router, as Pool.run sees them on the host."""
         offer = sealed(offer_of(plan, SENDER), self.secret)
-        answer = self._ask(keys.host_offer(host), MatchAnswer, payload=offer.encode())
-        if answer is None:
-            raise Failure(f"match host {host} did not answer the offer of {plan.match}")
-        if not answer.accepted:
-            raise Failure(f"match host {host} refused {plan.match}: {answer.reason}")
-        with self.changed:
-            self.offered.add(plan.match)
-        try:
-            done = self._wait(host, plan, stop)
-        finally:
+        with Tokens(self.z, keys.services_alive(plan.match), plan.tokens(), on_taken=on_taken):
+            answer = self._ask(keys.host_offer(host), MatchAnswer, payload=offer.encode())
+            if answer is None:
+                raise Failure(f"match host {host} did not answer the offer of {plan.match}")
+            if not answer.accepted:
+                raise Failure(f"match host {host} refused {plan.match}: {answer.reason}")
             with self.changed:
-                self.offered.discard(plan.match)
+                self.offered.add(plan.match)
+            try:
+                done = self._wait(host, plan, stop)
+            finally:
+                with self.changed:
+                    self.offered.discard(plan.match)
         if done.size:
             self.fetch(host, plan.match, done, recording_path(plan.directory, plan.match))
         if done.error:

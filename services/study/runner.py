@@ -42,7 +42,6 @@ import contextlib
 import json
 import logging
 import threading
-import time
 from collections.abc import Awaitable, Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -56,15 +55,14 @@ from websockets.protocol import State
 from services.adapter.seat import PERSON, SeatSpec
 from services.human.core import BadInput, Controls, PerAddress, RateLimit
 from services.human.gateway import Bridge, Gateway, Outbox, Web, receive_first, refuse
-from services.recorder.recording import load
+from services.recorder.recording import Recording
 from services.recorder.service import recording_path
-from services.runtime.launch import MatchPlan
+from services.runtime.launch import Incomplete, MatchPlan, read_recording
 from services.runtime.pool import Pool, pool_name
 from services.study.core import AROUND, SET_UP, Admission, Participant, Study, StudyConfig, Trial, worker_id
 from services.study.crowd import FAILS, attention_check, write_bonuses
 from services.study.dashboard import Dashboard, overview
 from services.study.remote import Remote
-from shared import keys
 from shared.bus import BusConfig, until_stopped
 from shared.game import FPS, ROLES, other
 from shared.secret import same_secret, signature
@@ -203,32 +201,40 @@ def run_trial(
     pool: Pool,
     remote: Remote | None = None,
     host: str = "",
+    on_taken: Callable[[], None] = lambda: None,
 ) -> tuple[int | None, list[str]]:
     """Run a trial's match (on this server's `pool`, or on match `host`, whose recording `remote`
-    fetches) and read its recording back: (kills, problems), no problems for a complete recording
-    with the participant's seat played from this server. The kills are the recording's, when it
-    has a summary (a stopped match's sim still sends one)."""
-    problems = []
+    fetches) and judge its recording: (kills, problems), no problems for a complete recording
+    with the participant's seat played from this server. `on_taken` is called once every service
+    has taken the match (the launcher's watch of its tokens). The recording is read once: the pool
+    hands over what it read back (Pool.run, complete or Incomplete), and a match that failed before
+    that (stopped, past its time, a service gone) or ran on a host is read here."""
+    path = recording_path(plan.directory, plan.match)
     try:
-        if host and remote is not None:
-            remote.run(host, plan, stop)
-        else:
-            pool.run(plan, stop)
+        if not (host and remote is not None):
+            return verdict(pool.run(plan, stop, on_taken), [], role)
+        remote.run(host, plan, stop, on_taken)
+    except Incomplete as error:  # its problems are the recording's: listed by the verdict, once
+        return verdict(error.recording, error.problems, role)
     except Exception as error:  # noqa: BLE001 - any failure fails the trial, never the server
-        problems.append(str(error) or type(error).__name__)
-    kills, found = judge(recording_path(plan.directory, plan.match), role)
-    return kills, [*problems, *found]
+        kills, found = judge(path, role)
+        return kills, [str(error) or type(error).__name__, *found]
+    return judge(path, role)
 
 
 def judge(path: Path, role: str) -> tuple[int | None, list[str]]:
-    """A trial's recording read back: (kills, problems); no problems for a complete recording of
-    the planned length with the participant's seat played from this server to its last second.
-    The kills are the recording's, when it has a summary (a stopped match's sim still sends one)."""
-    try:
-        recording = load(path)
-    except (OSError, ValueError) as error:  # none, or not a recording
-        return None, [f"no recording: {error}"]
-    problems = recording.problems()
+    """A trial's recording read back from `path` and judged (verdict)."""
+    return verdict(*read_recording(path), role)
+
+
+def verdict(recording: Recording | None, problems: list[str], role: str) -> tuple[int | None, list[str]]:
+    """A trial's recording as read (None: none), given what makes it less than a complete match
+    (read_recording), judged: (kills, problems); no problems for a complete recording of the
+    planned length with the participant's seat played from this server to its last second. The
+    kills are the recording's, when it has a summary (a stopped match's sim still sends one)."""
+    if recording is None:
+        return None, [f"no recording: {'; '.join(problems)}"]
+    problems = list(problems)
     answered = [a.frame for _, a in recording.actions if a.role == role and a.sender == f"human/{role}"]
     if not answered:
         problems.append(f"no action of the participant's {role} seat was recorded")
@@ -236,29 +242,6 @@ def judge(path: Path, role: str) -> tuple[int | None, list[str]]:
         last = f"frame {max(answered)} of {recording.summary.frame}"
         problems.append(f"the participant's {role} seat stopped answering at {last}")  # the page went
     return (recording.summary.kills if recording.summary else None), problems
-
-
-def wait_alive(z: zenoh.Session, tokens: list[str], timeout: float, abort: threading.Event) -> bool:
-    """Wait until every one of the liveliness `tokens` is declared (the match's processes are up);
-    False if some are still missing after `timeout` seconds or once `abort` is set (the match
-    stopped, the participant gone: within a tenth of a second). Declares and undeclares its
-    subscribers on the calling thread, never on zenoh's."""
-    present: set[str] = set()
-    changed = threading.Condition()
-
-    def on_alive(sample: zenoh.Sample) -> None:
-        with changed:
-            (present.add if sample.kind == zenoh.SampleKind.PUT else present.discard)(str(sample.key_expr))
-            changed.notify_all()
-
-    with contextlib.ExitStack() as stack:
-        for token in tokens:
-            stack.enter_context(z.liveliness().declare_subscriber(token, on_alive, history=True))
-        deadline = time.monotonic() + timeout
-        with changed:
-            while not present >= set(tokens) and not abort.is_set() and time.monotonic() < deadline:
-                changed.wait(0.1)
-            return present >= set(tokens)
 
 
 class Matches:
@@ -396,22 +379,28 @@ class TrialRunner:
         )  # fmt: skip
 
     async def bridge(
-        self, socket: Socket, trial: Trial, hosted: bool, obs: bool, stop: threading.Event
+        self,
+        socket: Socket,
+        trial: Trial,
+        hosted: bool,
+        obs: bool,
+        stop: threading.Event,
+        taken: asyncio.Event,
+        running: asyncio.Future,
     ) -> Bridge:
-        """The participant's seat in the trial's match, once every service has taken the match
-        (then a Ready starts the game at once): from the pool's session, or for a `hosted` match
-        from the router's."""
-        z = self.remote.z if hosted and self.remote else self.pool.z
-        agent = other(trial.role)
-        tokens = [keys.alive(trial.match, "sim"), keys.alive(trial.match, "recorder")]
-        tokens += [keys.alive(trial.match, "agent", agent)]
-        tokens += [keys.alive(trial.match, "adapter")] if trial.variant.adaptive(agent, 0) else []
-        alive = asyncio.ensure_future(asyncio.to_thread(wait_alive, z, tokens, WARM_UP, stop))
-        await first(alive, socket.gone.wait())
-        if socket.gone.is_set():  # left during set-up: the match ends, and the wait with it
+        """The participant's seat in the trial's match, from the pool's session (for a `hosted`
+        match, the router's), once every service has taken the match (`taken`, set by its
+        launcher, which watches the match's tokens): then a Ready starts the game at once. The
+        wait ends early when the match has ended (`running`) or the participant left (the match
+        is then stopped)."""
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(WARM_UP):
+                await first(taken.wait(), running, socket.gone.wait())
+        if socket.gone.is_set():  # left during set-up: the match ends
             stop.set()
-        if not await alive and not stop.is_set():
+        if not (taken.is_set() or running.done() or stop.is_set()):
             log.warning("trial %s: not every service has taken its match after %g s", trial.match, WARM_UP)
+        z = self.remote.z if hosted and self.remote else self.pool.z
         return Bridge(z, trial.match, trial.role, socket.controls, socket.outbox, obs)
 
     async def play(self, socket: Socket, trial: Trial, obs: bool, offer: dict) -> dict | None:
@@ -431,14 +420,17 @@ class TrialRunner:
         plan = self.plan(trial)
         if not trial.practice:
             self.study.record(trial, "running")
-        stop = threading.Event()
+        stop, taken, loop = threading.Event(), asyncio.Event(), asyncio.get_running_loop()
         if host:
             log.info("trial %s runs on match host %s", trial.match, host)
         running = asyncio.ensure_future(
-            asyncio.to_thread(run_trial, plan, trial.role, stop, self.pool, self.remote, host)
-        )
+            asyncio.to_thread(
+                run_trial, plan, trial.role, stop, self.pool, self.remote, host,
+                lambda: loop.call_soon_threadsafe(taken.set),
+            )
+        )  # fmt: skip
         self.matches.add(trial, running, stop, "" if host else self.pool.endpoint)
-        seat = await self.bridge(socket, trial, bool(host), obs, stop)
+        seat = await self.bridge(socket, trial, bool(host), obs, stop, taken, running)
         ready = await self.live(socket, trial, seat, offer, running, stop)
         seat.close()
         dropped = socket.gone.is_set() and not (ready and running.done())

@@ -311,8 +311,9 @@ def test_a_reload_during_set_up_is_a_resume(tmp_path, study_server):
 
 def test_a_consent_flood_from_one_address_leaves_newcomers_from_others_served(tmp_path, study_server):
     """One client loops hello, consent, close (as fast as the server answers, 40 times): it gets at
-    most its address's burst of ids and starts no match; four newcomers from other addresses
-    meanwhile are all served to the end."""
+    most its address's burst of ids and plays no match; four newcomers from other addresses
+    meanwhile are all served to the end. (A close that reaches the server just after a slot came
+    leaves a failed attempt of a match never played: the close and the slot race.)"""
     import time
 
     import websockets
@@ -343,7 +344,9 @@ def test_a_consent_flood_from_one_address_leaves_newcomers_from_others_served(tm
     stop.set()
     study = server.result(timeout=60)
     flooder = [p for p in study.participants.values() if p.id not in {s.participant for s in served}]
-    assert len(flooder) <= 5 and not any(p.attempts for p in flooder)  # ADDRESS_BURST ids, no match
+    assert len(flooder) <= 5  # ADDRESS_BURST ids
+    attempts = [a for p in flooder for a in p.attempts]
+    assert all(a["status"] == "failed" and a["kills"] is None for a in attempts), attempts
     assert len(list((tmp_path / "recordings").glob("*.tsflog"))) == 4
 
 

@@ -4,10 +4,11 @@ is due, so many matches cost one thread, and none can stall another by a loop of
 Matches tick in a few phases of the period (`phases`): each match is put in the least used, and its
 ticks fall on that phase of the monotonic clock's grid. The matches of a phase are played in one pass
 of the loop, so their states leave together: one wake-up of the clock and of each receiver's
-network thread serves several matches. A pool's 12 matches cost 20 % less CPU in 4 phases than each
-on its own (bench/study.py: 0.060 -> 0.048 CPU-s per second of play per participant) with the same
-tick jitter (p99 2.5 ms at worst); all in one phase is a little cheaper still, but the last match
-of a pass then waits for eleven others and jitter reached 5 ms."""
+network thread serves several matches. A pool's 12 matches cost about a fifth less CPU in 4 phases
+than each on its own (bench/study.py: 0.060 -> 0.048-0.053 CPU-s per second of play per
+participant), at a like tick jitter on a quiet machine (it varies from run to run) and a much lower
+one on a loaded machine; all in one phase is a little cheaper still, but the last match of a pass
+then waits for eleven others and jitter reached 5 ms (docs/architecture.md, "Pools")."""
 
 from __future__ import annotations
 

@@ -104,6 +104,13 @@ MISTAKES = [
     ("eval --workers 0 --out {tmp}/e", 2, "tsf eval: --workers 0: no worker could reach this coordinator"),
     ("eval --job-games 1001", 2, "--job-games"),
     (
+        "eval --games {garbage} --out {tmp}/e",
+        2,
+        "tsf eval: --games {garbage}: not an evaluation's team.csv; valid: partner, agent, seed, "
+        "kills_per_minute, switches, guarded",
+    ),
+    ("eval --games {tmp}/none.csv --out {tmp}/e", 2, "tsf eval: --games {tmp}/none.csv: cannot be read"),
+    (
         "table {tmp}/none.json",
         2,
         "tsf table: Invalid value for 'path': file '{tmp}/none.json' does not exist.",

@@ -117,13 +117,19 @@ def eval_command(
     sweep_id: str = typer.Option(
         "eval", "--sweep", help="Sweep id of the jobs: tsf worker --sweep ID joins."
     ),
+    games: Path | None = typer.Option(
+        None,
+        help="Team games already played (an evaluation's team.csv): analysed again, not played; the "
+        "comparison, per_partner.csv, the figure and summary.md go to --out (no identification).",
+    ),
     ray: str | None = RAY,
     *,
     bus: BusConfig,
 ) -> None:
     """Evaluate the adaptive agent on the job system's workers (here, and any `tsf worker --sweep
     eval` reached with --connect): identification, team performance, the test against the best
-    static policy, and the figures. Resumable; the numbers do not depend on the workers."""
+    static policy, and the figures. Resumable; the numbers do not depend on the workers. With
+    --games, an evaluation's games are analysed again (an analysis newer than the games)."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
 
     from services.adapter.evaluation import EvalPlan, evaluate
@@ -134,6 +140,17 @@ def eval_command(
 
     if role not in ROLES:
         raise UsageError("--role", role, "not a seat", ROLES)
+    if games is not None:
+        from services.adapter.evaluation import EvalReport
+        from services.adapter.results import read_games
+        from services.adapter.team import compare
+
+        played = read_games(games)
+        nothing = EvalPlan(role, identify=False, performance=False)
+        summary = EvalReport(nothing, None, played, compare(played), None).write(out)
+        console.print(summary.read_text())
+        console.print(f"written to {out}")
+        return
     partners = partner or []
     if partners_from is not None:
         if partner:

@@ -12,9 +12,9 @@ from scipy import stats
 from services.adapter.core import AdapterConfig
 from services.adapter.evaluate import batches, play_games, play_session, play_teams, setup
 from services.adapter.identification import follow_lag, windowed
-from services.adapter.results import TeamGame
+from services.adapter.results import TeamGame, read_games, write_results
 from services.adapter.seat import SeatSpec
-from services.adapter.team import compare, holm, paired_tests, variants
+from services.adapter.team import compare, holm, known_partner, paired_tests, variants
 from services.agent import networks
 from services.sim.batch_play import play_batch
 from services.sim.engine import Game
@@ -93,6 +93,33 @@ def test_compare_pairs_by_partner_and_seed() -> None:
     assert result["switches"]["adaptive-T150-cem"] == {"mean": 2.0, "max": 2, "guarded_games": 0}
     by_group = result["tests_by_group"]["adaptive-T150-cem"]["outside"]
     assert by_group["noninferior"] and by_group["p_superior"] == test["p_t"] == test["p_holm"]
+    known = result["known_partner"]  # S1 is every partner's best: knowing them gains nothing
+    assert known["all"]["mean_difference"] == 0 and known["outside"]["mean"] == result["agents"]["S1"]["mean"]
+
+
+@pytest.mark.parametrize("trial", [None, 2])
+def test_an_evaluations_games_read_back_as_written(tmp_path, trial) -> None:  # noqa: ANN001 - a Path
+    """`tsf eval --games` analyses a team.csv again: its games read back equal (sessions' trials
+    too), and the summary made from them names the headroom of knowing each partner."""
+    games = [
+        TeamGame(p, a, seed, 0.5 * seed + (a == "S2"), seed % 2, 0, trial)
+        for p in ("B1", "human(B5)") for a in ("S1", "S2", "adaptive-T150-cem") for seed in range(4)
+    ]  # fmt: skip
+    summary = write_results(tmp_path, None, games, compare(games)).read_text()
+    assert read_games(tmp_path / "team.csv") == games
+    assert "Knowing each partner in advance" in summary
+    assert "| known partner - S2 | +0.00 ± 0.00 (+0.0 %)" in summary
+
+
+def test_knowing_the_partner_chooses_on_its_other_seeds() -> None:
+    """Each game is scored by the static policy chosen on the partner's other half of seeds, not on
+    itself: with P2 the choice on seed 1 (S2) plays seed 0, and the one on seed 0 (S1) seed 1."""
+    units = [("P1", s) for s in range(4)] + [("P2", 0), ("P2", 1), ("P3", 7)]
+    grid = {
+        "S1": dict(zip(units, [5, 5, 5, 5, 5, 3, 2], strict=True)),
+        "S2": dict(zip(units, [6, 6, 6, 6, 4, 4, 1], strict=True)),
+    }
+    assert known_partner(grid, ["S1", "S2"], units).tolist() == [6, 6, 6, 6, 4, 3, 2]
 
 
 GUARD = "bayes-dwell-ood-guard"

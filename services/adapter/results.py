@@ -13,6 +13,7 @@ from services.adapter.seat import ADAPTIVE_KIND, SeatSpec
 from services.agent import library
 from services.provenance import lines as provenance_lines
 from services.provenance import provenance
+from shared.errors import UsageError
 
 
 @dataclass(frozen=True)
@@ -31,6 +32,41 @@ class TeamGame:
         """The game as team.csv writes it: the trial only for sessions."""
         row = asdict(self)
         return row if self.trial is not None else {k: v for k, v in row.items() if k != "trial"}
+
+
+def read_games(path: Path) -> list[TeamGame]:
+    """The games of a team.csv, as `write_results` wrote them (for an analysis made again without
+    playing); a file that is not one is a UsageError naming the file and what it lacks."""
+    fields = ["partner", "agent", "seed", "kills_per_minute", "switches", "guarded"]
+    wrong = UsageError("--games", path, "not an evaluation's team.csv", fields)
+    try:
+        with path.open(newline="") as f:
+            reader = csv.DictReader(f)
+            rows = list(reader) if set(fields) <= set(reader.fieldnames or ()) else None
+    except OSError as e:
+        raise UsageError("--games", path, f"cannot be read ({e.strerror})") from None
+    except (ValueError, csv.Error):  # not text, or not CSV
+        rows = None
+    try:
+        games = [
+            TeamGame(
+                r["partner"],
+                r["agent"],
+                int(r["seed"]),
+                float(r["kills_per_minute"]),
+                int(r["switches"]),
+                int(r["guarded"]),
+                int(r["trial"]) if r.get("trial") else None,
+            )  # fmt: skip
+            for r in rows or ()
+        ]
+    except (ValueError, TypeError):  # a row that is not a game
+        rows = None
+    if rows is None:
+        raise wrong
+    if not games:
+        raise UsageError("--games", path, "has no games")
+    return games
 
 
 def _csv(path: Path, header: list[str], rows: Iterable[Iterable]) -> None:
@@ -73,6 +109,31 @@ def _group_tests(comparison: dict) -> list[str]:
             cells.append(f"**{cell}**" if t["noninferior"] else cell)
         lines.append(f"| {agent} | " + " | ".join(cells) + " |")
     return [*lines, ""]
+
+
+def _known_partner(comparison: dict) -> list[str]:
+    """The headroom of choosing one static policy per partner, knowing the partner in advance."""
+    known = comparison.get("known_partner")
+    if not known:
+        return []
+
+    def cell(h: dict) -> str:
+        percent = "" if h["percent"] is None else f" ({h['percent']:+.1f} %)"
+        return f"{h['mean_difference']:+.2f} ± {h['stderr']:.2f}{percent}"
+
+    return [
+        f"Knowing each partner in advance, a static policy chosen per partner (its best on the "
+        f"partner's other seeds) scores {known['all']['mean']:.3f}: what any rule that picks one "
+        f"of these static policies per partner can gain over {comparison['best_static']}, "
+        "overall and by group (an adapter that switches within a game is not bound by it):",
+        "",
+        "| | " + " | ".join(known) + " |",
+        "| --- |" + " --- |" * len(known),
+        f"| known partner - {comparison['best_static']} | "
+        + " | ".join(cell(h) for h in known.values())
+        + " |",
+        "",
+    ]
 
 
 def write_results(
@@ -127,6 +188,7 @@ def write_results(
             "",
             f"Best static policy: **{comparison['best_static']}**.",
             "",
+            *_known_partner(comparison),
             "| adaptive | difference | d_z | p (paired t) | p (Holm) | p (Wilcoxon) | p (partners) | "
             "partners better | switches/game (max) | guard fell back |",
             "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",

@@ -152,13 +152,35 @@ def _stderr(values: np.ndarray) -> float:
     return float(values.std(ddof=1) / math.sqrt(len(values))) if len(values) > 1 else 0.0
 
 
+def known_partner(
+    grid: dict[str, dict[tuple[str, int], float]], statics: list[str], units: list[tuple[str, int]]
+) -> np.ndarray:
+    """Each game's kills/min with the static policy best for its partner on the partner's other
+    games (its seeds alternate between two halves; each half is scored by the other's choice): what
+    choosing one static policy per partner, knowing the partner in advance, would score, without
+    the luck of choosing on the games scored. A partner with a single game is chosen on it."""
+    halves: dict[tuple[str, int], list] = {}
+    for partner in dict.fromkeys(u[0] for u in units):
+        seeds = sorted(u[1] for u in units if u[0] == partner)
+        for i, seed in enumerate(seeds):
+            halves.setdefault((partner, i % 2), []).append((partner, seed))
+    choice = {}
+    for (partner, half), own in halves.items():
+        chosen_on = halves.get((partner, 1 - half), own)
+        best = max(statics, key=lambda a: sum(grid[a][u] for u in chosen_on))
+        choice.update(dict.fromkeys(own, best))
+    return np.array([grid[choice[u]][u] for u in units])
+
+
 def compare(games: list[TeamGame]) -> dict:
     """Each agent's mean and standard error over the population, and each adaptive variant against
     the best static policy (chosen on this same data, which favours the static side): a one-sided
     paired t-test and a Wilcoxon signed-rank test over (partner, seed) pairs (with Holm's
     correction over the variants), the same t-test over partner means (seeds averaged), the effect
     size d_z = mean difference / sd of differences; per partner group, one-sided superiority and
-    non-inferiority (margin MARGIN) tests; and each variant's switches per game."""
+    non-inferiority (margin MARGIN) tests; each variant's switches per game; and the headroom of
+    knowing each partner in advance (`known_partner`) over the best static policy, overall and per
+    group: what any rule that picks one of these static policies per partner can gain."""
     from scipy import stats
 
     units = sorted({(g.partner, g.seed) for g in games})
@@ -198,6 +220,17 @@ def compare(games: list[TeamGame]) -> dict:
     for a, t in tests.items():
         t["p_holm"] = holm_p[a]
     group_of_unit = np.array([group_of(u[0]) for u in units])
+    known = known_partner(grid, statics, units)
+
+    def headroom(where: np.ndarray) -> dict:
+        diff = known[where] - values[best][where]
+        return {
+            "mean": float(known[where].mean()),
+            "mean_difference": float(diff.mean()),
+            "stderr": _stderr(diff),
+            "percent": float(100 * diff.mean() / base) if (base := values[best][where].mean()) else None,
+        }
+
     by_group = {
         a: {
             g: paired_tests(values[a][group_of_unit == g] - values[best][group_of_unit == g])
@@ -229,6 +262,10 @@ def compare(games: list[TeamGame]) -> dict:
         "tests_by_group": by_group,
         "switches": switching,
         "margin": MARGIN,
+        "known_partner": {
+            "all": headroom(np.ones(len(units), dtype=bool)),
+            **{g: headroom(group_of_unit == g) for g in sorted(set(group_of_unit))},
+        },
     }
 
 

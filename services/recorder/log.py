@@ -139,7 +139,11 @@ class LogWriter:
         self._append(_payload(Record("", time.time_ns(), b"", (first, last))))
 
     def _append(self, payload: bytes) -> None:
-        self._file.write(HEADER.pack(len(payload), zlib.crc32(payload)) + payload)
+        """Write the record whole: an unbuffered write may take part of it (a file size limit, a
+        full disk); the rest is written again, so the OS's refusal raises at this record."""
+        rest = memoryview(HEADER.pack(len(payload), zlib.crc32(payload)) + payload)
+        while rest:
+            rest = rest[self._file.write(rest) :]
         self.records += 1
         if time.monotonic() - self._synced >= self.sync_every:
             self.sync()

@@ -3,6 +3,7 @@ tails cut on reopen, CRC, gaps."""
 
 from __future__ import annotations
 
+import resource
 import zlib
 from pathlib import Path
 
@@ -197,3 +198,21 @@ def test_gap_tracker() -> None:
     assert GapTracker().see(3) == (0, 2)  # the first frames were missed
     resumed = GapTracker(last=5)  # a restarted recorder resumes after its last state
     assert resumed.see(5) is None and resumed.see(7) == (6, 6)
+
+
+def test_a_record_the_os_takes_in_part_raises_at_that_record(tmp_path: Path) -> None:
+    """Past a file size limit the OS writes part of a record and returns the count: the writer
+    writes the rest, so the record that does not fit raises (EFBIG), and is not left torn for a
+    later record to find or a close to hide. (Python ignores SIGXFSZ; the limit binds root too.)"""
+    writer = LogWriter(tmp_path / "full.tsflog")
+    writer.write("tsf/m/state", bytes(40))
+    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (tmp_path.joinpath("full.tsflog").stat().st_size + 100, hard))
+    try:
+        with pytest.raises(OSError, match="File too large"):
+            writer.write("tsf/m/state", bytes(200))
+    finally:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
+    writer.close()
+    records, damage = read_log(tmp_path / "full.tsflog")
+    assert len(records) == 1 and damage[0].torn

@@ -136,6 +136,8 @@ def listener(bus):
     phases=[Phase.explicit, Phase.reuse, Phase.generate],  # a match per example: shrinking takes minutes
     suppress_health_check=[HealthCheck.function_scoped_fixture],
 )
+@pytest.mark.long
+@pytest.mark.slow
 @given(bad_inputs)
 def test_bad_input_anywhere_is_dropped_counted_and_harmless(listener, tap, background, tmp_path, inputs):
     bus, z = listener

@@ -27,6 +27,8 @@ PARTNERS = ["noisy(B4)", "switch(B1,B5)"]
 AGENTS = ["S4", "adaptive-T150-cem", "adaptive-T150-bayes-dwell-ood-guard-memory"]
 
 
+@pytest.mark.long
+@pytest.mark.slow
 def test_evaluation_on_workers_equals_in_process(bus, spawn, tmp_path):
     sweep = f"e{uuid.uuid4().hex[:8]}"
     for i in range(2):

@@ -30,6 +30,8 @@ def crowd_config(trial_seconds: float) -> StudyConfig:
     return StudyConfig("crowd", VARIANTS, trials=1, trial_seconds=trial_seconds, seed=4, crowd=crowd)
 
 
+@pytest.mark.long
+@pytest.mark.slow
 def test_stand_ins_from_a_platform_are_checked_redirected_and_paid_their_bonus(tmp_path, study_server):
     stop, url, server = study_server(crowd_config(8.0), tmp_path)  # 8 s: long enough for a kill
     ids = {"PROLIFIC_PID": "5f00aa11", "STUDY_ID": "S-1", "SESSION_ID": "sess-9"}
@@ -92,6 +94,8 @@ def take_part(page, url: str, pid: str, attentive: bool) -> str:  # noqa: ANN001
         wait_in_page(page, f"tsf.phase !== '{phase}'", 5_000)
 
 
+@pytest.mark.long
+@pytest.mark.slow
 @pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is not installed")
 def test_prolific_links_in_chromium_end_on_the_platforms_completion_or_screened_out_page(
     tmp_path, browser, study_server

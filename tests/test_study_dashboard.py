@@ -40,6 +40,8 @@ def ask(url: str, first: dict) -> dict:
         return pool.submit(asyncio.run, go()).result(timeout=30)
 
 
+@pytest.mark.long
+@pytest.mark.slow
 def test_the_dashboard_shows_the_study_live_and_a_spectator_watches_a_match(tmp_path, browser, study_server):
     port = int(free_endpoint().rsplit(":", 1)[1])
     serving = Serving(test_token=STAND_IN_TOKEN, dashboard=Web(port=port), dashboard_token=TOKEN)

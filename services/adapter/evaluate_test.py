@@ -57,6 +57,8 @@ def test_adaptive_game_switches_to_the_best_response_and_is_deterministic() -> N
     assert first.timeline[0][0] == 150  # decided on the warm-up's last frame, played from the next
 
 
+@pytest.mark.long
+@pytest.mark.slow
 def test_a_session_is_its_games_one_after_another_with_the_adapter_carried() -> None:
     """Without -memory a session's trials are the games of their seeds, as in any batch; with it
     the first trial is the same game and the next ones start where the adapter left off."""

@@ -49,17 +49,10 @@ def read_games(path: Path) -> list[TeamGame]:
         rows = None
     try:
         games = [
-            TeamGame(
-                r["partner"],
-                r["agent"],
-                int(r["seed"]),
-                float(r["kills_per_minute"]),
-                int(r["switches"]),
-                int(r["guarded"]),
-                int(r["trial"]) if r.get("trial") else None,
-            )  # fmt: skip
+            TeamGame(r["partner"], r["agent"], int(r["seed"]), float(r["kills_per_minute"]),
+                     int(r["switches"]), int(r["guarded"]), int(r["trial"]) if r.get("trial") else None)
             for r in rows or ()
-        ]
+        ]  # fmt: skip
     except (ValueError, TypeError):  # a row that is not a game
         rows = None
     if rows is None:

@@ -8,6 +8,7 @@ import signal
 
 import msgpack
 import numpy as np
+import pytest
 import zenoh
 
 from services.adapter.core import AdapterConfig, Scorer
@@ -122,6 +123,8 @@ def test_malformed_partner_actions_are_dropped_and_never_averaged(bus, tap, back
     np.testing.assert_allclose([last.scores[k] for k in scorer.keys], expected, rtol=1e-9)
 
 
+@pytest.mark.long
+@pytest.mark.slow
 def test_killing_the_adapter_leaves_the_match_and_the_agent_intact(bus, tap, spawn, wait_until) -> None:
     match = "adapt-kill"
     recorded = tap(bus.open(listen=True), match)

@@ -145,6 +145,8 @@ def test_a_host_killed_mid_trial_leaves_the_trial_to_be_played_again(tmp_path, s
     assert again.read_bytes() == (tmp_path / "lab-2" / again.name).read_bytes()
 
 
+@pytest.mark.long
+@pytest.mark.slow
 def test_a_recording_whose_hash_differs_never_lands_in_the_study(tmp_path: Path) -> None:
     endpoint = free_endpoint()
     source = tmp_path / "host" / "m.tsflog"

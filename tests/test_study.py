@@ -29,6 +29,8 @@ TEST = STAND_IN_TOKEN
 VARIANTS = (Variant.read("strong", "B5", "S5"), Variant.read("adaptive", adapter="adaptive-T30-cem"))
 
 
+@pytest.mark.long
+@pytest.mark.slow
 def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_until, study_server):
     config = StudyConfig(
         "e2e", VARIANTS, trials=1, trial_seconds=1.5, seed=3, consent="Agree?", end="Bye now."

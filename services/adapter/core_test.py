@@ -226,6 +226,8 @@ def test_frames_of_a_stalled_round_say_nothing_about_the_partner() -> None:
     assert adapter.filled == 1 and adapter.belief()[0] > 0.5
 
 
+@pytest.mark.long
+@pytest.mark.slow
 def test_lanes_decide_apart_with_the_guard_and_stalled_rounds() -> None:
     """Each lane decides as a one-lane adapter fed that lane's frames alone: partner types that
     change, bursts out of library, stalled rounds (left out of window and filter), kills that keep

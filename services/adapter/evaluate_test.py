@@ -136,6 +136,8 @@ GAMES = [
 ]
 
 
+@pytest.mark.long
+@pytest.mark.slow
 def test_batched_adaptive_games_decide_as_the_scalar_engine_replays_them() -> None:
     """Replay each batched game's actions on the scalar engine with the Scorer on world values and
     a one-game Adapter: the same states and scores, switches at the same frames to the same

@@ -13,10 +13,10 @@ its start-up and each match's set-up are outside. Resident memory is read at the
 from __future__ import annotations
 
 import argparse
-import os
 import subprocess
 import time
-from pathlib import Path
+
+from proc import cpu_seconds, rss_kib
 
 from services.adapter.core import AdapterConfig
 from services.runtime.launch import match_buses, service_command
@@ -28,17 +28,6 @@ from shared.game import FPS, ROLES, GameConfig
 from shared.messages import MatchOrder
 
 POOL = "bench"
-TICKS = os.sysconf("SC_CLK_TCK")
-
-
-def cpu_seconds(pid: int) -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / TICKS  # utime, stime
-
-
-def rss_mib(pid: int) -> float:
-    line = next(x for x in Path(f"/proc/{pid}/status").read_text().splitlines() if x.startswith("VmRSS"))
-    return int(line.split()[1]) / 1024
 
 
 def states(match: str, seed: int, frames: int) -> list[bytes]:
@@ -99,7 +88,7 @@ def main() -> None:
             time.sleep(0.2)  # the last answers
             play = time.perf_counter() - start
             spent = {name: cpu_seconds(p.pid) - began[name] for name, p in services.items()}
-            memory = {name: rss_mib(p.pid) for name, p in services.items()}
+            memory = {name: rss_kib(p.pid) / 1024 for name, p in services.items()}
             for match in matches:
                 z.put(
                     keys.summary(match),

@@ -18,17 +18,14 @@ import tempfile
 import time
 from pathlib import Path
 
+from proc import rss_kib
+
 from services.adapter.seat import KEY, SeatSpec
 from services.runtime.launch import MatchPlan
 from services.runtime.pool import Pool
 from shared.errors import Failure
 
 SERVICES = ("sim", "agent", "recorder")
-
-
-def rss_kib(pid: int) -> int:
-    line = next(x for x in Path(f"/proc/{pid}/status").read_text().splitlines() if x.startswith("VmRSS"))
-    return int(line.split()[1])
 
 
 def slope(ys: list[int]) -> float:

@@ -16,7 +16,6 @@ holds every message.
 from __future__ import annotations
 
 import argparse
-import os
 import subprocess
 import sys
 import tempfile
@@ -24,6 +23,7 @@ import time
 from pathlib import Path
 
 import zenoh
+from proc import cpu_seconds
 
 from services.agent.player import Player
 from services.recorder.log import read_log
@@ -61,11 +61,6 @@ def frames_of(match: str, frames: int, seed: int) -> list[list[tuple[str, bytes]
         applied = tuple(a.action for a in answers)
         game.step(*applied)
         out.append([])
-
-
-def cpu_seconds(pid: int) -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime
 
 
 def wait_for(predicate, what: str, timeout: float = 60.0) -> None:  # noqa: ANN001 - a callable

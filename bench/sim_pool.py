@@ -16,7 +16,6 @@ jitter p99 <= 5 ms at N = 12; CPU well under 0.01.
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
 import subprocess
 import sys
@@ -24,6 +23,7 @@ import threading
 import time
 
 import zenoh
+from proc import cpu_seconds
 
 from services.runtime.launch import service_command
 from shared import keys
@@ -33,13 +33,6 @@ from shared.messages import Action, MatchOrder, State, Summary, decode
 
 POOL = "bench"
 NAMES = {"bait": "idle", "shooter": "idle"}  # what the Start records call the seats
-
-
-def cpu_seconds(pid: int) -> float:
-    """User + system CPU time of a process so far (Linux's /proc)."""
-    with open(f"/proc/{pid}/stat") as stat:
-        fields = stat.read().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 class Run:

@@ -42,21 +42,17 @@ def read_games(path: Path) -> list[TeamGame]:
     try:
         with path.open(newline="") as f:
             reader = csv.DictReader(f)
-            rows = list(reader) if set(fields) <= set(reader.fieldnames or ()) else None
+            if not set(fields) <= set(reader.fieldnames or ()):
+                raise wrong
+            games = [
+                TeamGame(r["partner"], r["agent"], int(r["seed"]), float(r["kills_per_minute"]),
+                         int(r["switches"]), int(r["guarded"]), int(r["trial"]) if r.get("trial") else None)
+                for r in reader
+            ]  # fmt: skip
     except OSError as e:
         raise UsageError("--games", path, f"cannot be read ({e.strerror})") from None
-    except (ValueError, csv.Error):  # not text, or not CSV
-        rows = None
-    try:
-        games = [
-            TeamGame(r["partner"], r["agent"], int(r["seed"]), float(r["kills_per_minute"]),
-                     int(r["switches"]), int(r["guarded"]), int(r["trial"]) if r.get("trial") else None)
-            for r in rows or ()
-        ]  # fmt: skip
-    except (ValueError, TypeError):  # a row that is not a game
-        rows = None
-    if rows is None:
-        raise wrong
+    except (ValueError, TypeError, csv.Error):  # not text, not CSV, or a row that is not a game
+        raise wrong from None
     if not games:
         raise UsageError("--games", path, "has no games")
     return games

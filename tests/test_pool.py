@@ -106,8 +106,8 @@ def test_a_killed_service_fails_its_matches_and_the_next_match_plays(pool: Pool,
 
 def test_a_pooled_trial_whose_recording_is_incomplete_lists_each_problem_once(pool: Pool) -> None:
     """A summary put early on a match's key (as a broken sim would) ends its recording there: the
-    pool reads it back incomplete, and the trial's verdict (services/study/runner.py) lists each of
-    its problems once, from that one reading, then the trial's own (no person played the bait)."""
+    match ends without a failure of its own, and the trial's judge (services/study/judge.py) lists
+    each problem of the recording once, then the trial's own (no person played the bait)."""
     match, stop = "pool-trial-cut", threading.Event()
     with ThreadPoolExecutor(1) as threads:
         trial = threads.submit(run_trial, plan(match, pool.directory, frames=300), "bait", stop, pool)
@@ -117,8 +117,8 @@ def test_a_pooled_trial_whose_recording_is_incomplete_lists_each_problem_once(po
         counters = {role: Counters().to_dict() for role in ROLES}
         early = Summary(match=match, frame=5, sender="sim", counters=counters)
         pool.z.put(keys.summary(match), early.encode())
-        kills, problems = trial.result(timeout=60)
-    assert kills == 0 and len(problems) == len(set(problems)), problems
+        kills, problems, failure = trial.result(timeout=60)
+    assert kills == 0 and failure == "" and len(problems) == len(set(problems)), problems
     assert problems[0] == "stopped at frame 5 of 300" and not any("incomplete" in p for p in problems)
     assert problems[-1] == "no action of the participant's bait seat was recorded", problems
 

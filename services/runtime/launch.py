@@ -227,7 +227,7 @@ def run_match(
 def read_recording(path: Path) -> tuple[Recording | None, list[str]]:
     """The recording at `path`, read once, and what makes it less than a complete match
     (Recording.problems), one phrase each; (None, [why]) for a missing or unreadable file. The one
-    check of a recording: the launchers' (read_back) and the study's judge."""
+    check of a recording: the launchers' (read_back) and the study's judge (services/study/judge.py)."""
     try:
         recording = load(path)
     except FileNotFoundError:
@@ -238,13 +238,11 @@ def read_recording(path: Path) -> tuple[Recording | None, list[str]]:
 
 
 class Incomplete(Failure):
-    """A match that ended, but whose recording is not complete: what was read of it (None: no file,
-    or no recording) and its problems. They travel with the failure so that whoever judges the
-    recording further (the study's judge) reads it once and lists each problem once."""
+    """A match that ended, but whose recording is not complete: its problems, each said once."""
 
-    def __init__(self, match: str, path: Path, recording: Recording | None, problems: list[str]) -> None:
+    def __init__(self, match: str, path: Path, problems: list[str]) -> None:
         super().__init__(f"match {match}: its recording {path} is incomplete: {'; '.join(problems)}")
-        self.recording, self.problems = recording, problems
+        self.problems = problems
 
 
 def read_back(path: Path, match: str) -> Recording:
@@ -252,7 +250,7 @@ def read_back(path: Path, match: str) -> Recording:
     every process exited 0 and a recorder cut off under load had left an 8-byte log)."""
     recording, problems = read_recording(path)
     if problems:
-        raise Incomplete(match, path, recording, problems)
+        raise Incomplete(match, path, problems)
     return recording
 
 

@@ -31,4 +31,4 @@ def test_a_complete_recording_has_no_problems_and_a_missing_or_cut_one_does(tmp_
     assert found[0].startswith("torn tail at bytes") and found[-1].startswith("no summary (last state")
     with pytest.raises(Incomplete, match=f"match m: its recording {path} is incomplete: torn tail") as error:
         read_back(path, "m")
-    assert error.value.problems == found and error.value.recording.path == path  # what was read, carried
+    assert error.value.problems == found

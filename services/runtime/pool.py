@@ -148,15 +148,23 @@ class Pool:
         stop: threading.Event | None = None,
         on_taken: Callable[[], None] = lambda: None,
     ) -> Recording:
-        """Play `plan` on the pool to its end, as run_match does with processes of its own, and
-        return its complete recording (its summary, its path), read back once. `on_taken` is called
-        once (on zenoh's thread) when every service has taken the match: it is ready for its people
-        (the study offers the trial then). A match that was stopped or ran past `plan.timeout`, or
-        that some service of the pool did not take or left before the end, is a Failure; one whose
-        recording is not complete is Incomplete, which carries what was read. The recording, not
-        its path, is returned (and carried) because a pool's launcher judges it further (the
-        study's judge: the participant's seat): one reading of the file, and each of its problems
-        said once. Any recording is kept."""
+        """Play `plan` on the pool to its end (`play`) and return its complete recording (its
+        summary, its path), read back once, as run_match does; one whose recording is not complete
+        is Incomplete, which carries what was read."""
+        return read_back(self.play(plan, stop, on_taken), plan.match)
+
+    def play(
+        self,
+        plan: MatchPlan,
+        stop: threading.Event | None = None,
+        on_taken: Callable[[], None] = lambda: None,
+    ) -> Path:
+        """Play `plan` on the pool to its end and return the path of its recording, unread: a
+        launcher that judges the recording further reads it where it judges (the study's judge, in
+        a process of its own). `on_taken` is called once (on zenoh's thread) when every service
+        has taken the match: it is ready for its people (the study offers the trial then). A match
+        that was stopped or ran past `plan.timeout`, or that some service of the pool did not take
+        or left before the end, is a Failure. Any recording is kept."""
         stop = stop or threading.Event()
         order = plan.order(self.sender, self.folder(plan))
         path = recording_path(plan.directory, plan.match)
@@ -191,7 +199,7 @@ class Pool:
             why = f"match {match} was stopped before its end"
         if why:
             raise Failure(why)
-        return read_back(path, match)
+        return path
 
 
 def _service(key: str) -> str:

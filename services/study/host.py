@@ -24,7 +24,7 @@ import zenoh
 from services.adapter.seat import ADAPTIVE_KIND, SeatSpec
 from services.agent import library
 from services.recorder.service import recording_path
-from services.runtime.launch import Incomplete, MatchPlan
+from services.runtime.launch import MatchPlan
 from services.runtime.pool import Pool, pool_name
 from shared import keys
 from shared.bus import BusConfig, Drops, subscribe, why
@@ -204,9 +204,7 @@ class MatchHost:
     def _play(self, plan: MatchPlan, ended: threading.Event) -> None:
         host, error = self.host, ""
         try:
-            self.pool.run(plan, ended)
-        except Incomplete as failure:  # the server judges the recording it fetches: its problems said once
-            log.warning("%s", failure)
+            self.pool.play(plan, ended)  # unread here: the server judges the recording it fetches
         except Exception as failure:  # noqa: BLE001 - a match that fails is reported, never fatal
             error = (str(failure) or type(failure).__name__)[:300]
         path = recording_path(plan.directory, plan.match)

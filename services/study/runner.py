@@ -46,6 +46,7 @@ from collections.abc import Awaitable, Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import websockets
 import zenoh
@@ -55,13 +56,13 @@ from websockets.protocol import State
 from services.adapter.seat import PERSON, SeatSpec
 from services.human.core import BadInput, Controls, PerAddress, RateLimit
 from services.human.gateway import Bridge, Gateway, Outbox, Web, receive_first, refuse
-from services.recorder.recording import Recording
 from services.recorder.service import recording_path
-from services.runtime.launch import Incomplete, MatchPlan, read_recording
+from services.runtime.launch import MatchPlan
 from services.runtime.pool import Pool, pool_name
 from services.study.core import AROUND, SET_UP, Admission, Participant, Study, StudyConfig, Trial, worker_id
 from services.study.crowd import FAILS, attention_check, write_bonuses
 from services.study.dashboard import Dashboard, overview
+from services.study.judge import Judge, judge
 from services.study.remote import Remote
 from shared.bus import BusConfig, until_stopped
 from shared.game import FPS, ROLES, other
@@ -194,54 +195,40 @@ async def first(*waits: Awaitable) -> None:
                 future.cancel()
 
 
+class Judged(NamedTuple):
+    """How a trial's match ended: its recording's kills and problems (the judge's verdict), and
+    the launcher's own failure line, if the match failed before its end ("" if not)."""
+
+    kills: int | None
+    problems: list[str]
+    failure: str = ""
+
+
 def run_trial(
     plan: MatchPlan,
     role: str,
     stop: threading.Event,
-    pool: Pool,
+    pool: Pool | None,
     remote: Remote | None = None,
     host: str = "",
     on_taken: Callable[[], None] = lambda: None,
-) -> tuple[int | None, list[str]]:
+    judged: Callable[[Path, str], tuple[int | None, list[str]]] = judge,
+) -> Judged:
     """Run a trial's match (on this server's `pool`, or on match `host`, whose recording `remote`
-    fetches) and judge its recording: (kills, problems), no problems for a complete recording
-    with the participant's seat played from this server. `on_taken` is called once every service
-    has taken the match (the launcher's watch of its tokens). The recording is read once: the pool
-    hands over what it read back (Pool.run, complete or Incomplete), and a match that failed before
-    that (stopped, past its time, a service gone) or ran on a host is read here."""
-    path = recording_path(plan.directory, plan.match)
+    fetches) and judge its recording (`judged`: the server's Judge, in a process of its own). A
+    complete recording with the participant's seat played from this server has no problems.
+    `on_taken` is called once every service has taken the match (the launcher's watch of its
+    tokens). The recording is read once, by the judge, whether the match ended or failed."""
+    path, failure = recording_path(plan.directory, plan.match), ""
     try:
-        if not (host and remote is not None):
-            return verdict(pool.run(plan, stop, on_taken), [], role)
-        remote.run(host, plan, stop, on_taken)
-    except Incomplete as error:  # its problems are the recording's: listed by the verdict, once
-        return verdict(error.recording, error.problems, role)
+        if host and remote is not None:
+            remote.run(host, plan, stop, on_taken)
+        else:
+            assert pool is not None, "a trial runs on this server's pool or on a match host"
+            pool.play(plan, stop, on_taken)
     except Exception as error:  # noqa: BLE001 - any failure fails the trial, never the server
-        kills, found = judge(path, role)
-        return kills, [str(error) or type(error).__name__, *found]
-    return judge(path, role)
-
-
-def judge(path: Path, role: str) -> tuple[int | None, list[str]]:
-    """A trial's recording read back from `path` and judged (verdict)."""
-    return verdict(*read_recording(path), role)
-
-
-def verdict(recording: Recording | None, problems: list[str], role: str) -> tuple[int | None, list[str]]:
-    """A trial's recording as read (None: none), given what makes it less than a complete match
-    (read_recording), judged: (kills, problems); no problems for a complete recording of the
-    planned length with the participant's seat played from this server to its last second. The
-    kills are the recording's, when it has a summary (a stopped match's sim still sends one)."""
-    if recording is None:
-        return None, [f"no recording: {'; '.join(problems)}"]
-    problems = list(problems)
-    answered = [a.frame for _, a in recording.actions if a.role == role and a.sender == f"human/{role}"]
-    if not answered:
-        problems.append(f"no action of the participant's {role} seat was recorded")
-    elif recording.summary is not None and max(answered) < recording.summary.frame - FPS:
-        last = f"frame {max(answered)} of {recording.summary.frame}"
-        problems.append(f"the participant's {role} seat stopped answering at {last}")  # the page went
-    return (recording.summary.kills if recording.summary else None), problems
+        failure = str(error) or type(error).__name__
+    return Judged(*judged(path, role), failure)
 
 
 class Matches:
@@ -336,9 +323,16 @@ class TrialRunner:
     are the study's and the server's settings."""
 
     def __init__(
-        self, study: Study, serving: Serving, matches: Matches, pool: Pool, remote: Remote | None = None
+        self,
+        study: Study,
+        serving: Serving,
+        matches: Matches,
+        pool: Pool,
+        judge: Judge,
+        remote: Remote | None = None,
     ) -> None:
         self.study, self.serving, self.matches, self.pool, self.remote = study, serving, matches, pool, remote
+        self.judge = judge
         config = study.config
         self.recordings, self.practice = study.directory / "recordings", study.directory / "practice"
         self.practice_frames = round(config.practice_seconds * FPS)
@@ -426,7 +420,7 @@ class TrialRunner:
         running = asyncio.ensure_future(
             asyncio.to_thread(
                 run_trial, plan, trial.role, stop, self.pool, self.remote, host,
-                lambda: loop.call_soon_threadsafe(taken.set),
+                lambda: loop.call_soon_threadsafe(taken.set), self.judge,
             )
         )  # fmt: skip
         self.matches.add(trial, running, stop, "" if host else self.pool.endpoint)
@@ -436,10 +430,10 @@ class TrialRunner:
         dropped = socket.gone.is_set() and not (ready and running.done())
         if dropped and not trial.practice:  # resumable at once; the sidecar follows when the match has ended
             self.study.record(trial, "dropped")
-            running.add_done_callback(lambda done: self.outcome(trial, plan, done, dropped))
+            running.add_done_callback(lambda done: self.outcome(trial, done, dropped))
             return None
         await asyncio.wait({running})  # ended by the stop, if not over
-        return self.outcome(trial, plan, running, dropped)
+        return self.outcome(trial, running, dropped)
 
     async def live(
         self,
@@ -466,12 +460,14 @@ class TrialRunner:
             await asyncio.wait({running})
         return True
 
-    def outcome(self, trial: Trial, plan: MatchPlan, done: asyncio.Future, dropped: bool) -> dict:
+    def outcome(self, trial: Trial, done: asyncio.Future, dropped: bool) -> dict:
         """How the ended match went: a practice game's status and kills, a trial's sidecar."""
-        if dropped:  # the page went: the recording alone says whether the trial was played
-            kills, problems = judge(recording_path(plan.directory, trial.match), trial.role)
+        if done.cancelled():
+            kills, problems = None, ["cancelled"]
         else:
-            kills, problems = (None, ["cancelled"]) if done.cancelled() else done.result()
+            kills, problems, failure = done.result()
+            if failure and not dropped:  # the page went: the recording alone says whether it was played
+                problems = [failure, *problems]
         if trial.practice:  # no trial: nothing written down
             return {"status": "failed" if problems else "done", "kills": kills}
         return settle(self.study, trial, kills, problems)
@@ -657,9 +653,11 @@ def run_study(
     remote = Remote(serving.hosts, serving.host_secret) if serving.hosts else None
     adaptive = any(v.adaptive(role, 0) for v in config.variants for role in ROLES)
     pool = Pool(pool_name("study"), study.directory, adaptive, serving.low_latency)
+    judging = None
     try:
         pool.__enter__()
-        runner = TrialRunner(study, serving, matches, pool, remote)
+        judging = Judge()
+        runner = TrialRunner(study, serving, matches, pool, judging, remote)
         gateway = Gateway(None, Front(study, serving, runner).handle, web)
         # A running match holds a thread (run_trial) for its length, its start-up another: asyncio's
         # default pool (cores + 4 threads) would cap the matches at a handful, whatever hosts add.
@@ -679,6 +677,8 @@ def run_study(
                 asyncio.run_coroutine_threadsafe(matches.drained(), gateway.loop).result(DRAIN)
     finally:
         pool.__exit__()
+        if judging is not None:
+            judging.close()
         if remote is not None:
             remote.close()
         study.close()

@@ -11,8 +11,10 @@ done of all (done = the recording read back complete), the worst and median tick
 matches' sims and how many are over 5 ms, Ready-to-first-frame p50/p99 over all trials, the waits
 before the offers (consent to the first, each trial's end to the next), the load average, and what
 one participant costs: CPU seconds of the server's pool (its sim, agent, recorder and adapter
-processes) per second of play, from the moment the pool is up to the last trial's end, and the
-pool's resident memory (peak over the run) divided by the participants. The pool's own start-up
+processes) per second of play, from the moment the pool is up to the last trial's end (the
+server's judge, its worker process that reads each recording back, printed beside it: the server's
+work, as its bridges of the people's seats are), and the pool's resident memory (peak over the
+run) divided by the participants (the judge's printed apart: once per server). The pool's own start-up
 (once per server) is printed apart. The most participants served is the largest count with every
 trial done and tick jitter p99 <= 5 ms.
 
@@ -63,6 +65,7 @@ from shared.bus import BusConfig, free_endpoint
 TOKEN = "bench"
 HOST_SECRET = b"the-bench-host-secret"  # shared by the server and its match host
 JITTER_MS = 5.0
+JUDGE = "judge"
 # Every stand-in comes from this machine's one address, as every person does behind a reverse
 # proxy: the servers below take arrivals from one address without its own limit (arrivals_per_address=0).
 CONFIGS = Path(__file__).resolve().parent.parent / "services" / "study" / "configs"
@@ -74,17 +77,20 @@ def quantile(values: list[float], q: int) -> float:
 
 class Children:
     """Samples the resident memory and CPU time of this process's children (the study server's
-    pool) five times a second: the peak memory, and the CPU time they have used so far."""
+    pool, and its judge) five times a second: the peak memory of each, and the CPU time they have
+    used so far."""
 
     def __init__(self) -> None:
-        self.peak, self.cpu, self.stop = 0, dict[int, float](), threading.Event()
-        self.service: dict[int, str] = {}  # pid -> the pool service it runs
+        self.cpu, self.stop = dict[int, float](), threading.Event()
+        self.peak = {"pool": 0, JUDGE: 0}  # bytes, the most resident at once
+        self.service: dict[int, str] = {}  # pid -> the pool service it runs, or the judge
         self.page, self.tick = os.sysconf("SC_PAGE_SIZE"), os.sysconf("SC_CLK_TCK")
         self.thread = threading.Thread(target=self._sample, daemon=True)
         self.thread.start()
 
     def used(self) -> dict[str, float]:
-        """CPU seconds used so far by each pool service (an ended process: until its last sample)."""
+        """CPU seconds used so far by each pool service and the judge (an ended process: until its
+        last sample)."""
         used: dict[str, float] = {}
         for pid, seconds in self.cpu.items():
             used[self.service[pid]] = used.get(self.service[pid], 0.0) + seconds
@@ -92,21 +98,27 @@ class Children:
 
     def _sample(self) -> None:
         while not self.stop.wait(0.2):
-            total = 0
+            total = {"pool": 0, JUDGE: 0}
             for stat in Path("/proc").glob("[0-9]*/stat"):
                 try:
                     fields = stat.read_text().rsplit(")", 1)[1].split()
                     if int(fields[1]) != os.getpid():
                         continue
-                    total += int((stat.parent / "statm").read_text().split()[1]) * self.page
                     pid = int(stat.parent.name)
                     if pid not in self.service:
-                        words = (stat.parent / "cmdline").read_bytes().split(b"\0")
-                        self.service[pid] = words[words.index(b"services.cli") + 1].decode()
+                        self.service[pid] = _service((stat.parent / "cmdline").read_bytes().split(b"\0"))
+                    rss = int((stat.parent / "statm").read_text().split()[1]) * self.page
+                    total[JUDGE if self.service[pid] == JUDGE else "pool"] += rss
                     self.cpu[pid] = (int(fields[11]) + int(fields[12])) / self.tick
                 except (OSError, IndexError, ValueError):
                     continue
-            self.peak = max(self.peak, total)
+            self.peak = {part: max(self.peak[part], total[part]) for part in total}
+
+
+def _service(words: list[bytes]) -> str:
+    """What a child of the server runs: a pool service (`tsf sim --pool`...), or the judge (its
+    worker process, services/study/judge.py; multiprocessing's resource tracker counted with it)."""
+    return words[words.index(b"services.cli") + 1].decode() if b"services.cli" in words else JUDGE
 
 
 def serve(
@@ -172,6 +184,7 @@ def load_test(counts: list[int], trials: int, seconds: float, adaptive: bool = F
         (up, at_up), (_, at_end) = marks
         played = count * each * seconds
         cost = {name: (at_end[name] - at_up.get(name, 0.0)) / played for name in at_end}
+        judging = cost.pop(JUDGE, 0.0)  # the server's work, as its bridges are: not the pool's
         done = sum(a["status"] == "done" for a in attempts)
         first = [f for r in reports for f in r.first_frames]
         jitter = max(jitters, default=float("nan"))
@@ -189,10 +202,12 @@ def load_test(counts: list[int], trials: int, seconds: float, adaptive: bool = F
             f"trial end to next offer {spread([o for r in reports for o in r.offers[1:]])}; "
             f"load average {load:.1f} at the start, {os.getloadavg()[0]:.1f} at the end"
         )
+        pool, judge = (children.peak[part] / 2**20 for part in ("pool", JUDGE))
         print(
             f"       per participant {sum(cost.values()):.4f} CPU s per s of play "
-            f"({', '.join(f'{name} {value:.4f}' for name, value in cost.items())}), "
-            f"{children.peak / count / 2**20:.1f} MiB (the pool {children.peak / 2**20:.0f} MiB at its peak; "
+            f"({', '.join(f'{name} {value:.4f}' for name, value in cost.items())}; the server's judge "
+            f"{judging:.4f} beside it), "
+            f"{pool / count:.1f} MiB (the pool {pool:.0f} MiB at its peak, the judge {judge:.0f} MiB apart; "
             f"its start-up {up - began:.1f} s, {sum(at_up.values()):.1f} CPU s, once per server)"
         )
     print(f"most participants served with every trial done and tick jitter p99 <= {JITTER_MS:g} ms: {served}")

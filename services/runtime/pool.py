@@ -150,7 +150,7 @@ class Pool:
     ) -> Recording:
         """Play `plan` on the pool to its end (`play`) and return its complete recording (its
         summary, its path), read back once, as run_match does; one whose recording is not complete
-        is Incomplete, which carries what was read."""
+        is Incomplete."""
         return read_back(self.play(plan, stop, on_taken), plan.match)
 
     def play(

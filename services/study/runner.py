@@ -208,7 +208,7 @@ def run_trial(
     plan: MatchPlan,
     role: str,
     stop: threading.Event,
-    pool: Pool | None,
+    pool: Pool,
     remote: Remote | None = None,
     host: str = "",
     on_taken: Callable[[], None] = lambda: None,
@@ -224,7 +224,6 @@ def run_trial(
         if host and remote is not None:
             remote.run(host, plan, stop, on_taken)
         else:
-            assert pool is not None, "a trial runs on this server's pool or on a match host"
             pool.play(plan, stop, on_taken)
     except Exception as error:  # noqa: BLE001 - any failure fails the trial, never the server
         failure = str(error) or type(error).__name__

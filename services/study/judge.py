@@ -3,9 +3,10 @@
 Reading a recording back decodes and checks every record (about 0.2 CPU-s for a minute of play).
 In the server's process that work held the interpreter's lock while everyone else's frames, keys
 and offers waited: when a dozen trials ended together, the next ones' Ready-to-first-frame p99
-reached 113-171 ms in some runs, and each next offer waited for the judgements before it. The `Judge` keeps one
-worker process, started with the server, that reads and judges; the server only waits for its
-small answer (bench/study.py, 12 participants at once: Ready-to-first-frame p50 14-19 -> 2-4 ms).
+reached 113-171 ms in some runs, and each next offer waited for the judgements before it. The
+`Judge` keeps one worker process, started with the server, that reads and judges; the server only
+waits for its small answer (bench/study.py, 12 participants at once: Ready-to-first-frame p50
+14-19 -> 2-4 ms).
 """
 
 from __future__ import annotations

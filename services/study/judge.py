@@ -53,8 +53,8 @@ def verdict(recording: Recording | None, problems: list[str], role: str) -> tupl
 class Judge:
     """`judge` in a worker process, started (and warmed) with the server, so that no interpreter
     starts while a study runs. Called from any thread; the caller waits for the answer. A worker
-    that dies (killed) is replaced, and the judgement is asked of the new one: a trial is never
-    failed by its judge."""
+    that dies (killed) is replaced, and the judgement is asked of the new one (of the server's own
+    process if that one dies too): a trial is never failed by its judge."""
 
     def __init__(self) -> None:
         self.lock = threading.Lock()
@@ -76,7 +76,12 @@ class Judge:
                 if self.workers is workers:
                     log.warning("the judge's process was lost: a new one reads %s", path.name)
                     self.workers = self._start()
-            return self.workers.submit(judge, path, role).result()
+                workers = self.workers
+        try:
+            return workers.submit(judge, path, role).result()
+        except BrokenProcessPool:  # lost again: judged here, a moment of the others' time, never failed
+            log.error("the judge's new process was lost too: %s is judged in the server's", path.name)
+            return judge(path, role)
 
     def close(self) -> None:
         self.workers.shutdown()

@@ -1,5 +1,6 @@
 """The study's judge in a process of its own: the same verdict as in the server's process, and a
-worker that was killed is replaced without failing the trial it was judging."""
+worker that was killed is replaced without failing the trial it was judging, and one whose new
+worker dies too judges in the server's own process."""
 
 from __future__ import annotations
 
@@ -24,5 +25,25 @@ def test_the_judges_process_gives_the_verdict_and_survives_its_workers_death(tmp
         os.kill(worker, signal.SIGKILL)
         assert judging(path, "bait") == here
         assert judging.workers.submit(os.getpid).result() not in (worker, os.getpid())
+    finally:
+        judging.close()
+
+
+class Doomed(Judge):
+    """A judge whose every worker is killed as soon as it has started."""
+
+    @staticmethod
+    def _start():
+        workers = Judge._start()
+        os.kill(workers.submit(os.getpid).result(), signal.SIGKILL)
+        return workers
+
+
+def test_a_judge_whose_new_worker_dies_too_judges_in_the_servers_process(tmp_path):
+    path = tmp_path / "m.tsflog"
+    record_match(path)
+    judging = Doomed()
+    try:
+        assert judging(path, "shooter") == judge(path, "shooter")
     finally:
         judging.close()

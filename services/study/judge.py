@@ -72,16 +72,20 @@ class Judge:
         try:
             return workers.submit(judge, path, role).result()
         except BrokenProcessPool:
-            with self.lock:
-                if self.workers is workers:
-                    log.warning("the judge's process was lost: a new one reads %s", path.name)
-                    self.workers = self._start()
-                workers = self.workers
+            pass
         try:
-            return workers.submit(judge, path, role).result()
-        except BrokenProcessPool:  # lost again: judged here, a moment of the others' time, never failed
+            return self._replace(workers, path).submit(judge, path, role).result()
+        except BrokenProcessPool:  # lost again (or at its start): judged here, a moment of the others' time
             log.error("the judge's new process was lost too: %s is judged in the server's", path.name)
             return judge(path, role)
+
+    def _replace(self, lost: ProcessPoolExecutor, path: Path) -> ProcessPoolExecutor:
+        """A new worker in place of `lost`, once for all the threads that found it lost."""
+        with self.lock:
+            if self.workers is lost:
+                log.warning("the judge's process was lost: a new one reads %s", path.name)
+                self.workers = self._start()
+            return self.workers
 
     def close(self) -> None:
         self.workers.shutdown()

@@ -1,11 +1,14 @@
 """The study's judge in a process of its own: the same verdict as in the server's process, and a
 worker that was killed is replaced without failing the trial it was judging, and one whose new
-worker dies too judges in the server's own process."""
+worker dies too (after its start, or at it) judges in the server's own process."""
 
 from __future__ import annotations
 
 import os
 import signal
+from concurrent.futures import ProcessPoolExecutor
+
+import pytest
 
 from services.recorder.recording_test import record_match
 from services.study.judge import Judge, judge
@@ -29,20 +32,22 @@ def test_the_judges_process_gives_the_verdict_and_survives_its_workers_death(tmp
         judging.close()
 
 
-class Doomed(Judge):
-    """A judge whose every worker is killed as soon as it has started."""
-
-    @staticmethod
-    def _start():
-        workers = Judge._start()
-        os.kill(workers.submit(os.getpid).result(), signal.SIGKILL)
-        return workers
-
-
-def test_a_judge_whose_new_worker_dies_too_judges_in_the_servers_process(tmp_path):
+@pytest.mark.parametrize("at_start", [False, True], ids=["after-its-start", "at-its-start"])
+def test_a_judge_whose_new_worker_dies_too_judges_in_the_servers_process(tmp_path, monkeypatch, at_start):
     path = tmp_path / "m.tsflog"
     record_match(path)
-    judging = Doomed()
+    judging = Judge()
+
+    def doomed() -> ProcessPoolExecutor:
+        """A new worker killed as soon as it has started (`at_start`: before its warm-up answers)."""
+        workers = Judge._start()
+        os.kill(workers.submit(os.getpid).result(), signal.SIGKILL)
+        if at_start:
+            workers.submit(int).result()  # BrokenProcessPool, as from a worker dying at its start
+        return workers
+
+    monkeypatch.setattr(judging, "_start", doomed)
+    os.kill(judging.workers.submit(os.getpid).result(), signal.SIGKILL)
     try:
         assert judging(path, "shooter") == judge(path, "shooter")
     finally:

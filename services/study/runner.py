@@ -201,7 +201,7 @@ class Judged(NamedTuple):
 
     kills: int | None
     problems: list[str]
-    failure: str = ""
+    failure: str
 
 
 def run_trial(

@@ -16,15 +16,18 @@ import multiprocessing
 import os
 import signal
 import threading
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
+from typing import TypeVar
 
 from services.recorder.recording import Recording
 from services.runtime.launch import read_recording
 from shared.game import FPS
 
 log = logging.getLogger("tsf.study")
+T = TypeVar("T")
 NICE = 5  # nice steps below the server: a judgement yields to the matches being played
 
 
@@ -64,17 +67,17 @@ class Judge:
     def _start() -> ProcessPoolExecutor:
         # Not fork: the server's threads (zenoh's, the gateway's) would be copied mid-step.
         workers = ProcessPoolExecutor(1, multiprocessing.get_context("spawn"), _worker)
-        workers.submit(int).result()  # started now, not at the first trial's end
+        ask(workers, int)  # started now, not at the first trial's end
         return workers
 
     def __call__(self, path: Path, role: str) -> tuple[int | None, list[str]]:
         workers = self.workers
         try:
-            return workers.submit(judge, path, role).result()
+            return ask(workers, judge, path, role)
         except BrokenProcessPool:
             pass
         try:
-            return self._replace(workers, path).submit(judge, path, role).result()
+            return ask(self._replace(workers, path), judge, path, role)
         except BrokenProcessPool:  # lost again (or at its start): judged here, a moment of the others' time
             log.error("the judge's new process was lost too: %s is judged in the server's", path.name)
             return judge(path, role)
@@ -89,6 +92,17 @@ class Judge:
 
     def close(self) -> None:
         self.workers.shutdown()
+
+
+def ask(workers: ProcessPoolExecutor, fn: Callable[..., T], *args: object) -> T:
+    """`fn(*args)` in `workers`. A pool found broken is shut down before the error leaves: we hold it
+    until its manager thread has ended, since that thread dropping the last reference while it
+    breaks the pool deadlocks CPython 3.13.0 (gh-125451), and then the server at its exit."""
+    try:
+        return workers.submit(fn, *args).result()
+    except BrokenProcessPool:
+        workers.shutdown()
+        raise
 
 
 def _worker() -> None:

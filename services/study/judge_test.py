@@ -1,22 +1,31 @@
 """The study's judge in a process of its own: the same verdict as in the server's process, and a
 worker that was killed is replaced without failing the trial it was judging, and one whose new
-worker dies too (after its start, or at it) judges in the server's own process."""
+worker dies too (after its start, or at it) judges in the server's own process; either way, every
+thread the judge started ends (a lost pool's thread deadlocked on CPython 3.13.0 and hung the exit)."""
 
 from __future__ import annotations
 
 import os
 import signal
+import threading
 from concurrent.futures import ProcessPoolExecutor
 
 import pytest
 
 from services.recorder.recording_test import record_match
-from services.study.judge import Judge, judge
+from services.study.judge import Judge, ask, judge
+
+
+def assert_no_thread_left(before: set[threading.Thread]) -> None:
+    for thread in set(threading.enumerate()) - before:
+        thread.join(10)
+        assert not thread.is_alive(), f"{thread} still runs after the judge closed"
 
 
 def test_the_judges_process_gives_the_verdict_and_survives_its_workers_death(tmp_path):
     path = tmp_path / "m.tsflog"
     record_match(path)
+    before = set(threading.enumerate())
     judging = Judge()
     try:
         here = judge(path, "bait")
@@ -30,12 +39,14 @@ def test_the_judges_process_gives_the_verdict_and_survives_its_workers_death(tmp
         assert judging.workers.submit(os.getpid).result() not in (worker, os.getpid())
     finally:
         judging.close()
+    assert_no_thread_left(before)
 
 
 @pytest.mark.parametrize("at_start", [False, True], ids=["after-its-start", "at-its-start"])
 def test_a_judge_whose_new_worker_dies_too_judges_in_the_servers_process(tmp_path, monkeypatch, at_start):
     path = tmp_path / "m.tsflog"
     record_match(path)
+    before = set(threading.enumerate())
     judging = Judge()
 
     def doomed() -> ProcessPoolExecutor:
@@ -43,7 +54,7 @@ def test_a_judge_whose_new_worker_dies_too_judges_in_the_servers_process(tmp_pat
         workers = Judge._start()
         os.kill(workers.submit(os.getpid).result(), signal.SIGKILL)
         if at_start:
-            workers.submit(int).result()  # BrokenProcessPool, as from a worker dying at its start
+            ask(workers, int)  # BrokenProcessPool, as from a worker dying at its start
         return workers
 
     monkeypatch.setattr(judging, "_start", doomed)
@@ -52,3 +63,4 @@ def test_a_judge_whose_new_worker_dies_too_judges_in_the_servers_process(tmp_pat
         assert judging(path, "shooter") == judge(path, "shooter")
     finally:
         judging.close()
+    assert_no_thread_left(before)

@@ -363,6 +363,8 @@ JOB_KINDS = (
     "session",
     "identify",
     "calibrate",
+    "pairs",
+    "train",
 )  # what a job computes (services/jobs/kinds.py)
 _JOB_ID = _text(r"[A-Za-z0-9_.-]{1,64}")
 _PLUGIN = _text(r"[A-Za-z_][A-Za-z0-9_.]{0,100}:[A-Za-z_][A-Za-z0-9_.]{0,60}")

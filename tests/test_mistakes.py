@@ -65,6 +65,16 @@ MISTAKES = [
     ("game --shooter B1", 2, f"--shooter B1: plays the bait seat, not the shooter; valid: {SHOOTERS}"),
     ("calibrate --games 1", 2, "Invalid value for '--games': 1 is outside the range 2 to 10000"),
     ("train NOPE", 2, "tsf train: KEYS NOPE: not a learned policy of the library; valid: B"),
+    (
+        "library grow --population {garbage} --out {tmp}/grown",
+        2,
+        "tsf library: --population {garbage}: cannot be read as TOML",
+    ),
+    (
+        "library grow --population {tmp}/empty.toml --out {tmp}/grown",
+        2,
+        "tsf library: --population {tmp}/empty.toml: lacks 'bait'",
+    ),
     ("train --steps 0", 2, "Invalid value for '--steps'"),
     ("train", 2, "tsf train: KEYS (none): give library keys or --all, not both"),
     ("train B1 --all", 2, "tsf train: KEYS B1: give library keys or --all, not both"),

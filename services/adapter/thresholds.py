@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from services.adapter.cem import log_probs
-from services.adapter.evaluate import batches, play_games
+from services.adapter.evaluate import batches, play_games, setup
 from services.adapter.identification import windowed
 from services.agent import library, networks
 from services.jobs.core import spec
@@ -45,11 +45,13 @@ def calibrate(
     """Out-of-library thresholds: for each role and window T, the lowest (over library policies)
     `quantile` of a policy's own mean log-probability over T-frame windows of its play with every
     library policy of the other role, minus `margin` nats. A partner whose best similarity is
-    below it explains its actions far worse than any library policy explains its own."""
+    below it explains its actions far worse than any library policy explains its own. The library
+    is the table's (the adapter's candidates): a grown library's table need not hold every policy
+    of the libraries in use."""
     seeds = seeds or [0, 1]
+    keys = {role: list(setup(role).payoff.ours) for role in ROLES}
     by_policy = [  # each library policy's games with every teammate and seed
-        [[k, mate, seed] for mate in library.keys(other(_role(k))) for seed in seeds]
-        for k in library.registry()
+        [[k, mate, seed] for mate in keys[other(role)] for seed in seeds] for role in ROLES for k in keys[role]
     ]
     tasks = [game for games in by_policy for game in games]
     frames = GameConfig().frames
@@ -65,7 +67,7 @@ def calibrate(
         means = [windowed(s[:, None], window)[:, 0] for s in streams]
         for role in ROLES:
             per_policy = {}
-            for k in library.keys(role):
+            for k in keys[role]:
                 mine = np.concatenate([m for (key, *_), m in zip(tasks, means, strict=True) if key == k])
                 per_policy[k] = float(np.quantile(mine, quantile))
             lowest[role][str(window)] = per_policy
@@ -78,10 +80,6 @@ def calibrate(
         "thresholds": thresholds,
         "self_quantiles": lowest,
     }
-
-
-def _role(key: str) -> str:
-    return library.registry()[key].role
 
 
 def write_calibration(result: dict, path: Path) -> Path:

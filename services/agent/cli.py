@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import enum
+import os
 import time
 from pathlib import Path
 
@@ -11,9 +12,24 @@ from rich.table import Table
 
 from services.agent.calibration import calibrate
 from services.agent.seats import policy_for
-from services.options import GAMES, Duration, Frames, Role, console, game_frames, keys_help, number, output
+from services.options import (
+    GAMES,
+    RAY,
+    WORKERS,
+    Duration,
+    Frames,
+    Role,
+    bus_options,
+    console,
+    game_frames,
+    keys_help,
+    number,
+    output,
+)
+from services.population.families import SPEC
 from services.sim.observation import VIEWS
 from services.sim.play import play, summarize
+from shared.bus import BusConfig, stop_on_signals
 from shared.errors import Failure, UsageError
 from shared.game import ROLES, SEEDS, GameConfig, Range
 
@@ -171,6 +187,56 @@ def library_add(
     if entry.get("score"):
         console.print(f"  {_score_text(entry['score'])}")
     console.print(f"  play it everywhere with TSF_LIBRARY={library_dir.resolve()}")
+
+
+@library_commands.command("grow")
+@bus_options
+def library_grow(
+    population: Path = typer.Option(
+        SPEC, "--population", help="The partner population's spec (default: the shipped population.toml)."
+    ),
+    out: Path = output(
+        Path("tsf-grown"),
+        "Directory of the run: the population, cross-play, groups, responses, selection, the grown "
+        "library (OUT/library) and summary.md; run the same command again to resume.",
+        directory=True,
+    ),
+    workers: int = number(
+        os.cpu_count() or 1,
+        WORKERS,
+        "Worker processes to start here (0: only workers reached with --connect).",
+    ),
+    ray: str | None = RAY,
+    *,
+    bus: BusConfig,
+) -> None:
+    """Grow a library for coverage: a generated partner population per seat, its cross-play, groups
+    by what works with them, a PPO best response per group, and the members that leave an adaptive
+    teammate the most room (held-out oracle headroom on the validation population); then the grown
+    library's table, calibration and the test population's figures (docs/library.md)."""
+    from contextlib import contextmanager
+    from importlib.util import find_spec
+
+    from services.growth.grow import Grow
+    from services.jobs.engine import on_workers, open_engine
+    from services.population.families import read
+
+    spec = read(population)
+    if find_spec("stable_baselines3") is None:
+        raise UsageError("tsf library grow", "train", "needs the train extra: pip install -e '.[train]'")
+    stop = stop_on_signals()
+
+    @contextmanager
+    def engine(stage: str):  # noqa: ANN202 - a context manager of a Runner
+        journal = out / f"{stage}.journal"
+        with open_engine(bus, f"grow-{stage}", journal, workers, ray, stop, job_timeout=7200.0) as opened:
+            yield on_workers(opened)
+
+    summary = Grow(spec, out, engine, console.print, max(workers, 1)).run()
+    console.print((out / "summary.md").read_text())
+    console.print(
+        f"the grown library: TSF_LIBRARY={(out / 'library').resolve()} ({len(summary['members'])} members)"
+    )
 
 
 @commands.command("keys")

@@ -38,7 +38,7 @@ from services.agent.policy import (
     rule_head_probs,
     stalled,
 )
-from services.agent.scripted import MirrorShooter, good_shot, good_shot_batch
+from services.agent.scripted import CircleBait, MirrorShooter, good_shot, good_shot_batch
 from services.sim import observation as ob
 from shared.game import N_ACTIONS, N_FIRE, N_THRUST, N_TURN, GameConfig, Policy, join_action
 
@@ -238,12 +238,18 @@ class JointPolicy:
         return draw(self.rng, self.probs(obs))
 
 
-class MirrorVariant(MirrorShooter):
-    """A rule-based library shooter: the mirror shooter with its own placement distance."""
+RULE_FAMILIES = {"mirror": MirrorShooter, "circle": CircleBait}  # a rule-based entry's family: its rule
 
-    def __init__(self, recipe: Recipe) -> None:
-        super().__init__(**recipe.rule)
-        self.key, self.role, self.view = recipe.key, recipe.role, "world"
+
+def rule_variant(recipe: Recipe) -> RulePolicy:
+    """A rule-based library policy: its family's scripted rule with the entry's `rule` settings
+    (S4-S7: the mirror shooter with their own placement distances)."""
+    if recipe.family not in RULE_FAMILIES:
+        families = list(RULE_FAMILIES)
+        raise ValueError(f"registry entry {recipe.key}: no rule for family {recipe.family!r}; {families}")
+    policy = RULE_FAMILIES[recipe.family](**recipe.rule)
+    policy.key, policy.role = recipe.key, recipe.role
+    return policy
 
 
 def load(key: str, config: GameConfig | None = None, root: Path | None = None) -> Policy:
@@ -253,7 +259,7 @@ def load(key: str, config: GameConfig | None = None, root: Path | None = None) -
         raise KeyError(f"unknown library policy {key!r}; expected one of {list(recipes)}")
     recipe = recipes[key]
     if recipe.algorithm is None and recipe.family not in (OUTSIDE, PROXY_FAMILY):
-        return MirrorVariant(recipe)
+        return rule_variant(recipe)
     entry = manifest(recipe.root).get(key)
     path = recipe.root / entry["file"] if entry else None
     if path is None or not path.exists():

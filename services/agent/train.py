@@ -116,34 +116,70 @@ def shooter_position_reward(
     return weights["kill"] * batch.event_counts("kill") + placed + weights.get("aim", 0.0) * aimed
 
 
+# The terms of the "events" reward, each per lane and frame for the learner's seat: a partner of the
+# population is trained on a random weighting of them (services/population/families.py), as HSP
+# trains its biased partners on random event weights, so that its style is its own, not the
+# library's.
+EVENT_TERMS: dict[str, Callable[[BatchGame, int], np.ndarray]] = {
+    "kill": lambda b, seat: b.event_counts("kill"),  # team kills
+    "death": lambda b, seat: b.event_counts("death", seat),  # this ship's deaths
+    "region": lambda b, seat: b.state.in_region[:, seat],  # frames inside the activation region
+    "distance": lambda b, seat: np.hypot(b.state.x[:, seat], b.state.y[:, seat]) / b.config.region_radius,
+    "facing": facing,  # heading toward the fortress: aggression
+    "speed": lambda b, seat: np.hypot(b.state.vx[:, seat], b.state.vy[:, seat]) / b.config.ship_max_speed,
+    "shots": lambda b, seat: b.event_counts("missile", seat),  # missiles fired
+    "shells": lambda b, seat: b.event_counts("shell", seat),  # shells the fortress fired at this ship
+    "partner": lambda b, seat: (
+        np.hypot(b.state.x[:, 0] - b.state.x[:, 1], b.state.y[:, 0] - b.state.y[:, 1])
+        / b.config.region_radius
+    ),  # distance kept from the partner
+}
+
+
+def events_reward(batch: BatchGame, seat: int, before: np.ndarray, weights: dict[str, float]) -> np.ndarray:
+    """The weighted sum of EVENT_TERMS (a term without a weight counts 0; a negative weight is a
+    cost), while this ship lives."""
+    total = np.zeros(batch.n)
+    for name, weight in weights.items():
+        total += weight * EVENT_TERMS[name](batch, seat)
+    return total
+
+
 REWARDS: dict[str, Callable[[BatchGame, int, np.ndarray, dict[str, float]], np.ndarray]] = {
     "drawing-fire": drawing_fire_reward,
     "border-bearing-death": border_bearing_death_reward,
     "shooter-position": shooter_position_reward,
+    "events": events_reward,
 }
 
 # --- the env a recipe trains in ------------------------------------------------------------------
 
 
 def recipe_partner(name: str, recipe: Recipe, config: GameConfig, root: Path):  # noqa: ANN201
-    """One of a recipe's partners by name: a library key plays as the library plays it; a
-    calibrated human-like stand-in (`human(B5,skill=novice)`, adapter/partners.py) plays in its
-    batched form (adapter/partners.py), stateful per lane. Anything else is a UsageError."""
+    """One of a recipe's partners by name: a key of the library at `root` plays as that library
+    plays it; any other policy the partner grammar names (a key of the libraries in use, a rule
+    with its settings: `mirror(placed_distance=30)`) plays as itself, in batch; a calibrated
+    human-like stand-in (`human(B5,skill=novice)`, adapter/partners.py) plays in its batched form,
+    stateful per lane. Anything else (a wrapper, a plug-in) is a UsageError."""
     if name in library.registry(root):
         return networks.load(name, config, root)
-
     partner = make_partner(name, other(recipe.role))
-    if not isinstance(partner, HumanLike):
-        raise UsageError(f"{recipe.key}.partners", name, "a recipe's partner is a library key or human(...)")
-    return HumanLanes(partner)
+    if isinstance(partner, HumanLike):
+        return HumanLanes(partner)
+    if not hasattr(partner, "probs_batch"):
+        problem = "a recipe's partner is a library key, a rule, or human(...)"
+        raise UsageError(f"{recipe.key}.partners", name, problem)
+    return partner
 
 
 def curve_partner(recipe: Recipe, root: Path) -> Policy:
-    """The partner of a recipe's curve and score: its first library partner."""
-    keys = [name for name in recipe.partners if name in library.registry(root)]
-    if not keys:
-        raise UsageError(f"{recipe.key}.partners", ", ".join(recipe.partners), "name no library policy")
-    return networks.load(keys[0], root=root)
+    """The partner of a recipe's curve and score: its first partner that is a policy (not a
+    stand-in)."""
+    for name in recipe.partners:
+        partner = recipe_partner(name, recipe, GameConfig(), root)
+        if not isinstance(partner, HumanLanes):
+            return partner
+    raise UsageError(f"{recipe.key}.partners", ", ".join(recipe.partners), "name no policy")
 
 
 class RecipeVecEnv(VecEnv):

@@ -142,3 +142,38 @@ def test_the_shooter_is_paid_for_aiming_at_the_fortress_while_it_is_up() -> None
     study = shooter_position_reward(batch, 1, s.points, {"kill": 10.0})
     paid = shooter_position_reward(batch, 1, s.points, {"kill": 10.0, "aim": 2.0}) - study
     np.testing.assert_allclose(paid, [2.0, 2.0 * np.cos(np.radians(20.0)) ** 16, 0.0, 0.0])
+
+
+def test_the_events_reward_weighs_each_term_and_leaves_the_others_out() -> None:
+    """The population's events partners are trained on random weightings of EVENT_TERMS."""
+    from services.agent.train import events_reward
+    from services.sim.batch import BatchGame
+
+    batch = BatchGame(3, seeds=list(range(3)))
+    s = batch.state
+    s.x[:, 0], s.y[:, 0] = [100.0, 300.0, 0.0], 0.0
+    s.in_region[:, 0] = [True, False, True]
+    reward = events_reward(batch, 0, s.points, {"region": 1.0, "distance": -0.5})
+    np.testing.assert_allclose(reward, [1.0 - 0.25, -0.75, 1.0])
+    assert (events_reward(batch, 0, s.points, {}) == 0.0).all()
+
+
+def test_a_recipe_trains_with_any_policy_the_grammar_names(tmp_path):
+    """A rule with its settings and a key of the libraries in use are partners as a library key
+    is (what a best response to a population group trains with); a circle rule is a library entry."""
+    from dataclasses import replace
+
+    from services.agent.scripted import CircleBait
+    from services.agent.train import RecipeVecEnv
+
+    root = tmp_path / "library"
+    prepare(root)
+    recipe = library.registry(root)["B5"]
+    env = RecipeVecEnv(replace(recipe, partners=("mirror(placed_distance=30,max_speed=4)", "S4")), 2, root=root)
+    rule = env.env.partners[0]
+    assert rule.key == "mirror(placed_distance=30,max_speed=4)" and rule.placed_distance == 30.0
+    with open(root / "registry.toml", "a") as f:
+        f.write('\n[GB9]\nrole = "bait"\nfamily = "circle"\ndescription = "x"\nrule = { radius = 150.0 }\n')
+    library._registry.cache_clear()
+    circle = networks.load("GB9", root=root)
+    assert isinstance(circle, CircleBait) and circle.radius == 150.0 and circle.key == "GB9"

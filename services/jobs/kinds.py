@@ -27,6 +27,8 @@ RUNNERS = {
     "session": "services.adapter.team:run_session_jobs",
     "identify": "services.adapter.identification:run_identify_jobs",
     "calibrate": "services.adapter.thresholds:run_calibrate_jobs",
+    "pairs": "services.growth.crossplay:run_pair_jobs",
+    "train": "services.growth.training:run_train_jobs",
 }
 
 

@@ -1,0 +1,148 @@
+"""What a library leaves room for, and the library that leaves the most: pure functions over a
+cross-play grid (partners x candidate teammates x seeds, kills/min).
+
+- `headroom`: the held-out oracle headroom. Each partner's best library member is chosen on its
+  other seeds (its seeds alternate between two halves, each scored by the other's choice, as
+  team.known_partner does for the evaluation), and compared with the best single member (chosen
+  on all the games, which favours it). What a teammate that knew its partner could gain by
+  choosing: the most an adapter over that library can gain.
+- `groups`: partners grouped by what works with them (k-means over their rows, each row scaled by
+  its best value: the shape of what works, not how well), with the fewest groups whose regret (a
+  member's best candidate against its group's best) is within the spec's bound.
+- `select`: the greedy coverage selection (as HSP keeps its partners, and BRDiv looks for partners
+  whose best responses differ): start from the best single candidate, add the candidate that
+  raises the headroom most, until the next adds less than `gain` (relative) or the library is full.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Grid:
+    """Kills/min of `partners` (rows) with `candidates` (columns) over seeds: (P, C, S)."""
+
+    partners: tuple[str, ...]
+    candidates: tuple[str, ...]
+    kills: np.ndarray
+
+    def columns(self, names: list[str]) -> np.ndarray:
+        return self.kills[:, [self.candidates.index(n) for n in names]]
+
+
+def oracle(kills: np.ndarray) -> float:
+    """Mean kills/min when each partner plays with the column best on its other half of seeds
+    (even seeds choose for the odd ones and the other way round); kills: (P, C, S)."""
+    halves = [kills[:, :, 0::2], kills[:, :, 1::2]]
+    total = 0.0
+    for scored, chooser in ((halves[0], halves[1]), (halves[1], halves[0])):
+        choice = chooser.mean(axis=2).argmax(axis=1)
+        total += scored[np.arange(len(kills)), choice].sum()
+    return total / (kills.shape[0] * kills.shape[2])
+
+
+def best_single(kills: np.ndarray) -> tuple[int, float]:
+    """The column with the best mean over all partners and seeds, and that mean."""
+    means = kills.mean(axis=(0, 2))
+    return int(means.argmax()), float(means.max())
+
+
+def headroom(kills: np.ndarray) -> float:
+    """The held-out oracle headroom, relative to the best single column (0.25: +25 %)."""
+    _, single = best_single(kills)
+    return (oracle(kills) - single) / single if single > 0 else 0.0
+
+
+def select(grid: Grid, most: int, gain: float) -> list[dict]:
+    """The greedy selection's steps: each the library so far, its best single member's mean, its
+    held-out oracle and headroom."""
+    first, _ = best_single(grid.kills)
+    chosen = [first]
+    steps = [_step(grid, chosen)]
+    while len(chosen) < min(most, len(grid.candidates)):
+        rest = [c for c in range(len(grid.candidates)) if c not in chosen]
+        scores = [headroom(grid.kills[:, [*chosen, c]]) for c in rest]
+        best = int(np.argmax(scores))
+        if scores[best] - steps[-1]["headroom"] < gain:
+            break
+        chosen.append(rest[best])
+        steps.append(_step(grid, chosen))
+    return steps
+
+
+def _step(grid: Grid, chosen: list[int]) -> dict:
+    kills = grid.kills[:, chosen]
+    single, mean = best_single(kills)
+    return {
+        "library": [grid.candidates[c] for c in chosen],
+        "best_single": grid.candidates[chosen[single]],
+        "best_single_mean": round(mean, 4),
+        "oracle": round(oracle(kills), 4),
+        "headroom": round(headroom(kills), 4),
+    }
+
+
+def kmeans(rows: np.ndarray, k: int, seed: int, tries: int = 10, rounds: int = 100) -> np.ndarray:
+    """Each row's cluster of k (Lloyd's algorithm, k-means++ starts, the best of `tries`)."""
+    rng = np.random.default_rng(seed)
+    best, best_cost = np.zeros(len(rows), np.int64), np.inf
+    for _ in range(tries):
+        centres = [rows[rng.integers(len(rows))]]
+        for _ in range(1, k):
+            d = np.min([((rows - c) ** 2).sum(axis=1) for c in centres], axis=0)
+            centres.append(
+                rows[rng.choice(len(rows), p=d / d.sum())] if d.sum() > 0 else rows[rng.integers(len(rows))]
+            )
+        centres = np.array(centres)
+        for _ in range(rounds):
+            label = ((rows[:, None, :] - centres[None]) ** 2).sum(axis=2).argmin(axis=1)
+            moved = np.array(
+                [rows[label == j].mean(axis=0) if (label == j).any() else centres[j] for j in range(k)]
+            )
+            if np.allclose(moved, centres):
+                break
+            centres = moved
+        cost = ((rows - centres[label]) ** 2).sum()
+        if cost < best_cost:
+            best, best_cost = label, cost
+    return best
+
+
+def shape(means: np.ndarray) -> np.ndarray:
+    """Each row (a partner's mean kills/min with each candidate) scaled by its best value: what works
+    with the partner, whatever its level."""
+    top = means.max(axis=1, keepdims=True)
+    return means / np.where(top > 0, top, 1.0)
+
+
+def regret(means: np.ndarray, label: np.ndarray) -> float:
+    """How much the partners lose, relative to their own best candidate's mean, when each plays its
+    group's best candidate."""
+    own = means.max(axis=1)
+    lost = 0.0
+    for j in np.unique(label):
+        rows = means[label == j]
+        lost += (rows.max(axis=1) - rows[:, rows.mean(axis=0).argmax()]).sum()
+    return float(lost / own.sum()) if own.sum() > 0 else 0.0
+
+
+def groups(grid: Grid, most: int, bound: float, seed: int) -> tuple[np.ndarray, list[dict]]:
+    """Each partner's group, from the fewest groups (1..most) whose regret is within `bound`, and
+    the regret of each count tried."""
+    means = grid.kills.mean(axis=2)
+    rows, tried = shape(means), []
+    for k in range(1, min(most, len(rows)) + 1):
+        label = kmeans(rows, k, seed)
+        tried.append({"groups": k, "regret": round(regret(means, label), 4)})
+        if tried[-1]["regret"] <= bound:
+            break
+    return label, tried
+
+
+def nearest(rows: np.ndarray, members: np.ndarray, label: np.ndarray) -> np.ndarray:
+    """The group of each row: that of the nearest group centre (rows shaped as `shape` makes them)."""
+    centres = np.array([members[label == j].mean(axis=0) for j in range(label.max() + 1)])
+    return ((rows[:, None, :] - centres[None]) ** 2).sum(axis=2).argmin(axis=1)

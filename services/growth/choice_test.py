@@ -1,0 +1,59 @@
+import numpy as np
+import pytest
+
+from services.growth.choice import Grid, best_single, groups, headroom, kmeans, oracle, regret, select, shape
+
+
+def grid(kills: list[list[list[float]]], candidates: str = "abc") -> Grid:
+    kills = np.array(kills, float)
+    return Grid(tuple(f"p{i}" for i in range(len(kills))), tuple(candidates[: kills.shape[1]]), kills)
+
+
+def test_oracle_chooses_on_the_other_half():
+    # partner 0: a wins on even seeds, b on odd ones; each half is scored by the other's choice
+    kills = np.array([[[4, 0, 4, 0], [0, 4, 0, 4]]], float)
+    assert oracle(kills) == 0.0  # what each half chose is what the other half loses with
+    kills = np.array([[[4, 4, 4, 4], [0, 0, 0, 0]], [[0, 0, 0, 0], [2, 2, 2, 2]]], float)
+    assert oracle(kills) == 3.0
+    assert best_single(kills) == (0, 2.0)
+    assert headroom(kills) == pytest.approx(0.5)
+
+
+def test_a_single_column_leaves_no_room():
+    kills = np.random.default_rng(0).uniform(0, 9, (5, 1, 4))
+    assert headroom(kills) == pytest.approx(0.0)
+
+
+def test_selection_starts_from_the_best_single_and_adds_what_covers():
+    # a suits partners 0-1, b partners 2-3, c is a little worse than a everywhere: c adds nothing
+    rows = [[[6] * 4, [1] * 4, [5] * 4]] * 2 + [[[2] * 4, [8] * 4, [1] * 4]] * 2
+    steps = select(grid(rows), most=3, gain=0.01)
+    assert [s["library"] for s in steps] == [["b"], ["b", "a"]]
+    assert steps[0]["headroom"] == 0.0
+    assert steps[1]["headroom"] == pytest.approx((7 - 4.5) / 4.5, abs=1e-4)
+
+
+def test_selection_stops_at_its_size():
+    rows = [[[9 if j == i else 1] * 2 for j in range(4)] for i in range(4)]
+    assert len(select(grid(rows, "abcd"), most=2, gain=0.0)[-1]["library"]) == 2
+
+
+def test_groups_are_what_works_not_how_well():
+    # partners 0 and 1 want a (at very different levels), 2 and 3 want b
+    rows = [[[8] * 2, [1] * 2], [[2] * 2, [0.2] * 2], [[1] * 2, [6] * 2], [[0.1] * 2, [3] * 2]]
+    label, tried = groups(grid(rows), most=4, bound=0.01, seed=0)
+    assert label[0] == label[1] != label[2] == label[3]
+    assert [t["groups"] for t in tried] == [1, 2]
+    assert tried[-1]["regret"] == 0.0
+
+
+def test_regret_and_shape():
+    means = np.array([[4.0, 2.0], [1.0, 3.0]])
+    assert shape(means).max(axis=1).tolist() == [1.0, 1.0]
+    assert regret(means, np.array([0, 0])) == pytest.approx(2 / 7)
+    assert regret(means, np.array([0, 1])) == 0.0
+
+
+def test_kmeans_is_seeded():
+    rows = np.random.default_rng(1).normal(size=(30, 3))
+    assert (kmeans(rows, 3, seed=5) == kmeans(rows, 3, seed=5)).all()

@@ -1,0 +1,40 @@
+"""Training as jobs of the job system (kind `train`, the `train` extra): one recipe of a library
+directory trained to each of its levels in turn, each level kept as a policy of its own.
+
+`tsf train`'s machinery does the work (train.train): every level resumes the same run from its
+checkpoint (a run killed part way resumes too), the library gets the curve's best point so far, and
+the level's weights and manifest entry are copied under the level's key (`PB03` at its levels:
+`PB03a`, `PB03b`, ...). A best response has one level, its own key."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+from services.agent import library
+from services.agent.train import record_entry, train
+from services.jobs.core import Spec, spec
+
+
+def train_job(key: str, root: Path, levels: dict[str, int], runs: Path) -> Spec:
+    """A job that trains `key` of the library at `root` to each level (key -> steps, in order)."""
+    args = {"key": key, "library": str(root), "levels": levels, "runs": str(runs)}
+    return spec(f"train-{key}", "train", args, 1)
+
+
+def run_train_jobs(args: list[dict]) -> list[list]:
+    """Each job's last level's kills/min with its curve partner (on seeds no selection plays)."""
+    return [[train_levels(a["key"], Path(a["library"]), a["levels"], Path(a["runs"]))] for a in args]
+
+
+def train_levels(key: str, root: Path, levels: dict[str, int], runs: Path) -> float:
+    entry: dict = {}
+    for name, steps in levels.items():
+        entry = train(key, root, steps=steps, run_dir=runs, progress=False, every=max(steps // 4, 50_000))
+        if name != key:
+            path = root / "weights" / f"{name}.npz"
+            shutil.copyfile(root / entry["file"], path)
+            record_entry(
+                root, name, entry | {"file": str(path.relative_to(root)), "sha256": library.file_hash(path)}
+            )
+    return float(entry.get("score", {}).get("kills_per_minute", 0.0))

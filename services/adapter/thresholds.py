@@ -51,7 +51,9 @@ def calibrate(
     seeds = seeds or [0, 1]
     keys = {role: list(setup(role).payoff.ours) for role in ROLES}
     by_policy = [  # each library policy's games with every teammate and seed
-        [[k, mate, seed] for mate in keys[other(role)] for seed in seeds] for role in ROLES for k in keys[role]
+        [[k, mate, seed] for mate in keys[other(role)] for seed in seeds]
+        for role in ROLES
+        for k in keys[role]
     ]
     tasks = [game for games in by_policy for game in games]
     frames = GameConfig().frames

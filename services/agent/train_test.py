@@ -169,7 +169,8 @@ def test_a_recipe_trains_with_any_policy_the_grammar_names(tmp_path):
     root = tmp_path / "library"
     prepare(root)
     recipe = library.registry(root)["B5"]
-    env = RecipeVecEnv(replace(recipe, partners=("mirror(placed_distance=30,max_speed=4)", "S4")), 2, root=root)
+    partners = ("mirror(placed_distance=30,max_speed=4)", "S4")
+    env = RecipeVecEnv(replace(recipe, partners=partners), 2, root=root)
     rule = env.env.partners[0]
     assert rule.key == "mirror(placed_distance=30,max_speed=4)" and rule.placed_distance == 30.0
     with open(root / "registry.toml", "a") as f:

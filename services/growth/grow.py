@@ -196,7 +196,8 @@ class Grow:
                 recipe |= {
                     "role": ours,
                     "family": "response",
-                    "description": f"PPO best response to {role} group {j + 1} ({len(members)} members) and their stand-ins",
+                    "description": f"PPO best response to {role} group {j + 1} ({len(members)} members), "
+                    "with their stand-ins",
                     "algorithm": "PPO",
                     "seed": self.spec.seed + 1000 + 10 * ROLES.index(ours) + j,
                     "partners": [*members, *stand_ins],
@@ -227,9 +228,9 @@ class Grow:
                 grid = _rows(grid, [p for p in grid.partners if sides[p] == "validation"])
                 steps = choice.select(grid, int(self.spec.selection["most"]), self.spec.selection["gain"])
                 record[other(role)] = steps
-                self.say(
-                    f"selection for the {other(role)} seat: {len(steps[-1]['library'])} members, headroom {steps[-1]['headroom']:+.1%} on validation"
-                )
+                last = steps[-1]
+                size, room = len(last["library"]), last["headroom"]
+                self.say(f"selection, {other(role)} seat: {size} members, headroom {room:+.1%} on validation")
             _write(done, record)
         return json.loads(done.read_text())
 
@@ -554,12 +555,13 @@ def markdown(summary: dict) -> str:
         lines += [
             f"## The {ours} seat",
             "",
-            "| test partners | partners | headroom | best single (grown) | study's best single | study's headroom |",
+            "| test partners | n | headroom | grown: best single | study: best single | study: headroom |",
             "| --- | --- | --- | --- | --- | --- |",
         ]
         for label, f in seat["test"].items():
             lines.append(
-                f"| {label} | {f['partners']} | {f['headroom']:+.1%} | {f['best_single']} {f['best_single_mean']:.2f} | "
+                f"| {label} | {f['partners']} | {f['headroom']:+.1%} | "
+                f"{f['best_single']} {f['best_single_mean']:.2f} | "
                 f"{f['study_best_single']} {f['study_best_single_mean']:.2f} | {f['study_headroom']:+.1%} |"
             )
         lines += [

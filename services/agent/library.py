@@ -33,6 +33,9 @@ LIBRARY = Path(__file__).parent / "library"
 # Recipes trained into libraries of their own (`tsf train KEY --library DIR` adds the entry to DIR's
 # registry), not members of the shipped library, its table or the adapter's candidates.
 CANDIDATES = LIBRARY / "candidates.toml"
+# Libraries shipped beside the study's, by the name TSF_LIBRARY may give instead of a directory:
+# `grown` is the library grown for coverage by `tsf library grow` (docs/library.md, "The grown library").
+NAMED = {"grown": Path(__file__).parent / "grown"}
 OUTSIDE = "outside"  # the family of a policy added from outside (a network over all 12 actions)
 PROXY_FAMILY = "proxy"  # the family of a proxy added from recorded people (services/proxy)
 
@@ -80,9 +83,16 @@ class Recipe:
 
 
 def roots() -> list[Path]:
-    """The library directories: the shipped one, then those listed in TSF_LIBRARY."""
+    """The library directories: the shipped one, then those listed in TSF_LIBRARY: a directory, or
+    the name of a library shipped beside the study's (NAMED: `TSF_LIBRARY=grown`) where no directory
+    of that name is here."""
     extra = os.environ.get("TSF_LIBRARY", "")
-    return [LIBRARY, *(Path(p) for p in extra.split(os.pathsep) if p)]
+    return [LIBRARY, *(_named(p) for p in extra.split(os.pathsep) if p)]
+
+
+def _named(entry: str) -> Path:
+    path = Path(entry)
+    return NAMED[entry] if entry in NAMED and not path.is_dir() else path
 
 
 def table_path() -> Path:

@@ -31,10 +31,12 @@ import os
 import shutil
 import subprocess
 import sys
+import time
 from collections.abc import Callable
 from contextlib import AbstractContextManager
 from dataclasses import asdict
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -45,6 +47,9 @@ from services.growth.crossplay import pair_jobs
 from services.growth.training import train_job
 from services.jobs.kinds import Runner
 from services.population.families import Member, Spec
+from services.table.plot import heatmap
+from services.table.sweep import cell_spec
+from services.table.table import CHUNK, Table, assemble, jobs
 from shared.errors import UsageError
 from shared.game import ROLES, other
 
@@ -68,18 +73,28 @@ class Grow:
 
     def run(self) -> dict:
         self._bind()
-        members = self.population()
-        grouping = self.crossplay(
-            "grouping", {r: self._side(members[r], "train", stand_ins=False) for r in ROLES}
-        )
-        groups = self.groups(grouping)
-        self.responses(groups)
-        held_out = self.crossplay(
-            "held-out",
-            {r: self._side(members[r], "validation") + self._side(members[r], "test") for r in ROLES},
-        )
-        selection = self.selection(held_out)
-        return self.library(selection, held_out, groups, grouping)
+        members = self._timed("population", self.population)
+        train = {r: self._side(members[r], "train", stand_ins=False) for r in ROLES}
+        grouping = self._timed("grouping", self.crossplay, "grouping", train)
+        groups = self._timed("groups", self.groups, grouping)
+        self._timed("responses", self.responses, groups)
+        held = {r: self._side(members[r], "validation") + self._side(members[r], "test") for r in ROLES}
+        held_out = self._timed("held-out", self.crossplay, "held-out", held)
+        selection = self._timed("selection", self.selection, held_out)
+        return self._timed("library", self.library, selection, held_out, groups, grouping)
+
+    def _timed(self, stage: str, work: Callable, *args: object) -> Any:  # noqa: ANN401 - the stage's
+        """A stage's result; the wall seconds of a stage that ran (not one read back) go to
+        timing.json, where a run's sessions add up."""
+        started = time.monotonic()
+        result = work(*args)
+        seconds = time.monotonic() - started
+        if seconds > 1.0:
+            path = self.out / "timing.json"
+            timing = json.loads(path.read_text()) if path.exists() else {}
+            timing[stage] = round(timing.get(stage, 0.0) + seconds, 1)
+            _write(path, timing)
+        return result
 
     # --- the stages ----------------------------------------------------------------------------
 
@@ -340,10 +355,6 @@ class Grow:
     def _tables(self) -> None:
         """The grown library's self-play table P and the adapter's calibration, measured with the
         grown library alone in use (what a table is bound to), and P's heatmap."""
-        from services.table.plot import heatmap
-        from services.table.sweep import cell_spec
-        from services.table.table import CHUNK, Table, assemble, jobs
-
         with self._roots([self.library_dir]):
             baits, shooters = library.keys("bait"), library.keys("shooter")
             baits, shooters = (
@@ -368,6 +379,7 @@ class Grow:
         command += ["--out", str(self.library_dir / "calibration.json")]
         env = os.environ | {"TSF_LIBRARY": str(self.library_dir.resolve())}
         subprocess.run(command, env=env, check=True, stdout=subprocess.DEVNULL)
+        (self.library_dir / "calibration.json.journal").unlink(missing_ok=True)  # done: not the library's
 
     def _group_table(
         self, ours: str, chosen: list[str], grid: Grid, groups: dict, grouping: dict[str, Grid]

@@ -19,13 +19,13 @@ import time
 
 import numpy as np
 
-from services.adapter.core import STRATEGIES, AdapterConfig
-from services.adapter.evaluate import play_games
 from services.adapter.service import build, run_adapter
+from services.evaluation.evaluate import play_games
+from services.population.adaptive import STRATEGIES, AdapterConfig
 from services.runtime.launch import service_command
-from services.runtime.processes import Processes
 from shared.bus import BusConfig, free_endpoint
 from shared.game import FPS
+from shared.processes import Processes
 
 WINDOW = 800
 

@@ -18,7 +18,8 @@ import time
 
 from proc import cpu_seconds, rss_kib
 
-from services.adapter.core import AdapterConfig
+from services.adapter.core import initial_policy
+from services.population.adaptive import AdapterConfig
 from services.runtime.launch import match_buses, service_command
 from services.sim.engine import Game
 from services.sim.match import state_message, summary_message
@@ -67,7 +68,7 @@ def main() -> None:
 
             counted = z.declare_subscriber("tsf/*/action/*", count)
             adaptive = {"adapter": config.name, "adaptive": "shooter"} if args.adaptive else {}
-            shooter = config.initial_policy() if args.adaptive else "S5"
+            shooter = initial_policy(config) if args.adaptive else "S5"
             for i, match in enumerate(matches):
                 order = MatchOrder(
                     match=match, frame=0, sender="bench", seed=i, frames=frames, bait="B3", shooter=shooter,

@@ -21,7 +21,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from services.adapter.evaluation import EvalPlan, evaluate
+from services.evaluation.evaluation import KINDS, EvalPlan, evaluate
 from services.jobs.engine import on_workers, open_engine
 from shared.bus import BusConfig
 
@@ -29,7 +29,7 @@ from shared.bus import BusConfig
 def seconds(plan: EvalPlan, workers: int, out: Path) -> float:
     """Seconds of one evaluation and its report (a fresh output: no journal to resume)."""
     start = time.perf_counter()
-    with open_engine(BusConfig(), "eval", out / "eval.journal", workers) as engine:
+    with open_engine(BusConfig(), "eval", out / "eval.journal", KINDS, workers) as engine:
         evaluate(plan, on_workers(engine)).write(out)
     return time.perf_counter() - start
 

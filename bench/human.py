@@ -38,10 +38,10 @@ from urllib.parse import parse_qs, urlsplit
 
 import websockets
 
-from services.adapter.seat import SeatSpec
 from services.agent.seats import policy_for
 from services.human.core import action_keys
 from services.human.play import play_with_people
+from services.population.seat import SeatSpec
 from services.recorder.recording import load
 from services.runtime.launch import MatchPlan
 from services.sim.observation import as_observation

@@ -20,10 +20,10 @@ import time
 
 import numpy as np
 
-from services.adapter.evaluate import play_teams
-from services.adapter.human_like import SKILLS
-from services.adapter.humans import STUDY_PAIRS, calibration
 from services.agent import library
+from services.evaluation.evaluate import play_teams
+from services.population.human_like import SKILLS
+from services.proxy.humans import STUDY_PAIRS, calibration
 from services.table.table import Table
 from shared.game import GameConfig
 

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from proc import rss_kib
 
-from services.adapter.seat import KEY, SeatSpec
+from services.population.seat import KEY, SeatSpec
 from services.runtime.launch import MatchPlan
 from services.runtime.pool import Pool
 from shared.errors import Failure

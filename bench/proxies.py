@@ -11,7 +11,7 @@ gateway); a proxy is trained on them (`tsf proxy train`'s core, split by partici
     actions over games with S5, and the share of 400-frame windows identified as Bk (the same for
     the generator human(Bk), for reference);
 (c) team performance: kills per minute of the proxy and of human(Bk) with each of S4-S7, mean and
-    standard error over seeded games (the batched evaluation of services/adapter/evaluate.py).
+    standard error over seeded games (the batched evaluation of services/evaluation/evaluate.py).
 
     .venv/bin/python bench/proxies.py [--sources B1 B5 B8] [--participants 3] [--trials 3]
         [--games 8] [--history 0] [--out bench-proxies]
@@ -29,10 +29,10 @@ from pathlib import Path
 import numpy as np
 
 from services.adapter.cem import log_probs, rollout
-from services.adapter.evaluate import play_games
-from services.adapter.identification import windowed
-from services.adapter.partners import make_partner
 from services.agent import library, networks, seats
+from services.evaluation.evaluate import play_games
+from services.evaluation.identification import windowed
+from services.population.partners import make_partner
 from services.proxy.data import extract
 from services.proxy.synthetic import record_trial, trial_seed
 from services.proxy.train import Settings, train

@@ -23,7 +23,7 @@ from services.jobs.core import spec
 from services.jobs.engine import open_engine
 from services.jobs.kinds import in_process
 from services.table.sweep import cell_spec, run_sweep
-from services.table.table import LANES, jobs, run_jobs
+from services.table.table import KINDS, LANES, jobs, run_jobs
 from shared.bus import BusConfig, free_endpoint
 
 
@@ -70,9 +70,10 @@ def per_job(engine: str, out: Path, n: int = 40) -> tuple[float, float]:
     """Seconds per job of n one-game jobs on one worker of `engine` and in-process (the worker
     warm, its imports and caches loaded by a first run): the difference is the engine's overhead."""
     todo = [cell_spec(job) for job in jobs(["B4", "B7"], ["S4", "S5"], n // 4, 1)]
-    in_process(todo[:4])
+    here = in_process(KINDS)
+    here(todo[:4])
     start = time.perf_counter()
-    in_process(todo)
+    here(todo)
     alone = time.perf_counter() - start
     endpoint = free_endpoint()
     bus = BusConfig("peer", (endpoint,), ())
@@ -80,7 +81,9 @@ def per_job(engine: str, out: Path, n: int = 40) -> tuple[float, float]:
         ray = stack.enter_context(ray_cluster(1)) if engine == "ray" else None
         if ray is None:
             stack.enter_context(local_workers("overhead", (endpoint,), 1))
-        engine_run = stack.enter_context(open_engine(bus, "overhead", out / f"{engine}.journal", 0, ray))
+        engine_run = stack.enter_context(
+            open_engine(bus, "overhead", out / f"{engine}.journal", KINDS, 0, ray)
+        )
         warm = [spec("warm", "table", {"bait": "B1", "shooter": "S1", "seeds": [0]}, 1)]
         engine_run.run(warm)
         start = time.perf_counter()

@@ -33,7 +33,8 @@ def steps_per_second(algorithm: str, lanes: int, steps: int) -> float:
     import torch as th
 
     from services.agent import library
-    from services.agent.train import ALGORITHMS, NET, RecipeVecEnv
+    from services.training.algorithms import ALGORITHMS, NET
+    from services.training.env import RecipeVecEnv
 
     th.set_num_threads(1)
     key, settings, partners = SETTINGS[algorithm]

@@ -1,5 +1,5 @@
 """Team Space Fortress services. Importing the package registers the Gymnasium id `tsf/Role-v0`
-(services/envs.py).
+(services/agent/envs.py).
 
 numpy's BLAS runs one thread per process unless OPENBLAS_NUM_THREADS says otherwise: bulk play
 (sweeps, `tsf eval`, the vectorised env) runs one process per core, and BLAS threads that spin
@@ -11,6 +11,6 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from services.envs import register as _register  # noqa: E402 - after the BLAS setting
+from services.agent.envs import register as _register  # noqa: E402 - after the BLAS setting
 
 _register()

@@ -14,9 +14,9 @@ from collections.abc import Sequence
 
 import typer
 
-from services import provenance
-from services.runtime.processes import adopt
+from shared import provenance
 from shared.errors import Failure, UsageError
+from shared.processes import adopt
 
 DEBUG_HINT = "(--debug or TSF_DEBUG=1 shows the traceback)"
 
@@ -28,7 +28,7 @@ def start() -> None:
     """What a `tsf` process does first. SIGINT, SIGTERM and SIGHUP interrupt a command alike, so
     that it ends through its `finally` blocks (a pool is terminated, files are closed) with one
     line and exit status 1; a command that stops gracefully installs its own (stop_on_signals). A
-    process a launcher started dies with it (services/runtime/processes.py)."""
+    process a launcher started dies with it (shared/processes.py)."""
 
     def interrupt(sig: int, frame: object) -> None:
         _interrupted.append(signal.Signals(sig).name)

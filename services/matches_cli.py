@@ -81,7 +81,7 @@ def match_command(
 ) -> None:
     """Start a complete match on this machine: sim, two agents and the recorder as processes (and
     with --adaptive, the adapter, set by the adapter options)."""
-    from services.adapter.seat import SeatSpec
+    from services.population.seat import SeatSpec
     from services.recorder.export import export
     from services.recorder.recording import load
     from services.runtime.launch import MatchPlan, new_match_id, run_match
@@ -154,8 +154,8 @@ def play_command(
     adapter: AdapterFactory,
 ) -> None:
     """Play a match from a browser, with an agent or another person; prints the link(s) to open."""
-    from services.adapter.seat import PERSON, SeatSpec, check_live
     from services.human.play import play_with_people
+    from services.population.seat import PERSON, SeatSpec, check_live
     from services.runtime.launch import MatchPlan, new_match_id
 
     if role not in ROLES:
@@ -241,6 +241,7 @@ def study(
 ) -> None:
     """Serve a study: participants open the link, consent, get a role and play every agent variant.
     With --listen or --connect, match hosts on other machines add capacity beyond --max-matches."""
+    from services.adapter import core
     from services.human.gateway import Web
     from services.study.core import StudyConfig
     from services.study.crowd import BONUSES
@@ -270,7 +271,7 @@ def study(
     for variant in protocol.variants:  # adaptive agents' thresholds: refused now, not at a trial
         for role in protocol.roles:
             if (adapter := variant.adaptive(other(role), protocol.seed)) is not None:
-                adapter.threshold()
+                core.threshold(adapter)
     directory = out / protocol.name
 
     def show(gateway) -> None:  # noqa: ANN001 - a Gateway

@@ -20,7 +20,7 @@ from typing import Annotated, Any, Literal
 import typer
 from rich.console import Console
 
-from services.adapter.core import STRATEGIES, AdapterConfig
+from services.population.adaptive import STRATEGIES, AdapterConfig
 from shared import keys
 from shared.bus import BusConfig
 from shared.errors import UsageError

@@ -9,7 +9,7 @@ from typing import Annotated
 
 import typer
 
-from services.adapter.seat import SeatSpec
+from services.adapter import core
 from services.options import (
     PRIORITY,
     SECONDS,
@@ -34,6 +34,7 @@ from services.options import (
     number,
     output,
 )
+from services.population.seat import SeatSpec
 from shared import keys
 from shared.bus import BusConfig, stop_on_signals
 from shared.errors import UsageError
@@ -108,7 +109,8 @@ def agent(
     if role is None or not policy:
         raise UsageError("--role" if role is None else "--policy", "(none)", "needed with --match")
     adaptive = SeatSpec.parse(policy, "--policy").adaptive(role, seed)
-    run_agent(bus, match, role, adaptive.initial_policy() if adaptive else policy, seed, stop_on_signals())
+    start = core.initial_policy(adaptive) if adaptive else policy
+    run_agent(bus, match, role, start, seed, stop_on_signals())
 
 
 @commands.command()
@@ -183,7 +185,7 @@ def router(
     ),
 ) -> None:
     """Run a zenoh router (a Python session in router mode) for matches across machines."""
-    from services.router import run_router
+    from shared.router import run_router
 
     endpoints = tuple(listen or ("tcp/0.0.0.0:7447",))
     run_router(endpoints, credentials, stop_on_signals())

@@ -44,7 +44,7 @@ class BusConfig:
     connect: tuple[str, ...] = ()
     multicast: bool = False
     low_latency: bool = False  # zenoh's low-latency unicast transport (no QoS); every peer must agree
-    user: str = ""  # credentials for a secured router (services/router.py); empty: none
+    user: str = ""  # credentials for a secured router (shared/router.py); empty: none
     password: str = ""
     wait_router: float = 10.0  # seconds a client keeps trying to reach its router at start
 

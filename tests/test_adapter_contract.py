@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 import zenoh
 
-from services.adapter.core import AdapterConfig, Scorer
+from services.adapter.core import Scorer
 from services.adapter.service import run_adapter
 from services.agent import library, networks
 from services.agent.service import run_agent
+from services.population.adaptive import AdapterConfig
 from services.sim.engine import Game
 from services.sim.match import state_message
 from services.sim.observation import observe

@@ -9,10 +9,11 @@ from collections import Counter
 import pytest
 import zenoh
 
-from services.adapter.core import AdapterConfig
+from services.adapter.core import initial_policy
 from services.adapter.service import run_adapter_pool
 from services.agent.seats import policy_for
 from services.agent.service import run_agent_pool
+from services.population.adaptive import AdapterConfig
 from services.sim.engine import Game
 from services.sim.match import state_message, summary_message
 from services.sim.observation import observe
@@ -186,7 +187,7 @@ def test_the_adapter_pool_switches_an_ordered_match_as_the_single_adapter_does(
     assert wait_until(lambda: pool_alive(z, "adapter") and pool_alive(z, "agent"), timeout=10)
     config = AdapterConfig("shooter", window=100, strategy="cem", seed=7)
     ordered = order(
-        "adapted", 7, bait="B3", shooter=config.initial_policy(), adapter=config.name, adaptive="shooter"
+        "adapted", 7, bait="B3", shooter=initial_policy(config), adapter=config.name, adaptive="shooter"
     )
     for made in (ordered, order("plain", 7, bait="B3", shooter="S5")):
         z.put(keys.pool_order(POOL), made.encode(), **BLOCK)
@@ -214,7 +215,7 @@ def test_pool_processes_leave_on_sigterm_with_their_matches_tokens(bus, tap, spa
     processes = [spawn(service, bus.config(), "--pool", POOL) for service in ("agent", "adapter")]
     assert wait_until(lambda: pool_alive(z, "agent") and pool_alive(z, "adapter"), timeout=30)
     made = order(
-        "open", 1, bait="B3", shooter=config.initial_policy(), adapter=config.name, adaptive="shooter"
+        "open", 1, bait="B3", shooter=initial_policy(config), adapter=config.name, adaptive="shooter"
     )
     z.put(keys.pool_order(POOL), made.encode(), **BLOCK)
     assert wait_until(

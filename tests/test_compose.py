@@ -28,7 +28,8 @@ from pathlib import Path
 import pytest
 from conftest import wait_in_page
 
-from services.adapter.core import AdapterConfig
+from services.adapter.core import initial_policy
+from services.population.adaptive import AdapterConfig
 from services.recorder.recording import load, replay
 from shared import keys
 from shared.bus import free_endpoint
@@ -221,7 +222,7 @@ def test_compose_up_plays_a_full_adaptive_match(inputs: dict[str, float], tmp_pa
     # plays what the adapter chose last.
     assert recording.switches and {s.sender for s in recording.switches} == {"adapter"}
     shooter = [a for _, a in recording.actions if a.role == "shooter"]
-    initial = AdapterConfig("shooter", 400).initial_policy()
+    initial = initial_policy(AdapterConfig("shooter", 400))
     assert shooter[0].policy == initial and shooter[-1].policy == recording.adapter[-1].policy
     assert recording.switches[-1].policy == recording.adapter[-1].policy
 

@@ -15,11 +15,12 @@ import pandas as pd
 import pytest
 from PIL import Image
 
-from services.adapter.core import STRATEGIES, AdapterConfig
-from services.plots import legibility
+from services.adapter.core import initial_policy
+from services.population.adaptive import STRATEGIES, AdapterConfig
 from services.report import figures
 from services.report.analysis import reference_partner
 from services.table.table import Table
+from shared.plots import legibility
 
 ROOT = Path(__file__).resolve().parent.parent
 PAGES = ["README.md", *sorted(str(p.relative_to(ROOT)) for p in (ROOT / "docs").glob("*.md"))]
@@ -115,7 +116,7 @@ def test_the_env_page_examples_run(block: int) -> None:
 
 
 def test_the_env_page_tables_are_the_envs() -> None:
-    from services import envs
+    from services.agent import envs, library
     from services.sim.env import TSFParallelEnv
     from shared.game import FPS, GameConfig
 
@@ -132,7 +133,7 @@ def test_the_env_page_tables_are_the_envs() -> None:
                           (config.points_shield_hit, "a shield hit")):  # fmt: skip
         assert re.search(rf"{event}[^|]*\| {re.escape(f'{points:+d}')} \|", text), event
     assert f"({config.frames:,} frames, {config.frames // FPS} s)" in text
-    partners = envs.DEFAULT_PARTNER
+    partners = library.DEFAULT_PARTNER
     assert f"`{partners['bait']}` for the bait seat, `{partners['shooter']}` for the shooter seat" in text
 
 
@@ -153,7 +154,7 @@ def test_the_pages_name_the_shipped_tables_best_responses(table: Table) -> None:
     shooter, bait = AdapterConfig(role="shooter"), AdapterConfig(role="bait")
     best_shooter = {b: table.best_shooter(b) for b in table.baits}
     best_bait = {s: table.best_bait(s) for s in table.shooters}
-    start = shooter.initial_policy()
+    start = initial_policy(shooter)
     claims = {
         "README.md": [
             f"starts as {start} (the best average in the table)",
@@ -165,7 +166,7 @@ def test_the_pages_name_the_shipped_tables_best_responses(table: Table) -> None:
             f"(`{AdapterConfig().strategy}`, the default strategy",
         ],
         "docs/adapter.md": [
-            f"{start} for the shooter seat, {bait.initial_policy()} for the bait seat with the shipped table",
+            f"{start} for the shooter seat, {initial_policy(bait)} for the bait seat with the shipped table",
             f"falls back to the best static policy ({start} with the shipped table)",
         ],
         "docs/report.md": [

@@ -11,10 +11,10 @@ from concurrent.futures import Future, ThreadPoolExecutor
 import pytest
 from conftest import CHROMIUM, wait_in_page
 
-from services.adapter.seat import SeatSpec
 from services.human.core import SeatBook
 from services.human.gateway import Gateway, Web, seat_handler
 from services.human.play import play_with_people, seat_links
+from services.population.seat import SeatSpec
 from services.recorder.recording import load
 from services.recorder.replay import republish
 from services.runtime.launch import MatchPlan, run_match

@@ -16,11 +16,11 @@ from urllib.parse import parse_qs, urlsplit
 import pytest
 import websockets
 
-from services.adapter.seat import SeatSpec
 from services.agent.service import run_agent
 from services.human.core import SeatBook
 from services.human.gateway import REFUSED, Gateway, Web, seat_handler
 from services.human.play import play_with_people
+from services.population.seat import SeatSpec
 from services.recorder.recording import load
 from services.runtime.launch import MatchPlan
 from services.sim.service import run_sim

@@ -10,7 +10,7 @@ import asyncio
 import pytest
 from conftest import STAND_IN_TOKEN
 
-from services.adapter.humans import fit, human_with
+from services.proxy.humans import fit, human_with
 from services.study.core import StudyConfig, Variant
 from services.study.runner import Serving
 from services.study.standin import stand_in

@@ -19,7 +19,7 @@ from services.jobs.engine import on_workers
 from shared.errors import Failure
 
 LAB = '''
-from services.adapter.partners_test import Constant
+from services.population.partners_test import Constant
 
 class Late(Constant):
     """Plays for 100 frames, then fails as `answer` says."""

@@ -15,7 +15,7 @@ import uuid
 
 import pytest
 
-from services.adapter import team
+from services.evaluation import identification, team
 from services.jobs.bus import Coordination
 from services.jobs.core import spec
 from services.jobs.engine import on_workers
@@ -48,12 +48,13 @@ def evaluate_both_ways(run) -> None:  # noqa: ANN001 - a Runner
     )
     games = [["noisy(B4)", "S5", 0, 3, -1], ["noisy(switch(B1,B5))", "S4", 0, -1, 4]]
     job = [spec("identify", "identify", {"role": "shooter", "windows": [150, 400], "games": games}, 2)]
-    assert run(job, None) == in_process(job)
+    assert run(job, None) == in_process(identification.KINDS)(job)
 
 
 def test_a_worker_without_the_plugin_gets_no_more_jobs(bus, spawn, tmp_path, monkeypatch, caplog, wait_until):
     (tmp_path / "lab_partners.py").write_text(
-        "from services.adapter.partners_test import Constant\n\nclass Alice(Constant):\n    key = 'alice'\n"
+        "from services.population.partners_test import Constant\n\n"
+        "class Alice(Constant):\n    key = 'alice'\n"
     )
     partners, sweep = ["lab_partners:Alice", "noisy(lab_partners:Alice)"], f"p{uuid.uuid4().hex[:8]}"
     spawn("worker", bus.config(), "--sweep", sweep, "--id", "without")
@@ -92,13 +93,14 @@ def test_a_job_that_breaks_the_contract_is_refused_at_once_not_left_to_time_out(
 
 @pytest.mark.parametrize("name", ["no_such_module:Alice"])
 def test_in_process_run_names_the_missing_plugin(name):
-    from services.jobs.kinds import import_plugins, plugins_in
+    from services.jobs.kinds import import_plugins
+    from services.population.seat import plugins_in
 
     assert plugins_in(
         [f"noisy({name})", "B1", "my.zip", "human(proxy:/study/proxies/p0)", "humans:/s@p0"]
     ) == (name,)
     assert import_plugins([name]).startswith(f"cannot import plug-in {name}: ModuleNotFoundError")
-    assert import_plugins(["services.adapter.partners_test:Constant"]) == ""
+    assert import_plugins(["services.population.partners_test:Constant"]) == ""
     assert sys.modules.get("no_such_module") is None
 
 

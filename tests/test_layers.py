@@ -40,18 +40,19 @@ LAZY_PACKAGES = {  # outside the command line, the packages an import inside a f
     "scipy": "statistics: slow to import, and only the evaluation's tests need it",
     "PIL": "video and GIF replays only",
     "imageio_ffmpeg": "video replays only",
-    "gymnasium": "gymnasium imports envs.py as its plug-in while it imports itself (a circle not ours)",
+    "gymnasium": "gymnasium imports agent/envs.py as its plug-in while it imports itself (a circle not ours)",
     "pettingzoo": "the multi-agent env only",
 }
 BULK = "bulk play only: numba loads with it"
-MADE_ENV = "`import services` loads envs.py: only a made env loads policies and the engine"
+MADE_ENV = "gymnasium loads agent/envs.py as its plug-in: only a made env loads policies and the engine"
 LAZY_MODULES = {  # (file, project module): an import inside a function outside the command line, and why
-    ("services/adapter/evaluate.py", "services.sim.batch"): BULK,
-    ("services/adapter/evaluate.py", "services.sim.batch_play"): BULK,
+    ("services/evaluation/evaluate.py", "services.sim.batch"): BULK,
+    ("services/evaluation/evaluate.py", "services.sim.batch_play"): BULK,
     ("services/table/table.py", "services.sim.batch_play"): BULK + " (the table's readers never load it)",
-    ("services/envs.py", "services.agent.seats"): MADE_ENV,
-    ("services/envs.py", "services.sim.env"): MADE_ENV,
-    ("services/envs.py", "services.sim.vec_env"): MADE_ENV,
+    ("services/agent/envs.py", "services.agent.library"): MADE_ENV,
+    ("services/agent/envs.py", "services.agent.seats"): MADE_ENV,
+    ("services/agent/envs.py", "services.sim.env"): MADE_ENV,
+    ("services/agent/envs.py", "services.sim.vec_env"): MADE_ENV,
     ("services/proxy/__init__.py", "services.proxy.train"): "the `train` extra (torch), one line if missing",
 }
 
@@ -126,6 +127,15 @@ def edges() -> dict[str, set[str]]:
 def test_every_file_is_on_a_layer():
     assert LAYERS[0] == COMMAND_LINE and len(LAYERS) == len(set(LAYERS)) >= 8
     assert [relative(p) for p in files() if layer_of(relative(p)) is None] == []
+
+
+def test_each_layer_is_folders_not_files():
+    """A row names folders (`services/adapter/*`) or a family of files (`services/*/cli.py`), never
+    one file: a file placed on another layer than its folder's is a folder that is not one layer."""
+    single = [
+        pattern for _, patterns in TABLE for pattern in patterns if not any(c in pattern for c in "*?[")
+    ]
+    assert single == []
 
 
 def test_no_file_imports_from_a_layer_above_its_own():
@@ -207,5 +217,5 @@ def test_the_checks_see_imports_inside_functions_and_circles(tmp_path):
     assert circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
     assert (
         layer_of("services/adapter/cli.py") == COMMAND_LINE
-        and layer_of("services/adapter/core.py") == "services"
+        and layer_of("services/adapter/core.py") == "adapter"
     )

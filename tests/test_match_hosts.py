@@ -24,7 +24,7 @@ import pytest
 import zenoh
 from conftest import STAND_IN_TOKEN, wait_until
 
-from services.adapter.seat import SeatSpec
+from services.population.seat import SeatSpec
 from services.recorder.recording import load
 from services.runtime.launch import MatchPlan
 from services.sim.engine import Counters

@@ -168,7 +168,7 @@ def ended(process: subprocess.Popen, sig: signal.Signals, line: str) -> bool:
 @pytest.mark.parametrize("sig", SIGNALS, ids=lambda s: s.name)
 def test_a_signal_ends_the_match_and_every_process_it_started(tsf_match, tmp_path, wait_until, sig):
     """SIGKILL leaves the match no time to end its processes: each asked the kernel for SIGTERM
-    when its launcher dies (services/runtime/processes.py)."""
+    when its launcher dies (shared/processes.py)."""
     match = tsf_match("--duration", "60", "--match", "signalled")
     log = tmp_path / "signalled.tsflog"
     assert wait_until(lambda: recorded(log) > 20, timeout=60)  # under way

@@ -564,7 +564,7 @@ def test_train_without_the_train_extra_says_which_extra(
     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
 ) -> None:
     monkeypatch.setitem(sys.modules, "torch", None)  # as if torch were not installed
-    monkeypatch.delitem(sys.modules, "services.agent.train", raising=False)
+    monkeypatch.delitem(sys.modules, "services.training.loop", raising=False)
     status, lines = tsf(["train", library.learned([])[0]], capsys)
     assert status == 1 and len(lines) == 1
     assert lines[0].startswith("tsf train: import of torch halted") and "the `train` extra" in lines[0]

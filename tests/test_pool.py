@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from services.adapter.seat import SeatSpec
+from services.population.seat import SeatSpec
 from services.recorder.recording import load
 from services.runtime.launch import MatchPlan
 from services.runtime.pool import Pool, Tokens

@@ -16,6 +16,7 @@ import pytest
 ray = pytest.importorskip("ray")
 from ray.cluster_utils import Cluster  # noqa: E402
 
+from services.evaluation import team, thresholds  # noqa: E402
 from services.jobs.core import spec  # noqa: E402
 from services.jobs.kinds import in_process  # noqa: E402
 from services.jobs.ray_engine import OnRay  # noqa: E402
@@ -32,7 +33,7 @@ EVAL += ["--partner", "noisy(B4)", "--partner", "B1", "-q"]
 def cluster(tmp_path, monkeypatch):  # noqa: ANN201 - a ray Cluster
     """A head and a second node of one CPU each; the plug-ins of `lab.py` importable on both."""
     (tmp_path / "lab.py").write_text(
-        "from services.adapter.partners_test import Constant\n\n"
+        "from services.population.partners_test import Constant\n\n"
         "class Raises(Constant):\n    key = 'raises'\n"
         "    def reset(self, seed=None):\n        self.t = 0\n"
         "    def act(self, obs):\n        self.t += 1\n"
@@ -117,9 +118,10 @@ def test_sessions_and_calibration_games_on_ray_equal_in_process(cluster, tmp_pat
         ),  # noqa: E501
         spec("calibrate", "calibrate", {"games": [["B4", "S5", 0]]}, 1800),
     ]
-    with OnRay(cluster.address, tmp_path / "j.journal") as engine:
+    runners = team.KINDS | thresholds.KINDS
+    with OnRay(cluster.address, tmp_path / "j.journal", runners) as engine:
         done = engine.run(todo)
-    assert [done[job.id] for job in todo] == in_process(todo)
+    assert [done[job.id] for job in todo] == in_process(runners)(todo)
 
 
 def test_a_job_that_fails_on_ray_ends_the_run_in_one_line(cluster, tmp_path):

@@ -12,7 +12,6 @@ import msgpack
 import pytest
 import zenoh
 
-from services.provenance import read_sidecar
 from services.recorder.log import LogWriter, read_log
 from services.recorder.recording import load
 from services.recorder.service import recording_path, run_pool_recorder, run_recorder
@@ -24,6 +23,7 @@ from shared.bus import BusConfig, session
 from shared.errors import Failure, UsageError
 from shared.game import ROLES, GameConfig
 from shared.messages import Action, GameEvent, MatchOrder, PolicySwitch
+from shared.provenance import read_sidecar
 
 MATCH, SEED = "rec", 3
 POLICIES = {"bait": "circle", "shooter": "mirror"}

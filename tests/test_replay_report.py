@@ -15,8 +15,8 @@ import pandas as pd
 import pytest
 from PIL import Image
 
-from services.adapter.core import AdapterConfig
-from services.adapter.seat import SeatSpec
+from services.population.adaptive import AdapterConfig
+from services.population.seat import SeatSpec
 from services.recorder.recording import load
 from services.recorder.replay import republish
 from services.runtime.launch import MatchPlan, run_match

@@ -10,13 +10,13 @@ import zenoh
 
 from services.agent.scripted import CircleBait, MirrorShooter
 from services.agent.service import run_agent
-from services.router import USERS, access_control, run_router
 from services.sim.play import play
 from services.sim.service import run_sim
 from shared import keys
 from shared.bus import BusConfig, session
 from shared.game import GameConfig
 from shared.messages import Action, PolicySwitch, State, Summary
+from shared.router import USERS, access_control, run_router
 
 MATCH = "secured"
 FRAMES = 90

@@ -11,7 +11,6 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from services.adapter.core import WINDOWS, AdapterConfig
 from services.agent.seats import policy_for
 from services.options import (
     GAMES,
@@ -25,6 +24,7 @@ from services.options import (
     number,
     output,
 )
+from services.population.adaptive import WINDOWS, AdapterConfig
 from shared.bus import BusConfig, stop_on_signals
 from shared.errors import UsageError
 from shared.game import ROLES, Range, other
@@ -132,18 +132,18 @@ def eval_command(
     --games, an evaluation's games are analysed again (an analysis newer than the games)."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
 
-    from services.adapter.evaluation import EvalPlan, evaluate
-    from services.adapter.human_like import STAND_INS
-    from services.adapter.partners import fitted_people
-    from services.adapter.seat import HUMANS
+    from services.evaluation.evaluation import KINDS, EvalPlan, evaluate
     from services.jobs.engine import on_workers, open_engine
+    from services.population.human_like import STAND_INS
+    from services.population.partners import fitted_people
+    from services.population.seat import HUMANS
 
     if role not in ROLES:
         raise UsageError("--role", role, "not a seat", ROLES)
     if games is not None:
-        from services.adapter.evaluation import EvalReport
-        from services.adapter.results import read_games
-        from services.adapter.team import compare
+        from services.evaluation.evaluation import EvalReport
+        from services.evaluation.results import read_games
+        from services.evaluation.team import compare
 
         played = read_games(games)
         nothing = EvalPlan(role, identify=False, performance=False)
@@ -173,7 +173,7 @@ def eval_command(
     )  # fmt: skip
     columns = (BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
     with (
-        open_engine(bus, sweep_id, out / "eval.journal", workers, ray, stop_on_signals()) as engine,
+        open_engine(bus, sweep_id, out / "eval.journal", KINDS, workers, ray, stop_on_signals()) as engine,
         Progress(*columns, console=console) as bar,
     ):
 
@@ -212,11 +212,11 @@ def calibrate_adapter(
 ) -> None:
     """Measure the adapter's out-of-library thresholds: one game of each library policy with each
     of the other seat's, per seed, as jobs on the job system's workers or on Ray. Resumable."""
-    from services.adapter.thresholds import calibrate, write_calibration
+    from services.evaluation.thresholds import KINDS, calibrate, write_calibration
     from services.jobs.engine import on_workers, open_engine
 
     journal = out.with_name(out.name + ".journal")
-    with open_engine(bus, sweep_id, journal, workers, ray, stop_on_signals()) as engine:
+    with open_engine(bus, sweep_id, journal, KINDS, workers, ray, stop_on_signals()) as engine:
         result = calibrate(seeds=list(range(seeds)), run=on_workers(engine))
     for role, thresholds in result["thresholds"].items():
         console.print(f"{role}: " + ", ".join(f"T={t}: {v:.2f}" for t, v in thresholds.items()))
@@ -245,7 +245,7 @@ def humans_fit(
     import shlex
     import sys
 
-    from services.adapter.humans import fit, write
+    from services.proxy.humans import fit, write
 
     fitted = fit(recordings, role)
     path = write(out, role, fitted, shlex.join(["tsf", *sys.argv[1:]]))

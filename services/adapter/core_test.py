@@ -12,11 +12,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from services.adapter.core import Adapter, AdapterConfig, AdapterLanes, Payoff, Scorer, Window, ood_threshold
+from services.adapter.core import Adapter, AdapterLanes, Payoff, Scorer, Window, ood_threshold, threshold
 from services.adapter.skill import FEATURES, LEVELS, SkillModel
 from services.agent import library, networks
 from services.agent.library_test import empty_library
 from services.agent.seats import policy_for
+from services.population.adaptive import AdapterConfig
 from services.sim import observation as ob
 from services.sim.engine import Game
 from services.sim.observation import world_values
@@ -203,16 +204,16 @@ def test_thresholds_of_other_libraries_or_none_are_refused_with_the_remedy(tmp_p
     with pytest.raises(
         UsageError, match=re.escape(f"no out-of-library thresholds at {mine}/calibration.json")
     ):
-        config.threshold()
+        threshold(config)
     record = json.loads((library.LIBRARY / "calibration.json").read_text())
     (mine / "calibration.json").write_text(json.dumps(record | {"library": "0123456789abcdef"}))
     with pytest.raises(
         UsageError, match="was measured with library 0123456789abcdef, but the library is now"
     ):
-        config.threshold()
+        threshold(config)
     (mine / "calibration.json").write_text(json.dumps(record | {"library": library.manifest_hash()}))
-    assert config.threshold() == record["thresholds"]["bait"]["400"]
-    assert AdapterConfig("shooter", 400, "cem-dwell").threshold() is None
+    assert threshold(config) == record["thresholds"]["bait"]["400"]
+    assert threshold(AdapterConfig("shooter", 400, "cem-dwell")) is None
 
 
 def test_frames_of_a_stalled_round_say_nothing_about_the_partner() -> None:

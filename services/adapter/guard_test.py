@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from services.adapter.core import AdapterConfig
-from services.adapter.evaluate import play_games
+from services.adapter.core import build
 from services.adapter.guard import GUARD_FRAMES, Guard, poisson_cdf
+from services.evaluation.evaluate import play_games
+from services.population.adaptive import AdapterConfig
 from services.sim import observation as ob
 
 
@@ -48,15 +49,15 @@ def test_a_guarded_game_switches_at_most_once_more_and_reports_it():
     outcome, plain = play_games([("human(B3)", config, 1), ("human(B3)", plain, 1)], "shooter")
     assert outcome.switches <= plain.switches + 1
     if outcome.guarded:  # fell back to the best static policy
-        payoff = AdapterConfig("shooter").build().payoff
+        payoff = build(AdapterConfig("shooter")).payoff
         assert outcome.timeline[-1][2] == payoff.ours[payoff.best_average()]
 
 
 def test_memory_carries_the_adapter_into_the_next_trial():
     scores = np.log(np.full(9, 1 / 12))
     scores[2] = np.log(0.9)  # the partner plays like B3
-    remembering = AdapterConfig("shooter", 150, "bayes-dwell-ood-guard-memory").build()
-    forgetting = AdapterConfig("shooter", 150, "bayes-dwell-ood-guard").build()
+    remembering = build(AdapterConfig("shooter", 150, "bayes-dwell-ood-guard-memory"))
+    forgetting = build(AdapterConfig("shooter", 150, "bayes-dwell-ood-guard"))
     for adapter in (remembering, forgetting):
         for v in frames(10**6, 200):
             adapter.update(scores, v)
@@ -70,7 +71,7 @@ def test_memory_carries_the_adapter_into_the_next_trial():
 
 def flipping_switches(strategy: str) -> list[int]:
     """The frames an adapter switches at with a partner that flips between B3 and B9 every 2 s."""
-    adapter, switched = AdapterConfig("shooter", 150, strategy, warmup=1).build(), []
+    adapter, switched = build(AdapterConfig("shooter", 150, strategy, warmup=1)), []
     for t in range(1800):
         scores = np.log(np.full(9, 1 / 12))
         scores[2 if (t // 60) % 2 else 8] = np.log(0.95)

@@ -19,9 +19,11 @@ from pathlib import Path
 import numpy as np
 import zenoh
 
-from services.adapter.core import Adapter, AdapterConfig, Pairing, Payoff, Scorer
-from services.adapter.seat import SeatSpec
+from services.adapter import core
+from services.adapter.core import Adapter, Pairing, Payoff, Scorer, threshold
 from services.agent import networks
+from services.population.adaptive import AdapterConfig
+from services.population.seat import SeatSpec
 from services.table.table import DEFAULT_TABLE
 from shared import keys
 from shared.bus import BusConfig, Drops, on_match_end, serve_orders, session, subscribe
@@ -44,7 +46,7 @@ def seat_of(role: str, table: Path = DEFAULT_TABLE) -> tuple[Payoff, Scorer]:
 def build(config: AdapterConfig, table: Path = DEFAULT_TABLE) -> tuple[Adapter, Scorer]:
     """The core for one adaptive seat of one match (its own Adapter: the window and estimates)."""
     payoff, scorer = seat_of(config.role, table)
-    return config.build(payoff), scorer
+    return core.build(config, payoff), scorer
 
 
 class AdapterShell:
@@ -66,7 +68,7 @@ class AdapterShell:
     ) -> None:
         self.match, self.config, self.costs = match, config, costs
         payoff, self.scorer = seat
-        self.adapter = config.build(payoff)
+        self.adapter = core.build(config, payoff)
         self.pairing, self.lock, self.open = Pairing(), threading.Lock(), True
         self.ended = ended or threading.Event()
         self.playing = ""  # what the agent plays, from its own actions
@@ -240,7 +242,7 @@ def config_of(order: MatchOrder) -> AdapterConfig | None:
         config = SeatSpec.parse(order.adapter, "adapter").adaptive(order.adaptive, order.seed)
         if config is None:
             raise ValueError(f"{order.adapter} is not an adaptive agent")
-        config.threshold()  # the out-of-library thresholds, checked before anything is declared
+        threshold(config)  # the out-of-library thresholds, checked before anything is declared
     except ValueError as error:
         raise MessageError("adapter", f"{order.match}: {error}") from error
     return config

@@ -1,6 +1,6 @@
 """The adapter's skill estimate: how practised is the partner, from the same window of frames.
 
-The skill table (services/table/skills.py) measures what works with the stand-ins of each style
+The skill table (services/evaluation/skills.py) measures what works with the stand-ins of each style
 and skill; P measures what works with library policies. Which row to read needs the partner's
 skill as well as its style. From the last T frames of the partner's keys the window shows
 (keys.py, the readings the stand-ins' fit uses too):
@@ -27,10 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
-from services.adapter.keys import LAPSE, changes, shortest_runs, still
 from services.agent import library
-from services.provenance import provenance
+from services.population.keys import LAPSE, changes, shortest_runs, still
 from shared.game import split_action
+from shared.provenance import provenance
 
 LEVELS = ("novice", "typical", "practised", "library")  # the skill table's skills, then P's partners
 PEOPLE = len(LEVELS) - 1

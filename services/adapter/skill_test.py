@@ -9,11 +9,12 @@ import re
 import numpy as np
 import pytest
 
-from services.adapter.core import AdapterConfig, AdapterLanes
+from services.adapter.core import AdapterLanes, build_lanes, skill_model
 from services.adapter.core_test import PAYOFF, keys_held, toy_model
-from services.adapter.evaluate import play_games, setup
 from services.adapter.skill import LEVELS, skill_path
 from services.agent import library
+from services.evaluation.evaluate import play_games, setup
+from services.population.adaptive import AdapterConfig
 from services.sim import observation as ob
 from shared.errors import UsageError
 
@@ -40,17 +41,17 @@ def test_a_person_gets_the_skill_tables_choice_and_a_policy_ps() -> None:
 def test_a_model_of_other_libraries_or_windows_is_refused_with_the_remedy(tmp_path) -> None:
     config = AdapterConfig("shooter", 400, "bayes-dwell-ood-guard-skill")
     payoff = setup("shooter").payoff
-    assert config.skill_model(payoff).teammates == payoff.ours
+    assert skill_model(config, payoff).teammates == payoff.ours
     record = json.loads(skill_path().read_text())
     path = tmp_path / "skill.json"
     path.write_text(json.dumps(record | {"library": "0123456789abcdef"}))
     with pytest.raises(UsageError, match=re.escape("0123456789abcdef") + ".*tsf skill-model"):
-        config.skill_model(payoff, path)
+        skill_model(config, payoff, path)
     with pytest.raises(UsageError, match="no skill model"):
-        config.skill_model(payoff, tmp_path / "none.json")
+        skill_model(config, payoff, tmp_path / "none.json")
     with pytest.raises(UsageError, match="window"):
-        AdapterConfig("shooter", 150, "bayes-dwell-ood-guard-skill").skill_model(payoff)
-    assert record["library"] == library.manifest_hash() and AdapterConfig().skill_model(payoff) is None
+        skill_model(AdapterConfig("shooter", 150, "bayes-dwell-ood-guard-skill"), payoff)
+    assert record["library"] == library.manifest_hash() and skill_model(AdapterConfig(), payoff) is None
 
 
 @pytest.mark.slow
@@ -62,7 +63,7 @@ def test_the_shipped_model_recovers_the_stand_ins_skill() -> None:
     config = AdapterConfig(strategy="bayes-dwell-ood-guard-skill")
     names = [f"human({s},skill={k})" for s in ("B1", "B5") for k in LEVELS[:-1]] + ["B1", "B5"]
     games = [(name, config, seed) for name in names for seed in (96, 97)]
-    adapter = config.build_lanes(len(games), setup("shooter").payoff)
+    adapter = build_lanes(config, len(games), setup("shooter").payoff)
     play_games(games, "shooter", adapters={config: adapter})
     read = {}
     for (name, _, _), levels in zip(games, adapter.levels, strict=True):

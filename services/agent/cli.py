@@ -112,7 +112,7 @@ def train(
         raise UsageError("KEYS", " ".join(keys or []) or "(none)", "give library keys or --all, not both")
     todo = library.learned(keys or [])
     try:
-        from services.agent.train import train_library
+        from services.training.loop import train_library
     except ModuleNotFoundError as error:
         raise Failure(f"{error}: training needs the `train` extra, pip install -e '.[train]'") from None
     started = time.monotonic()
@@ -180,7 +180,7 @@ def library_add(
 ) -> None:
     """Export an SB3 model into a library of yours: numpy weights, registry and manifest entries with
     hashes and provenance. List the directory in TSF_LIBRARY to play its keys everywhere."""
-    from services.agent.train import add
+    from services.agent.outside import add
 
     entry = add(key, model, role, library_dir, view.value, partner, games)
     console.print(f"{key}: {library_dir / entry['file']} sha256 {entry['sha256'][:12]}")
@@ -217,7 +217,7 @@ def library_grow(
     from contextlib import contextmanager
     from importlib.util import find_spec
 
-    from services.growth.grow import Grow
+    from services.growth.grow import KINDS, Grow
     from services.jobs.engine import on_workers, open_engine
     from services.population.families import read
 
@@ -229,7 +229,9 @@ def library_grow(
     @contextmanager
     def engine(stage: str):  # noqa: ANN202 - a context manager of a Runner
         journal = out / f"{stage}.journal"
-        with open_engine(bus, f"grow-{stage}", journal, workers, ray, stop, job_timeout=7200.0) as opened:
+        with open_engine(
+            bus, f"grow-{stage}", journal, KINDS, workers, ray, stop, job_timeout=7200.0
+        ) as opened:
             yield on_workers(opened)
 
     summary = Grow(spec, out, engine, console.print, max(workers, 1)).run()
@@ -243,9 +245,9 @@ def library_grow(
 def keys_command(role: Role | None = typer.Option(None, help="Only the keys of this seat.")) -> None:
     """Every valid policy key with the seat it plays (the library's, yours in TSF_LIBRARY, the
     scripted ones), and the other forms a key can take."""
-    from services.adapter.core import STRATEGIES
     from services.agent import library
     from services.agent.scripted import scripted_keys
+    from services.population.adaptive import STRATEGIES
 
     table = Table(title="Policy keys")
     for column in ("key", "seat", "kind", "what"):

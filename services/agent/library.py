@@ -6,13 +6,14 @@ and the command that made it. This module reads them and hashes them (what a tab
 recording are bound to) and never loads a network: playing a policy is networks.py (numpy
 inference), and a seat's policy by key is seats.py.
 
-Libraries of your own (made by `tsf library add`, services/agent/train.py) join the shipped one
+Libraries of your own (made by `tsf library add`, services/training/loop.py) join the shipped one
 when their directories are listed in TSF_LIBRARY (separated by the OS path separator): their keys
 play, enter the table and the adapter's candidates like the shipped ones.
 """
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import json
 import os
@@ -24,8 +25,8 @@ from dataclasses import fields as dataclass_fields
 from functools import cache
 from pathlib import Path
 
-from services import provenance
 from services.sim import observation as ob
+from shared import provenance
 from shared.errors import UsageError
 from shared.game import OBS_SIZE, ROLES
 
@@ -55,6 +56,7 @@ FEATURES: dict[str, list[int]] = {
     "shooter": _SELF + _PARTNER + [ob.PARTNER + ob.IN_REGION] + _FORTRESS,
     "all": list(range(OBS_SIZE)),
 }
+DEFAULT_PARTNER = {"bait": "S5", "shooter": "B5"}  # a strong partner for each seat (the env's, `add`'s)
 
 
 @dataclass(frozen=True)
@@ -245,3 +247,13 @@ def learned(chosen: list[str]) -> list[str]:
         if key not in trainable:
             raise UsageError("KEYS", key, "not a learned policy of the library", trainable)
     return chosen or trainable
+
+
+def record_entry(out: Path, key: str, entry: dict) -> None:
+    """Write one manifest entry; a lock keeps parallel trainings from losing each other's."""
+    with open(out / ".manifest.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        path = out / "manifest.json"
+        entries = json.loads(path.read_text()) if path.exists() else {}
+        entries[key] = entry
+        path.write_text(json.dumps(entries, indent=2, sort_keys=True) + "\n")

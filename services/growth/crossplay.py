@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import itertools
 
-from services.adapter.evaluate import play_teams
+from services.evaluation.evaluate import play_teams
 from services.jobs.core import Spec, spec
 
 PAIRS = 128  # teams of one job (x seeds games): a batch of a few hundred lanes

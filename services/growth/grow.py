@@ -41,15 +41,17 @@ from typing import Any
 import numpy as np
 
 from services.agent import library
+from services.growth import KINDS as GROWTH
 from services.growth import choice
 from services.growth.choice import Grid
 from services.growth.crossplay import pair_jobs
-from services.growth.training import train_job
+from services.jobs import core
 from services.jobs.kinds import Runner
 from services.population.families import Member, Spec
 from services.table.plot import heatmap
 from services.table.sweep import cell_spec
 from services.table.table import CHUNK, Table, assemble, jobs
+from services.table.table import KINDS as SELF_PLAY
 from shared.errors import UsageError
 from shared.game import ROLES, other
 
@@ -57,6 +59,14 @@ Engine = Callable[[str], AbstractContextManager[Runner]]  # a stage's name -> it
 Say = Callable[[str], None]
 PREFIX = {"bait": "GB", "shooter": "GS"}  # the grown library's keys
 RESPONSE = {"bait": "RB", "shooter": "RS"}  # a best response's key while it is a candidate
+KINDS = SELF_PLAY | GROWTH  # the job kinds a run hands out (the grown library's table too)
+
+
+def train_job(key: str, root: Path, levels: dict[str, int], runs: Path) -> core.Spec:
+    """A job that trains `key` of the library at `root` to each level (key -> steps, in order):
+    training.train_levels."""
+    args = {"key": key, "library": str(root), "levels": levels, "runs": str(runs)}
+    return core.spec(f"train-{key}", "train", args, 1)
 
 
 class Grow:

@@ -9,7 +9,7 @@ from contextlib import nullcontext
 import numpy as np
 import pytest
 
-from services.adapter.evaluate import play_teams
+from services.evaluation.evaluate import play_teams
 from services.growth.crossplay import pair_jobs, run_pair_jobs
 
 SMALL = """
@@ -53,7 +53,7 @@ def test_pair_jobs_play_the_games_they_stand_for():
 def test_a_small_population_grows_a_library_and_a_second_run_resumes_from_its_files(tmp_path, monkeypatch):
     pytest.importorskip("stable_baselines3", reason="the `train` extra is not installed")
     from services.agent import library, networks
-    from services.growth.grow import Grow
+    from services.growth.grow import KINDS, Grow
     from services.jobs.kinds import in_process
     from services.population.families import read
 
@@ -61,7 +61,7 @@ def test_a_small_population_grows_a_library_and_a_second_run_resumes_from_its_fi
     path = tmp_path / "population.toml"
     path.write_text(SMALL)
     spec, out, said = read(path), tmp_path / "grown", []
-    summary = Grow(spec, out, lambda stage: nullcontext(in_process), said.append).run()
+    summary = Grow(spec, out, lambda stage: nullcontext(in_process(KINDS)), said.append).run()
     population = json.loads((out / "population.json").read_text())["members"]
     assert {row["split"] for row in population["bait"]} == {"train", "validation", "test"}
     assert [row["name"] for row in population["bait"] if row["family"] == "events"] == ["PB01a", "PB01b"]

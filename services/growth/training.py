@@ -12,14 +12,8 @@ import shutil
 from pathlib import Path
 
 from services.agent import library
-from services.agent.train import record_entry, train
-from services.jobs.core import Spec, spec
-
-
-def train_job(key: str, root: Path, levels: dict[str, int], runs: Path) -> Spec:
-    """A job that trains `key` of the library at `root` to each level (key -> steps, in order)."""
-    args = {"key": key, "library": str(root), "levels": levels, "runs": str(runs)}
-    return spec(f"train-{key}", "train", args, 1)
+from services.agent.library import record_entry
+from services.training.loop import train
 
 
 def run_train_jobs(args: list[dict]) -> list[list]:

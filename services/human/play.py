@@ -8,9 +8,9 @@ import threading
 from collections.abc import Callable
 from pathlib import Path
 
-from services.adapter.seat import PERSON
 from services.human.core import SeatBook
 from services.human.gateway import Gateway, Web, seat_handler
+from services.population.seat import PERSON
 from services.runtime.launch import MatchPlan, run_match
 from shared.bus import BusConfig, free_endpoint
 from shared.messages import State, Summary

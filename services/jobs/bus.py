@@ -27,11 +27,11 @@ import zenoh
 from services.jobs import kinds
 from services.jobs.core import Coordinator, JournalFile, Spec, check
 from services.jobs.kinds import Progress
-from services.runtime.processes import Processes
 from shared import keys
 from shared.bus import BusConfig, Drops, free_endpoint, session, subscribe
 from shared.errors import Failure, UsageError
 from shared.messages import MAX_BYTES, JobOrder, JobResult, MessageError, decode, printable
+from shared.processes import Processes
 
 log = logging.getLogger("tsf.jobs")
 
@@ -194,8 +194,11 @@ def local_workers(sweep: str, endpoints: tuple[str, ...], n: int) -> Iterator[li
         yield [processes.start(f"worker{i}", [*command, "--id", f"{sweep}-local{i}"]) for i in range(n)]
 
 
-def run_worker(bus: BusConfig, sweep: str, worker: str, stop: threading.Event | None = None) -> int:
-    """Run the jobs a sweep's coordinator sends this worker until it goes away (or `stop`); returns
+def run_worker(
+    bus: BusConfig, sweep: str, worker: str, runners: kinds.Kinds, stop: threading.Event | None = None
+) -> int:
+    """Run the jobs a sweep's coordinator sends this worker, each by its kind's runner in `runners`,
+    until the coordinator goes away (or `stop`); returns
     the number of jobs done. A job it cannot run (other library or rules, a plug-in that does not
     import) is answered with the reason, and the coordinator sends it no more."""
     stop = stop or threading.Event()
@@ -245,7 +248,7 @@ def run_worker(bus: BusConfig, sweep: str, worker: str, stop: threading.Event | 
                         fits.append(job)
                 for kind in dict.fromkeys(job.kind for job in fits):
                     mine = [job for job in fits if job.kind == kind]
-                    played, why = _run(kind, mine)
+                    played, why = _run(runners, kind, mine)
                     seconds = time.monotonic() - started
                     for job, values in zip(mine, played or [[]] * len(mine), strict=True):
                         answer(job, values, why, "job", seconds)
@@ -253,11 +256,11 @@ def run_worker(bus: BusConfig, sweep: str, worker: str, stop: threading.Event | 
     return done
 
 
-def _run(kind: str, jobs: list[JobOrder]) -> tuple[list[list] | None, str]:
+def _run(runners: kinds.Kinds, kind: str, jobs: list[JobOrder]) -> tuple[list[list] | None, str]:
     """The jobs' values, or None and why they failed: the same jobs would fail on any worker, so
     the coordinator ends the run with that line (bad arguments end the run, not the worker)."""
     try:
-        return kinds.run(kind, [job.args for job in jobs]), ""
+        return kinds.run(runners, kind, [job.args for job in jobs]), ""
     except Exception as error:  # noqa: BLE001 - reported to the coordinator, which ends the run
         why = kinds.failure_line(error)
         log.error("%s jobs %s failed: %s", kind, [job.job for job in jobs], why)

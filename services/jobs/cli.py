@@ -28,13 +28,19 @@ def worker(
 ) -> None:
     """Run a worker: plays the jobs a coordinator hands it (table cells, evaluation games), until
     the coordinator is gone."""
+    from services import growth
+    from services.evaluation import evaluation, thresholds
     from services.jobs.bus import run_worker
-    from services.runtime.processes import Processes
+    from services.table import table
+    from shared.processes import Processes
 
     name = worker_id or f"{socket.gethostname()}-{os.getpid()}".replace(".", "-")
     stop = stop_on_signals()
     if slots == 1:
-        done = run_worker(bus, sweep_id, name, stop)
+        runners = (
+            table.KINDS | evaluation.KINDS | thresholds.KINDS | growth.KINDS
+        )  # every kind it may be handed
+        done = run_worker(bus, sweep_id, name, runners, stop)
         logging.getLogger("tsf.worker").info("worker %s did %d jobs", name, done)
         return
     command = [sys.executable, "-m", "services.cli", "worker", *bus.to_args(), "--sweep", sweep_id]

@@ -13,7 +13,7 @@ from typing import Protocol
 
 from services.jobs.bus import Coordination, with_local_workers
 from services.jobs.core import Spec
-from services.jobs.kinds import Progress, Runner
+from services.jobs.kinds import Kinds, Progress, Runner
 from services.jobs.ray_engine import OnRay
 from shared.bus import BusConfig
 from shared.errors import Failure
@@ -43,16 +43,18 @@ def open_engine(
     bus: BusConfig,
     sweep: str,
     journal: Path,
+    runners: Kinds,
     workers: int = 0,
     ray: str | None = None,
     stop: threading.Event | None = None,
     per_worker: int = 1,
     job_timeout: float = 900.0,
 ) -> Iterator[Engine]:
-    """The Ray cluster at `ray` when one is named; else a zenoh coordinator on `bus` for `sweep`,
-    with `workers` local worker processes (ended on exit) beside any reached through the bus."""
+    """The Ray cluster at `ray` when one is named, its tasks run by `runners`; else a zenoh
+    coordinator on `bus` for `sweep`, with `workers` local worker processes (`tsf worker`, ended on
+    exit) beside any reached through the bus."""
     if ray:
-        with OnRay(ray, journal, stop) as engine:
+        with OnRay(ray, journal, runners, stop) as engine:
             yield engine
         return
     with (

@@ -1,18 +1,20 @@
-"""What each kind of job runs, and the plug-ins a job names: the worker's side of the contract.
+"""Running jobs by kind, and the plug-ins a job names: the worker's side of the contract.
 
 A kind's runner takes the arguments of several jobs of that kind and returns each job's values (a
 runner may play them together, as the table's plays cells as lanes of one batch, since a game
-depends on its pair and seed only). Runners are imported when first asked for, so a coordinator
-that only hands out jobs never loads the engine.
+depends on its pair and seed only). The job system names none of its clients: each client names
+its kinds and their runners (`Kinds`: the table's `table.KINDS`, the evaluation's
+`evaluation.KINDS`), and whoever runs jobs is handed them (a worker process by its command,
+services/jobs/cli.py). Runners are imported when first asked for, so a coordinator that only
+hands out jobs never loads the engine.
 """
 
 from __future__ import annotations
 
 import importlib
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
-from services.adapter.seat import SeatSpec
 from services.agent import library
 from services.jobs.core import Hashes, Spec
 from shared.errors import Failure, UsageError
@@ -21,34 +23,32 @@ from shared.game import GameConfig
 Progress = Callable[[int, int], None]  # (values done, values in all)
 Runner = Callable[[list[Spec], Progress | None], list[list]]  # (jobs, progress) -> values
 
-RUNNERS = {
-    "table": "services.table.table:run_cells",
-    "team": "services.adapter.team:run_team_jobs",
-    "session": "services.adapter.team:run_session_jobs",
-    "identify": "services.adapter.identification:run_identify_jobs",
-    "calibrate": "services.adapter.thresholds:run_calibrate_jobs",
-    "pairs": "services.growth.crossplay:run_pair_jobs",
-    "train": "services.growth.training:run_train_jobs",
-}
+Kinds = Mapping[str, str]  # a job kind -> its runner, "module:attr" (imported when first asked for)
 
 
-def run(kind: str, args: list[dict[str, Any]]) -> list[list]:
-    """Each job's values, in order."""
-    module, attr = RUNNERS[kind].split(":")
+def run(kinds: Kinds, kind: str, args: list[dict[str, Any]]) -> list[list]:
+    """Each job's values, in order, by the runner `kinds` names for `kind`."""
+    if kind not in kinds:
+        raise Failure(f"no runner for jobs of kind {kind!r} here (this process runs {', '.join(kinds)})")
+    module, attr = kinds[kind].split(":")
     return getattr(importlib.import_module(module), attr)(args)
 
 
-def in_process(todo: list[Spec], progress: Callable[[int, int], None] | None = None) -> list[list]:
-    """Each job's values, computed here one job at a time (the reference a run on workers equals);
-    `progress` counts values (games)."""
-    out: list[list] = []
-    total, done = sum(job.size for job in todo), 0
-    for job in todo:
-        out += run(job.kind, [job.args])
-        done += job.size
-        if progress is not None:
-            progress(done, total)
-    return out
+def in_process(kinds: Kinds) -> Runner:
+    """A runner that computes each job here, one at a time, by `kinds` (the reference a run on
+    workers equals); its `progress` counts values (games)."""
+
+    def run_here(todo: list[Spec], progress: Progress | None = None) -> list[list]:
+        out: list[list] = []
+        total, done = sum(job.size for job in todo), 0
+        for job in todo:
+            out += run(kinds, job.kind, [job.args])
+            done += job.size
+            if progress is not None:
+                progress(done, total)
+        return out
+
+    return run_here
 
 
 def hashes() -> Hashes:
@@ -71,13 +71,6 @@ def failure_line(error: BaseException) -> str:
     """A failed job's error as one line: a user's mistake or a failure as it reads (it names the
     partner, seed and frame where a partner failed), anything else with its type."""
     return str(error) if isinstance(error, UsageError | Failure) else f"{type(error).__name__}: {error}"
-
-
-def plugins_in(names: Iterable[str]) -> tuple[str, ...]:
-    """The `module:attr` plug-ins among partner or policy names (inside wrappers too:
-    noisy(my_lab.partners:Alice)); a proxy (`proxy:DIR`) or fitted stand-ins (`humans:DIR@NAME`)
-    are a directory, not a plug-in."""
-    return tuple(dict.fromkeys(plugin for name in names for plugin in SeatSpec.parse(name).plugins))
 
 
 def import_plugins(names: Iterable[str]) -> str:

@@ -32,14 +32,16 @@ def _here() -> Hashes:
     return kinds.hashes()
 
 
-def _job(kind: str, args: dict[str, Any], plugins: list[str], ours: Hashes) -> tuple[list, str, str, Hashes]:
+def _job(
+    runners: kinds.Kinds, kind: str, args: dict[str, Any], plugins: list[str], ours: Hashes
+) -> tuple[list, str, str, Hashes]:
     """One job on a Ray worker: (values, why not, whose fault, the hashes it computed with)."""
     here = _here()
     why = kinds.cannot_run(ours.library, ours.config, plugins, here)
     if why:
         return [], why, "worker", here
     try:
-        return kinds.run(kind, [args])[0], "", "", here
+        return kinds.run(runners, kind, [args])[0], "", "", here
     except Exception as error:  # noqa: BLE001 - reported to the driver, which ends the run
         return [], kinds.failure_line(error), "job", here
 
@@ -49,8 +51,11 @@ class OnRay:
     `local` for a private one on this machine) for as long as the `with` block lasts; `run` has
     the signature of bus.Coordination.run."""
 
-    def __init__(self, address: str, journal: Path, stop: threading.Event | None = None) -> None:
+    def __init__(
+        self, address: str, journal: Path, runners: kinds.Kinds, stop: threading.Event | None = None
+    ) -> None:
         self.address, self.journal, self.stop = address, journal, stop or threading.Event()
+        self.runners = dict(runners)
 
     def __enter__(self) -> OnRay:
         try:
@@ -82,7 +87,7 @@ class OnRay:
         jobs = {job.id: job for job in todo}
         done = self.journal_file.earlier(jobs)
         flying = {
-            self.task.remote(job.kind, job.args, list(job.plugins), self.ours): job
+            self.task.remote(self.runners, job.kind, job.args, list(job.plugins), self.ours): job
             for job in todo
             if job.id not in done
         }

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from services.adapter.human_like import parse_skill
+from services.population.human_like import parse_skill
 from shared.errors import UsageError
 from shared.game import ROLES
 

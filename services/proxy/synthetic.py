@@ -1,6 +1,6 @@
 """Recordings of stand-in people, made in-process: what proxies are measured on without real people.
 
-A stand-in person is a partner of the partner grammar (services/adapter/partners.py), typically a
+A stand-in person is a partner of the partner grammar (services/population/partners.py), typically a
 human-like hand on a library policy (`human(B5)`); the agent is a policy key. Each trial is played
 in lockstep on the engine and written as the recorder writes a match (the same log, start, states,
 actions, events and summary messages; the start names the person's seat "human" as the launcher
@@ -19,8 +19,8 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
-from services.adapter.partners import make_partner
 from services.agent.player import Player
+from services.population.partners import make_partner
 from services.recorder.log import LogWriter
 from services.sim.engine import Game
 from services.sim.match import event_messages, start_message, state_message, summary_message

@@ -20,9 +20,9 @@ import torch as th
 from services.agent import library
 from services.agent.networks import FLOOR, HEAD_SIZES, HEADS, inputs
 from services.agent.proxy import save
-from services.provenance import provenance
 from services.proxy.data import HISTORY, Dataset, Split, extract, split
 from shared.game import N_ACTIONS, N_FIRE, N_THRUST, OBS_SIZE
+from shared.provenance import provenance
 
 SIZES = [HEAD_SIZES[h] for h in HEADS]
 CURVE = ("epoch", "train_loglik", "held_out_loglik")

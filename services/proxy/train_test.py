@@ -13,13 +13,12 @@ pytest.importorskip("torch", reason="the `train` extra is not installed")
 
 import torch as th  # noqa: E402
 
-from services.adapter.partners import make_partner  # noqa: E402
-from services.agent import library, networks  # noqa: E402
-from services.agent import train as agent_train  # noqa: E402
+from services.agent import library, networks, outside  # noqa: E402
 from services.agent.networks import ProxyPolicy, inputs  # noqa: E402
 from services.agent.seats import policy_for  # noqa: E402
 from services.cli import app  # noqa: E402
 from services.entry import run  # noqa: E402
+from services.population.partners import make_partner  # noqa: E402
 from services.proxy import train  # noqa: E402
 from services.proxy.data import extract  # noqa: E402
 from services.proxy.data_test import trials  # noqa: E402
@@ -93,7 +92,7 @@ def test_numpy_probs_are_the_torch_softmax(proxy, tmp_path):
         remembering.probs(obs[1]), remembering.probs_given(obs[1:2], np.array([[first, 0]]))[0]
     )
     with pytest.raises(UsageError, match="reads its own last actions"):
-        agent_train.add("HELD", held, "bait", tmp_path / "lib", games=0)
+        outside.add("HELD", held, "bait", tmp_path / "lib", games=0)
 
 
 def test_a_proxy_plays_as_a_key_and_as_a_partner(proxy, capsys):

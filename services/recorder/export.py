@@ -5,7 +5,7 @@ id, unless given). Every table has a `match` column, so the files of many matche
 table (`'study/*.states.parquet'` in DuckDB). Nested values are Parquet structs, lists and maps,
 wall-clock times are UTC timestamps, and every column has its type even in an empty table. The
 `match` table also names what made the recording (the recorder's `<match>.provenance.json`) and
-the export (services/provenance.py).
+the export (shared/provenance.py).
 """
 
 from __future__ import annotations
@@ -16,9 +16,9 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from services.agent import library
-from services.provenance import FIELDS, provenance, read_sidecar
 from services.recorder.recording import Recording
 from shared.game import ROLES, GameConfig
+from shared.provenance import FIELDS, provenance, read_sidecar
 
 TABLES = ("match", "states", "missiles", "shells", "actions", "switches", "events", "gaps", "adapter")
 

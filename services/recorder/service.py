@@ -22,13 +22,13 @@ from pathlib import Path
 import zenoh
 
 from services.agent import library
-from services.provenance import provenance, sidecar
 from services.recorder.log import GapTracker, LogWriter, read_log
 from shared import keys
 from shared.bus import BusConfig, Drops, Seen, session, subscribe, until_stopped
 from shared.errors import Failure, UsageError
 from shared.game import ROLES, GameConfig
 from shared.messages import MatchOrder, Message, MessageError, Start, State, Summary, decode_any
+from shared.provenance import provenance, sidecar
 
 log = logging.getLogger("tsf.recorder")
 _DONE = object()
@@ -285,7 +285,7 @@ def _wait_for_seats(z: zenoh.Session, match: str, timeout: float, stop: threadin
 
 
 def _write_provenance(path: Path, start: Start) -> None:
-    """Name what made the recording beside it (services/provenance.py), with the match's rules."""
+    """Name what made the recording beside it (shared/provenance.py), with the match's rules."""
     try:
         record = provenance(**library.provenance_hashes(), config=GameConfig.from_dict(start.config))
         sidecar(path).write_text(json.dumps(record, indent=1) + "\n")

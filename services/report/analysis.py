@@ -36,9 +36,9 @@ import pandas as pd
 from scipy import stats
 
 from services.adapter import cem
-from services.adapter.core import AdapterConfig
-from services.adapter.seat import ADAPTIVE_KIND, SeatSpec
 from services.agent import library, networks
+from services.population.adaptive import AdapterConfig
+from services.population.seat import ADAPTIVE_KIND, SeatSpec
 from services.report.load import Match
 from services.table.table import Table
 from shared.game import FPS, ROLES, GameConfig, Policy, other

@@ -26,9 +26,9 @@ def report_command(
     reference_games: int = number(2, GAMES, "Games per library policy for the reference points."),
 ) -> None:
     """The study's figures and numbers from recordings: one self-contained HTML report."""
-    from services import provenance
     from services.report.report import build_report
     from services.table.table import DEFAULT_TABLE, StaleTable
+    from shared import provenance
 
     try:
         report = build_report(

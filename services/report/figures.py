@@ -12,7 +12,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from services.plots import place_labels, save  # noqa: E402
+from shared.plots import place_labels, save  # noqa: E402
 
 DPI = 100
 

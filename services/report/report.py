@@ -13,13 +13,13 @@ from pathlib import Path
 import pandas as pd
 
 from services.agent import library
-from services.provenance import provenance
 from services.report import analysis, figures
 from services.report.html import Section, write_html
 from services.report.load import Match, Problem, load_matches
 from services.table.plot import heatmap
 from services.table.table import DEFAULT_TABLE, Table
 from shared.game import GameConfig
+from shared.provenance import provenance
 
 REFERENCE_GAMES = 2
 
@@ -32,7 +32,7 @@ class Report:
     problems: list[Problem] = field(default_factory=list)
     matches: int = 0  # recordings in the analyses (none: the report names only problems)
     left_out: list[str] = field(default_factory=list)  # what the adaptive-vs-static tests did not compare
-    provenance: dict[str, str] = field(default_factory=dict)  # what made it (services/provenance.py)
+    provenance: dict[str, str] = field(default_factory=dict)  # what made it (shared/provenance.py)
 
 
 def build_report(
@@ -221,6 +221,6 @@ def _sections(report: Report, seat: analysis.Partnership | None) -> list[Section
         )
     sections.append(Section("Partners", "Every partner-agent pair and its similarity vector.", None,
                             [("Partners", d["partners"])]))  # fmt: skip
-    sections.append(Section("Provenance", "What made this report (services/provenance.py).", None,
+    sections.append(Section("Provenance", "What made this report (shared/provenance.py).", None,
                             [("Made by", d["provenance"])]))  # fmt: skip
     return sections

@@ -19,8 +19,6 @@ from scipy import stats
 
 from services.adapter.cem import log_probs
 from services.agent import library, networks
-from services.plots import legibility, save
-from services.provenance import FIELDS
 from services.recorder.recording import Recording, load
 from services.recorder.recording_test import Script, record_match
 from services.report import figures
@@ -31,6 +29,8 @@ from services.table.plot import heatmap
 from services.table.table import Table
 from shared.game import GameConfig
 from shared.messages import AdapterStatus, PolicySwitch
+from shared.plots import legibility, save
+from shared.provenance import FIELDS
 
 FRAMES = 450  # 15 s: long enough for the weak pairs to score less than the strong ones
 STATIC = [("B5", "S5"), ("B9", "S5"), ("B2", "S4"), ("B3", "S6"), ("B4", "S7"), ("B8", "S1")]

@@ -19,18 +19,19 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from services.adapter.core import AdapterConfig
-from services.adapter.seat import ADAPTIVE_KIND, KEY, PERSON, SeatSpec, check_live
+from services.adapter import core
 from services.agent.outside import record_name
+from services.population.adaptive import AdapterConfig
+from services.population.seat import ADAPTIVE_KIND, KEY, PERSON, SeatSpec, check_live
 from services.recorder.log import make_way
 from services.recorder.recording import Recording, load
 from services.recorder.service import recording_path
-from services.runtime.processes import Processes
 from shared import keys
 from shared.bus import BusConfig, free_endpoint, session, subscribe
 from shared.errors import Failure, UsageError
 from shared.game import ROLES
 from shared.messages import POLICY_NAME, AdapterStatus, MatchOrder, State, Summary
+from shared.processes import Processes
 
 # Priorities, in nice steps from the launcher's: the sim raises itself at its first frame (where
 # permitted; its start-up runs at the launcher's), so every start-up runs below the live sims and
@@ -71,7 +72,7 @@ class MatchPlan:
         if len(adaptive) > 1:
             raise UsageError("--adaptive", "both seats", "one seat at most is the adaptive agent's")
         if self.adapter is not None:
-            self.adapter.threshold()
+            core.threshold(self.adapter)
             if not re.fullmatch(POLICY_NAME, self.adapter.name):  # what the Start record names the seat
                 raise UsageError(
                     "--adaptive", self.adapter.name, "a name longer than a recording's 64 characters"
@@ -119,7 +120,7 @@ class MatchPlan:
         """Each seat's starting policy key; an adaptive seat starts with the adapter's initial policy."""
         keys_ = {role: str(spec) for role, spec in self.seats.items()}
         if self.adapter is not None:
-            keys_[self.adapter.role] = self.adapter.initial_policy()
+            keys_[self.adapter.role] = core.initial_policy(self.adapter)
         return keys_
 
 

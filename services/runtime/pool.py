@@ -38,11 +38,11 @@ from services.runtime.launch import (
     read_back,
     service_command,
 )
-from services.runtime.processes import Processes
 from shared import keys
 from shared.bus import free_endpoint, subscribe
 from shared.errors import Failure, UsageError
 from shared.messages import MatchStop, Summary
+from shared.processes import Processes
 
 log = logging.getLogger("tsf.pool")
 READY = 60.0  # seconds a new pool's services may take to come up (a busy machine, a cold cache)

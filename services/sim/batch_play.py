@@ -20,9 +20,9 @@ import numpy as np
 
 from services.sim.batch import BatchGame
 from services.sim.observation import observe
-from services.sim.play import GameResult
+from services.sim.play import GameResult, summarize
 from services.sim.sampling import act_lanes, lane_uniforms
-from shared.game import ROLES, GameConfig, Policy
+from shared.game import ROLES, GameConfig, Policy, bait_first
 
 
 class RoleLanes:
@@ -86,3 +86,9 @@ def results(batch: BatchGame, seeds: list[int]) -> list[GameResult]:
         )
         for lane, seed in enumerate(seeds)
     ]
+
+
+def team_score(policy: Policy, partner: Policy, seeds: range, config: GameConfig | None = None) -> dict:
+    """Kills/min of `policy` with `partner` over seeded games (lanes of one batch)."""
+    s = summarize(play_batch(*bait_first(policy.role, policy, partner), list(seeds), config))
+    return {"partner": partner.key, "games": s.games, "kills_per_minute": s.mean, "stderr": s.stderr}

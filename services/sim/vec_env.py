@@ -2,7 +2,7 @@
 
 The learner plays `role` in every lane; the partner seat is played by one policy, or by a pool
 (each game draws its partner from its own seed). A pool may hold stateful partners in their
-batched form (`LanePartner`, e.g. a human-like stand-in's, adapter/partners.py): such a
+batched form (`LanePartner`, e.g. a human-like stand-in's, population/partners.py): such a
 partner plays every lane every frame, so that its per-lane state runs on, and a lane's game uses
 its action when it drew that partner; a restarted lane restarts it there. Policies answer in
 batch (`probs_batch`) and their actions are drawn with `lane_uniforms`, so a lane's game depends

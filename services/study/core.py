@@ -24,8 +24,8 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from services.adapter.core import AdapterConfig
-from services.adapter.seat import ADAPTIVE_KIND, SeatSpec
+from services.population.adaptive import AdapterConfig
+from services.population.seat import ADAPTIVE_KIND, SeatSpec
 from services.study.crowd import FAILS, Crowd
 from shared.errors import UsageError
 from shared.game import DURATION, FPS, ROLES, SEEDS, other

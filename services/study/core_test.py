@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from services.adapter.core import AdapterConfig
 from services.agent.library import keys as library_keys
+from services.population.adaptive import AdapterConfig
 from services.runtime.launch import MatchPlan
 from services.study.core import Admission, Study, StudyConfig, Variant, assigned_role, variant_order
 

@@ -21,8 +21,8 @@ from pathlib import Path
 
 import zenoh
 
-from services.adapter.seat import ADAPTIVE_KIND, SeatSpec
 from services.agent import library
+from services.population.seat import ADAPTIVE_KIND, SeatSpec
 from services.recorder.service import recording_path
 from services.runtime.launch import MatchPlan
 from services.runtime.pool import Pool, pool_name

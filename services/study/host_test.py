@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from services.adapter.seat import SeatSpec
+from services.population.seat import SeatSpec
 from services.runtime.launch import MatchPlan
 from services.study.host import Host, offer_of, plan_of, sha256
 from shared import keys

@@ -53,9 +53,9 @@ import zenoh
 from websockets.asyncio.server import ServerConnection
 from websockets.protocol import State
 
-from services.adapter.seat import PERSON, SeatSpec
 from services.human.core import BadInput, Controls, PerAddress, RateLimit
 from services.human.gateway import Bridge, Gateway, Outbox, Web, receive_first, refuse
+from services.population.seat import PERSON, SeatSpec
 from services.recorder.service import recording_path
 from services.runtime.launch import MatchPlan
 from services.runtime.pool import Pool, pool_name

@@ -10,8 +10,8 @@ from dataclasses import dataclass, field
 
 import websockets
 
-from services.adapter.partners import make_partner
 from services.human.core import action_keys
+from services.population.partners import make_partner
 from services.sim.observation import as_observation
 from services.sim.play import policy_seed
 
@@ -58,7 +58,7 @@ async def stand_in(
     attentive: bool = True,
 ) -> StandInReport:
     """Take part in the study served at `url` (the page's address), playing each role with a partner
-    by name (services/adapter/partners.py: a policy key, or `human(B5,input_ms=0)`, a stand-in
+    by name (services/population/partners.py: a policy key, or `human(B5,input_ms=0)`, a stand-in
     person whose screen is the page itself; default: the scripted circle bait and mirror shooter),
     its trial k reset as in game seed `seed` + k - 1. `resume` = (participant, key) comes
     back as an earlier participant; `leave_after` > 0 drops the connection after that many frames,

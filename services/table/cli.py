@@ -132,7 +132,7 @@ def skill_table(
     stand-ins of each style (the other seat's library) and skill (novice, typical, practised),
     beside P; writes and prints each stand-in's best response beside P's for its style (OUT.md).
     With --into, measures only the --teammate columns and adds them to that table."""
-    from services.table.skills import SkillTable, measure, summary
+    from services.evaluation.skills import SkillTable, measure, summary
 
     before = SkillTable.load(into) if into else None
     if before:
@@ -174,7 +174,7 @@ def skill_model_command(
     import sys
 
     from services.agent import library
-    from services.table.skills import SkillTable, skill_model
+    from services.evaluation.skills import SkillTable, skill_model
 
     try:
         skills = SkillTable.load(table)
@@ -186,7 +186,7 @@ def skill_model_command(
     console.print(f"skill model written to {model.save(out, ' '.join(['tsf', *sys.argv[1:]]))}")
 
 
-def _p_best(table) -> dict[str, str]:  # noqa: ANN001 - a services.table.skills.SkillTable
+def _p_best(table) -> dict[str, str]:  # noqa: ANN001 - a services.evaluation.skills.SkillTable
     """P's best response to each style of the skill table ({} without a current P)."""
     from services.table.table import DEFAULT_TABLE, StaleTable
     from services.table.table import Table as SelfPlayTable

@@ -12,8 +12,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.patches import Rectangle  # noqa: E402
 
 from services.agent import library  # noqa: E402
-from services.plots import save  # noqa: E402
 from services.table.table import Table  # noqa: E402
+from shared.plots import save  # noqa: E402
 
 
 def family_breaks(keys: tuple[str, ...]) -> list[int]:

@@ -14,7 +14,7 @@ from pathlib import Path
 from services.jobs.core import Spec, spec
 from services.jobs.engine import open_engine
 from services.jobs.kinds import Progress
-from services.table.table import CHUNK, LANES, Job, Table, assemble, jobs
+from services.table.table import CHUNK, KINDS, LANES, Job, Table, assemble, jobs
 from shared.bus import BusConfig
 
 
@@ -49,7 +49,7 @@ def run_sweep(
     cells = {cell_spec(job).id: job for job in jobs(baits, shooters, games, chunk)}
     todo = [cell_spec(job) for job in cells.values()]
     journal = journal_path(out)
-    with open_engine(bus, sweep, journal, workers, ray, stop, lanes // chunk, job_timeout) as engine:
+    with open_engine(bus, sweep, journal, KINDS, workers, ray, stop, lanes // chunk, job_timeout) as engine:
         done = engine.run(todo, progress)
     if done is None:
         return None

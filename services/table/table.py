@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from services.agent import library, networks
-from services.provenance import provenance
 from shared.game import SEEDS, GameConfig
+from shared.provenance import provenance
 
 TABLE_VERSION = 1
 DEFAULT_TABLE = library.table_path()  # with TSF_LIBRARY: the table in your library directory
@@ -77,6 +77,9 @@ def run_jobs(todo: list[Job], config: GameConfig | None = None) -> list[list[flo
         out.append([result.kills_per_minute for result in played[start : start + len(job.seeds)]])
         start += len(job.seeds)
     return out
+
+
+KINDS = {"table": f"{__name__}:run_cells"}  # the job kind a sweep hands out, for services/jobs
 
 
 def run_cells(args: list[dict]) -> list[list[float]]:

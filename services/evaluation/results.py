@@ -8,12 +8,12 @@ from collections.abc import Iterable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from services.adapter.partners import group_of
-from services.adapter.seat import ADAPTIVE_KIND, SeatSpec
 from services.agent import library
-from services.provenance import lines as provenance_lines
-from services.provenance import provenance
+from services.population.partners import group_of
+from services.population.seat import ADAPTIVE_KIND, SeatSpec
 from shared.errors import UsageError
+from shared.provenance import lines as provenance_lines
+from shared.provenance import provenance
 
 
 @dataclass(frozen=True)

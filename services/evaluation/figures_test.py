@@ -12,9 +12,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
-from services.adapter import figures
-from services.adapter.core import ADAPTIVE, AdapterConfig
-from services.plots import drawn, legibility
+from services.evaluation import figures
+from services.population.adaptive import ADAPTIVE, AdapterConfig
+from shared.plots import drawn, legibility
 
 EVAL = Path(__file__).resolve().parents[2] / "docs" / "eval"
 

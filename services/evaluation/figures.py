@@ -13,9 +13,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402 - after choosing the file-only backend
 import numpy as np  # noqa: E402
 
-from services.adapter.core import ADAPTIVE, AdapterConfig  # noqa: E402
-from services.plots import save  # noqa: E402
+from services.population.adaptive import ADAPTIVE, AdapterConfig  # noqa: E402
 from shared.game import FPS  # noqa: E402
+from shared.plots import save  # noqa: E402
 
 GOALS = {150: 0.80, 400: 0.95, 800: 0.99}
 

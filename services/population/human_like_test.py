@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from services.adapter.human_like import SESSION_TRIALS, SKILLS, HumanLike, predict
-from services.adapter.partners import group_of, make_partner, population
 from services.agent import networks
+from services.population.human_like import SESSION_TRIALS, SKILLS, HumanLike, predict
+from services.population.partners import group_of, make_partner, population
 from services.sim.engine import Game
 from services.sim.observation import observe
 from services.sim.play import policy_seed

@@ -14,7 +14,8 @@ import torch as th  # noqa: E402
 
 from services.agent import library, networks, seats  # noqa: E402
 from services.agent.library_test import observations  # noqa: E402
-from services.agent.train import HYPERPARAMETERS, make_model, prepare, train  # noqa: E402
+from services.training.algorithms import HYPERPARAMETERS, make_model  # noqa: E402
+from services.training.loop import prepare, train  # noqa: E402
 from shared.errors import UsageError  # noqa: E402
 
 
@@ -60,7 +61,7 @@ def test_a_recipe_trains_with_human_like_stand_ins_and_a_candidate_joins_a_libra
     each lane restarts; any other kind of partner is refused with one clear line."""
     from dataclasses import replace
 
-    from services.agent.train import RecipeVecEnv
+    from services.training.env import RecipeVecEnv
 
     assert "B10" in library.learned(["B10"]) and "B10" not in library.learned([])
     root = tmp_path / "library"
@@ -87,7 +88,7 @@ def test_a_recipe_trains_with_human_like_stand_ins_and_a_candidate_joins_a_libra
 
 @pytest.mark.parametrize("key", ["B4", "S2"])
 def test_numpy_network_matches_torch(tmp_path, key):
-    from services.agent.train import export
+    from services.training.algorithms import export
 
     recipe = library.registry()[key]
     model = make_model(recipe, seed=0)
@@ -105,10 +106,10 @@ def test_numpy_network_matches_torch(tmp_path, key):
 
 
 def test_drawing_fire_pays_the_frames_the_fortress_opens_to_the_shooter_and_kills() -> None:
-    from services.agent.train import drawing_fire_reward, opening
     from services.sim.batch import BatchGame
     from services.sim.observation import observe
     from services.sim.sampling import batch_act, lane_uniforms
+    from services.training.rewards import drawing_fire_reward, opening
 
     bait, shooter = seats.policy_for("circle", "bait"), seats.policy_for("mirror", "shooter")
     batch = BatchGame(8, seeds=list(range(8)))
@@ -131,8 +132,8 @@ def test_drawing_fire_pays_the_frames_the_fortress_opens_to_the_shooter_and_kill
 
 
 def test_the_shooter_is_paid_for_aiming_at_the_fortress_while_it_is_up() -> None:
-    from services.agent.train import shooter_position_reward
     from services.sim.batch import BatchGame
+    from services.training.rewards import shooter_position_reward
 
     batch = BatchGame(4, seeds=list(range(4)))
     s = batch.state
@@ -146,8 +147,8 @@ def test_the_shooter_is_paid_for_aiming_at_the_fortress_while_it_is_up() -> None
 
 def test_the_events_reward_weighs_each_term_and_leaves_the_others_out() -> None:
     """The population's events partners are trained on random weightings of EVENT_TERMS."""
-    from services.agent.train import events_reward
     from services.sim.batch import BatchGame
+    from services.training.rewards import events_reward
 
     batch = BatchGame(3, seeds=list(range(3)))
     s = batch.state
@@ -164,7 +165,7 @@ def test_a_recipe_trains_with_any_policy_the_grammar_names(tmp_path):
     from dataclasses import replace
 
     from services.agent.scripted import CircleBait
-    from services.agent.train import RecipeVecEnv
+    from services.training.env import RecipeVecEnv
 
     root = tmp_path / "library"
     prepare(root)

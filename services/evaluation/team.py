@@ -9,19 +9,19 @@ from collections.abc import Callable
 
 import numpy as np
 
-from services.adapter.core import (
-    AdapterConfig,
-)
-from services.adapter.evaluate import batches, play_games, play_session
-from services.adapter.human_like import SESSION_TRIALS
-from services.adapter.partners import group_of
-from services.adapter.results import TeamGame
-from services.adapter.seat import ADAPTIVE_KIND, SeatSpec
+from services.evaluation.evaluate import batches, play_games, play_session
+from services.evaluation.results import TeamGame
 from services.jobs.core import Spec, spec
-from services.jobs.kinds import Runner, in_process, plugins_in
+from services.jobs.kinds import Runner, in_process
+from services.population.adaptive import AdapterConfig
+from services.population.human_like import SESSION_TRIALS
+from services.population.partners import group_of
+from services.population.seat import ADAPTIVE_KIND, SeatSpec, plugins_in
 from shared.game import check_role
 
 JOB_GAMES = 256  # games of a team or identification job (the lanes of one batch): tsf eval --job-games
+KINDS = {"team": f"{__name__}:run_team_jobs", "session": f"{__name__}:run_session_jobs"}  # for services/jobs
+HERE = in_process(KINDS)  # the runner that plays them in this process
 
 
 def _team_batch(games: list[tuple[str, str, int]], role: str) -> list[list]:
@@ -57,7 +57,7 @@ def team(
     partners: list[str],
     agents: list[str],
     seeds: list[int],
-    run: Runner = in_process,
+    run: Runner = HERE,
     progress: Callable[[int, int], None] | None = None,
     job_games: int | None = None,
 ) -> list[TeamGame]:
@@ -124,7 +124,7 @@ def sessions(
     partners: list[str],
     agents: list[str],
     people: list[int],
-    run: Runner = in_process,
+    run: Runner = HERE,
     progress: Callable[[int, int], None] | None = None,
 ) -> list[TeamGame]:
     """`team`, played as sessions: SESSION_TRIALS one-minute trials of each person (seeds

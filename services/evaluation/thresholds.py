@@ -10,14 +10,17 @@ from pathlib import Path
 import numpy as np
 
 from services.adapter.cem import log_probs
-from services.adapter.evaluate import batches, play_games, setup
-from services.adapter.identification import windowed
 from services.agent import library, networks
+from services.evaluation.evaluate import batches, play_games, setup
+from services.evaluation.identification import windowed
 from services.jobs.core import spec
 from services.jobs.kinds import Progress, Runner, in_process
 from shared.game import ROLES, GameConfig, other
 
 JOB_GAMES = 3  # games of one job: three games' streams stay under a message's 64 KiB
+
+KINDS = {"calibrate": f"{__name__}:run_calibrate_jobs"}  # the job kinds it runs, for services/jobs
+HERE = in_process(KINDS)  # the runner that plays them in this process
 
 
 def _self_scores(games: list[list]) -> np.ndarray:
@@ -39,7 +42,7 @@ def calibrate(
     seeds: list[int] | None = None,
     quantile: float = 0.01,
     margin: float = 2.0,
-    run: Runner = in_process,
+    run: Runner = HERE,
     progress: Progress | None = None,
 ) -> dict:
     """Out-of-library thresholds: for each role and window T, the lowest (over library policies)

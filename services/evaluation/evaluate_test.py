@@ -9,13 +9,14 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from services.adapter.core import AdapterConfig
-from services.adapter.evaluate import batches, play_games, play_session, play_teams, setup
-from services.adapter.identification import follow_lag, windowed
-from services.adapter.results import TeamGame, read_games, write_results
-from services.adapter.seat import SeatSpec
-from services.adapter.team import compare, holm, known_partner, paired_tests, variants
+from services.adapter import core
 from services.agent import networks
+from services.evaluation.evaluate import batches, play_games, play_session, play_teams, setup
+from services.evaluation.identification import follow_lag, windowed
+from services.evaluation.results import TeamGame, read_games, write_results
+from services.evaluation.team import compare, holm, known_partner, paired_tests, variants
+from services.population.adaptive import AdapterConfig
+from services.population.seat import SeatSpec
 from services.sim.batch_play import play_batch
 from services.sim.engine import Game
 from services.sim.observation import observe, world_values
@@ -151,7 +152,7 @@ def test_batched_adaptive_games_decide_as_the_scalar_engine_replays_them() -> No
     s = setup("shooter")
     for (_, agent, seed), outcome in zip(GAMES, played, strict=True):
         game = Game(config, seed)
-        adapter = agent.build(s.payoff) if isinstance(agent, AdapterConfig) else None
+        adapter = core.build(agent, s.payoff) if isinstance(agent, AdapterConfig) else None
         policy = s.ours[adapter.policy if adapter else agent]
         timeline = []
         for frame, (bait, shooter) in enumerate(outcome.pairs.tolist()):

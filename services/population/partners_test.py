@@ -8,8 +8,8 @@ import re
 import numpy as np
 import pytest
 
-from services.adapter.human_like import HumanLike
-from services.adapter.partners import (
+from services.population.human_like import HumanLike
+from services.population.partners import (
     DELAY,
     SWITCH_AT,
     Delayed,
@@ -32,7 +32,8 @@ from services.sim.play import policy_seed
 from shared.errors import UsageError
 from shared.game import N_ACTIONS, GameConfig
 
-COUNTING, CONSTANT = "services.adapter.partners_test:Counting", "services.adapter.partners_test:Constant"
+HERE = "services.population.partners_test"
+COUNTING, CONSTANT = f"{HERE}:Counting", f"{HERE}:Constant"
 
 
 class Counting:

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from services.adapter.human_like import FRAME_MS, PARAMETERS
+from services.population.human_like import FRAME_MS, PARAMETERS
 from shared.game import split_action
 
 LAPSE = 15  # frames (0.5 s) alive without a key change: a lapse (or a long hold)

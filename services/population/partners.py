@@ -55,8 +55,13 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from services.adapter.human_like import STAND_INS, HumanLike
-from services.adapter.seat import (
+from services.agent import library
+from services.agent.networks import LearnedPolicy
+from services.agent.policy import RulePolicy, UniformPolicy
+from services.agent.scripted import SCRIPTED
+from services.agent.seats import policy_of
+from services.population.human_like import STAND_INS, HumanLike
+from services.population.seat import (
     ADAPTIVE_KIND,
     FITTED,
     HUMANS,
@@ -67,11 +72,6 @@ from services.adapter.seat import (
     WRAPPERS,
     SeatSpec,
 )
-from services.agent import library
-from services.agent.networks import LearnedPolicy
-from services.agent.policy import RulePolicy, UniformPolicy
-from services.agent.scripted import SCRIPTED
-from services.agent.seats import policy_of
 from services.sim.engine import Game
 from services.sim.observation import as_observation, world_values
 from services.sim.play import game_seed, policy_seed

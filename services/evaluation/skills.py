@@ -2,7 +2,7 @@
 each style and skill, beside P.
 
 P measures library pairs only, so it knows nothing about what works with a slow, lapsing or
-novice partner. Here a partner is `human(K,skill=S)` (adapter/human_like.py, docs/humans.md): the
+novice partner. Here a partner is `human(K,skill=S)` (population/human_like.py, docs/humans.md): the
 library policy K of the other role (its style) played by a simulated hand of skill S (novice,
 typical, practised). Each (partner, teammate) cell is the mean kills/min over seeded one-minute
 games (seeds 0..games-1, as P's), with its standard error; the games are played as the lanes of
@@ -21,16 +21,17 @@ from pathlib import Path
 
 import numpy as np
 
-from services.adapter.core import AdapterConfig, Window
-from services.adapter.evaluate import batches, play_games, play_teams, setup
+from services.adapter.core import Window
 from services.adapter.skill import EVERY, FEATURES, LEVELS, Keys, SkillModel
 from services.agent import library
 from services.agent.policy import end_round_batch
-from services.provenance import provenance
+from services.evaluation.evaluate import batches, play_games, play_teams, setup
+from services.population.adaptive import AdapterConfig
 from services.sim import observation as ob
 from services.table.table import stderr
 from shared.errors import UsageError
 from shared.game import ROLES, GameConfig
+from shared.provenance import provenance
 
 VERSION = 1
 SKILLS = LEVELS[:-1]  # human_like.SKILLS, in order of practice

@@ -8,10 +8,10 @@ import json
 
 import pytest
 
-from services.adapter.core import STRATEGIES
-from services.adapter.evaluation import EvalPlan, evaluate
-from services.adapter.partners import population
 from services.agent import library
+from services.evaluation.evaluation import EvalPlan, evaluate
+from services.population.adaptive import STRATEGIES
+from services.population.partners import population
 from shared.errors import UsageError
 
 

@@ -1,9 +1,9 @@
 import json
 import subprocess
 
-from services import provenance
 from services.agent import library
 from services.table.table import DEFAULT_TABLE, Table
+from shared import provenance
 from shared.game import GameConfig
 
 
@@ -40,7 +40,7 @@ def test_a_saved_table_names_what_made_it(tmp_path):
 
 
 def test_an_eval_summary_names_what_made_it(tmp_path):
-    from services.adapter.results import write_results
+    from services.evaluation.results import write_results
 
     summary = write_results(tmp_path, None, [], None).read_text()
     made = json.loads((tmp_path / "provenance.json").read_text())

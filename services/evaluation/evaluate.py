@@ -1,6 +1,6 @@
 """Evaluating the adaptive agent in-process: the games every measurement plays.
 
-`play_games` plays games of partners (services/adapter/partners.py) with our seat played by a
+`play_games` plays games of partners (services/population/partners.py) with our seat played by a
 static library policy or adaptively, as the lanes of one batched engine (one game is one lane):
 the partners in their batched forms (partners.py), our seat's lanes grouped by the policy
 they play now, and every adaptive lane's update batched (`AdapterLanes`). The adaptive agent
@@ -25,10 +25,12 @@ from pathlib import Path
 
 import numpy as np
 
-from services.adapter.core import AdapterConfig, AdapterLanes, Payoff, Scorer
-from services.adapter.human_like import SESSION_TRIALS
-from services.adapter.partners import PartnerError, Partners
+from services.adapter import core
+from services.adapter.core import AdapterLanes, Payoff, Scorer
 from services.agent import networks
+from services.population.adaptive import AdapterConfig
+from services.population.human_like import SESSION_TRIALS
+from services.population.partners import PartnerError, Partners
 from services.sim.observation import observe
 from services.table.table import DEFAULT_TABLE
 from shared.game import OBS_SIZE, ROLES, GameConfig, Policy, bait_first, other
@@ -97,7 +99,7 @@ def play_games(
     scored = np.arange(len(games)) if score else np.array(sorted(sum(adaptive.values(), [])), np.int64)
     groups = []  # (lanes, their rows among the scored, the adapter)
     for agent, lanes in adaptive.items():
-        adapter = (adapters or {}).get(agent) or agent.build_lanes(len(lanes), s.payoff)
+        adapter = (adapters or {}).get(agent) or core.build_lanes(agent, len(lanes), s.payoff)
         groups.append((np.array(lanes), np.searchsorted(scored, lanes), adapter))
     ours = [s.payoff.ours.index(agent) if isinstance(agent, str) else -1 for _, agent, _ in games]
     for lanes, _, adapter in groups:
@@ -204,7 +206,8 @@ def play_session(partner: str, agent: Agent, person: int, role: str) -> list[Out
     """The trials of one session (human_like.SESSION_TRIALS games, seeds person * trials + i) with
     the same partner, one after the other; an adaptive agent's adapter in each trial is the
     previous one's `next_trial()`."""
-    adapters = {agent: agent.build_lanes(1, setup(role).payoff)} if isinstance(agent, AdapterConfig) else {}
+    adaptive = isinstance(agent, AdapterConfig)
+    adapters = {agent: core.build_lanes(agent, 1, setup(role).payoff)} if adaptive else {}
     outcomes: list[Outcome] = []
     for trial in range(SESSION_TRIALS):
         outcomes += play_games([(partner, agent, person * SESSION_TRIALS + trial)], role, adapters=adapters)

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from services.adapter.humans import (
+from services.population.partners import group_of, make_partner
+from services.proxy.humans import (
     ESTIMATED,
     FROZEN,
     SIGNATURE,
@@ -22,7 +23,6 @@ from services.adapter.humans import (
     traits,
     write,
 )
-from services.adapter.partners import group_of, make_partner
 from services.proxy.synthetic import record_trial, trial_seed
 from shared.errors import UsageError
 from shared.game import join_action

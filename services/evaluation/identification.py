@@ -9,15 +9,19 @@ from collections.abc import Callable
 
 import numpy as np
 
-from services.adapter.core import AdapterConfig, Payoff, forward
-from services.adapter.evaluate import Setup, batches, play_games, setup
-from services.adapter.partners import SWITCH_AT
+from services.adapter.core import Payoff, forward
+from services.evaluation.evaluate import Setup, batches, play_games, setup
 from services.jobs.core import spec
 from services.jobs.kinds import Runner, in_process
+from services.population.adaptive import AdapterConfig
+from services.population.partners import SWITCH_AT
 from shared.game import check_role
 
 FOLLOW_HOLD = 30  # frames the estimate must stay on the new type to count as following it
 JOB_GAMES = 32  # games of an identification job: the default's 99 games spread over 4 workers
+
+KINDS = {"identify": f"{__name__}:run_identify_jobs"}  # the job kinds it runs, for services/jobs
+HERE = in_process(KINDS)  # the runner that plays them in this process
 
 
 def windowed(scores: np.ndarray, window: int) -> np.ndarray:
@@ -107,7 +111,7 @@ def identification(
     role: str,
     windows: list[int],
     seeds: list[int],
-    run: Runner = in_process,
+    run: Runner = HERE,
     progress: Callable[[int, int], None] | None = None,
     job_games: int | None = None,
 ) -> dict:

@@ -12,14 +12,19 @@ from pathlib import Path
 
 import numpy as np
 
-from services.adapter import figures, identification, results, team
-from services.adapter.core import STRATEGIES, AdapterConfig, Payoff
-from services.adapter.partners import SWITCH_AT, check_partner, population
-from services.adapter.results import TeamGame
+from services.adapter import core
+from services.adapter.core import Payoff
 from services.agent import library
+from services.evaluation import figures, identification, results, team
+from services.evaluation.results import TeamGame
 from services.jobs.kinds import Progress, Runner, in_process
+from services.population.adaptive import STRATEGIES, AdapterConfig
+from services.population.partners import SWITCH_AT, check_partner, population
 from shared.errors import UsageError
 from shared.game import FPS, other
+
+KINDS = team.KINDS | identification.KINDS  # the job kinds an evaluation hands out
+HERE = in_process(KINDS)  # the runner that plays them in this process
 
 
 @dataclass(frozen=True)
@@ -57,7 +62,7 @@ class EvalPlan:
             return True
         config = AdapterConfig(self.role, self.strategy_window, strategy)
         try:
-            config.skill_model(Payoff.load(self.role))
+            core.skill_model(config, Payoff.load(self.role))
         except UsageError:
             if say:
                 raise
@@ -112,7 +117,7 @@ class EvalReport:
 
 
 def evaluate(
-    plan: EvalPlan, run: Runner = in_process, progress: Callable[[str], Progress] | None = None
+    plan: EvalPlan, run: Runner = HERE, progress: Callable[[str], Progress] | None = None
 ) -> EvalReport:
     """Play and measure what `plan` asks, with the games as jobs run by `run` (here, or on the job
     system's workers); `progress(step)` gives the (done, total) callback of each step."""

@@ -24,19 +24,19 @@ from __future__ import annotations
 
 import inspect
 import re
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, replace
 
-from services.adapter.core import ADAPTIVE, AdapterConfig, setting_text
 from services.agent.outside import BY_KEY, PLUGIN, PROXY_KIND, ZIP, policy_kind
 from services.agent.scripted import SCRIPTED
 from services.agent.seats import check_seat, policy_of
+from services.population.adaptive import ADAPTIVE, AdapterConfig, setting_text
 from shared.errors import UsageError
 from shared.game import HUMAN
 
 KEY = BY_KEY  # a policy's kinds (KEY, ZIP, PLUGIN, PROXY_KIND) are outside.policy_kind's
 RULE, FITTED, PERSON, ADAPTIVE_KIND = "rule", "fitted", "person", "adaptive"
-HUMANS = "humans:"  # stand-ins fitted by `tsf humans fit`: humans:DIR@NAME (services/adapter/humans.py)
+HUMANS = "humans:"  # stand-ins fitted by `tsf humans fit`: humans:DIR@NAME (services/proxy/humans.py)
 WRAPPERS = {
     "noisy": (1,),
     "delayed": (1,),
@@ -123,6 +123,13 @@ class SeatSpec:
     def plugins(self) -> tuple[str, ...]:
         """The `module:attr` plug-ins it names, inside wrappers too: what a worker must import."""
         return tuple(dict.fromkeys(s.key for s in self.walk() if s.kind == PLUGIN))
+
+
+def plugins_in(names: Iterable[str]) -> tuple[str, ...]:
+    """The `module:attr` plug-ins among partner or policy names (inside wrappers too:
+    noisy(my_lab.partners:Alice)); a proxy (`proxy:DIR`) or fitted stand-ins (`humans:DIR@NAME`)
+    are a directory, not a plug-in."""
+    return tuple(dict.fromkeys(plugin for name in names for plugin in SeatSpec.parse(name).plugins))
 
 
 def check_live(spec: SeatSpec, role: str, option: str) -> SeatSpec:

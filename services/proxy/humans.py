@@ -19,8 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from services.adapter.evaluate import play_teams
-from services.adapter.human_like import (
+from services.agent import library, networks
+from services.evaluation.evaluate import play_teams
+from services.population.human_like import (
     FRAME_MS,
     HISTORY,
     PARAMETERS,
@@ -30,8 +31,7 @@ from services.adapter.human_like import (
     predict,
     rules_of,
 )
-from services.adapter.keys import LAPSE, changes, fire_presses, shortest_runs, still
-from services.agent import library, networks
+from services.population.keys import LAPSE, changes, fire_presses, shortest_runs, still
 from services.proxy.data import pairs, person_seats, study_record
 from services.recorder.recording import load
 from services.sim import observation as ob

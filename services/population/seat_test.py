@@ -2,10 +2,20 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from services.adapter.core import INITIAL, STRATEGIES, WINDOWS, AdapterConfig
-from services.adapter.partners import make_partner, population
-from services.adapter.seat import KEY, PERSON, PLUGIN, PROXY_KIND, RULE, ZIP, SeatSpec, check_live
-from services.jobs.kinds import plugins_in
+from services.adapter import core
+from services.population.adaptive import INITIAL, STRATEGIES, WINDOWS, AdapterConfig
+from services.population.partners import make_partner, population
+from services.population.seat import (
+    KEY,
+    PERSON,
+    PLUGIN,
+    PROXY_KIND,
+    RULE,
+    ZIP,
+    SeatSpec,
+    check_live,
+    plugins_in,
+)
 from services.runtime.launch import MatchPlan
 from shared.errors import UsageError
 from shared.game import FRAMES, HUMAN, ROLES
@@ -117,6 +127,6 @@ def test_a_live_match_refuses_an_adaptive_name_no_recording_can_hold():
 def test_a_match_plan_carries_the_adaptive_seat_whole():
     plan = MatchPlan("m", 7, bait=SeatSpec.parse("adaptive-T150-cem_noise0.1"))
     assert plan.adapter == AdapterConfig("bait", 150, "cem", noise=0.1, seed=7)
-    assert plan.policies() == {"bait": plan.adapter.initial_policy(), "shooter": "mirror"}
+    assert plan.policies() == {"bait": core.initial_policy(plan.adapter), "shooter": "mirror"}
     with pytest.raises(UsageError, match="one seat at most"):
         MatchPlan("m", bait=SeatSpec.parse("adaptive-T150-cem"), shooter=SeatSpec.parse("adaptive-T150-cem"))

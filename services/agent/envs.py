@@ -25,7 +25,6 @@ if TYPE_CHECKING:
     from shared.game import Policy
 
 ENV_ID = "tsf/Role-v0"
-DEFAULT_PARTNER = {"bait": "S5", "shooter": "B5"}  # a strong library partner for each seat
 
 
 def register() -> None:
@@ -34,10 +33,12 @@ def register() -> None:
     from gymnasium.envs.registration import registry
 
     if ENV_ID not in registry:
-        add(ENV_ID, entry_point="services.envs:role_env", vector_entry_point="services.envs:role_vector_env")
+        here = "services.agent.envs"
+        add(ENV_ID, entry_point=f"{here}:role_env", vector_entry_point=f"{here}:role_vector_env")
 
 
 def _partner(partner: Any, role: str) -> Policy:
+    from services.agent.library import DEFAULT_PARTNER
     from services.agent.seats import policy_for
 
     check_role(role)

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import pytest
 
-from services.table import skills
+from services.evaluation import skills
+from services.evaluation.skills import SkillTable, measure, stand_in
 from services.table.plot import skill_heatmap
-from services.table.skills import SkillTable, measure, stand_in
 
 NOVICE, PRACTISED = stand_in("S4", "novice"), stand_in("S4", "practised")
 

@@ -6,7 +6,7 @@ from pettingzoo.test import api_test, parallel_api_test, seed_test
 from pettingzoo.test.render_test import collect_render_results
 
 import services  # noqa: F401 - importing the package registers tsf/Role-v0
-from services import envs
+from services.agent import envs
 from services.agent.scripted import MirrorShooter
 from services.sim.env import RoleEnv
 from services.sim.vec_env import RoleVectorEnv

@@ -1,0 +1,142 @@
+"""The adaptive agent as a value: `AdapterConfig`, its settings, its name and the name read back.
+
+Every launcher, study variant, command line, seat and report names the adaptive agent through this
+value, so it sits below them all and reads no file; what it builds (the adapter core, from the
+table, the out-of-library calibration and the skill model) is the adapter's
+(services/adapter/core.py: `build`, `build_lanes`, `initial_policy`, `threshold`, `skill_model`).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+from shared.errors import UsageError
+from shared.game import FRAMES, ROLES, SEEDS, Range, other
+
+STRATEGIES = (
+    "cem",
+    "cem-dwell",
+    "cem-ood",
+    "bayes",
+    "bayes-dwell-ood",
+    "bayes-dwell-ood-guard",
+    "bayes-dwell-ood-guard-memory",
+    "bayes-dwell-ood-guard-skill",
+)
+INITIAL = ("best-average", "random")
+WINDOWS = Range(1, FRAMES.high)  # T: a window longer than a game never fills
+ADAPTIVE = "adaptive-"  # how every adaptive agent's name begins
+_NAME = re.compile(rf"^{ADAPTIVE}T(\d+)-([a-z-]+)$")
+NAMED = {
+    "initial": str,
+    "warmup": int,
+    "dwell": int,
+    "hazard": float,
+    "noise": float,
+}  # in a name after T, strategy
+
+
+def setting_text(value: object) -> str:
+    """A setting as a name writes it: 150, not 150.0 (floats otherwise as Python writes them back,
+    so that reading the name gives the same number); a word after a hyphen."""
+    if isinstance(value, str):
+        return f"-{value}"
+    if isinstance(value, float) and value.is_integer() and abs(value) < 1e15:
+        return str(int(value))
+    return repr(value)
+
+
+def _option(default: object, help: str) -> Any:
+    """A config field with its command-line help (services/cli.py builds the options from these)."""
+    return field(default=default, metadata={"help": help})
+
+
+@dataclass(frozen=True)
+class AdapterConfig:
+    """The adaptive agent, whole: every launcher, study variant, command line and report reads or
+    names it through this value. Zero means "the default derived from the window"."""
+
+    role: str = _option("shooter", "The adaptive agent's seat; the partner plays the other.")
+    window: int = _option(400, "T: frames of partner play the similarity averages over.")
+    strategy: str = _option("bayes-dwell-ood-guard", f"One of {', '.join(STRATEGIES)}.")
+    initial: str = _option("best-average", f"Policy before the first estimate: {' or '.join(INITIAL)}.")
+    warmup: int = _option(0, "Frames before the first estimate (0: min(T, 150), 5 s).")
+    dwell: int = _option(0, "-dwell strategies: frames a new choice must hold (0: max(15, T/10)).")
+    hazard: float = _option(0.0, "bayes: per-frame switching probability (0: 1/T).")
+    noise: float = _option(0.05, "bayes: probability that the partner's action is a uniform slip.")
+    seed: int = _option(0, "Draws the random initial policy.")
+
+    def __post_init__(self) -> None:
+        choices = (("--role", self.role, ROLES), ("--strategy", self.strategy, STRATEGIES))
+        for option, value, valid in (*choices, ("--initial", self.initial, INITIAL)):
+            if value not in valid:
+                raise UsageError(option, value, "unknown", valid)
+        for option, value, limits in (
+            ("--window", self.window, WINDOWS),
+            ("--warmup", self.warmup, Range(0, FRAMES.high)),
+            ("--dwell", self.dwell, Range(0, FRAMES.high)),
+            ("--seed", self.seed, SEEDS),
+        ):
+            if value not in limits:
+                raise UsageError(option, value, f"outside the range {limits}")
+        for option, value in (("--hazard", self.hazard), ("--noise", self.noise)):
+            if not 0.0 <= value < 1.0:
+                raise UsageError(option, value, "a probability in [0, 1)")
+
+    @property
+    def partner_role(self) -> str:
+        return other(self.role)
+
+    @property
+    def warmup_frames(self) -> int:
+        return self.warmup or min(self.window, 150)
+
+    @property
+    def dwell_frames(self) -> int:
+        return (self.dwell or max(15, self.window // 10)) if "dwell" in self.strategy else 0
+
+    @property
+    def hazard_rate(self) -> float:
+        return self.hazard or 1.0 / self.window
+
+    @property
+    def name(self) -> str:
+        """The name a recording, a result table, a study or an offer gives this agent, whole:
+        adaptive-T<window>-<strategy>, then _<setting><value> for each of NAMED that is not the
+        default (_initial-random, _warmup150, _dwell20, _hazard0.01, _noise0.1). The seat and the
+        seed are where it plays, not what it is, so the name leaves them out."""
+        default = AdapterConfig()
+        extra = "".join(
+            f"_{s}{setting_text(getattr(self, s))}" for s in NAMED if getattr(self, s) != getattr(default, s)
+        )
+        return f"{ADAPTIVE}T{self.window}-{self.strategy}{extra}"
+
+    @classmethod
+    def parse(cls, name: str, option: str = "--policy", **context: object) -> AdapterConfig:
+        """The config a name stands for (`name`'s inverse); `context` gives the seat and seed (role,
+        seed). A UsageError about `option` for a name that is not an adaptive agent's."""
+        head, *items = name.split("_")
+        found = _NAME.match(head)
+        if not found:
+            raise UsageError(
+                option, name, f"not an adaptive agent ({ADAPTIVE}T<window>-<strategy>[_<setting>...])"
+            )
+        named: dict[str, object] = {}
+        for item in items:
+            setting = next((s for s in NAMED if item.startswith(s)), None)
+            if setting is None or setting in named:
+                raise UsageError(
+                    option, name, f"{item!r} is not one setting of the adaptive agent", list(NAMED)
+                )
+            text = item.removeprefix(setting)
+            try:
+                named[setting] = text.removeprefix("-") if NAMED[setting] is str else NAMED[setting](text)
+            except ValueError:
+                raise UsageError(option, name, f"{item!r}: {setting} takes a number") from None
+        return cls(window=int(found[1]), strategy=found[2], **named, **context)
+
+    def to_args(self) -> list[str]:
+        """The same config as `tsf adapter` options: one per field, so that none is dropped."""
+        return [arg for f in fields(self) for arg in (f"--{f.name}", str(getattr(self, f.name)))]

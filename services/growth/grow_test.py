@@ -50,6 +50,7 @@ def test_pair_jobs_play_the_games_they_stand_for():
 
 @pytest.mark.slow
 @pytest.mark.long
+@pytest.mark.timeout(900)  # two minutes alone; a loaded machine takes more
 def test_a_small_population_grows_a_library_and_a_second_run_resumes_from_its_files(tmp_path, monkeypatch):
     pytest.importorskip("stable_baselines3", reason="the `train` extra is not installed")
     from services.agent import library, networks

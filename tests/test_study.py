@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 from conftest import STAND_IN_TOKEN
-from test_match_processes import children
+from test_match_processes import in_session
 
 from services.recorder.recording import load
 from services.study.core import StudyConfig, Variant
@@ -142,16 +142,22 @@ def test_eight_stand_ins_at_once_each_in_a_match_of_their_own(tmp_path, study_se
         assert recording.problems() == [] and len(recording.states) == config.frames + 1
 
 
+def study_file(tmp_path: Path, name: str, trials: int = 1, seconds: float = 600) -> Path:
+    """A study config: `trials` trials of `seconds` with one static agent."""
+    config = tmp_path / f"{name}.toml"
+    variant = '[[variants]]\nname = "s"\nbait = "B5"\nshooter = "S5"\n'
+    config.write_text(f'name = "{name}"\ntrials = {trials}\ntrial_seconds = {seconds}\n{variant}')
+    return config
+
+
 @contextlib.contextmanager
 def study_command(
     tmp_path: Path, name: str = "long", trials: int = 1, seconds: float = 600
 ) -> Iterator[tuple[subprocess.Popen, str]]:
     """A real `tsf study` process (study `name`: `trials` trials of `seconds` with one static agent,
-    its journal and recordings in tmp_path/name) on a free port: (the process, its address); killed
-    with its process group at the end if it is still running. Started again, it resumes the study."""
-    config = tmp_path / f"{name}.toml"
-    variant = '[[variants]]\nname = "s"\nbait = "B5"\nshooter = "S5"\n'
-    config.write_text(f'name = "{name}"\ntrials = {trials}\ntrial_seconds = {seconds}\n{variant}')
+    its journal and recordings in tmp_path/name) on a free port: (the process, its address); its
+    process group is killed at the end. Started again, it resumes the study."""
+    config = study_file(tmp_path, name, trials, seconds)
     server = subprocess.Popen(
         [sys.executable, "-m", "services.cli", "study", str(config), "--out", str(tmp_path), "--port", "0",
          "--test-token", TEST],
@@ -163,27 +169,49 @@ def study_command(
             line = server.stdout.readline()
             assert line, "the server printed no address"
         yield server, line[line.index("http") :].split()[0]
-    finally:
-        if server.poll() is None:
+    finally:  # its process group, even once the server is gone: nothing is left if a test fails
+        with contextlib.suppress(ProcessLookupError):
             os.killpg(server.pid, signal.SIGKILL)
-            server.wait()
+        server.wait()
 
 
-def ended(processes: dict[int, str]) -> bool:
-    """Whether every one of `processes` has exited (multiprocessing's resource tracker, started for
-    the judge's process, exits a moment after the server)."""
-    return not [pid for pid in processes if Path(f"/proc/{pid}").exists()]
-
-
-def test_sigterm_ends_the_study_server_and_every_match_it_started(tmp_path, wait_until):
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=lambda s: s.name)
+def test_a_study_server_stopped_or_killed_mid_trial_leaves_no_process_behind(tmp_path, wait_until, sig):
+    """SIGTERM ends the study and every process it started; SIGKILL leaves the server no time to,
+    and they end by themselves: the pool's services (PR_SET_PDEATHSIG), the judge's worker (it
+    watches its pipe from the server) and with it multiprocessing's resource tracker. Before, the
+    last two ran on for hours after a SIGKILL, re-parented to init."""
     with study_command(tmp_path) as (server, url):
         asyncio.run(stand_in(url, leave_after=30, test=TEST))  # the match runs out for ten minutes
-        started = children(server.pid)  # the pool's sim, agent, recorder; the judge's process
-        pool = [p for p in started.values() if "--pool study-" in p]
+        started = in_session(server.pid)  # the server, its pool's sim, agent and recorder, the judge's
+        pool = [p for p in started.values() if "--pool study-" in p]  # worker, the resource tracker
         assert len(pool) == 3 and any("multiprocessing.spawn" in p for p in started.values()), started
-        server.send_signal(signal.SIGTERM)
-        assert server.wait(60) == 0
-        assert wait_until(lambda: ended(started)), "no process is left behind"
+        assert any("resource_tracker" in p for p in started.values()), started
+        server.send_signal(sig)
+        assert server.wait(60) == (0 if sig == signal.SIGTERM else -signal.SIGKILL)
+        assert wait_until(lambda: not in_session(server.pid), timeout=5), in_session(server.pid)
+
+
+def test_a_study_server_that_fails_at_its_start_leaves_no_process_behind(tmp_path, wait_until):
+    """Its port taken: the server fails after its pool and judge have started, and ends them."""
+    import socket
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        server = subprocess.Popen(
+            [sys.executable, "-m", "services.cli", "study", str(study_file(tmp_path, "start")),
+             "--out", str(tmp_path),
+             "--port", str(taken.getsockname()[1])],
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        )  # fmt: skip
+        try:
+            _, err = server.communicate(timeout=120)
+        finally:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(server.pid, signal.SIGKILL)
+    assert server.returncode != 0 and "Traceback" not in err, err
+    assert wait_until(lambda: not in_session(server.pid), timeout=5), in_session(server.pid)
 
 
 def test_ctrl_c_during_a_matchs_warm_up_ends_the_server_at_once(tmp_path, wait_until):
@@ -208,9 +236,8 @@ def test_ctrl_c_during_a_matchs_warm_up_ends_the_server_at_once(tmp_path, wait_u
                 assert status == 0
                 assert waited < 10.0
 
-        started = children(server.pid)
         asyncio.run(consent())
-        assert wait_until(lambda: ended(started)), "no process is left behind"
+        assert wait_until(lambda: not in_session(server.pid), timeout=5), in_session(server.pid)
 
 
 def test_attempts_an_earlier_server_left_are_settled_by_their_recordings(tmp_path):

@@ -401,7 +401,8 @@ class Gateway:
                     server.close(close_connections=True)
         except BaseException as error:  # surfaced to the thread that opened the gateway
             self.failed = error
-            raise
+            if self.ready.is_set():  # else __enter__ raises it: one line, not a thread's traceback too
+                raise
         finally:
             self.ready.set()
 

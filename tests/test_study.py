@@ -317,6 +317,40 @@ def test_a_client_that_consents_and_goes_silent_frees_its_slot_for_a_newcomer(tm
     assert statuses == {"P001": ["failed"], "P002": ["done"]}
 
 
+BROKEN = {  # the agent's bait seat of a variant whose match cannot be set up
+    "unknown-key": "B99",
+    "swapped-seats": "S5",
+    "missing-zip": "{tmp}/gone.zip",
+}
+
+
+@pytest.mark.parametrize("bait", BROKEN.values(), ids=BROKEN.keys())
+def test_a_trial_that_cannot_be_set_up_is_told_at_once_and_takes_no_slot(tmp_path, study_server, bait):
+    """A variant whose agent cannot play its seat: its participant is told of a problem at once (no
+    attempt again: each would fail the same way), the attempt is written down as failed with the
+    reason, and the only slot stays free: the next participant, who meets the good variant first,
+    plays (the slot was held for ever, and the participant got a traceback's close 1011)."""
+    variants = (Variant.read("broken", bait.format(tmp=tmp_path), "S5"), VARIANTS[0])
+
+    def config(seed: int) -> StudyConfig:
+        return StudyConfig("broken", variants, trials=1, trial_seconds=1.5, seed=seed, roles=("shooter",))
+
+    from services.study.core import variant_order
+
+    seed = next(s for s in range(100) if [variant_order(config(s), i)[0] for i in (0, 1)] == [0, 1])
+    stop, url, server = study_server(config(seed), tmp_path, Serving(max_matches=1, test_token=TEST))
+    first = asyncio.run(asyncio.wait_for(stand_in(url, test=TEST), 60))
+    assert first.refused == PROBLEM and first.agents == [], first
+    second = asyncio.run(asyncio.wait_for(stand_in(url, test=TEST, leave_after=10), 60))
+    assert second.agents and second.states == 10, "the slot was free"
+    stop.set()
+    study = server.result(timeout=60)
+    [failed] = study.participants["P001"].attempts
+    assert failed["status"] == "failed"
+    sidecar = json.loads((tmp_path / "recordings" / f"{failed['match']}.study.json").read_text())
+    assert sidecar["status"] == "failed" and sidecar["variant"] == "broken"
+
+
 def test_a_reload_during_set_up_is_a_resume(tmp_path, study_server):
     """The page is reloaded while its trial is set up (offered, not Ready): the new page resumes
     and plays every trial; the old socket is closed; the cut attempt is set down as failed."""

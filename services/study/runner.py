@@ -402,27 +402,43 @@ class TrialRunner:
         for at most its length and `trial_timeout`. Returns the sidecar, or None if the participant
         left (a match they started runs out with their ship idle; one they had not is ended;
         either is marked dropped)."""
+        try:
+            plan = self.plan(trial)
+        except ValueError as error:  # its variant names a policy that cannot play the seat (UsageError)
+            # Before any slot is taken; told at once, since every new attempt would fail the same way
+            # (the participant may resume once the study is mended).
+            if not trial.practice:
+                settle(self.study, trial, None, [f"its match cannot be set up: {error}"])
+            else:
+                log.error("the practice game %s cannot be set up: %s", trial.match, error)
+            socket.send({"type": "problem", "text": PROBLEM})
+            await socket.close()
+            return None
         if not await self.slot(socket, trial.match):
             return None
-        if socket.closed:  # left as the slot came: nothing starts
+        try:
+            if socket.closed:  # left as the slot came: nothing starts
+                self.matches.admission.end(trial.match)
+                self.matches.notify()
+                return None
+            socket.send({"type": "wait", "reason": SETTING_UP, "seconds": round(SET_UP)})
+            host = self.matches.admission.running[trial.match]  # Admission.LOCAL: this machine
+            if not trial.practice:
+                self.study.record(trial, "running")
+            stop, taken, loop = threading.Event(), asyncio.Event(), asyncio.get_running_loop()
+            if host:
+                log.info("trial %s runs on match host %s", trial.match, host)
+            running = asyncio.ensure_future(
+                asyncio.to_thread(
+                    run_trial, plan, trial.role, stop, self.pool, self.remote, host,
+                    lambda: loop.call_soon_threadsafe(taken.set), self.judge,
+                )
+            )  # fmt: skip
+            self.matches.add(trial, running, stop, "" if host else self.pool.endpoint)
+        except BaseException:  # the slot goes back: matches.add frees it from here on, when the match ends
             self.matches.admission.end(trial.match)
             self.matches.notify()
-            return None
-        socket.send({"type": "wait", "reason": SETTING_UP, "seconds": round(SET_UP)})
-        host = self.matches.admission.running[trial.match]  # Admission.LOCAL: this machine
-        plan = self.plan(trial)
-        if not trial.practice:
-            self.study.record(trial, "running")
-        stop, taken, loop = threading.Event(), asyncio.Event(), asyncio.get_running_loop()
-        if host:
-            log.info("trial %s runs on match host %s", trial.match, host)
-        running = asyncio.ensure_future(
-            asyncio.to_thread(
-                run_trial, plan, trial.role, stop, self.pool, self.remote, host,
-                lambda: loop.call_soon_threadsafe(taken.set), self.judge,
-            )
-        )  # fmt: skip
-        self.matches.add(trial, running, stop, "" if host else self.pool.endpoint)
+            raise
         seat = await self.bridge(socket, trial, bool(host), obs, stop, taken, running)
         ready = await self.live(socket, trial, seat, offer, running, stop)
         seat.close()

@@ -214,6 +214,26 @@ def test_a_study_server_that_fails_at_its_start_leaves_no_process_behind(tmp_pat
     assert wait_until(lambda: not in_session(server.pid), timeout=5), in_session(server.pid)
 
 
+def test_a_second_server_on_the_same_study_is_refused_naming_the_first(tmp_path):
+    """Both ran, handed out the same participant ids and overwrote each other's records."""
+    with study_command(tmp_path, "twice") as (server, _):
+        second = subprocess.run(
+            [sys.executable, "-m", "services.cli", "study", str(tmp_path / "twice.toml"),
+             "--out", str(tmp_path), "--port", "0"],
+            capture_output=True, text=True, timeout=60,
+        )  # fmt: skip
+        assert second.returncode == 2, second.stderr
+        assert second.stderr.strip().splitlines()[-1] == (
+            f"tsf study: --out {tmp_path / 'twice'}: another study server (pid {server.pid}) serves this "
+            "study; stop it first"
+        )
+        server.send_signal(signal.SIGTERM)
+        assert server.wait(60) == 0
+    with study_command(tmp_path, "twice") as (server, _):  # once it has ended, the next one serves
+        server.send_signal(signal.SIGTERM)
+        assert server.wait(60) == 0
+
+
 def test_ctrl_c_during_a_matchs_warm_up_ends_the_server_at_once(tmp_path, wait_until):
     """SIGINT just as a trial's match starts up (its sim not yet listening, the server's session to
     it not yet open): the server exits within seconds (it took a minute, and at times for ever)."""

@@ -39,14 +39,16 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import fcntl
 import json
 import logging
+import os
 import threading
 from collections.abc import Awaitable, Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import NamedTuple
+from typing import IO, NamedTuple
 
 import websockets
 import zenoh
@@ -65,6 +67,7 @@ from services.study.dashboard import Dashboard, overview
 from services.study.judge import Judge, judge
 from services.study.remote import Remote
 from shared.bus import BusConfig, until_stopped
+from shared.errors import UsageError
 from shared.game import FPS, ROLES, other
 from shared.secret import same_secret, signature
 
@@ -650,6 +653,29 @@ class Visit:
         await socket.close()
 
 
+def one_server(directory: Path) -> IO[str]:
+    """The study directory's lock (`server.lock`, holding the server's pid), held until the file is
+    closed, or the process ends however it ends. A second server on the same directory is refused
+    (UsageError, naming the first one's pid): both ran, handed out the same participant ids and
+    overwrote each other's records. An advisory lock (flock): on a shared file system that does not
+    carry flock across machines, run one server per directory yourself."""
+    directory.mkdir(parents=True, exist_ok=True)
+    file = (directory / "server.lock").open("a+")
+    try:
+        fcntl.flock(file, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        file.seek(0)
+        other = file.read().strip() or "unknown"
+        file.close()
+        raise UsageError(
+            "--out", directory, f"another study server (pid {other}) serves this study; stop it first"
+        ) from None
+    file.truncate(0)
+    file.write(f"{os.getpid()}\n")
+    file.flush()
+    return file
+
+
 def run_study(
     config: StudyConfig,
     directory: str | Path,
@@ -661,6 +687,7 @@ def run_study(
     """Serve the study until `stop` is set, then end every match it started; participants'
     progress lives in `directory` (a restarted server resumes everyone)."""
     stop = stop or threading.Event()
+    lock = one_server(Path(directory))  # before anything is read or started
     study = Study(config, directory)
     for sidecar in reconcile(study):
         log.info("attempt %s left %s by an earlier server", sidecar["match"], sidecar["status"])
@@ -700,4 +727,5 @@ def run_study(
         bonuses = write_bonuses(study.config.crowd.bonus, study.participants.values(), study.directory)
         if bonuses is not None:
             log.info("bonuses written to %s", bonuses)
+        lock.close()
     return study

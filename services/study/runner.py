@@ -56,8 +56,8 @@ from websockets.asyncio.server import ServerConnection
 from websockets.protocol import State
 
 from services.adapter.seat import PERSON, SeatSpec
-from services.human.core import BadInput, Controls, PerAddress, RateLimit
-from services.human.gateway import Bridge, Gateway, Outbox, Web, receive_first, refuse
+from services.human.core import BadInput, Controls, PerAddress, Quiet, RateLimit
+from services.human.gateway import Bridge, Gateway, Outbox, Web, client_address, receive_first, refuse
 from services.recorder.service import recording_path
 from services.runtime.launch import MatchPlan
 from services.runtime.pool import Pool, pool_name
@@ -80,6 +80,7 @@ DRAIN = 60.0  # seconds the stopping server waits for its matches to end and be 
 WARM_UP = 60.0  # seconds to wait for a match's services to take it before offering its trial anyway
 ARRIVAL_BURST = 20  # participant ids issued at once, beyond the rate
 ADDRESS_BURST = 5  # ... to one address
+RECONNECT_BURST = 5  # reconnects of one participant at once (reloads), and failed resumes of one address
 SCREENED = "Thank you. This study cannot go on: two attention checks were not passed."
 BUSY = "Too many people are starting right now. Please try again in a minute."
 TAKEN = "This worker id has already taken part in this study."
@@ -87,6 +88,7 @@ NO_WORKER = "This link's ids are not ones this study can take (letters, digits a
 DECLINED = "You declined to take part. Nothing about you was recorded. You may close this window now."
 SETTING_UP = "Your next game is being set up."
 UNSIGNED = "This link is not signed for its worker id. Please open the link exactly as the study gave it."
+RECONNECTS = "Too many reconnects. Please wait a minute, then reload the page."
 
 
 @dataclass(frozen=True)
@@ -98,9 +100,12 @@ class Serving:
     low_latency: bool = True  # zenoh's low-latency transport within each match
     test_token: str = ""  # a hello with this `test` token may ask for the observation values (stand-ins)
     arrivals: float = 1.0  # new participant ids a second, on average (bursts of ARRIVAL_BURST)
-    # ... and from one address (bursts of ADDRESS_BURST; 0: none, as behind a reverse proxy, where
-    # every client has the proxy's address), so that one client cannot drain the ids of all
+    # ... and from one address (bursts of ADDRESS_BURST; 0: none), so that one client cannot drain
+    # the ids of all; behind a reverse proxy, the address it forwards (Web.trusted)
     arrivals_per_address: float = 0.1
+    # Reconnects (a reload resumes, and cuts the trial being played) of one participant a second,
+    # and failed resumes (an unknown id or key) of one address (bursts of RECONNECT_BURST; 0: none)
+    reconnects: float = 0.1
     ready_timeout: float = 120.0  # seconds an offered trial waits for Ready; then its match and slot go
     hosts: BusConfig | None = None  # the router where match hosts offer their slots; None: local only
     # A signed link's secret: new participants need a worker id and its signature (`sig`, the
@@ -496,13 +501,24 @@ class Front:
     their visit; the newest window of a participant plays. Its fields are what every participant's
     admission shares: the rate limits and who is playing."""
 
-    def __init__(self, study: Study, serving: Serving, runner: TrialRunner) -> None:
-        self.study, self.serving, self.runner = study, serving, runner
+    def __init__(
+        self, study: Study, serving: Serving, runner: TrialRunner, trusted: tuple[str, ...] = ()
+    ) -> None:
+        self.study, self.serving, self.runner, self.trusted = study, serving, runner, trusted
         self.playing: dict[
             str, tuple[Socket, asyncio.Event]
         ] = {}  # participant -> their socket, set once it left
         self.arrivals = RateLimit(serving.arrivals, ARRIVAL_BURST)
         self.per_address = PerAddress(serving.arrivals_per_address, ADDRESS_BURST)
+        self.reconnects = PerAddress(serving.reconnects, RECONNECT_BURST)  # by participant, or address
+        self.quiet = Quiet()  # refusals over a limit: logged once per address and minute
+
+    async def over_limit(self, socket: Socket, address: str, reason: str, line: str) -> None:
+        """Refuse a socket over one of the limits with `reason`; `line` goes to the log, once per
+        address and minute."""
+        if self.quiet(f"{line} {address}"):
+            log.warning("refused %s: %s (said once a minute per address)", address, line)
+        await refuse(socket.ws, reason)
 
     async def handle(self, ws: ServerConnection, z: zenoh.Session | None) -> None:
         hello = await receive_first(ws, ("hello",))
@@ -533,10 +549,17 @@ class Front:
         """The participant who resumes (id and key), or a new one once they consent: ids are
         issued only then, at a limited rate, and once per crowd-sourcing worker id."""
         study, config = self.study, self.study.config
+        address = client_address(socket.ws, self.trusted)
         if "participant" in hello:
             participant = study.resume(hello["participant"], hello.get("key", ""))
             if participant is None:
+                if not self.reconnects.allow(address):
+                    await self.over_limit(socket, address, RECONNECTS, "too many failed resumes")
+                    return None
                 await refuse(socket.ws, "unknown participant or resume key")
+            elif not self.reconnects.allow(f"participant {participant.id}"):
+                await self.over_limit(socket, address, RECONNECTS, f"too many reconnects of {participant.id}")
+                return None
             return participant
         ids = [worker_id(v) for v in config.crowd.ids(hello.get("link", {}))]
         worker = ids[0] or worker_id(hello.get("worker"))
@@ -564,8 +587,8 @@ class Front:
             return None
         if socket.closed:  # consented and left: no id, no match
             return None
-        if not (self.per_address.allow(socket.ws.remote_address[0]) and self.arrivals.allow()):
-            await refuse(socket.ws, BUSY)
+        if not (self.per_address.allow(address) and self.arrivals.allow()):
+            await self.over_limit(socket, address, BUSY, "over the limits on new participants")
             return None
         participant = study.arrive(worker, link)
         log.info("participant %s arrives and plays the %s", participant.id, participant.role)
@@ -700,7 +723,7 @@ def run_study(
         pool.__enter__()
         judging = Judge()
         runner = TrialRunner(study, serving, matches, pool, judging, remote)
-        gateway = Gateway(None, Front(study, serving, runner).handle, web)
+        gateway = Gateway(None, Front(study, serving, runner, web.trusted).handle, web)
         # A running match holds a thread (run_trial) for its length, its start-up another: asyncio's
         # default pool (cores + 4 threads) would cap the matches at a handful, whatever hosts add.
         gateway.loop.set_default_executor(ThreadPoolExecutor(THREADS, thread_name_prefix="study"))

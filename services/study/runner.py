@@ -44,6 +44,7 @@ import json
 import logging
 import os
 import threading
+import time
 from collections.abc import Awaitable, Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -61,7 +62,17 @@ from services.human.gateway import Bridge, Gateway, Outbox, Web, client_address,
 from services.recorder.service import recording_path
 from services.runtime.launch import MatchPlan
 from services.runtime.pool import Pool, pool_name
-from services.study.core import AROUND, SET_UP, Admission, Participant, Study, StudyConfig, Trial, worker_id
+from services.study.core import (
+    AROUND,
+    SET_UP,
+    Admission,
+    Lag,
+    Participant,
+    Study,
+    StudyConfig,
+    Trial,
+    worker_id,
+)
 from services.study.crowd import FAILS, attention_check, write_bonuses
 from services.study.dashboard import Dashboard, overview
 from services.study.judge import Judge, judge
@@ -69,6 +80,7 @@ from services.study.remote import Remote
 from shared.bus import BusConfig, until_stopped
 from shared.errors import UsageError
 from shared.game import FPS, ROLES, other
+from shared.messages import State as GameState
 from shared.secret import same_secret, signature
 
 log = logging.getLogger("tsf.study")
@@ -106,6 +118,9 @@ class Serving:
     # Reconnects (a reload resumes, and cuts the trial being played) of one participant a second,
     # and failed resumes (an unknown id or key) of one address (bursts of RECONNECT_BURST; 0: none)
     reconnects: float = 0.1
+    # Seconds the running matches' frames may reach the server late (Lag, the worst of the last 5 s)
+    # before no new match starts on this machine until they catch up (0: no hold)
+    max_lag: float = 0.025
     ready_timeout: float = 120.0  # seconds an offered trial waits for Ready; then its match and slot go
     hosts: BusConfig | None = None  # the router where match hosts offer their slots; None: local only
     # A signed link's secret: new participants need a worker id and its signature (`sig`, the
@@ -238,11 +253,24 @@ def run_trial(
     return Judged(*judged(path, role), failure)
 
 
+class Metered(Bridge):
+    """A seat's bridge that times each frame's arrival for the machine's Lag."""
+
+    def __init__(self, lag: Lag, *args: object) -> None:
+        self.lag = lag
+        super().__init__(*args)
+
+    def _on_state(self, state: GameState) -> None:
+        self.lag.frame(self.match, state.frame, time.monotonic())
+        super()._on_state(state)
+
+
 class Matches:
     """The running matches: slots (Admission), a stop per match, and each participant's one match."""
 
     def __init__(self, cap: int) -> None:
         self.admission = Admission(cap)
+        self.lag = Lag()  # how late this machine's matches' frames arrive: new ones wait while it is high
         self.stops: dict[str, threading.Event] = {}  # match -> its stop
         self.endpoints: dict[str, str] = {}  # match -> its sim's endpoint, "" on a match host (spectators)
         self.of: dict[str, tuple[asyncio.Future, threading.Event]] = {}  # participant -> their match
@@ -272,6 +300,7 @@ class Matches:
             if self.of.get(trial.participant, (None,))[0] is running:
                 del self.of[trial.participant]
             self.admission.end(trial.match)
+            self.lag.end(trial.match)
             self.notify()
 
         running.add_done_callback(ended)
@@ -348,9 +377,10 @@ class TrialRunner:
 
     async def slot(self, socket: Socket, match: str) -> bool:
         """Wait for a free match, telling the participant their place; False if they leave."""
-        admission, told = self.matches.admission, None
+        admission, told, lag = self.matches.admission, None, self.serving.max_lag
         while True:
             admission.hosts = self.remote.hosts() if self.remote else {}
+            admission.held = bool(lag) and self.matches.lag.worst(time.monotonic()) > lag
             if admission.start(match):
                 break
             place = admission.place(match)
@@ -358,7 +388,9 @@ class TrialRunner:
                 wait = round(admission.wait(place, self.match_seconds))
                 socket.send({"type": "queue", "place": place, "wait": wait})
                 told = place
-            await first(self.matches.changed.wait(), socket.gone.wait())
+            with contextlib.suppress(TimeoutError):  # held: asked again as the lag falls
+                async with asyncio.timeout(1.0 if admission.held else None):
+                    await first(self.matches.changed.wait(), socket.gone.wait())
             if socket.gone.is_set():
                 admission.end(match)
                 self.matches.notify()
@@ -401,15 +433,18 @@ class TrialRunner:
             stop.set()
         if not (taken.is_set() or running.done() or stop.is_set()):
             log.warning("trial %s: not every service has taken its match after %g s", trial.match, WARM_UP)
-        z = self.remote.z if hosted and self.remote else self.pool.z
-        return Bridge(z, trial.match, trial.role, socket.controls, socket.outbox, obs)
+        if hosted and self.remote:  # another machine's frames: not this one's lag
+            return Bridge(self.remote.z, trial.match, trial.role, socket.controls, socket.outbox, obs)
+        return Metered(
+            self.matches.lag, self.pool.z, trial.match, trial.role, socket.controls, socket.outbox, obs
+        )
 
     async def play(self, socket: Socket, trial: Trial, obs: bool, offer: dict) -> dict | None:
         """Run one trial: wait for a free match, start it (its processes start while the participant
         reads the `offer`, and its sim waits for them: a warm start), then play it from their Ready
-        for at most its length and `trial_timeout`. Returns the sidecar, or None if the participant
-        left (a match they started runs out with their ship idle; one they had not is ended;
-        either is marked dropped)."""
+        for at most its length and `trial_timeout`. Returns the sidecar and `played` (whether the
+        participant played the game to its end), or None if the participant left (a match they
+        started runs out with their ship idle; one they had not is ended; either is marked dropped)."""
         try:
             plan = self.plan(trial)
         except ValueError as error:  # its variant names a policy that cannot play the seat (UsageError)
@@ -456,7 +491,8 @@ class TrialRunner:
             running.add_done_callback(lambda done: self.outcome(trial, done, dropped))
             return None
         await asyncio.wait({running})  # ended by the stop, if not over
-        return self.outcome(trial, running, dropped)
+        # played to its end: Ready came and the match ended by itself, not by a stop (a timeout's)
+        return {**self.outcome(trial, running, dropped), "played": ready and not stop.is_set()}
 
     async def live(
         self,
@@ -641,9 +677,12 @@ class Visit:
 
     async def run(self) -> None:
         """The participant's remaining trials, after a practice game if the study has one and they
-        have not begun; a failed trial is offered again, RETRIES times."""
+        have not begun; a failed trial is offered again, and a problem is shown once RETRIES in a
+        row failed before the participant could play them to the end: a game played to its end and
+        judged failed (the server's fault: under overload, its recorder fell behind) never sends its
+        player away, it is offered again."""
         study, socket, participant, matches = self.study, self.socket, self.participant, self.runner.matches
-        last, failures = None, 0
+        last, failures, again = None, 0, False
         await matches.end_previous(participant.id)  # a reload's practice game still running out
         practice = study.practice(participant)
         if (
@@ -658,17 +697,17 @@ class Visit:
                 break
             if not await self.attend(trial):
                 return
-            sidecar = await self.runner.play(socket, trial, self.obs, self.offer(trial, last, failures > 0))
+            sidecar = await self.runner.play(socket, trial, self.obs, self.offer(trial, last, again))
             if sidecar is None:
                 return
             if sidecar["status"] == "failed":
-                failures += 1
+                failures, again = failures + (not sidecar["played"]), True
                 if failures < RETRIES:
                     continue
                 socket.send({"type": "problem", "text": PROBLEM})
                 await socket.close()
                 return
-            last, failures = sidecar["kills"], 0
+            last, failures, again = sidecar["kills"], 0, False
         config = study.config
         redirect = config.crowd.redirect(config.crowd.completion_url, participant.code)
         socket.send({"type": "done", "text": config.end, "code": participant.code, "redirect": redirect})

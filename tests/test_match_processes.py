@@ -217,6 +217,16 @@ def test_a_signal_ends_a_launcher_and_its_workers(tsf, tmp_path, wait_until, lau
     assert wait_until(lambda: not in_session(process.pid), timeout=30), in_session(process.pid)
 
 
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=lambda s: s.name)
+def test_a_worker_with_slots_stopped_or_killed_leaves_no_process_behind(tsf, tmp_path, wait_until, sig):
+    """`tsf worker --slots 2`, waiting for a coordinator: its slots' processes end with it."""
+    worker = tsf("worker", "--slots", "2", "--sweep", tmp_path.name[-30:], "--listen", "tcp/127.0.0.1:0")
+    assert wait_until(lambda: len(children(worker.pid)) == 2, timeout=60)
+    os.kill(worker.pid, sig)
+    worker.wait(30)
+    assert wait_until(lambda: not in_session(worker.pid), timeout=10), in_session(worker.pid)
+
+
 def test_a_service_that_fails_fails_the_match(tsf_match, tmp_path, wait_until):
     match = tsf_match("--duration", "3", "--match", "failing")
     log = tmp_path / "failing.tsflog"

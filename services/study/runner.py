@@ -491,8 +491,9 @@ class TrialRunner:
             running.add_done_callback(lambda done: self.outcome(trial, done, dropped))
             return None
         await asyncio.wait({running})  # ended by the stop, if not over
-        # played to its end: Ready came and the match ended by itself, not by a stop (a timeout's)
-        return {**self.outcome(trial, running, dropped), "played": ready and not stop.is_set()}
+        # played to its end: Ready came, and the match ended with its summary (no launcher's failure)
+        played = ready and not running.cancelled() and not running.result().failure
+        return {**self.outcome(trial, running, dropped), "played": played}
 
     async def live(
         self,
@@ -679,8 +680,8 @@ class Visit:
         """The participant's remaining trials, after a practice game if the study has one and they
         have not begun; a failed trial is offered again, and a problem is shown once RETRIES in a
         row failed before the participant could play them to the end: a game played to its end and
-        judged failed (the server's fault: under overload, its recorder fell behind) never sends its
-        player away, it is offered again."""
+        judged failed (under overload, the server's recorder fell behind; or the page stopped
+        answering) never sends its player away, it is offered again."""
         study, socket, participant, matches = self.study, self.socket, self.participant, self.runner.matches
         last, failures, again = None, 0, False
         await matches.end_previous(participant.id)  # a reload's practice game still running out

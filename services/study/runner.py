@@ -380,7 +380,12 @@ class TrialRunner:
         admission, told, lag = self.matches.admission, None, self.serving.max_lag
         while True:
             admission.hosts = self.remote.hosts() if self.remote else {}
-            admission.held = bool(lag) and self.matches.lag.worst(time.monotonic()) > lag
+            late = self.matches.lag.worst(time.monotonic())
+            if admission.held != (held := bool(lag) and late > lag):
+                what = ("fall behind", "wait") if held else ("have caught up", "start again")
+                log.warning("this machine's matches %s (frames up to %.0f ms late): new ones %s", what[0],
+                            late * 1e3, what[1])  # fmt: skip
+            admission.held = held
             if admission.start(match):
                 break
             place = admission.place(match)

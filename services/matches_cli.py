@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ipaddress
 import os
 import socket
 from pathlib import Path
@@ -183,6 +184,18 @@ def play_command(
     )
 
 
+RATES = Range(0.0, 1000.0)  # a limit's events a second (0: no limit)
+ARRIVALS = Range(0.01, 1000.0)  # new participant ids a second, for everyone (always limited)
+
+
+def ip_address(text: str, option: str) -> str:
+    """`text` as an IP address, as a peer's address is written (a UsageError for anything else)."""
+    try:
+        return str(ipaddress.ip_address(text.strip()))
+    except ValueError:
+        raise UsageError(option, text, "an IP address, e.g. 127.0.0.1 or ::1") from None
+
+
 @commands.command()
 def study(
     config: Path = typer.Argument(
@@ -210,6 +223,20 @@ def study(
         "server by a name, as behind a reverse proxy).",
     ),
     per_address: int = typer.Option(8, min=0, help="Sockets one address may hold at once (0: no cap)."),
+    trusted_proxy: list[str] | None = typer.Option(
+        None,
+        help="A reverse proxy's address (e.g. 127.0.0.1) whose X-Forwarded-For names the client: the "
+        "limits per address count clients, not the proxy (repeatable; no other peer's header is read).",
+    ),
+    arrivals: float = number(1.0, ARRIVALS, "New participant ids a second, on average (bursts of 20)."),
+    arrivals_per_address: float = number(
+        0.1, RATES, "New participant ids a second from one address (bursts of 5; 0: no limit)."
+    ),
+    reconnects: float = number(
+        0.1,
+        RATES,
+        "Reconnects a second of one participant, and failed resumes of one address (bursts of 5; 0: none).",
+    ),
     test_token: str = typer.Option(
         "", envvar="TSF_TEST_TOKEN", help="Stand-ins that show this token get the observation values."
     ),
@@ -258,6 +285,7 @@ def study(
             "--max-matches", 0, "no match could run: give match hosts with --listen or --connect"
         )
     signed = read_secret(link_secret, "--link-secret") if link_secret else b""
+    trusted = tuple(ip_address(a, "--trusted-proxy") for a in trusted_proxy or ())
     board, token = None, ""
     if dashboard_token is not None:
         try:
@@ -266,7 +294,7 @@ def study(
             raise UsageError("--dashboard-token", str(dashboard_token), str(error)) from None
         if dashboard_port == port:
             raise UsageError("--dashboard-port", port, "the participants' port: give another")
-        board = Web(host, dashboard_port, cert, key)
+        board = Web(host, dashboard_port, cert, key, trusted=trusted)
     protocol = StudyConfig.load(config)
     for variant in protocol.variants:  # adaptive agents' thresholds: refused now, not at a trial
         for role in protocol.roles:
@@ -286,10 +314,11 @@ def study(
 
     if (cert is None) != (key is None):
         raise UsageError("--cert/--key", str(cert or key), "give both, or neither")
-    web = Web(host, port, cert, key, tuple(origin or ()), per_address)
+    web = Web(host, port, cert, key, tuple(origin or ()), per_address, trusted)
     serving = Serving(
-        max_matches, trial_timeout, test_token=test_token, hosts=hosts,
-        link_secret=signed, host_secret=sealing, dashboard=board, dashboard_token=token,
+        max_matches, trial_timeout, test_token=test_token, hosts=hosts, link_secret=signed,
+        host_secret=sealing, dashboard=board, dashboard_token=token,
+        arrivals=arrivals, arrivals_per_address=arrivals_per_address, reconnects=reconnects,
     )  # fmt: skip
     done = run_study(protocol, directory, web, stop_on_signals(), show, serving)
     finished = sum(done.next_trial(p) is None for p in done.participants.values())

@@ -8,6 +8,10 @@ PR_SET_PDEATHSIG) as its first act, and ends at once if the parent is already go
 comes when the thread that started the child ends, so launchers start children from a thread that
 outlives them (run_match waits for its children).
 
+Workers of a `concurrent.futures.ProcessPoolExecutor` (the study's judge) are started by
+multiprocessing, not here: they call `end_with_parent` first, so that they, and with them
+multiprocessing's resource tracker, end when their launcher does.
+
 Priorities are relative to the launcher's own: a child is started `nice` steps below it (and the
 sim raises itself some steps above, services/sim/service.py), so a launcher run under `nice`
 keeps the order of its processes, shifted.
@@ -16,10 +20,12 @@ keeps the order of its processes, shifted.
 from __future__ import annotations
 
 import ctypes
+import multiprocessing
 import os
 import signal
 import subprocess
 import sys
+import threading
 
 PARENT = "TSF_PARENT"  # environment: the pid of the launcher a `tsf` child must not outlive
 _PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
@@ -34,6 +40,24 @@ def die_with_parent(parent: int) -> None:
             raise OSError(ctypes.get_errno(), "prctl(PR_SET_PDEATHSIG)")
     if os.getppid() != parent:
         os._exit(1)
+
+
+def end_with_parent() -> None:
+    """In a multiprocessing worker (a pool's initializer): exit as soon as the process that started
+    it is gone, however it went. A launcher that was SIGKILLed, or crashed, never shuts its pool
+    down, and its workers, waiting on a queue whose ends they hold themselves, ran on for hours,
+    re-parented to init, and kept multiprocessing's resource tracker alive with them. The worker
+    watches the pipe whose other end only its parent holds (multiprocessing's parent sentinel; a
+    thread, since PR_SET_PDEATHSIG fires when the thread that started the worker ends, and a pool
+    starts its workers from whichever thread submits first)."""
+    parent = multiprocessing.parent_process()
+    if parent is not None:
+        threading.Thread(target=_exit_after, args=(parent,), name="end-with-parent", daemon=True).start()
+
+
+def _exit_after(parent: multiprocessing.process.BaseProcess) -> None:
+    parent.join()
+    os._exit(1)
 
 
 def adopt() -> None:

@@ -23,6 +23,7 @@ import msgpack
 import pytest
 import zenoh
 from conftest import STAND_IN_TOKEN, wait_until
+from test_match_processes import in_session
 
 from services.population.seat import SeatSpec
 from services.recorder.recording import load
@@ -111,6 +112,20 @@ def test_trials_run_on_a_match_host_and_their_recordings_come_back_whole(tmp_pat
         assert sidecar["status"] == "done" and sidecar["participant"] == "P001"
         assert bool(recording.adapter) == (sidecar["variant"] == "adaptive"), "the host ran the adapter"
     assert not list((tmp_path / "study" / "recordings").glob("*.part"))
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=lambda s: s.name)
+def test_a_match_host_stopped_or_killed_leaves_no_process_behind(tmp_path, study_server, match_host, sig):
+    """Its pool's services end with it, however it ends (found by its session, not by name)."""
+    endpoint = free_endpoint()
+    config = StudyConfig("gone", (Variant.read("strong", "B5", "S5"),), trials=1, trial_seconds=2.0)
+    study_server(config, tmp_path / "study", hosted(endpoint))
+    host = match_host("lab-1", endpoint)
+    pool = lambda: [c for c in in_session(host.pid).values() if "--pool lab-1-" in c]  # noqa: E731
+    assert wait_until(lambda: len(pool()) == 4, timeout=60), in_session(host.pid)  # an adaptive pool
+    host.send_signal(sig)
+    host.wait(60)
+    assert wait_until(lambda: not in_session(host.pid), timeout=10), in_session(host.pid)
 
 
 @pytest.mark.slow  # over 15 s of real processes; runs with -m slow

@@ -22,8 +22,11 @@ from services.runtime.launch import RECORDER_NICE, SIM_RAISE
 SHORT = ("--lockstep", "--duration", "0.3")  # 9 frames
 
 
-def children(pid: int) -> dict[int, str]:
-    """The live child processes of `pid` and their command lines, from /proc."""
+PARENT, SESSION = 1, 3  # fields of /proc/PID/stat after the command's name
+
+
+def processes(field: int, value: int) -> dict[int, str]:
+    """The live processes whose stat `field` is `value`, and their command lines, from /proc."""
     found = {}
     for stat in Path("/proc").glob("[0-9]*/stat"):
         try:
@@ -31,9 +34,22 @@ def children(pid: int) -> dict[int, str]:
             command = (stat.parent / "cmdline").read_bytes().replace(b"\0", b" ").decode()
         except OSError:
             continue  # it ended while we looked
-        if int(fields[1]) == pid and fields[0] != "Z":
+        if int(fields[field]) == value and fields[0] != "Z":
             found[int(stat.parent.name)] = command
     return found
+
+
+def children(pid: int) -> dict[int, str]:
+    """The live child processes of `pid` and their command lines."""
+    return processes(PARENT, pid)
+
+
+def in_session(session: int) -> dict[int, str]:
+    """The live processes of session `session`: a launcher started with start_new_session=True and
+    everything it started, at any depth, even once re-parented to init after the launcher died
+    (only a process that calls setsid leaves it). Found by session, never by name, so that two
+    runs of the suite cannot see each other's processes."""
+    return processes(SESSION, session)
 
 
 def alive(pid: int) -> bool:
@@ -176,7 +192,7 @@ def test_a_signal_ends_the_match_and_every_process_it_started(tsf_match, tmp_pat
     assert sorted(command.split()[3] for command in started.values()) == ["agent", "agent", "recorder", "sim"]
     os.kill(match.pid, sig)
     assert ended(match, sig, "tsf match: match signalled was stopped before its end; its processes ended")
-    assert wait_until(lambda: not any(alive(pid) for pid in started), timeout=20)
+    assert wait_until(lambda: not in_session(match.pid), timeout=20), in_session(match.pid)
 
 
 # Launchers of worker processes, as they are started for a long run: `tsf worker` processes of the
@@ -196,10 +212,19 @@ STOPPED = {
 def test_a_signal_ends_a_launcher_and_its_workers(tsf, tmp_path, wait_until, launcher, sig):
     process = tsf(*(arg.format(tmp=tmp_path) for arg in LAUNCHERS[launcher]))
     assert wait_until(lambda: len(children(process.pid)) == 2, timeout=60)
-    started = children(process.pid)
     os.kill(process.pid, sig)
     assert ended(process, sig, STOPPED[launcher].format(tmp=tmp_path, sig=sig.name))
-    assert wait_until(lambda: not any(alive(pid) for pid in started), timeout=30)
+    assert wait_until(lambda: not in_session(process.pid), timeout=30), in_session(process.pid)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=lambda s: s.name)
+def test_a_worker_with_slots_stopped_or_killed_leaves_no_process_behind(tsf, tmp_path, wait_until, sig):
+    """`tsf worker --slots 2`, waiting for a coordinator: its slots' processes end with it."""
+    worker = tsf("worker", "--slots", "2", "--sweep", tmp_path.name[-30:], "--listen", "tcp/127.0.0.1:0")
+    assert wait_until(lambda: len(children(worker.pid)) == 2, timeout=60)
+    os.kill(worker.pid, sig)
+    worker.wait(30)
+    assert wait_until(lambda: not in_session(worker.pid), timeout=10), in_session(worker.pid)
 
 
 def test_a_service_that_fails_fails_the_match(tsf_match, tmp_path, wait_until):

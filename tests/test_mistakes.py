@@ -311,6 +311,12 @@ MISTAKES = [
         2,
         "tsf study: --dashboard-port 8000: the participants' port: give another",
     ),
+    (
+        "study {tmp}/long.toml --trusted-proxy proxy.example",
+        2,
+        "tsf study: --trusted-proxy proxy.example: an IP address, e.g. 127.0.0.1 or ::1",
+    ),
+    ("study {tmp}/long.toml --arrivals 0", 2, "'--arrivals': 0 is outside the range 0.01 to 1000.0"),
     ("match-host", 2, "tsf match-host: --connect (none): a match host needs the router's endpoint"),
     (
         "match-host --slots 0 --connect tcp/127.0.0.1:1",

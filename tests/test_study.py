@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 from conftest import STAND_IN_TOKEN
-from test_match_processes import children
+from test_match_processes import in_session
 
 from services.recorder.recording import load
 from services.study.core import StudyConfig, Variant
@@ -142,16 +142,22 @@ def test_eight_stand_ins_at_once_each_in_a_match_of_their_own(tmp_path, study_se
         assert recording.problems() == [] and len(recording.states) == config.frames + 1
 
 
+def study_file(tmp_path: Path, name: str, trials: int = 1, seconds: float = 600) -> Path:
+    """A study config: `trials` trials of `seconds` with one static agent."""
+    config = tmp_path / f"{name}.toml"
+    variant = '[[variants]]\nname = "s"\nbait = "B5"\nshooter = "S5"\n'
+    config.write_text(f'name = "{name}"\ntrials = {trials}\ntrial_seconds = {seconds}\n{variant}')
+    return config
+
+
 @contextlib.contextmanager
 def study_command(
     tmp_path: Path, name: str = "long", trials: int = 1, seconds: float = 600
 ) -> Iterator[tuple[subprocess.Popen, str]]:
     """A real `tsf study` process (study `name`: `trials` trials of `seconds` with one static agent,
-    its journal and recordings in tmp_path/name) on a free port: (the process, its address); killed
-    with its process group at the end if it is still running. Started again, it resumes the study."""
-    config = tmp_path / f"{name}.toml"
-    variant = '[[variants]]\nname = "s"\nbait = "B5"\nshooter = "S5"\n'
-    config.write_text(f'name = "{name}"\ntrials = {trials}\ntrial_seconds = {seconds}\n{variant}')
+    its journal and recordings in tmp_path/name) on a free port: (the process, its address); its
+    process group is killed at the end. Started again, it resumes the study."""
+    config = study_file(tmp_path, name, trials, seconds)
     server = subprocess.Popen(
         [sys.executable, "-m", "services.cli", "study", str(config), "--out", str(tmp_path), "--port", "0",
          "--test-token", TEST],
@@ -163,27 +169,69 @@ def study_command(
             line = server.stdout.readline()
             assert line, "the server printed no address"
         yield server, line[line.index("http") :].split()[0]
-    finally:
-        if server.poll() is None:
+    finally:  # its process group, even once the server is gone: nothing is left if a test fails
+        with contextlib.suppress(ProcessLookupError):
             os.killpg(server.pid, signal.SIGKILL)
-            server.wait()
+        server.wait()
 
 
-def ended(processes: dict[int, str]) -> bool:
-    """Whether every one of `processes` has exited (multiprocessing's resource tracker, started for
-    the judge's process, exits a moment after the server)."""
-    return not [pid for pid in processes if Path(f"/proc/{pid}").exists()]
-
-
-def test_sigterm_ends_the_study_server_and_every_match_it_started(tmp_path, wait_until):
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=lambda s: s.name)
+def test_a_study_server_stopped_or_killed_mid_trial_leaves_no_process_behind(tmp_path, wait_until, sig):
+    """SIGTERM ends the study and every process it started; SIGKILL leaves the server no time to,
+    and they end by themselves: the pool's services (PR_SET_PDEATHSIG), the judge's worker (it
+    watches its pipe from the server) and with it multiprocessing's resource tracker. Before, the
+    last two ran on for hours after a SIGKILL, re-parented to init."""
     with study_command(tmp_path) as (server, url):
         asyncio.run(stand_in(url, leave_after=30, test=TEST))  # the match runs out for ten minutes
-        started = children(server.pid)  # the pool's sim, agent, recorder; the judge's process
-        pool = [p for p in started.values() if "--pool study-" in p]
+        started = in_session(server.pid)  # the server, its pool's sim, agent and recorder, the judge's
+        pool = [p for p in started.values() if "--pool study-" in p]  # worker, the resource tracker
         assert len(pool) == 3 and any("multiprocessing.spawn" in p for p in started.values()), started
+        assert any("resource_tracker" in p for p in started.values()), started
+        server.send_signal(sig)
+        assert server.wait(60) == (0 if sig == signal.SIGTERM else -signal.SIGKILL)
+        assert wait_until(lambda: not in_session(server.pid), timeout=5), in_session(server.pid)
+
+
+def test_a_study_server_that_fails_at_its_start_leaves_no_process_behind(tmp_path, wait_until):
+    """Its port taken: the server fails after its pool and judge have started, and ends them."""
+    import socket
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        server = subprocess.Popen(
+            [sys.executable, "-m", "services.cli", "study", str(study_file(tmp_path, "start")),
+             "--out", str(tmp_path),
+             "--port", str(taken.getsockname()[1])],
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        )  # fmt: skip
+        try:
+            _, err = server.communicate(timeout=120)
+        finally:
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(server.pid, signal.SIGKILL)
+    assert server.returncode != 0 and "Traceback" not in err, err
+    assert wait_until(lambda: not in_session(server.pid), timeout=5), in_session(server.pid)
+
+
+def test_a_second_server_on_the_same_study_is_refused_naming_the_first(tmp_path):
+    """Both ran, handed out the same participant ids and overwrote each other's records."""
+    with study_command(tmp_path, "twice") as (server, _):
+        second = subprocess.run(
+            [sys.executable, "-m", "services.cli", "study", str(tmp_path / "twice.toml"),
+             "--out", str(tmp_path), "--port", "0"],
+            capture_output=True, text=True, timeout=60,
+        )  # fmt: skip
+        assert second.returncode == 2, second.stderr
+        assert second.stderr.strip().splitlines()[-1] == (
+            f"tsf study: --out {tmp_path / 'twice'}: another study server (pid {server.pid}) serves this "
+            "study; stop it first"
+        )
         server.send_signal(signal.SIGTERM)
         assert server.wait(60) == 0
-        assert wait_until(lambda: ended(started)), "no process is left behind"
+    with study_command(tmp_path, "twice") as (server, _):  # once it has ended, the next one serves
+        server.send_signal(signal.SIGTERM)
+        assert server.wait(60) == 0
 
 
 def test_ctrl_c_during_a_matchs_warm_up_ends_the_server_at_once(tmp_path, wait_until):
@@ -208,9 +256,8 @@ def test_ctrl_c_during_a_matchs_warm_up_ends_the_server_at_once(tmp_path, wait_u
                 assert status == 0
                 assert waited < 10.0
 
-        started = children(server.pid)
         asyncio.run(consent())
-        assert wait_until(lambda: ended(started)), "no process is left behind"
+        assert wait_until(lambda: not in_session(server.pid), timeout=5), in_session(server.pid)
 
 
 def test_attempts_an_earlier_server_left_are_settled_by_their_recordings(tmp_path):
@@ -288,6 +335,40 @@ def test_a_client_that_consents_and_goes_silent_frees_its_slot_for_a_newcomer(tm
     study = server.result(timeout=60)
     statuses = {p.id: [a["status"] for a in p.attempts] for p in study.participants.values()}
     assert statuses == {"P001": ["failed"], "P002": ["done"]}
+
+
+BROKEN = {  # the agent's bait seat of a variant whose match cannot be set up
+    "unknown-key": "B99",
+    "swapped-seats": "S5",
+    "missing-zip": "{tmp}/gone.zip",
+}
+
+
+@pytest.mark.parametrize("bait", BROKEN.values(), ids=BROKEN.keys())
+def test_a_trial_that_cannot_be_set_up_is_told_at_once_and_takes_no_slot(tmp_path, study_server, bait):
+    """A variant whose agent cannot play its seat: its participant is told of a problem at once (no
+    attempt again: each would fail the same way), the attempt is written down as failed with the
+    reason, and the only slot stays free: the next participant, who meets the good variant first,
+    plays (the slot was held for ever, and the participant got a traceback's close 1011)."""
+    variants = (Variant.read("broken", bait.format(tmp=tmp_path), "S5"), VARIANTS[0])
+
+    def config(seed: int) -> StudyConfig:
+        return StudyConfig("broken", variants, trials=1, trial_seconds=1.5, seed=seed, roles=("shooter",))
+
+    from services.study.core import variant_order
+
+    seed = next(s for s in range(100) if [variant_order(config(s), i)[0] for i in (0, 1)] == [0, 1])
+    stop, url, server = study_server(config(seed), tmp_path, Serving(max_matches=1, test_token=TEST))
+    first = asyncio.run(asyncio.wait_for(stand_in(url, test=TEST), 60))
+    assert first.refused == PROBLEM and first.agents == [], first
+    second = asyncio.run(asyncio.wait_for(stand_in(url, test=TEST, leave_after=10), 60))
+    assert second.agents and second.states == 10, "the slot was free"
+    stop.set()
+    study = server.result(timeout=60)
+    [failed] = study.participants["P001"].attempts
+    assert failed["status"] == "failed"
+    sidecar = json.loads((tmp_path / "recordings" / f"{failed['match']}.study.json").read_text())
+    assert sidecar["status"] == "failed" and sidecar["variant"] == "broken"
 
 
 def test_a_reload_during_set_up_is_a_resume(tmp_path, study_server):

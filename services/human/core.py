@@ -157,6 +157,26 @@ class PerAddress:
         return bucket.allow()
 
 
+class Quiet:
+    """Whether to log about `key` (a client address) now: once per key and `every` seconds, so that
+    a flood of refusals from one address writes a line a minute, not one per attempt (a wrong
+    dashboard token wrote about 750 a second). Keys not seen for `every` are forgotten once there
+    are many."""
+
+    def __init__(self, every: float = 60.0, clock: Callable[[], float] = time.monotonic) -> None:
+        self.every, self.clock = every, clock
+        self.said: dict[str, float] = {}
+
+    def __call__(self, key: str) -> bool:
+        now = self.clock()
+        if len(self.said) > 10_000:
+            self.said = {k: t for k, t in self.said.items() if now - t < self.every}
+        if now - self.said.get(key, -self.every) < self.every:
+            return False
+        self.said[key] = now
+        return True
+
+
 @dataclass
 class Controls:
     """One connection's input: what it holds now, whether it is playing, and what it got wrong.

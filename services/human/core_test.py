@@ -151,6 +151,19 @@ def test_one_address_gets_its_burst_then_its_rate_and_others_are_untouched():
     assert all(PerAddress(0.0, 3).allow("10.0.0.1") for _ in range(100))  # 0: no limit
 
 
+def test_a_refusal_is_said_once_per_address_and_minute():
+    from services.human.core import Quiet
+
+    now = [100.0]
+    quiet = Quiet(60.0, clock=lambda: now[0])
+    assert [quiet("10.0.0.1") for _ in range(3)] == [True, False, False]
+    assert quiet("10.0.0.2")  # each address its own
+    now[0] += 59.0
+    assert not quiet("10.0.0.1")
+    now[0] += 1.0
+    assert quiet("10.0.0.1") and not quiet("10.0.0.1")
+
+
 def play(game: Game, bait: int, shooter: int, narrator, until) -> tuple[list[dict], list]:  # noqa: ANN001
     """Step `game` with fixed actions until `until(game)`: the narrated views and the events."""
     views, events = [], []

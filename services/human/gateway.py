@@ -77,8 +77,9 @@ class Web:
     """How the page is served. `cert`/`key` (PEM files) turn on TLS; `origins` are further origins
     (`https://study.example.org`) whose pages may open the socket besides the server's own (the
     Host the browser asked for), and whose host names requests may ask for (`known_host`);
-    `per_address` caps the sockets one address holds at once (0: no cap; behind a reverse proxy
-    every client has the proxy's address, so let the proxy cap them)."""
+    `per_address` caps the sockets one address holds at once (0: no cap). `trusted` are reverse
+    proxies whose X-Forwarded-For names the client (`client_address`): behind a proxy every client
+    has the proxy's address, and the limits per address would count them all as one."""
 
     host: str = "127.0.0.1"
     port: int = 8000
@@ -86,6 +87,7 @@ class Web:
     key: Path | None = None
     origins: tuple[str, ...] = ()
     per_address: int = 8
+    trusted: tuple[str, ...] = ()
 
     def tls(self) -> ssl.SSLContext | None:
         if self.cert is None:
@@ -238,6 +240,24 @@ async def play_seat(ws: ServerConnection, bridge: Bridge, outbox: Outbox) -> Non
             await pump
 
 
+FORWARDED = "X-Forwarded-For"
+
+
+def client_address(connection: ServerConnection, trusted: tuple[str, ...]) -> str:
+    """The address the limits count a connection under: its peer's, or, where the peer is a
+    `trusted` reverse proxy, the last address of X-Forwarded-For, the one that proxy appended (the
+    ones before it are the client's to write, and could be forged). A header that ends in no
+    address leaves the proxy's; a forwarded address from any other peer is never read."""
+    peer = connection.remote_address[0]
+    if peer not in trusted or connection.request is None:
+        return peer
+    forwarded = ",".join(connection.request.headers.get_all(FORWARDED)).rsplit(",", 1)[-1].strip()
+    try:
+        return str(ipaddress.ip_address(forwarded))
+    except ValueError:
+        return peer
+
+
 async def receive_first(ws: ServerConnection, allowed: tuple[str, ...]) -> dict | None:
     """The socket's first message, validated; None (and the socket closed) if it is bad or late."""
     try:
@@ -370,12 +390,13 @@ class Gateway:
         if request.path.split("?", 1)[0] == SOCKET_PATH:
             if not same_origin(request, self.web.origins, "https" if self.web.cert else "http"):
                 return connection.respond(403, "forbidden\n")
-            if self.web.per_address and self.sockets[connection.remote_address[0]] >= self.web.per_address:
+            address = client_address(connection, self.web.trusted)
+            if self.web.per_address and self.sockets[address] >= self.web.per_address:
                 return connection.respond(429, "too many connections\n")
         return serve_page(connection, request, self.pages)
 
     async def _handle(self, ws: ServerConnection, z: zenoh.Session | None) -> None:
-        address = ws.remote_address[0]
+        address = client_address(ws, self.web.trusted)
         self.sockets[address] += 1
         try:
             await self.handler(ws, z)
@@ -401,7 +422,8 @@ class Gateway:
                     server.close(close_connections=True)
         except BaseException as error:  # surfaced to the thread that opened the gateway
             self.failed = error
-            raise
+            if self.ready.is_set():  # else __enter__ raises it: one line, not a thread's traceback too
+                raise
         finally:
             self.ready.set()
 

@@ -210,7 +210,14 @@ class MatchSim:
 
     def _finish(self) -> None:
         with self.changed:
-            trips = [(t - self.sent[f]) / 1e6 for (_, f), t in self.answered_at.items() if f in self.sent]
+            trips = {
+                role: [
+                    (t - self.sent[f]) / 1e6
+                    for (r, f), t in self.answered_at.items()
+                    if r == role and f in self.sent
+                ]
+                for role in ROLES
+            }
         timing = _timing(trips, self.ticks, self.period)
         summary = summary_message(
             self.game, self.match, "sim", self.drops.counts, timing, self.seats.failures
@@ -278,11 +285,14 @@ def real_time() -> bool:
     return True
 
 
-def _timing(trips: list[float], ticks: list[float], period: float) -> dict[str, float]:
-    """Round trip state -> action, and the tick period's deviation from 1/fps: median and p99, ms."""
+def _timing(trips: dict[str, list[float]], ticks: list[float], period: float) -> dict[str, float]:
+    """Round trip state -> action (of both seats, and of each: an agent's and a person's differ), and
+    the tick period's deviation from 1/fps: median and p99, ms."""
     deviations = [abs(b - a - period) * 1e3 for a, b in zip(ticks, ticks[1:], strict=False)]
     timing: dict[str, float] = {}
-    for name, values in (("round_trip", trips), ("tick_jitter", deviations)):
+    every = [trip for role in ROLES for trip in trips[role]]
+    seats = [(f"round_trip_{role}", trips[role]) for role in ROLES]
+    for name, values in (("round_trip", every), *seats, ("tick_jitter", deviations)):
         if len(values) >= 2:
             timing[f"{name}_ms_p50"] = statistics.median(values)
             timing[f"{name}_ms_p99"] = statistics.quantiles(values, n=100)[98]

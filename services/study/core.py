@@ -10,6 +10,7 @@ was cut short, which is played again as a new attempt (the cut one stays recorde
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import hashlib
 import json
@@ -437,7 +438,8 @@ class Study:
 class Admission:
     """Where and when trials' matches run: at most `cap` at once on this machine (LOCAL), plus as
     many as each live match host has slots (`hosts`, name -> slots, kept up to date by the shell);
-    the trials that must wait are served in arrival order.
+    the trials that must wait are served in arrival order. While `held` (this machine's running
+    matches fall behind, Lag), no new match starts here until it catches up, unless none runs here.
 
     A trial asks with `start(match)`: True if it may start now (it then holds a slot, `running[match]`
     says where, until `end`), else it joins the queue, and `place(match)` says how many wait before
@@ -451,13 +453,15 @@ class Admission:
         self.hosts: dict[str, int] = {}
         self.running: dict[str, str] = {}  # match -> where it runs: LOCAL or a host's name
         self.waiting: list[str] = []
+        self.held = False  # no new match here while this machine falls behind (Lag); hosts still take them
 
     def free(self) -> dict[str, int]:
         """Free slots by place, local first, then hosts by most free (ties by name)."""
         used: dict[str, int] = {}
         for where in self.running.values():
             used[where] = used.get(where, 0) + 1
-        slots = {self.LOCAL: self.cap, **self.hosts}
+        local = min(self.cap, used.get(self.LOCAL, 0)) if self.held and used.get(self.LOCAL) else self.cap
+        slots = {self.LOCAL: local, **self.hosts}
         free = {where: n - used.get(where, 0) for where, n in slots.items() if n > used.get(where, 0)}
         hosts = sorted((w for w in free if w != self.LOCAL), key=lambda w: (-free[w], w))
         return {w: free[w] for w in ([self.LOCAL] if self.LOCAL in free else []) + hosts}
@@ -486,3 +490,37 @@ class Admission:
         for the next `slots` in the queue (a running match is half over, on average)."""
         slots = max(1, self.cap + sum(self.hosts.values()))
         return (math.ceil(place / slots) - 0.5) * match_seconds
+
+
+class Lag:
+    """How late the running matches' frames reach the study server, the worst over the last
+    `window` seconds: each state's arrival against the earliest its frame number allows (its
+    match's best so far). The sims, agents and recorder of the running matches share the machine
+    with every new one; a machine that falls behind shows it here first, so the server admits no
+    new match while the worst is over its limit (Admission.held). Fed from zenoh's threads."""
+
+    def __init__(self, window: float = 5.0) -> None:
+        self.window = window
+        self.origins: dict[str, float] = {}  # match -> its earliest arrival less frame / FPS
+        self.recent: collections.deque[tuple[float, float]] = collections.deque()  # (arrival, lateness)
+        self.lock = threading.Lock()
+
+    def frame(self, match: str, frame: int, now: float) -> None:
+        origin = now - frame / FPS
+        with self.lock:
+            best = min(origin, self.origins.get(match, origin))
+            self.origins[match] = best
+            self.recent.append((now, origin - best))
+            while self.recent and self.recent[0][0] < now - self.window:
+                self.recent.popleft()
+
+    def worst(self, now: float) -> float:
+        """Seconds: the latest frame of the last `window` seconds, against its match's best."""
+        with self.lock:
+            while self.recent and self.recent[0][0] < now - self.window:
+                self.recent.popleft()
+            return max((late for _, late in self.recent), default=0.0)
+
+    def end(self, match: str) -> None:
+        with self.lock:
+            self.origins.pop(match, None)

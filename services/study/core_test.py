@@ -234,3 +234,29 @@ def test_a_practice_game_only_before_the_recorded_ones_and_a_new_match_each_time
     assert str(first.variant.seat("shooter")) == "mirror" and str(first.variant.seat("bait")) == "circle"
     study.record(study.next_trial(participant), "running")
     assert study.practice(participant) is None, "the recorded trials have begun"
+
+
+def test_a_machine_that_falls_behind_starts_no_new_match_until_it_catches_up():
+    from services.study.core import Lag
+
+    lag = Lag(window=5.0)
+    for frame in range(30):  # on time: a frame each 1/30 s
+        lag.frame("a", frame, 100.0 + frame / 30)
+    assert lag.worst(101.0) == pytest.approx(0.0, abs=1e-9)
+    lag.frame("a", 30, 101.0 + 0.040)  # 40 ms late
+    assert lag.worst(101.1) == pytest.approx(0.040)
+    assert lag.worst(106.1) == 0.0  # the window has passed: caught up
+    lag.frame("b", 0, 107.0)  # a match of its own origin
+    lag.end("a")
+    assert set(lag.origins) == {"b"}
+
+    slots = Admission(3)
+    assert slots.start("m1")
+    slots.held = True  # behind: the second waits, though a slot is free
+    assert not slots.start("m2") and slots.place("m2") == 1
+    slots.hosts = {"h": 1}  # another machine's slot is not held
+    assert slots.start("m2") and slots.running["m2"] == "h"
+    slots.end("m1")
+    assert slots.start("m3"), "with none running here, a held machine still starts one"
+    slots.held = False
+    assert slots.start("m4") and slots.running["m4"] == Admission.LOCAL

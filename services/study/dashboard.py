@@ -26,7 +26,8 @@ from collections.abc import Callable
 import zenoh
 from websockets.asyncio.server import ServerConnection
 
-from services.human.gateway import Gateway, Web, receive_first, refuse, watch
+from services.human.core import PerAddress, Quiet
+from services.human.gateway import Gateway, Web, client_address, receive_first, refuse, watch
 from services.runtime.launch import watcher_bus
 from services.study.core import Admission, Study
 from shared.secret import same_secret
@@ -35,6 +36,8 @@ log = logging.getLogger("tsf.study.dashboard")
 PAGES = {"/": "dashboard.html", "/dashboard.js": "dashboard.js", "/watch": "index.html", "/tsf.js": "tsf.js"}
 EVERY = 1.0  # seconds between two overviews sent down
 WRONG = "not the dashboard's token"
+TOO_MANY = "too many attempts: wait a minute"
+ATTEMPTS, ATTEMPT_BURST = 0.2, 10  # sockets one address may open a second, on average, and at once
 NOT_RUNNING = "no such match is running"
 TOKEN_LENGTH = range(16, 65)  # the token's accepted length (characters)
 
@@ -102,6 +105,8 @@ class Dashboard:
         self.token, self.loop, self.show, self.endpoint = token, loop, show, endpoint
         self.low_latency, self.router = low_latency, router
         self.gateway = Gateway(None, self.handle, web, PAGES)
+        self.attempts = PerAddress(ATTEMPTS, ATTEMPT_BURST)
+        self.quiet = Quiet()  # a refusal is logged once per address and minute
 
     def __enter__(self) -> Dashboard:
         self.gateway.__enter__()
@@ -126,9 +131,16 @@ class Dashboard:
         first = await receive_first(ws, ("dashboard", "watch"))
         if first is None:
             return
-        if not self.token or not same_secret(first.get("token"), self.token):
-            log.warning("dashboard: refused a socket from %s: %s", ws.remote_address[0], WRONG)
-            await refuse(ws, WRONG)
+        address = client_address(ws, self.gateway.web.trusted)
+        refusal = (
+            TOO_MANY if not self.attempts.allow(address)
+            else WRONG if not self.token or not same_secret(first.get("token"), self.token)
+            else ""
+        )  # fmt: skip
+        if refusal:
+            if self.quiet(address):
+                log.warning("dashboard: refused a socket from %s: %s (said once a minute)", address, refusal)
+            await refuse(ws, refusal)
             return
         if first["type"] == "dashboard":
             while True:

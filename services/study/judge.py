@@ -25,6 +25,7 @@ from typing import TypeVar
 from services.recorder.recording import Recording
 from services.runtime.launch import read_recording
 from shared.game import FPS
+from shared.processes import end_with_parent
 
 log = logging.getLogger("tsf.study")
 T = TypeVar("T")
@@ -67,7 +68,11 @@ class Judge:
     def _start() -> ProcessPoolExecutor:
         # Not fork: the server's threads (zenoh's, the gateway's) would be copied mid-step.
         workers = ProcessPoolExecutor(1, multiprocessing.get_context("spawn"), _worker)
-        ask(workers, int)  # started now, not at the first trial's end
+        try:
+            ask(workers, int)  # started now, not at the first trial's end
+        except BaseException:  # a stop (KeyboardInterrupt) or a failure while it starts: none left
+            workers.shutdown(cancel_futures=True)
+            raise
         return workers
 
     def __call__(self, path: Path, role: str) -> tuple[int | None, list[str]]:
@@ -106,7 +111,9 @@ def ask(workers: ProcessPoolExecutor, fn: Callable[..., T], *args: object) -> T:
 
 
 def _worker() -> None:
-    """The worker yields to the matches being played, and leaves a terminal's Ctrl-C (sent to the
-    whole process group) to the server, which ends the study and then its judge."""
+    """The worker yields to the matches being played, leaves a terminal's Ctrl-C (sent to the
+    whole process group) to the server, which ends the study and then its judge, and ends at once
+    when the server is gone however it went (a SIGKILLed server's worker ran on for hours)."""
+    end_with_parent()
     os.nice(NICE)
     signal.signal(signal.SIGINT, signal.SIG_IGN)

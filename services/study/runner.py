@@ -39,33 +39,48 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import fcntl
 import json
 import logging
+import os
 import threading
+import time
 from collections.abc import Awaitable, Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import NamedTuple
+from typing import IO, NamedTuple
 
 import websockets
 import zenoh
 from websockets.asyncio.server import ServerConnection
 from websockets.protocol import State
 
-from services.human.core import BadInput, Controls, PerAddress, RateLimit
-from services.human.gateway import Bridge, Gateway, Outbox, Web, receive_first, refuse
+from services.human.core import BadInput, Controls, PerAddress, Quiet, RateLimit
+from services.human.gateway import Bridge, Gateway, Outbox, Web, client_address, receive_first, refuse
 from services.population.seat import PERSON, SeatSpec
 from services.recorder.service import recording_path
 from services.runtime.launch import MatchPlan
 from services.runtime.pool import Pool, pool_name
-from services.study.core import AROUND, SET_UP, Admission, Participant, Study, StudyConfig, Trial, worker_id
+from services.study.core import (
+    AROUND,
+    SET_UP,
+    Admission,
+    Lag,
+    Participant,
+    Study,
+    StudyConfig,
+    Trial,
+    worker_id,
+)
 from services.study.crowd import FAILS, attention_check, write_bonuses
 from services.study.dashboard import Dashboard, overview
 from services.study.judge import Judge, judge
 from services.study.remote import Remote
 from shared.bus import BusConfig, until_stopped
+from shared.errors import UsageError
 from shared.game import FPS, ROLES, other
+from shared.messages import State as GameState
 from shared.secret import same_secret, signature
 
 log = logging.getLogger("tsf.study")
@@ -77,6 +92,7 @@ DRAIN = 60.0  # seconds the stopping server waits for its matches to end and be 
 WARM_UP = 60.0  # seconds to wait for a match's services to take it before offering its trial anyway
 ARRIVAL_BURST = 20  # participant ids issued at once, beyond the rate
 ADDRESS_BURST = 5  # ... to one address
+RECONNECT_BURST = 5  # reconnects of one participant at once (reloads), and failed resumes of one address
 SCREENED = "Thank you. This study cannot go on: two attention checks were not passed."
 BUSY = "Too many people are starting right now. Please try again in a minute."
 TAKEN = "This worker id has already taken part in this study."
@@ -84,6 +100,7 @@ NO_WORKER = "This link's ids are not ones this study can take (letters, digits a
 DECLINED = "You declined to take part. Nothing about you was recorded. You may close this window now."
 SETTING_UP = "Your next game is being set up."
 UNSIGNED = "This link is not signed for its worker id. Please open the link exactly as the study gave it."
+RECONNECTS = "Too many reconnects. Please wait a minute, then reload the page."
 
 
 @dataclass(frozen=True)
@@ -95,9 +112,15 @@ class Serving:
     low_latency: bool = True  # zenoh's low-latency transport within each match
     test_token: str = ""  # a hello with this `test` token may ask for the observation values (stand-ins)
     arrivals: float = 1.0  # new participant ids a second, on average (bursts of ARRIVAL_BURST)
-    # ... and from one address (bursts of ADDRESS_BURST; 0: none, as behind a reverse proxy, where
-    # every client has the proxy's address), so that one client cannot drain the ids of all
+    # ... and from one address (bursts of ADDRESS_BURST; 0: none), so that one client cannot drain
+    # the ids of all; behind a reverse proxy, the address it forwards (Web.trusted)
     arrivals_per_address: float = 0.1
+    # Reconnects (a reload resumes, and cuts the trial being played) of one participant a second,
+    # and failed resumes (an unknown id or key) of one address (bursts of RECONNECT_BURST; 0: none)
+    reconnects: float = 0.1
+    # Seconds the running matches' frames may reach the server late (Lag, the worst of the last 5 s)
+    # before no new match starts on this machine until they catch up (0: no hold)
+    max_lag: float = 0.025
     ready_timeout: float = 120.0  # seconds an offered trial waits for Ready; then its match and slot go
     hosts: BusConfig | None = None  # the router where match hosts offer their slots; None: local only
     # A signed link's secret: new participants need a worker id and its signature (`sig`, the
@@ -230,11 +253,24 @@ def run_trial(
     return Judged(*judged(path, role), failure)
 
 
+class Metered(Bridge):
+    """A seat's bridge that times each frame's arrival for the machine's Lag."""
+
+    def __init__(self, lag: Lag, *args: object) -> None:
+        self.lag = lag
+        super().__init__(*args)
+
+    def _on_state(self, state: GameState) -> None:
+        self.lag.frame(self.match, state.frame, time.monotonic())
+        super()._on_state(state)
+
+
 class Matches:
     """The running matches: slots (Admission), a stop per match, and each participant's one match."""
 
     def __init__(self, cap: int) -> None:
         self.admission = Admission(cap)
+        self.lag = Lag()  # how late this machine's matches' frames arrive: new ones wait while it is high
         self.stops: dict[str, threading.Event] = {}  # match -> its stop
         self.endpoints: dict[str, str] = {}  # match -> its sim's endpoint, "" on a match host (spectators)
         self.of: dict[str, tuple[asyncio.Future, threading.Event]] = {}  # participant -> their match
@@ -264,6 +300,7 @@ class Matches:
             if self.of.get(trial.participant, (None,))[0] is running:
                 del self.of[trial.participant]
             self.admission.end(trial.match)
+            self.lag.end(trial.match)
             self.notify()
 
         running.add_done_callback(ended)
@@ -340,9 +377,15 @@ class TrialRunner:
 
     async def slot(self, socket: Socket, match: str) -> bool:
         """Wait for a free match, telling the participant their place; False if they leave."""
-        admission, told = self.matches.admission, None
+        admission, told, lag = self.matches.admission, None, self.serving.max_lag
         while True:
             admission.hosts = self.remote.hosts() if self.remote else {}
+            late = self.matches.lag.worst(time.monotonic())
+            if admission.held != (held := bool(lag) and late > lag):
+                what = ("fall behind", "wait") if held else ("have caught up", "start again")
+                log.warning("this machine's matches %s (frames up to %.0f ms late): new ones %s", what[0],
+                            late * 1e3, what[1])  # fmt: skip
+            admission.held = held
             if admission.start(match):
                 break
             place = admission.place(match)
@@ -350,7 +393,9 @@ class TrialRunner:
                 wait = round(admission.wait(place, self.match_seconds))
                 socket.send({"type": "queue", "place": place, "wait": wait})
                 told = place
-            await first(self.matches.changed.wait(), socket.gone.wait())
+            with contextlib.suppress(TimeoutError):  # held: asked again as the lag falls
+                async with asyncio.timeout(1.0 if admission.held else None):
+                    await first(self.matches.changed.wait(), socket.gone.wait())
             if socket.gone.is_set():
                 admission.end(match)
                 self.matches.notify()
@@ -393,36 +438,55 @@ class TrialRunner:
             stop.set()
         if not (taken.is_set() or running.done() or stop.is_set()):
             log.warning("trial %s: not every service has taken its match after %g s", trial.match, WARM_UP)
-        z = self.remote.z if hosted and self.remote else self.pool.z
-        return Bridge(z, trial.match, trial.role, socket.controls, socket.outbox, obs)
+        if hosted and self.remote:  # another machine's frames: not this one's lag
+            return Bridge(self.remote.z, trial.match, trial.role, socket.controls, socket.outbox, obs)
+        return Metered(
+            self.matches.lag, self.pool.z, trial.match, trial.role, socket.controls, socket.outbox, obs
+        )
 
     async def play(self, socket: Socket, trial: Trial, obs: bool, offer: dict) -> dict | None:
         """Run one trial: wait for a free match, start it (its processes start while the participant
         reads the `offer`, and its sim waits for them: a warm start), then play it from their Ready
-        for at most its length and `trial_timeout`. Returns the sidecar, or None if the participant
-        left (a match they started runs out with their ship idle; one they had not is ended;
-        either is marked dropped)."""
+        for at most its length and `trial_timeout`. Returns the sidecar and `played` (whether the
+        participant played the game to its end), or None if the participant left (a match they
+        started runs out with their ship idle; one they had not is ended; either is marked dropped)."""
+        try:
+            plan = self.plan(trial)
+        except ValueError as error:  # its variant names a policy that cannot play the seat (UsageError)
+            # Before any slot is taken; told at once, since every new attempt would fail the same way
+            # (the participant may resume once the study is mended).
+            if not trial.practice:
+                settle(self.study, trial, None, [f"its match cannot be set up: {error}"])
+            else:
+                log.error("the practice game %s cannot be set up: %s", trial.match, error)
+            socket.send({"type": "problem", "text": PROBLEM})
+            await socket.close()
+            return None
         if not await self.slot(socket, trial.match):
             return None
-        if socket.closed:  # left as the slot came: nothing starts
+        try:
+            if socket.closed:  # left as the slot came: nothing starts
+                self.matches.admission.end(trial.match)
+                self.matches.notify()
+                return None
+            socket.send({"type": "wait", "reason": SETTING_UP, "seconds": round(SET_UP)})
+            host = self.matches.admission.running[trial.match]  # Admission.LOCAL: this machine
+            if not trial.practice:
+                self.study.record(trial, "running")
+            stop, taken, loop = threading.Event(), asyncio.Event(), asyncio.get_running_loop()
+            if host:
+                log.info("trial %s runs on match host %s", trial.match, host)
+            running = asyncio.ensure_future(
+                asyncio.to_thread(
+                    run_trial, plan, trial.role, stop, self.pool, self.remote, host,
+                    lambda: loop.call_soon_threadsafe(taken.set), self.judge,
+                )
+            )  # fmt: skip
+            self.matches.add(trial, running, stop, "" if host else self.pool.endpoint)
+        except BaseException:  # the slot goes back: matches.add frees it from here on, when the match ends
             self.matches.admission.end(trial.match)
             self.matches.notify()
-            return None
-        socket.send({"type": "wait", "reason": SETTING_UP, "seconds": round(SET_UP)})
-        host = self.matches.admission.running[trial.match]  # Admission.LOCAL: this machine
-        plan = self.plan(trial)
-        if not trial.practice:
-            self.study.record(trial, "running")
-        stop, taken, loop = threading.Event(), asyncio.Event(), asyncio.get_running_loop()
-        if host:
-            log.info("trial %s runs on match host %s", trial.match, host)
-        running = asyncio.ensure_future(
-            asyncio.to_thread(
-                run_trial, plan, trial.role, stop, self.pool, self.remote, host,
-                lambda: loop.call_soon_threadsafe(taken.set), self.judge,
-            )
-        )  # fmt: skip
-        self.matches.add(trial, running, stop, "" if host else self.pool.endpoint)
+            raise
         seat = await self.bridge(socket, trial, bool(host), obs, stop, taken, running)
         ready = await self.live(socket, trial, seat, offer, running, stop)
         seat.close()
@@ -432,7 +496,9 @@ class TrialRunner:
             running.add_done_callback(lambda done: self.outcome(trial, done, dropped))
             return None
         await asyncio.wait({running})  # ended by the stop, if not over
-        return self.outcome(trial, running, dropped)
+        # played to its end: Ready came, and the match ended with its summary (no launcher's failure)
+        played = ready and not running.cancelled() and not running.result().failure
+        return {**self.outcome(trial, running, dropped), "played": played}
 
     async def live(
         self,
@@ -477,13 +543,24 @@ class Front:
     their visit; the newest window of a participant plays. Its fields are what every participant's
     admission shares: the rate limits and who is playing."""
 
-    def __init__(self, study: Study, serving: Serving, runner: TrialRunner) -> None:
-        self.study, self.serving, self.runner = study, serving, runner
+    def __init__(
+        self, study: Study, serving: Serving, runner: TrialRunner, trusted: tuple[str, ...] = ()
+    ) -> None:
+        self.study, self.serving, self.runner, self.trusted = study, serving, runner, trusted
         self.playing: dict[
             str, tuple[Socket, asyncio.Event]
         ] = {}  # participant -> their socket, set once it left
         self.arrivals = RateLimit(serving.arrivals, ARRIVAL_BURST)
         self.per_address = PerAddress(serving.arrivals_per_address, ADDRESS_BURST)
+        self.reconnects = PerAddress(serving.reconnects, RECONNECT_BURST)  # by participant, or address
+        self.quiet = Quiet()  # refusals over a limit: logged once per address and minute
+
+    async def over_limit(self, socket: Socket, address: str, reason: str, line: str) -> None:
+        """Refuse a socket over one of the limits with `reason`; `line` goes to the log, once per
+        address and minute."""
+        if self.quiet(f"{line} {address}"):
+            log.warning("refused %s: %s (said once a minute per address)", address, line)
+        await refuse(socket.ws, reason)
 
     async def handle(self, ws: ServerConnection, z: zenoh.Session | None) -> None:
         hello = await receive_first(ws, ("hello",))
@@ -514,10 +591,17 @@ class Front:
         """The participant who resumes (id and key), or a new one once they consent: ids are
         issued only then, at a limited rate, and once per crowd-sourcing worker id."""
         study, config = self.study, self.study.config
+        address = client_address(socket.ws, self.trusted)
         if "participant" in hello:
             participant = study.resume(hello["participant"], hello.get("key", ""))
             if participant is None:
+                if not self.reconnects.allow(address):
+                    await self.over_limit(socket, address, RECONNECTS, "too many failed resumes")
+                    return None
                 await refuse(socket.ws, "unknown participant or resume key")
+            elif not self.reconnects.allow(f"participant {participant.id}"):
+                await self.over_limit(socket, address, RECONNECTS, f"too many reconnects of {participant.id}")
+                return None
             return participant
         ids = [worker_id(v) for v in config.crowd.ids(hello.get("link", {}))]
         worker = ids[0] or worker_id(hello.get("worker"))
@@ -545,8 +629,8 @@ class Front:
             return None
         if socket.closed:  # consented and left: no id, no match
             return None
-        if not (self.per_address.allow(socket.ws.remote_address[0]) and self.arrivals.allow()):
-            await refuse(socket.ws, BUSY)
+        if not (self.per_address.allow(address) and self.arrivals.allow()):
+            await self.over_limit(socket, address, BUSY, "over the limits on new participants")
             return None
         participant = study.arrive(worker, link)
         log.info("participant %s arrives and plays the %s", participant.id, participant.role)
@@ -599,9 +683,12 @@ class Visit:
 
     async def run(self) -> None:
         """The participant's remaining trials, after a practice game if the study has one and they
-        have not begun; a failed trial is offered again, RETRIES times."""
+        have not begun; a failed trial is offered again, and a problem is shown once RETRIES in a
+        row failed before the participant could play them to the end: a game played to its end and
+        judged failed (under overload, the server's recorder fell behind; or the page stopped
+        answering) never sends its player away, it is offered again."""
         study, socket, participant, matches = self.study, self.socket, self.participant, self.runner.matches
-        last, failures = None, 0
+        last, failures, again = None, 0, False
         await matches.end_previous(participant.id)  # a reload's practice game still running out
         practice = study.practice(participant)
         if (
@@ -616,22 +703,45 @@ class Visit:
                 break
             if not await self.attend(trial):
                 return
-            sidecar = await self.runner.play(socket, trial, self.obs, self.offer(trial, last, failures > 0))
+            sidecar = await self.runner.play(socket, trial, self.obs, self.offer(trial, last, again))
             if sidecar is None:
                 return
             if sidecar["status"] == "failed":
-                failures += 1
+                failures, again = failures + (not sidecar["played"]), True
                 if failures < RETRIES:
                     continue
                 socket.send({"type": "problem", "text": PROBLEM})
                 await socket.close()
                 return
-            last, failures = sidecar["kills"], 0
+            last, failures, again = sidecar["kills"], 0, False
         config = study.config
         redirect = config.crowd.redirect(config.crowd.completion_url, participant.code)
         socket.send({"type": "done", "text": config.end, "code": participant.code, "redirect": redirect})
         log.info("participant %s is done", participant.id)
         await socket.close()
+
+
+def one_server(directory: Path) -> IO[str]:
+    """The study directory's lock (`server.lock`, holding the server's pid), held until the file is
+    closed, or the process ends however it ends. A second server on the same directory is refused
+    (UsageError, naming the first one's pid): both ran, handed out the same participant ids and
+    overwrote each other's records. An advisory lock (flock): on a shared file system that does not
+    carry flock across machines, run one server per directory yourself."""
+    directory.mkdir(parents=True, exist_ok=True)
+    file = (directory / "server.lock").open("a+")
+    try:
+        fcntl.flock(file, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        file.seek(0)
+        other = file.read().strip() or "unknown"
+        file.close()
+        raise UsageError(
+            "--out", directory, f"another study server (pid {other}) serves this study; stop it first"
+        ) from None
+    file.truncate(0)
+    file.write(f"{os.getpid()}\n")
+    file.flush()
+    return file
 
 
 def run_study(
@@ -645,6 +755,7 @@ def run_study(
     """Serve the study until `stop` is set, then end every match it started; participants'
     progress lives in `directory` (a restarted server resumes everyone)."""
     stop = stop or threading.Event()
+    lock = one_server(Path(directory))  # before anything is read or started
     study = Study(config, directory)
     for sidecar in reconcile(study):
         log.info("attempt %s left %s by an earlier server", sidecar["match"], sidecar["status"])
@@ -657,7 +768,7 @@ def run_study(
         pool.__enter__()
         judging = Judge()
         runner = TrialRunner(study, serving, matches, pool, judging, remote)
-        gateway = Gateway(None, Front(study, serving, runner).handle, web)
+        gateway = Gateway(None, Front(study, serving, runner, web.trusted).handle, web)
         # A running match holds a thread (run_trial) for its length, its start-up another: asyncio's
         # default pool (cores + 4 threads) would cap the matches at a handful, whatever hosts add.
         gateway.loop.set_default_executor(ThreadPoolExecutor(THREADS, thread_name_prefix="study"))
@@ -684,4 +795,5 @@ def run_study(
         bonuses = write_bonuses(study.config.crowd.bonus, study.participants.values(), study.directory)
         if bonuses is not None:
             log.info("bonuses written to %s", bonuses)
+        lock.close()
     return study

@@ -67,6 +67,8 @@ for group in (agent_cli, table_cli, jobs_cli, services_cli, matches_cli, adapter
     app.registered_groups += group.commands.registered_groups
 for command in app.registered_commands:
     command.rich_help_panel = PANEL.get(name_of(command))
+    # The list shows each command's first paragraph on one line: rich keeps a docstring's breaks
+    command.short_help = " ".join((command.help or command.callback.__doc__ or "").split("\n\n")[0].split())
 for group in app.registered_groups:
     group.rich_help_panel = PANEL.get(group.name)
 app.registered_commands.sort(key=lambda c: ORDER.index(name_of(c)) if name_of(c) in PANEL else len(ORDER))

@@ -7,6 +7,7 @@
 # make any other figure a few lines of pandas. Everything is written to a temporary folder.
 
 # %%
+import os
 import subprocess
 import sys
 import tempfile
@@ -18,13 +19,15 @@ from IPython.display import Image
 
 tsf = str(Path(sys.executable).with_name("tsf"))  # the `tsf` command of this environment
 work = Path(tempfile.mkdtemp(prefix="tsf-notebook-"))
+plain = {**os.environ, "NO_COLOR": "1", "COLUMNS": "150"}  # the commands' lines as they would be in a log
 for shooter in (["--adaptive", "shooter"], ["--shooter", "S4"]):
     match = subprocess.run(
         [tsf, "match", "--lockstep", "--duration", "20", "--seed", "1", "--bait", "B5", *shooter]
         + ["--out", str(work / "recordings")],
-        check=True, capture_output=True, text=True,
+        check=True, capture_output=True, text=True, env=plain,
     )  # fmt: skip
-    print(match.stdout)
+    lines = match.stdout.splitlines()  # the scoreboard's updates, then the summary
+    print(*lines[next(i for i, line in enumerate(lines) if "kills/min" in line) :], sep="\n")
 recordings = sorted((work / "recordings").glob("*.tsflog"))
 [r.name for r in recordings]
 

@@ -19,4 +19,4 @@ done, reward_sum = False, 0.0
 while not done:
     obs, reward, terminated, truncated, info = env.step(model.predict(obs, deterministic=True)[0])
     reward_sum, done = reward_sum + reward, terminated or truncated
-print(f"one game of the PPO bait with S5: reward {reward_sum:.1f}, info {info}")
+print(f"one game of the PPO bait with S5: {reward_sum:+.0f} points (the default reward: the team's points)")

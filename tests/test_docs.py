@@ -221,7 +221,8 @@ def test_the_adapter_page_opens_with_the_shipped_results_at_a_glance(seat: str) 
     glance = text[text.index("## Results at a glance") : text.index("## How it decides")]
     assert "simulated people" in glance and "no data from people" in glance
     assert f"| {seat}: {len(gain)} " in glance
-    assert f"**{100 * gain.mean() / wide[static].mean():+.1f} %**" in glance
+    percent = f"**{100 * gain.mean() / wide[static].mean():+.1f} %**"
+    assert percent in glance and percent.replace("+", "") in page("docs/index.md").replace("+", "")
     assert f"{(gain > 0).sum()} / {(gain == 0).sum()} / {(gain < 0).sum()}" in glance
     share = f"{gain[built].sum() / gain.sum():.0%}".replace("%", " %")
     effect = "gain" if gain.mean() > 0 else "loss"

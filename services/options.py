@@ -12,7 +12,8 @@ import inspect
 import logging
 import os
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from types import EllipsisType
 from typing import Annotated, Any, Literal
@@ -27,6 +28,31 @@ from shared.errors import UsageError
 from shared.game import DURATION, FPS, FRAMES, ROLES, SEEDS, GameConfig, Range
 
 console = Console()
+
+
+@contextmanager
+def progress_bars() -> Iterator[Callable[[str], Callable[[int, int], None]]]:
+    """Progress on the console for a command that runs more than a few seconds: `shown(step)` adds
+    a bar named `step` and gives its (done, total) callback (services/jobs/kinds.py's Progress)."""
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+               TimeRemainingColumn())  # fmt: skip
+    with Progress(*columns, console=console) as bar:
+
+        def shown(step: str) -> Callable[[int, int], None]:
+            task = bar.add_task(step, total=None)
+            return lambda done, total: bar.update(task, completed=done, total=total)
+
+        yield shown
+
 
 # The limits of values that only the command line sets; those of the game and the wire live in
 # shared/ (game.SEEDS, FRAMES, DURATION, messages.JOB_SEEDS) and the adapter's in AdapterConfig.

@@ -15,6 +15,10 @@ multiprocessing's resource tracker, end when their launcher does.
 Priorities are relative to the launcher's own: a child is started `nice` steps below it (and the
 sim raises itself some steps above, services/sim/service.py), so a launcher run under `nice`
 keeps the order of its processes, shifted.
+
+A child's output comes back through the launcher, line by line, written to the launcher's own
+stdout and stderr as they are then: inside a live display (`tsf match`'s scoreboard, a progress bar)
+rich puts each line above it, instead of the child's line running onto the display's.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ import signal
 import subprocess
 import sys
 import threading
+from typing import IO
 
 PARENT = "TSF_PARENT"  # environment: the pid of the launcher a `tsf` child must not outlive
 _PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
@@ -75,13 +80,19 @@ class Processes:
     def __init__(self) -> None:
         self.children: dict[str, subprocess.Popen] = {}
         self.ended: set[str] = set()  # the children still running at exit, which this ended
+        self.relays: list[threading.Thread] = []
 
     def start(self, name: str, command: list[str], nice: int = 0) -> subprocess.Popen:
         """Start a child; `nice` > 0 steps below this thread's priority (for work off the latency
         path; its threads inherit it)."""
         child = self.children[name] = subprocess.Popen(
-            command, stdin=subprocess.DEVNULL, env={**os.environ, PARENT: str(os.getpid())}
-        )
+            command, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+            env={**os.environ, PARENT: str(os.getpid())},
+        )  # fmt: skip
+        for pipe, stream in ((child.stdout, "stdout"), (child.stderr, "stderr")):
+            relay = threading.Thread(target=_relay, args=(pipe, stream), name=f"{name}-{stream}", daemon=True)
+            relay.start()
+            self.relays.append(relay)
         if nice:  # set from here: a preexec_fn is unsafe in a process with threads (the study server)
             os.setpriority(os.PRIO_PROCESS, child.pid, min(19, os.getpriority(os.PRIO_PROCESS, 0) + nice))
         return child
@@ -110,3 +121,15 @@ class Processes:
             except subprocess.TimeoutExpired:
                 child.kill()
                 child.wait()
+        for relay in self.relays:  # the children's last lines
+            relay.join(5)
+
+
+def _relay(pipe: IO[bytes], stream: str) -> None:
+    """Write each line of a child's output to this process's stream (sys.stdout or sys.stderr, as it
+    is when the line comes: a live display's proxy while one runs), until the child closes it."""
+    with pipe:
+        for line in iter(pipe.readline, b""):
+            out = getattr(sys, stream)
+            out.write(line.decode(errors="replace"))
+            out.flush()

@@ -57,12 +57,15 @@ def project_version() -> str:
 
 @cache
 def commit() -> str:
-    """The checkout's commit, "+dirty" when files differ from it; "unknown" outside a git checkout."""
+    """The checkout's commit, "+dirty" when files differ from it; "unknown" outside a git checkout
+    (also for a copy installed into a virtual environment that lies inside some checkout)."""
     try:
         head = subprocess.run(
-            ["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10
-        )
-        if head.returncode != 0:
+            ["git", "-C", str(ROOT), "rev-parse", "--show-toplevel", "HEAD"],
+            capture_output=True, text=True, timeout=10,
+        )  # fmt: skip
+        top, _, sha = head.stdout.strip().partition("\n")
+        if head.returncode != 0 or Path(top).resolve() != ROOT:  # an installed copy inside some checkout
             return "unknown"
         dirty = subprocess.run(
             ["git", "-C", str(ROOT), "status", "--porcelain", "--untracked-files=no"],
@@ -70,7 +73,7 @@ def commit() -> str:
         )  # fmt: skip
     except (OSError, subprocess.SubprocessError):
         return "unknown"
-    return head.stdout.strip() + ("+dirty" if dirty.stdout.strip() else "")
+    return sha + ("+dirty" if dirty.stdout.strip() else "")
 
 
 def file_hash(path: Path | None) -> str:

@@ -1,4 +1,5 @@
 import json
+import re
 import subprocess
 
 from services.agent import library
@@ -15,11 +16,12 @@ def test_the_record_names_version_commit_hashes_and_the_command_line():
         ["git", "-C", str(provenance.ROOT), "rev-parse", "HEAD"], capture_output=True, text=True
     )
     assert record["commit"].removesuffix("+dirty") == head.stdout.strip()
-    assert record["version"] == "0.1.0" and record["library"] == library.manifest_hash()
+    version = re.search(r'^version = "(.+)"$', (provenance.ROOT / "pyproject.toml").read_text(), re.M)[1]
+    assert record["version"] == version and record["library"] == library.manifest_hash()
     assert record["table"] == provenance.file_hash(DEFAULT_TABLE) != "none"
     assert record["config"] == GameConfig(frames=60).hash() != GameConfig().hash()
     assert record["command"] == "tsf report a.tsflog --out r"
-    assert provenance.lines(record)[1] == "version: 0.1.0"
+    assert provenance.lines(record)[1] == f"version: {version}"
 
 
 def test_outside_a_git_checkout_the_commit_is_unknown(tmp_path, monkeypatch):

@@ -203,6 +203,44 @@ def test_the_adapter_page_reports_the_shipped_evaluation() -> None:
     assert f"Best static policy: **{best}**" in summary
 
 
+GLANCE = {  # seat: (its evaluation, the best static policy, the family the gain or loss is most from)
+    "shooter": ("docs/eval", "S4", "B3"),
+    "bait": ("docs/eval/bait", "B6", "S7"),
+}
+
+
+@pytest.mark.parametrize("seat", GLANCE)
+def test_the_adapter_page_opens_with_the_shipped_results_at_a_glance(seat: str) -> None:
+    """The figures at the top of the page are the shipped per_partner.csv's: the effect in percent,
+    partners better / equal / worse, and the share from the partners built on one policy."""
+    folder, static, family = GLANCE[seat]
+    games = pd.read_csv(ROOT / folder / "per_partner.csv")
+    wide = games.pivot(index="partner", columns="agent", values="kills_per_minute")
+    gain = wide[f"adaptive-T400-{AdapterConfig().strategy}"] - wide[static]
+    built = gain.index.str.contains(rf"\b{family}\b")
+    text = page("docs/adapter.md")
+    glance = text[text.index("## Results at a glance") : text.index("## How it decides")]
+    assert "simulated people" in glance and "no data from people" in glance
+    assert f"| {seat}: {len(gain)} " in glance
+    percent = f"**{100 * gain.mean() / wide[static].mean():+.1f} %**"
+    assert percent in glance and percent.replace("+", "") in page("docs/index.md").replace("+", "")
+    assert f"{(gain > 0).sum()} / {(gain == 0).sum()} / {(gain < 0).sum()}" in glance
+    share = f"{gain[built].sum() / gain.sum():.0%}".replace("%", " %")
+    effect = "gain" if gain.mean() > 0 else "loss"
+    assert f"{share} of the {effect} comes from the {built.sum()} partners built on {family}" in glance
+    assert f"without them {gain[~built].mean():+.3f}" in glance
+
+
+def test_no_page_names_an_issue() -> None:
+    """The pages speak the project's words: an issue number or 'the issue's bar' means nothing to a
+    reader (an upstream project's issue, named with its project, is a reference)."""
+    pages = [*PAGES, "CHANGELOG.md", *(str(p.relative_to(ROOT)) for p in (ROOT / "docs").rglob("*.py"))]
+    named = {
+        name: re.findall(r"(?<!zenoh )\bissues? (?:\d+|'s)|\bthe issue\b", page(name), re.I) for name in pages
+    }
+    assert {name: found for name, found in named.items() if found} == {}
+
+
 # --- the report's worked example ----------------------------------------------------------------------
 
 

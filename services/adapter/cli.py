@@ -4,7 +4,6 @@ calibrate-adapter."""
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated
 
@@ -23,6 +22,7 @@ from services.options import (
     console,
     number,
     output,
+    progress_bars,
 )
 from services.population.adaptive import WINDOWS, AdapterConfig
 from shared.bus import BusConfig, stop_on_signals
@@ -130,8 +130,6 @@ def eval_command(
     eval` reached with --connect): identification, team performance, the test against the best
     static policy, and the figures. Resumable; the numbers do not depend on the workers. With
     --games, an evaluation's games are analysed again (an analysis newer than the games)."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
-
     from services.evaluation.evaluation import KINDS, EvalPlan, evaluate
     from services.jobs.engine import on_workers, open_engine
     from services.population.human_like import STAND_INS
@@ -171,16 +169,10 @@ def eval_command(
         tuple(s.value for s in strategy or ()), strategy_window, identify_seeds, identify,
         performance, sessions, job_games,
     )  # fmt: skip
-    columns = (BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
     with (
         open_engine(bus, sweep_id, out / "eval.journal", KINDS, workers, ray, stop_on_signals()) as engine,
-        Progress(*columns, console=console) as bar,
+        progress_bars() as shown,
     ):
-
-        def shown(step: str) -> Callable[[int, int], None]:
-            task = bar.add_task(step, total=None)
-            return lambda done, total: bar.update(task, completed=done, total=total)
-
         report = evaluate(plan, on_workers(engine), shown)
     summary = report.write(out)
     console.print(summary.read_text())
@@ -216,8 +208,11 @@ def calibrate_adapter(
     from services.jobs.engine import on_workers, open_engine
 
     journal = out.with_name(out.name + ".journal")
-    with open_engine(bus, sweep_id, journal, KINDS, workers, ray, stop_on_signals()) as engine:
-        result = calibrate(seeds=list(range(seeds)), run=on_workers(engine))
+    with (
+        open_engine(bus, sweep_id, journal, KINDS, workers, ray, stop_on_signals()) as engine,
+        progress_bars() as shown,
+    ):
+        result = calibrate(seeds=list(range(seeds)), run=on_workers(engine), progress=shown("frames played"))
     for role, thresholds in result["thresholds"].items():
         console.print(f"{role}: " + ", ".join(f"T={t}: {v:.2f}" for t, v in thresholds.items()))
     console.print(f"written to {write_calibration(result, out)}")

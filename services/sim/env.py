@@ -151,6 +151,8 @@ class RoleEnv(gymnasium.Env):
         return observe(self.game, self.role, self.view), _info(self.game, [])
 
     def step(self, action: int) -> tuple[np.ndarray, float, bool, bool, dict]:
+        if isinstance(action, np.ndarray) and action.shape == () and action.dtype.kind in "iu":
+            action = action.item()  # what SB3's `model.predict` returns for one Discrete action
         game = self.game
         before = game.points
         partner_action = self.partner.act(observe(game, self.partner.role, self.partner.view))

@@ -113,8 +113,21 @@ def test_invalid_actions_and_wrong_seats_raise():
     role_env.reset(seed=0)
     with pytest.raises(ValueError, match="invalid action for bait"):
         role_env.step(1.5)
+    with pytest.raises(ValueError, match="invalid action for bait"):
+        role_env.step(np.array(12))
     with pytest.raises(ValueError, match="plays bait"):
         RoleEnv("bait", CircleBait())
+
+
+def test_an_action_as_sb3_predicts_it_is_played_as_the_integer():
+    """SB3's `model.predict` answers a Discrete action as a 0-d integer array; the step takes it."""
+    games = [RoleEnv("bait", MirrorShooter()) for _ in range(2)]
+    for env in games:
+        env.reset(seed=3)
+    for step in range(90):
+        action = 2 if step % 30 > 5 else 6
+        as_array, as_int = games[0].step(np.array(action, np.int64)), games[1].step(action)
+        assert np.array_equal(as_array[0], as_int[0]) and as_array[1:4] == as_int[1:4]
     with pytest.raises(ValueError, match="observation view"):
         TSFParallelEnv(view="fortress")
 

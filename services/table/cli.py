@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from services.options import GAMES, RAY, WORKERS, Role, bus_options, console, number, output
+from services.options import GAMES, RAY, WORKERS, Role, bus_options, console, number, output, progress_bars
 from services.table.table import LANES
 from shared.bus import BusConfig, stop_on_signals
 from shared.errors import Failure, UsageError
@@ -48,18 +48,13 @@ def sweep(
     bus: BusConfig,
 ) -> None:
     """Coordinate a self-play sweep: measure the table with local and remote workers; resumable."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
-
     from services.table.sweep import journal_path, run_sweep
 
     bait_keys, shooter_keys = _keys(bait, "bait"), _keys(shooter, "shooter")
     stop = stop_on_signals()
-    columns = (BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
-    with Progress(*columns, console=console) as bar:
-        task = bar.add_task("games", total=None)
+    with progress_bars() as shown:
         table = run_sweep(
-            bus, sweep_id, out, bait_keys, shooter_keys, games, chunk,
-            lambda done, total: bar.update(task, completed=done, total=total), stop, lanes=lanes,
+            bus, sweep_id, out, bait_keys, shooter_keys, games, chunk, shown("games"), stop, lanes=lanes,
             workers=workers, ray=ray,
         )  # fmt: skip
     if table is None:

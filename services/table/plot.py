@@ -1,5 +1,6 @@
 """The table as a heatmap, laid out like the original study's: baits as rows, shooters as columns,
-families separated by lines, each bait's best shooter outlined."""
+families separated by lines, each bait's best shooter outlined. The outlines are drawn above the
+separators (BOXES over LINES), so that a box on a family's edge shows whole."""
 
 from __future__ import annotations
 
@@ -14,6 +15,8 @@ from matplotlib.patches import Rectangle  # noqa: E402
 from services.agent import library  # noqa: E402
 from services.table.table import Table  # noqa: E402
 from shared.plots import save  # noqa: E402
+
+LINES, BOXES = 2, 3  # the drawing order (zorder): the best responses' outlines over the separators
 
 
 def family_breaks(keys: tuple[str, ...]) -> list[int]:
@@ -34,15 +37,16 @@ def heatmap(table: Table, path: Path) -> Path:
     top = max(max(row) for row in means) or 1.0
     for i, bait in enumerate(table.baits):
         best = table.shooters.index(table.best_shooter(bait))
-        ax.add_patch(Rectangle((best - 0.5, i - 0.5), 1, 1, fill=False, edgecolor="red", linewidth=2))
+        box = Rectangle((best - 0.5, i - 0.5), 1, 1, fill=False, edgecolor="red", linewidth=2, zorder=BOXES)
+        ax.add_patch(box)
         for j, value in enumerate(means[i]):
             ax.text(
                 j, i, f"{value:.1f}", ha="center", va="center", color="white" if value < top / 2 else "black"
             )
     for j in family_breaks(table.shooters):
-        ax.axvline(j - 0.5, color="white", linewidth=2)
+        ax.axvline(j - 0.5, color="white", linewidth=2, zorder=LINES)
     for i in family_breaks(table.baits):
-        ax.axhline(i - 0.5, color="white", linewidth=2)
+        ax.axhline(i - 0.5, color="white", linewidth=2, zorder=LINES)
     ax.set_title(f"Self-play table P: mean kills/min over {table.games} games (red: best shooter)")
     return save(fig, path)
 
@@ -64,17 +68,21 @@ def skill_heatmap(table, path: Path, p_best: dict[str, str] | None = None) -> Pa
     top = max(max(row) for row in means) or 1.0
     for i, partner in enumerate(rows):
         best = table.teammates.index(table.best(partner))
-        ax.add_patch(Rectangle((best - 0.5, i - 0.5), 1, 1, fill=False, edgecolor="red", linewidth=2))
+        ax.add_patch(
+            Rectangle((best - 0.5, i - 0.5), 1, 1, fill=False, edgecolor="red", linewidth=2, zorder=BOXES)
+        )
         style = table.styles[i // len(table.skills)]
         if p_best and p_best.get(style) in table.teammates:
             j = table.teammates.index(p_best[style])
-            box = Rectangle((j - 0.42, i - 0.42), 0.84, 0.84, fill=False, edgecolor="white", linestyle="--")
+            box = Rectangle(
+                (j - 0.42, i - 0.42), 0.84, 0.84, fill=False, edgecolor="white", linestyle="--", zorder=BOXES
+            )
             ax.add_patch(box)
         for j, value in enumerate(means[i]):
             color = "white" if value < top / 2 else "black"
             ax.text(j, i, f"{value:.1f}", ha="center", va="center", color=color, fontsize=7)
     for i in range(len(table.skills), len(rows), len(table.skills)):
-        ax.axhline(i - 0.5, color="white", linewidth=1.5)
+        ax.axhline(i - 0.5, color="white", linewidth=1.5, zorder=LINES)
     ax.set_title(
         f"Skill table, {table.role} seat: kills/min over {table.games} games\n"
         "(red: best teammate; dashed: P's best response to the style)",

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import torch as th
 from stable_baselines3 import DQN
+from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 
 from services.agent import library, networks
@@ -123,6 +124,14 @@ def plot_curve(curve: Path, out: Path, key: str) -> None:
     plt.close(fig)
 
 
+def whole_rollouts(model: BaseAlgorithm, steps: int) -> int:
+    """`steps` rounded up to what SB3 plays for them: it collects whole rollouts (n_envs lanes of
+    n_steps each on-policy, one step of every lane for DQN), so `learn(4096)` with 64 lanes of 128
+    steps plays 8,192. Asking for that number keeps the progress bar's total true."""
+    rollout = model.n_envs * getattr(model, "n_steps", 1)
+    return -(-steps // rollout) * rollout
+
+
 def train(
     key: str,
     out: Path,
@@ -164,7 +173,8 @@ def train(
     partner = curve_partner(recipe, out)
     run = Run(run_dir, recipe, partner, every, state)
     if state["steps"] < steps:
-        model.learn(steps - state["steps"], callback=run, progress_bar=progress, reset_num_timesteps=False)
+        todo = whole_rollouts(model, steps - state["steps"])
+        model.learn(todo, callback=run, progress_bar=progress, reset_num_timesteps=False)
         run.point()
     plot_curve(run_dir / "curve.csv", run_dir / "curve.png", key)
     if figures is not None:

@@ -15,7 +15,7 @@ import torch as th  # noqa: E402
 from services.agent import library, networks, seats  # noqa: E402
 from services.agent.library_test import observations  # noqa: E402
 from services.training.algorithms import HYPERPARAMETERS, make_model  # noqa: E402
-from services.training.loop import prepare, train  # noqa: E402
+from services.training.loop import prepare, train, whole_rollouts  # noqa: E402
 from shared.errors import UsageError  # noqa: E402
 
 
@@ -44,6 +44,20 @@ def test_a_stopped_run_resumes_from_its_checkpoint(tmp_path):
     assert entry["steps"] == 256 and entry["seconds"] >= json.loads(curve[-1].split(",")[1])
     train("B5", root, steps=128, **{**options, "hyperparameters": {**small, "learning_rate": 1e-3}})
     assert len((runs / "B5" / "curve.csv").read_text().splitlines()) == len(curve)  # other settings: anew
+
+
+def test_the_steps_asked_are_rounded_up_to_whole_rollouts_so_the_bar_shows_what_is_played(tmp_path):
+    """`tsf train --steps 4096` with PPO's 64 lanes of 128 steps plays one rollout, 8,192 steps: the
+    bar's total says 8,192 too (it said 4,096 and ended at 8,192/4,096)."""
+    root = tmp_path / "library"
+    prepare(root)
+    recipe = library.registry(root)["B5"]
+    small = {**HYPERPARAMETERS["PPO"], "n_envs": 4, "n_steps": 16, "batch_size": 64}
+    model = make_model(recipe, 0, small, root=root)
+    assert [whole_rollouts(model, n) for n in (1, 64, 65, 100)] == [64, 64, 128, 128]
+    entry = train("B5", root, steps=100, run_dir=tmp_path / "runs", hyperparameters=small, progress=False,
+                  score_games=0)  # fmt: skip
+    assert entry["steps"] == 128
 
 
 def test_a_new_library_starts_as_a_copy_and_a_stray_directory_is_refused(tmp_path):

@@ -238,15 +238,31 @@ def study(
         "(16-64 characters, e.g. from `openssl rand -hex 24`), on --dashboard-port.",
     ),
     dashboard_port: int = number(8001, PORTS, "Port of the experimenter's dashboard (--dashboard-token)."),
+    check: bool = typer.Option(
+        False,
+        "--check",
+        help="Check the study's config as serving it would (every setting, every variant's agent in "
+        "every seat), say so and exit: a lab's pre-flight. Nothing is started or written.",
+    ),
 ) -> None:
     """Serve a study: participants open the link, consent, get a role and play every agent variant.
-    With --listen or --connect, match hosts on other machines add capacity beyond --max-matches."""
+    With --listen or --connect, match hosts on other machines add capacity beyond --max-matches.
+    Everything is checked before anything starts: a mistake in the config is one line (exit 2)."""
     from services.human.gateway import Web
-    from services.study.core import StudyConfig
     from services.study.crowd import BONUSES
     from services.study.dashboard import read_token
+    from services.study.preflight import load_checked
     from services.study.runner import Serving, run_study
     from shared.secret import read_secret
+
+    if check:
+        protocol = load_checked(config)
+        console.print(
+            f"{config}: study {protocol.name}, {len(protocol.variants)} variants x {protocol.trials} "
+            f"trials of {protocol.trial_seconds:g} s: every setting and every variant's agent in each "
+            "seat it plays checked; ready to serve"
+        )
+        return
 
     hosts, sealing = None, b""
     if listen or connect:
@@ -266,11 +282,7 @@ def study(
         if dashboard_port == port:
             raise UsageError("--dashboard-port", port, "the participants' port: give another")
         board = Web(host, dashboard_port, cert, key)
-    protocol = StudyConfig.load(config)
-    for variant in protocol.variants:  # adaptive agents' thresholds: refused now, not at a trial
-        for role in protocol.roles:
-            if (adapter := variant.adaptive(other(role), protocol.seed)) is not None:
-                adapter.threshold()
+    protocol = load_checked(config)
     directory = out / protocol.name
 
     def show(gateway) -> None:  # noqa: ANN001 - a Gateway

@@ -283,6 +283,23 @@ MISTAKES = [
     ),
     ("study {garbage}", 2, "tsf study: CONFIG {garbage}: not a study: Expected '=' after a key"),
     ("study {tmp}/empty.toml", 2, "tsf study: CONFIG {tmp}/empty.toml: not a study: "),
+    (
+        "study {tmp}/typo.toml",
+        2,
+        "tsf study: CONFIG {tmp}/typo.toml: not a study: trial_secnds: no such setting; valid: name, "
+        "variants, trials, trial_seconds,",
+    ),
+    (
+        "study {tmp}/text.toml",
+        2,
+        'tsf study: CONFIG {tmp}/text.toml: not a study: crowd.bonus.max = "2": a number expected',
+    ),
+    (
+        "study {tmp}/s55.toml --check",
+        2,
+        "tsf study: CONFIG {tmp}/s55.toml: not a study: variant B8-S5 (the shooter seat): shooter = S55: "
+        f"no policy of the shooter seat; valid: {SHOOTERS}",
+    ),
     ("study {tmp}/long.toml --max-matches 0", 2, "tsf study: --max-matches 0: no match could run"),
     ("study {tmp}/long.toml --listen nowhere", 2, "tsf study: --listen nowhere: not a zenoh endpoint"),
     (
@@ -493,6 +510,9 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
     (tmp / "empty.toml").write_text("")
     study = (resources.files("services.study") / "configs" / "static.toml").read_text()
     (tmp / "long.toml").write_text(study.replace("trial_seconds = 60", "trial_seconds = 1e9"))
+    (tmp / "typo.toml").write_text(study.replace("trial_seconds = 60", "trial_secnds = 60"))
+    (tmp / "text.toml").write_text(f'{study}\n[crowd.bonus]\nper_kill = 0.1\nmax = "2"\n')
+    (tmp / "s55.toml").write_text(study.replace('shooter = "S5"', 'shooter = "S55"'))
     names = {"done": done, "torn": torn, "tampered": tmp / "tampered.tsflog", "garbage": tmp / "garbage"}
     return {"tmp": str(tmp), **{name: str(path) for name, path in names.items()}}
 
@@ -603,4 +623,20 @@ def test_an_adaptive_match_or_study_without_thresholds_for_the_library_stops_bef
     for command in (["match", "--adaptive", "shooter", "--lockstep"], ["study", study]):
         status, lines = tsf([*command, "--out", str(out)], capsys)
         assert status == 2 and len(lines) == 1 and not out.exists()
-        assert lines[0].startswith(f"tsf {command[0]}: {said} {mine}")
+        assert lines[0].startswith(f"tsf {command[0]}: ") and f"{said} {mine}" in lines[0]
+
+
+def test_a_study_is_checked_without_serving(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """`tsf study --check` is a lab's pre-flight: it says the study is ready, and starts and writes
+    nothing; a config with a mistake is refused the same way, before anything is written."""
+    out = tmp_path / "studies"
+    for name in ("static", "adaptive"):
+        study = str(resources.files("services.study") / "configs" / f"{name}.toml")
+        status = run(app, ["study", study, "--check", "--out", str(out)])
+        said = capsys.readouterr().out.replace("\n", " ")
+        assert status == 0 and f"study {name}," in said and "ready to serve" in said and not out.exists()
+    typo = tmp_path / "typo.toml"
+    typo.write_text('name = "x"\n[[variants]]\nname = "a"\nbait = "B1"\nshooter = "S55"\n')
+    status, lines = tsf(["study", str(typo), "--out", str(out)], capsys)
+    assert status == 2 and len(lines) == 1 and "shooter = S55: no policy of the shooter seat" in lines[0]
+    assert not out.exists()

@@ -26,6 +26,7 @@ from pathlib import Path
 
 from services.adapter.core import AdapterConfig
 from services.adapter.seat import ADAPTIVE_KIND, SeatSpec
+from services.study import settings
 from services.study.crowd import FAILS, Crowd
 from shared.errors import UsageError
 from shared.game import DURATION, FPS, ROLES, SEEDS, other
@@ -131,6 +132,8 @@ class StudyConfig:
             raise ValueError(f"seed {self.seed}: outside the range {SEEDS}")
         if not self.roles or not set(self.roles) <= set(ROLES):
             raise ValueError(f"roles must be among {ROLES}")
+        if not set(self.instructions) <= set(ROLES):
+            raise ValueError(f"instructions: a text per role, among {ROLES}; not {sorted(self.instructions)}")
         try:
             self.consent_text()
         except (KeyError, IndexError, ValueError) as error:
@@ -165,14 +168,10 @@ class StudyConfig:
         """Read a study's TOML file (services/study/configs/ has the original two experiments); a
         file that is not a study's is a UsageError that says why."""
         try:
-            data = tomllib.loads(Path(path).read_text())
-            variants = tuple(Variant.read(**v) for v in data.pop("variants", []))
-            if "roles" in data:
-                data["roles"] = tuple(data["roles"])
-            if "crowd" in data:
-                data["crowd"] = Crowd.from_toml(data["crowd"])
-            return cls(variants=variants, **data)
-        except (ValueError, TypeError) as error:  # TOML syntax, unknown or missing fields, bad values
+            return settings.build(cls, tomllib.loads(Path(path).read_text()))
+        except UnicodeDecodeError:
+            raise UsageError("CONFIG", path, "not a study: not text (UTF-8)") from None
+        except ValueError as error:  # TOML syntax, unknown or missing settings, bad kinds or values
             raise UsageError("CONFIG", path, f"not a study: {error}") from None
 
     def hash(self) -> str:

@@ -74,12 +74,6 @@ class Crowd:
             if url and (urlsplit(url).scheme not in ("https", "http") or not urlsplit(url).netloc):
                 raise ValueError(f"crowd.{name} {url!r}: give an http(s) address")
 
-    @classmethod
-    def from_toml(cls, table: dict) -> Crowd:
-        bonus = table.pop("bonus", None)
-        checks = tuple(table.pop("attention_checks", ()))
-        return cls(**table, bonus=Bonus(**bonus) if bonus is not None else None, attention_checks=checks)
-
     def redirect(self, url: str, code: str) -> str:
         """The address to send the participant to, with their completion code filled in."""
         return url.replace("{code}", quote(code, safe=""))

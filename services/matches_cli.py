@@ -23,10 +23,12 @@ from services.options import (
     adapter_options,
     bus_options,
     console,
+    free_port,
     game_frames,
     keys_help,
     number,
     output,
+    refuse_beside,
 )
 from shared.bus import BusConfig, stop_on_signals
 from shared.errors import Failure, UsageError
@@ -58,6 +60,7 @@ def host_secret_of(path: Path | None) -> bytes:
 @commands.command("match")
 @adapter_options("role", "seed")
 def match_command(
+    context: typer.Context,
     seed: Seed = 0,
     duration: Duration = None,
     frames: Frames = None,
@@ -88,6 +91,10 @@ def match_command(
 
     if adaptive and adaptive not in ROLES:
         raise UsageError("--adaptive", adaptive, "not a seat", ROLES)
+    if adaptive:
+        refuse_beside(
+            context, "--adaptive", adaptive, "the adaptive agent plays that seat", {adaptive: f"--{adaptive}"}
+        )
     config = adapter(role=adaptive or ROLES[1], seed=seed)  # its options are checked with or without
     seats = {"bait": SeatSpec.parse(bait, "--bait"), "shooter": SeatSpec.parse(shooter, "--shooter")}
     if adaptive:
@@ -176,6 +183,7 @@ def play_command(
         for seat, url in urls.items():
             console.print(f"[bold]{seat}[/]: open {url}")
 
+    free_port(host, port)
     summary, path = play_with_people(plan, host, port, links, stop=stop_on_signals())
     console.print(
         f"[bold]{plan.match}[/]: {summary.kills} kills in {summary.frame} frames "
@@ -281,6 +289,7 @@ def study(
             raise UsageError("--dashboard-token", str(dashboard_token), str(error)) from None
         if dashboard_port == port:
             raise UsageError("--dashboard-port", port, "the participants' port: give another")
+        free_port(host, dashboard_port, "--dashboard-port")
         board = Web(host, dashboard_port, cert, key)
     protocol = load_checked(config)
     directory = out / protocol.name
@@ -297,6 +306,7 @@ def study(
 
     if (cert is None) != (key is None):
         raise UsageError("--cert/--key", str(cert or key), "give both, or neither")
+    free_port(host, port)  # before the pool starts and anything is written
     web = Web(host, port, cert, key, tuple(origin or ()), per_address)
     serving = Serving(
         max_matches, trial_timeout, test_token=test_token, hosts=hosts,

@@ -14,7 +14,7 @@ from services.agent.seats import policy_for
 from services.options import GAMES, Duration, Frames, Role, console, game_frames, keys_help, number, output
 from services.sim.observation import VIEWS
 from services.sim.play import play, summarize
-from shared.errors import Failure, UsageError
+from shared.errors import Failure, UsageError, missing_extra
 from shared.game import ROLES, SEEDS, GameConfig, Range
 
 commands = typer.Typer()
@@ -98,7 +98,7 @@ def train(
     try:
         from services.agent.train import train_library
     except ModuleNotFoundError as error:
-        raise Failure(f"{error}: training needs the `train` extra, pip install -e '.[train]'") from None
+        raise Failure(f"training {missing_extra(error) or error}") from None
     started = time.monotonic()
     console.print(f"training {', '.join(todo)} into {out}, {jobs} at a time")
     options = {"steps": steps, "seed": seed, "run_dir": runs, "figures": figures}

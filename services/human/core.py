@@ -260,7 +260,7 @@ class Narrator:
     frames until a round whose ships are both dead resets (None while one lives), and `ending`,
     whether the partner is an agent ending a stalled round on purpose (its own rule, policy.stalled
     on its observation: this ship dead, it alive, the fortress up, no missile that can kill), so
-    the page can say why it flies into the wall. Fed every state in order: the page may skip
+    the page can say why it flies into the shield. Fed every state in order: the page may skip
     frames, the gateway does not."""
 
     def __init__(self, role: str | None, partner_ends_rounds: bool, delay: int) -> None:
@@ -279,13 +279,22 @@ class Narrator:
         return {"respawn": respawn, "ending": ending}
 
 
-def end(summary: Summary) -> dict:
+def end(summary: Summary, frames: int) -> dict:
+    """The match's result as the page shows it; `frame` short of the planned `frames`: it was
+    stopped early (the page says so, never "Time is up")."""
     return {
         "type": "end",
         "kills": summary.kills,
         "kills_per_minute": round(summary.kills_per_minute, 2),
         "points": summary.points,
+        "frame": summary.frame,
+        "frames": frames,
     }
+
+
+def points(config: GameConfig) -> dict[str, int]:
+    """How the team's points are counted, as the page explains them."""
+    return {"kill": config.points_kill, "death": config.points_death, "shield_hit": config.points_shield_hit}
 
 
 def _r(value: float) -> float:

@@ -42,6 +42,7 @@ from services.human.core import (
     end,
     event_view,
     parse,
+    points,
     setup,
     view,
 )
@@ -211,7 +212,7 @@ class Bridge:
 
     def _on_summary(self, summary: Summary) -> None:
         self._check(summary)
-        self.outbox.offer(json.dumps(end(summary)), control=True)
+        self.outbox.offer(json.dumps(end(summary, self.config.frames)), control=True)
         self.summary.set()
 
     def close(self) -> None:
@@ -426,7 +427,15 @@ def seat_handler(match: str, book: SeatBook, done: threading.Event | None = None
         bridge = Bridge(z, match, role, Controls(), outbox, join.get("obs", False))
         try:
             await ws.send(
-                json.dumps({"type": "welcome", "match": match, "role": role, **setup(bridge.config)})
+                json.dumps(
+                    {
+                        "type": "welcome",
+                        "match": match,
+                        "role": role,
+                        **setup(bridge.config),
+                        "points": points(bridge.config),
+                    }
+                )
             )
             log.info("a person took the %s seat of %s", role, match)
             await play_seat(ws, bridge, outbox)

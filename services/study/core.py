@@ -42,6 +42,17 @@ DEFAULT_CONSENT = (
 SET_UP = 2.0  # seconds a game takes to set up on a warm pool (p99 under 1 s measured), as the page says
 AROUND = 20.0  # seconds a game takes beyond its length (the offer read, Ready, its end): study and slot time
 DEFAULT_END = "Thank you for taking part. You may close this window now."
+REDIRECTED_END = "Thank you for taking part."  # the default end text where the page then redirects
+# What the consent text says of a practice game and of attention checks where the study has them and
+# the text does not place {practice} or {checks}: added at its end.
+PRACTICE_TEXT = "Before them you play a practice game of {seconds} seconds, which does not count."
+CHECKS_TEXT = (
+    "Before some sessions a short attention check asks you to click the button it names; "
+    "missing {fails} of them ends the study for you."
+)
+# Settings added after studies had begun: left out of the study's hash while at their default, so
+# that a journal begun before they existed is still this study's (as a message's ADDED fields).
+LATER = {"show_points": True}
 PRACTICE = ("practice", "circle", "mirror")  # the practice partner: the library's scripted bait and shooter
 
 
@@ -114,6 +125,9 @@ class StudyConfig:
     # partner (PRACTICE); it is no trial: not in the journal, its recording apart in practice/.
     practice_seconds: float = 0.0
     crowd: Crowd = field(default_factory=Crowd)  # a platform's ids, redirects, bonus (study/crowd.py)
+    # The page shows the team's points beside the fortresses destroyed, and how they are counted;
+    # false: only the fortresses destroyed (the study's score), points neither shown nor explained.
+    show_points: bool = True
 
     def __post_init__(self) -> None:
         if not NAME.fullmatch(self.name):
@@ -139,7 +153,7 @@ class StudyConfig:
         except (KeyError, IndexError, ValueError) as error:
             raise ValueError(
                 f"consent: cannot fill in {error} (the text may name {{games}}, {{seconds}}, "
-                "{minutes} and {pay}; a brace itself is written {{ or }})"
+                "{minutes}, {pay}, {practice} and {checks}; a brace itself is written {{ or }})"
             ) from None
         if any(s > len(self.variants) for s in self.crowd.attention_checks):
             raise ValueError(f"crowd.attention_checks: sessions are 1 to {len(self.variants)}")
@@ -154,14 +168,26 @@ class StudyConfig:
         return round(self.trial_seconds * FPS)
 
     def consent_text(self) -> str:
-        """The consent text as shown: the study's numbers filled in, and its pay."""
+        """The consent text as shown: the study's numbers filled in, what comes besides the games (a
+        practice game, attention checks) and its pay; each the text does not place is added."""
         games = self.trials * len(self.variants)
-        minutes = math.ceil(games * (self.trial_seconds + AROUND) / 60)
+        minutes = math.ceil((games * (self.trial_seconds + AROUND) + self.practice_seconds) / 60)
         counted = f"{games} game{'s' if games != 1 else ''}"
+        practice = PRACTICE_TEXT.format(seconds=f"{self.practice_seconds:g}") if self.practice_seconds else ""
+        checks = CHECKS_TEXT.format(fails=FAILS) if self.crowd.attention_checks else ""
         shown = self.consent.format(
-            games=counted, seconds=f"{self.trial_seconds:g}", minutes=minutes, pay=self.pay
-        )
+            games=counted, seconds=f"{self.trial_seconds:g}", minutes=minutes, pay=self.pay,
+            practice=practice, checks=checks,
+        )  # fmt: skip
+        placed = {name: f"{{{name}}}" in self.consent for name in ("practice", "checks")}
+        added = [text for name, text in (("practice", practice), ("checks", checks)) if not placed[name]]
+        shown = " ".join([shown, *filter(None, added)])
         return shown if not self.pay or "{pay}" in self.consent else f"{shown}\n\nPay: {self.pay}"
+
+    def end_text(self, redirected: bool) -> str:
+        """The end text as shown: the default one tells the participant to close the window only
+        where no redirect takes them back to the platform."""
+        return REDIRECTED_END if redirected and self.end == DEFAULT_END else self.end
 
     @classmethod
     def load(cls, path: str | Path) -> StudyConfig:
@@ -176,7 +202,11 @@ class StudyConfig:
 
     def hash(self) -> str:
         """The protocol's fingerprint; the platform's logistics (`crowd`) may change mid-study."""
-        protocol = {k: v for k, v in dataclasses.asdict(self).items() if k != "crowd"}
+        protocol = {
+            k: v
+            for k, v in dataclasses.asdict(self).items()
+            if k != "crowd" and not (k in LATER and LATER[k] == v)
+        }
         protocol["variants"] = [variant.names for variant in self.variants]
         if self.crowd.attention_checks:  # these do change what participants go through
             protocol["attention_checks"] = self.crowd.attention_checks

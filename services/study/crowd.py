@@ -53,7 +53,7 @@ class Bonus:
 class Crowd:
     """How the study meets a crowd-sourcing platform. `participant`, `study`, `session`: the link's
     parameter names of its ids; `completion_url` and `screened_out_url`: where the page sends a
-    participant who finished or was screened out (`{code}` is replaced by their completion code;
+    participant who finished or was screened out (`{code}` is replaced by the completion code;
     empty: no redirect); `bonus`: the pay rule, if any; `attention_checks`: the sessions before
     whose first trial an attention check comes."""
 
@@ -62,6 +62,12 @@ class Crowd:
     session: str = "SESSION_ID"
     completion_url: str = ""
     screened_out_url: str = ""
+    # The platform's own completion code (Prolific's `cc`, fixed per study): shown at the end and put
+    # in for `{code}`; empty: each participant's own code (the journal keeps it either way).
+    completion_code: str = ""
+    # Whom a participant contacts when the study cannot go on for them (a refusal, a stop): shown
+    # on the page, e.g. "the researcher through Prolific's messages" or an address.
+    contact: str = ""
     bonus: Bonus | None = None
     attention_checks: tuple[int, ...] = ()
 
@@ -69,10 +75,18 @@ class Crowd:
         if any(not isinstance(s, int) or s < 1 for s in self.attention_checks):
             checks = list(self.attention_checks)
             raise ValueError(f"crowd.attention_checks {checks}: give session numbers, 1 and on")
+        for name, most in (("completion_code", 64), ("contact", 200)):
+            if len(getattr(self, name)) > most or not getattr(self, name).isprintable():
+                raise ValueError(f"crowd.{name}: at most {most} printable characters")
         for name in ("completion_url", "screened_out_url"):
             url = getattr(self, name)
             if url and (urlsplit(url).scheme not in ("https", "http") or not urlsplit(url).netloc):
                 raise ValueError(f"crowd.{name} {url!r}: give an http(s) address")
+
+    def code(self, own: str) -> str:
+        """The completion code a participant is shown and sent back with: the platform's, if the
+        study gives it, else their `own`."""
+        return self.completion_code or own
 
     def redirect(self, url: str, code: str) -> str:
         """The address to send the participant to, with their completion code filled in."""

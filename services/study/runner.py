@@ -54,7 +54,7 @@ from websockets.asyncio.server import ServerConnection
 from websockets.protocol import State
 
 from services.adapter.seat import PERSON, SeatSpec
-from services.human.core import BadInput, Controls, PerAddress, RateLimit
+from services.human.core import BadInput, Controls, PerAddress, RateLimit, points
 from services.human.gateway import Bridge, Gateway, Outbox, Web, receive_first, refuse
 from services.recorder.service import recording_path
 from services.runtime.launch import MatchPlan
@@ -65,7 +65,7 @@ from services.study.dashboard import Dashboard, overview
 from services.study.judge import Judge, judge
 from services.study.remote import Remote
 from shared.bus import BusConfig, until_stopped
-from shared.game import FPS, ROLES, other
+from shared.game import FPS, ROLES, GameConfig, other
 from shared.secret import same_secret, signature
 
 log = logging.getLogger("tsf.study")
@@ -84,6 +84,10 @@ NO_WORKER = "This link's ids are not ones this study can take (letters, digits a
 DECLINED = "You declined to take part. Nothing about you was recorded. You may close this window now."
 SETTING_UP = "Your next game is being set up."
 UNSIGNED = "This link is not signed for its worker id. Please open the link exactly as the study gave it."
+STOPPED = (
+    "The study has stopped for now. Everything you did so far is kept: open your study link again "
+    "later to go on where you left off (a game cut short is played again)."
+)
 
 
 @dataclass(frozen=True)
@@ -485,6 +489,14 @@ class Front:
         self.arrivals = RateLimit(serving.arrivals, ARRIVAL_BURST)
         self.per_address = PerAddress(serving.arrivals_per_address, ADDRESS_BURST)
 
+    async def stopping(self) -> None:
+        """The server stops: tell everyone playing that their progress is kept, and close."""
+        contact = self.study.config.crowd.contact
+        text = STOPPED + (f" If it stays stopped, please contact {contact}." if contact else "")
+        for socket, _ in list(self.playing.values()):
+            socket.send({"type": "stopped", "text": text})
+        await asyncio.gather(*(socket.close() for socket, _ in list(self.playing.values())))
+
     async def handle(self, ws: ServerConnection, z: zenoh.Session | None) -> None:
         hello = await receive_first(ws, ("hello",))
         if hello is None:
@@ -577,6 +589,7 @@ class Visit:
             "session": trial.session, "sessions": len(config.variants),
             "trial": trial.trial, "trials": config.trials, "again": again, "practice": trial.practice,
             "instructions": config.instructions.get(trial.role, ""),
+            "points": points(GameConfig()) if config.show_points else None,
         }  # fmt: skip
 
     async def attend(self, trial: Trial) -> bool:
@@ -627,9 +640,11 @@ class Visit:
                 await socket.close()
                 return
             last, failures = sidecar["kills"], 0
-        config = study.config
-        redirect = config.crowd.redirect(config.crowd.completion_url, participant.code)
-        socket.send({"type": "done", "text": config.end, "code": participant.code, "redirect": redirect})
+        crowd = study.config.crowd
+        code = crowd.code(participant.code)
+        redirect = crowd.redirect(crowd.completion_url, code)
+        text = study.config.end_text(bool(redirect))
+        socket.send({"type": "done", "text": text, "code": code, "redirect": redirect})
         log.info("participant %s is done", participant.id)
         await socket.close()
 
@@ -657,7 +672,8 @@ def run_study(
         pool.__enter__()
         judging = Judge()
         runner = TrialRunner(study, serving, matches, pool, judging, remote)
-        gateway = Gateway(None, Front(study, serving, runner).handle, web)
+        front = Front(study, serving, runner)
+        gateway = Gateway(None, front.handle, web)
         # A running match holds a thread (run_trial) for its length, its start-up another: asyncio's
         # default pool (cores + 4 threads) would cap the matches at a handful, whatever hosts add.
         gateway.loop.set_default_executor(ThreadPoolExecutor(THREADS, thread_name_prefix="study"))
@@ -671,6 +687,8 @@ def run_study(
         with gateway, board or contextlib.nullcontext():
             on_ready(gateway)
             until_stopped(stop)
+            with contextlib.suppress(TimeoutError):  # the pages say so before their matches end
+                asyncio.run_coroutine_threadsafe(front.stopping(), gateway.loop).result(5.0)
             matches.stop_all()
             with contextlib.suppress(TimeoutError):  # a match's thread that hangs: leave it to exit
                 asyncio.run_coroutine_threadsafe(matches.drained(), gateway.loop).result(DRAIN)

@@ -25,6 +25,7 @@ class StandInReport:
     role: str = ""
     agents: list[str] = field(default_factory=list)  # the agent label of each trial started
     kills: list[int] = field(default_factory=list)  # each finished trial's kills
+    cut: list[int] = field(default_factory=list)  # frames left in each trial stopped before its end
     states: int = 0
     consent: str = ""  # the consent text shown
     end: str = ""  # the end screen's text
@@ -34,6 +35,7 @@ class StandInReport:
     screened: bool = False  # screened out (failed attention checks)
     done: bool = False
     refused: str = ""
+    stopped: str = ""  # what the page says when the server stops (progress kept)
     queued: int = 0  # the furthest place in the queue it was shown
     first_frames: list[float] = field(default_factory=list)  # seconds from each Ready to its first frame
     waits: list[float] = field(default_factory=list)  # seconds each trial waited in the queue (if it did)
@@ -127,6 +129,8 @@ async def stand_in(
                 report.set_ups += 1
             elif kind == "end":
                 report.kills.append(message["kills"])
+                left = message["frames"] - message["frame"]
+                report.cut += [left] if left > 0 else []
                 since = time.monotonic()
             elif kind == "done":
                 report.done, report.end, report.code = True, message["text"], message.get("code", "")
@@ -134,6 +138,9 @@ async def stand_in(
                 return report
             elif kind == "screened":
                 report.screened, report.end, report.redirect = True, message["text"], message["redirect"]
+                return report
+            elif kind == "stopped":
+                report.stopped = message["text"]
                 return report
             elif kind in ("refused", "problem"):
                 report.refused = message.get("reason") or message.get("text", "")

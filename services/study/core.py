@@ -263,6 +263,7 @@ class Participant:
     code: str = ""  # the completion code shown at the end (for the platform's payment)
     link: dict[str, str] = field(default_factory=dict)  # the platform's study and session ids, if given
     checks: list[bool] = field(default_factory=list)  # each attention check answered: passed?
+    refused: list[str] = field(default_factory=list)  # each time they came back and were refused: why
 
     @property
     def screened(self) -> bool:
@@ -351,6 +352,8 @@ class Study:
                 self._add(Participant(**record["participant"]))
             elif "check" in record:
                 self.participants[record["id"]].checks.append(record["check"])
+            elif "refused" in record:
+                self.participants[record["id"]].refused.append(record["refused"])
             else:
                 self._attempt(record["id"], record["attempt"])
         self.journal = Journal(self.path)
@@ -396,6 +399,15 @@ class Study:
         """Write down an attention check's outcome."""
         participant.checks.append(passed)
         self.journal.append({"id": participant.id, "check": passed})
+
+    def by_worker(self, worker: str) -> Participant:
+        """The participant of a crowd-sourcing worker id that has taken part (`taken`)."""
+        return self.participants[self.workers[worker.casefold()]]
+
+    def refused(self, participant: Participant, why: str) -> None:
+        """Write down that a returning participant was refused, and why (a short code)."""
+        participant.refused.append(why)
+        self.journal.append({"id": participant.id, "refused": why})
 
     def resume(self, participant: str, key: str) -> Participant | None:
         """The participant with this id and key, or None."""

@@ -24,6 +24,7 @@ from services.recorder.recording import load
 from services.recorder.service import recording_path
 
 BONUSES = "bonuses.csv"  # in the study's directory
+RESUMES = ("session", "never")  # Crowd.resume's values
 FAILS = 2  # failed attention checks that screen a participant out (Prolific's minimum)
 WORDS = ("RED", "GREEN", "BLUE", "PURPLE", "ORANGE", "YELLOW")
 
@@ -68,6 +69,10 @@ class Crowd:
     # Whom a participant contacts when the study cannot go on for them (a refusal, a stop): shown
     # on the page, e.g. "the researcher through Prolific's messages" or an address.
     contact: str = ""
+    # Who may come back through the platform's link (a worker id that has begun): "session", one
+    # whose link carries the platform's session id they began with; "never", none (only the study's
+    # own resume link, participant id and key). With a link secret, any link signed for the id.
+    resume: str = "session"
     bonus: Bonus | None = None
     attention_checks: tuple[int, ...] = ()
 
@@ -78,6 +83,8 @@ class Crowd:
         for name, most in (("completion_code", 64), ("contact", 200)):
             if len(getattr(self, name)) > most or not getattr(self, name).isprintable():
                 raise ValueError(f"crowd.{name}: at most {most} printable characters")
+        if self.resume not in RESUMES:
+            raise ValueError(f"crowd.resume {self.resume!r}: one of {', '.join(RESUMES)}")
         for name in ("completion_url", "screened_out_url"):
             url = getattr(self, name)
             if url and (urlsplit(url).scheme not in ("https", "http") or not urlsplit(url).netloc):

@@ -61,7 +61,7 @@ from services.runtime.launch import MatchPlan
 from services.runtime.pool import Pool, pool_name
 from services.study.core import AROUND, SET_UP, Admission, Participant, Study, StudyConfig, Trial, worker_id
 from services.study.crowd import FAILS, attention_check, write_bonuses
-from services.study.dashboard import Dashboard, overview
+from services.study.dashboard import Dashboard, about, overview
 from services.study.judge import Judge, judge
 from services.study.remote import Remote
 from shared.bus import BusConfig, until_stopped
@@ -80,6 +80,12 @@ ADDRESS_BURST = 5  # ... to one address
 SCREENED = "Thank you. This study cannot go on: two attention checks were not passed."
 BUSY = "Too many people are starting right now. Please try again in a minute."
 TAKEN = "This worker id has already taken part in this study."
+NOT_YOURS = (
+    "This worker id has begun this study, but this link does not show that it is yours: open the "
+    "study from the platform's own link (the one you began with) to go on where you left off."
+)
+UNKNOWN = "unknown participant or resume key"
+CONTACT = "the researchers, through the platform you came from"  # without [crowd] contact
 NO_WORKER = "This link's ids are not ones this study can take (letters, digits and _ . : @ + - only)."
 DECLINED = "You declined to take part. Nothing about you was recorded. You may close this window now."
 SETTING_UP = "Your next game is being set up."
@@ -529,7 +535,7 @@ class Front:
         if "participant" in hello:
             participant = study.resume(hello["participant"], hello.get("key", ""))
             if participant is None:
-                await refuse(socket.ws, "unknown participant or resume key")
+                await self.refuse(socket, study.participants.get(hello["participant"]), UNKNOWN, "resume key")
             return participant
         ids = [worker_id(v) for v in config.crowd.ids(hello.get("link", {}))]
         worker = ids[0] or worker_id(hello.get("worker"))
@@ -542,9 +548,8 @@ class Front:
             await refuse(socket.ws, UNSIGNED)
             return None
         link = {k: v for k, v in zip(("study", "session"), ids[1:], strict=True) if v}
-        if study.taken(worker):
-            await refuse(socket.ws, TAKEN)
-            return None
+        if study.taken(worker):  # back through the platform's link: another tab, browser or device
+            return await self.returning(socket, study.by_worker(worker), link)
         socket.send({"type": "consent", "text": config.consent_text()})
         answer = await socket.wait_for(("consent", "decline"))
         if answer == "decline":  # no id, nothing written
@@ -553,8 +558,7 @@ class Front:
         if answer != "consent":
             return None
         if study.taken(worker):  # a second window of the same worker consented first
-            await refuse(socket.ws, TAKEN)
-            return None
+            return await self.returning(socket, study.by_worker(worker), link)
         if socket.closed:  # consented and left: no id, no match
             return None
         if not (self.per_address.allow(socket.ws.remote_address[0]) and self.arrivals.allow()):
@@ -564,6 +568,45 @@ class Front:
         log.info("participant %s arrives and plays the %s", participant.id, participant.role)
         socket.send({"type": "participant", "participant": participant.id, "key": participant.key})
         return participant
+
+    def proven(self, participant: Participant, link: dict[str, str]) -> bool:
+        """Whether a returning worker id's link shows that it is the participant's own: signed for
+        the id (with a link secret, checked before this), or carrying the platform's session id
+        they began with ([crowd] resume = "session"); a worker id alone never does."""
+        if self.serving.link_secret:
+            return True
+        began = participant.link.get("session", "")
+        return self.study.config.crowd.resume == "session" and bool(began) and link.get("session") == began
+
+    async def returning(
+        self, socket: Socket, participant: Participant, link: dict[str, str]
+    ) -> Participant | None:
+        """A worker id that has taken part comes back through a link (a crashed tab, another
+        browser, a phone): resumed where they left off if the link is proven theirs (a finished
+        or screened-out one is shown their end again), else refused, journalled and logged."""
+        if self.proven(participant, link):
+            log.info("participant %s resumes through the platform's link", participant.id)
+            socket.send({"type": "participant", "participant": participant.id, "key": participant.key})
+            return participant
+        finished = self.study.next_trial(participant) is None or participant.screened
+        await self.refuse(
+            socket, participant, TAKEN if finished else NOT_YOURS, "taken" if finished else "unproven"
+        )
+        return None
+
+    async def refuse(self, socket: Socket, participant: Participant | None, text: str, why: str) -> None:
+        """Refuse a returning participant with whom to contact; journalled (the dashboard shows it)
+        and logged."""
+        contact = self.study.config.crowd.contact or CONTACT
+        if participant is not None:
+            self.study.refused(participant, why)
+        log.warning(
+            "refused %s from %s: %s",
+            participant.id if participant else "a resume",
+            socket.ws.remote_address[0],
+            why,
+        )
+        await refuse(socket.ws, f"{text.rstrip('.')}. If this is wrong, please contact {contact}.")
 
 
 class Visit:
@@ -681,8 +724,8 @@ def run_study(
             remote.on_change = lambda: gateway.loop.call_soon_threadsafe(matches.notify)
         board = serving.dashboard and Dashboard(
             serving.dashboard_token, serving.dashboard, gateway.loop,
-            lambda: overview(study, matches.admission), matches.endpoints.get, serving.low_latency,
-            remote and remote.z,
+            lambda: overview(study, matches.admission, front.playing), matches.endpoints.get,
+            serving.low_latency, remote and remote.z, lambda match: about(study, match),
         )  # fmt: skip
         with gateway, board or contextlib.nullcontext():
             on_ready(gateway)

@@ -63,6 +63,7 @@ const held = { left: false, right: false, thrust: false, fire: false };
 const tsf = (window.tsf = {
   phase: "connecting", role: null, frame: null, geometry: null, drawn: 0, events: [], said: [], onDraw: null,
   points: null, study: false, // how points count (null: not shown); whether this is the study's page
+  watching: null, // a dashboard spectator's match: {variant, person}
 });
 let socket = null;
 let onGo = null;
@@ -94,12 +95,16 @@ function ready() {
 }
 
 const handlers = {
+  watching(m) {  // the dashboard's spectator: which variant plays, and which seat is the person's
+    tsf.watching = m;
+  },
   welcome(m) {
     tsf.role = m.role;
     tsf.geometry = m;
     if (m.role === null) {  // a spectator: frames are drawn as they come
       tsf.phase = "waiting";
-      show("Watching", `Match ${m.match}: waiting for its frames\u2026`);
+      const who = tsf.watching ? `\n\nVariant ${tsf.watching.variant}; the person plays the ${tsf.watching.person}.` : "";
+      show("Watching", `Match ${m.match}: waiting for its frames\u2026${who}`);
       return;
     }
     tsf.phase = "instructions";
@@ -541,7 +546,8 @@ function ship(g, [cx, cy], heading, role, thrusting, frame) {
   ctx.arc(r * 0.25, 0, r * 0.22, 0, 2 * Math.PI);
   ctx.fill();
   ctx.restore();
-  label(role.toUpperCase() + (role === tsf.role ? " (you)" : ""), cx, cy - r - 12, body, "bold 12px sans-serif");
+  const who = role === tsf.role ? " (you)" : tsf.watching && role === tsf.watching.person ? " (person)" : "";
+  label(role.toUpperCase() + who, cx, cy - r - 12, body, "bold 12px sans-serif");
 }
 
 function ring([cx, cy], radius, alpha, colour) {
@@ -617,7 +623,9 @@ function hud(g, s) {
   ctx.textAlign = "left";
   ctx.fillText(`Fortresses destroyed ${s.kills}` + (tsf.points || !tsf.study ? `    Points ${s.points}` : ""), 12, 27);
   ctx.textAlign = "right";
-  ctx.fillText(`${tsf.role ? `You: ${tsf.role}    ` : ""}Time left ${time}`, canvas.width - 12, 27);
+  const seat = tsf.role ? `You: ${tsf.role}    ` :
+    tsf.watching ? `Variant ${tsf.watching.variant}, person: ${tsf.watching.person}    ` : "";
+  ctx.fillText(`${seat}Time left ${time}`, canvas.width - 12, 27);
 }
 
 connect();

@@ -15,12 +15,10 @@ from collections.abc import Sequence
 import typer
 
 from shared import provenance
-from shared.errors import Failure, UsageError
+from shared.errors import Failure, UsageError, missing_extra
 from shared.processes import adopt
 
 DEBUG_HINT = "(--debug or TSF_DEBUG=1 shows the traceback)"
-
-
 _interrupted: list[str] = []  # the signal that interrupted the command, if one did
 
 
@@ -37,6 +35,10 @@ def start() -> None:
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         signal.signal(sig, interrupt)
     adopt()
+    # Plug-ins (`my_lab.partners:alice`) are found in the working directory, as `python -m` finds
+    # them; last on the path, so a folder there never hides an installed package.
+    if os.getcwd() not in sys.path:
+        sys.path.append(os.getcwd())
 
 
 def run(app: typer.Typer, args: Sequence[str] | None = None) -> int:
@@ -66,6 +68,9 @@ def run(app: typer.Typer, args: Sequence[str] | None = None) -> int:
             raise
         if _interrupted:  # what failed was cut short by the signal
             return _stopped(where)
+        if missing_extra(error):
+            _say(f"{where}: {missing_extra(error)}")
+            return 1
         plain = isinstance(error, Failure | OSError)
         _say(f"{where}: {error}" if plain else f"{where}: {type(error).__name__}: {error} {DEBUG_HINT}")
         return 1

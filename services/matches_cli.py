@@ -24,10 +24,12 @@ from services.options import (
     adapter_options,
     bus_options,
     console,
+    free_port,
     game_frames,
     keys_help,
     number,
     output,
+    refuse_beside,
 )
 from shared.bus import BusConfig, stop_on_signals
 from shared.errors import Failure, UsageError
@@ -59,6 +61,7 @@ def host_secret_of(path: Path | None) -> bytes:
 @commands.command("match")
 @adapter_options("role", "seed")
 def match_command(
+    context: typer.Context,
     seed: Seed = 0,
     duration: Duration = None,
     frames: Frames = None,
@@ -89,6 +92,10 @@ def match_command(
 
     if adaptive and adaptive not in ROLES:
         raise UsageError("--adaptive", adaptive, "not a seat", ROLES)
+    if adaptive:
+        refuse_beside(
+            context, "--adaptive", adaptive, "the adaptive agent plays that seat", {adaptive: f"--{adaptive}"}
+        )
     config = adapter(role=adaptive or ROLES[1], seed=seed)  # its options are checked with or without
     seats = {"bait": SeatSpec.parse(bait, "--bait"), "shooter": SeatSpec.parse(shooter, "--shooter")}
     if adaptive:
@@ -177,6 +184,7 @@ def play_command(
         for seat, url in urls.items():
             console.print(f"[bold]{seat}[/]: open {url}")
 
+    free_port(host, port)
     summary, path = play_with_people(plan, host, port, links, stop=stop_on_signals())
     console.print(
         f"[bold]{plan.match}[/]: {summary.kills} kills in {summary.frame} frames "
@@ -265,16 +273,31 @@ def study(
         "(16-64 characters, e.g. from `openssl rand -hex 24`), on --dashboard-port.",
     ),
     dashboard_port: int = number(8001, PORTS, "Port of the experimenter's dashboard (--dashboard-token)."),
+    check: bool = typer.Option(
+        False,
+        "--check",
+        help="Check the study's config as serving it would (every setting, every variant's agent in "
+        "every seat), say so and exit: a lab's pre-flight. Nothing is started or written.",
+    ),
 ) -> None:
     """Serve a study: participants open the link, consent, get a role and play every agent variant.
-    With --listen or --connect, match hosts on other machines add capacity beyond --max-matches."""
-    from services.adapter import core
+    With --listen or --connect, match hosts on other machines add capacity beyond --max-matches.
+    Everything is checked before anything starts: a mistake in the config is one line (exit 2)."""
     from services.human.gateway import Web
-    from services.study.core import StudyConfig
     from services.study.crowd import BONUSES
     from services.study.dashboard import read_token
+    from services.study.preflight import load_checked
     from services.study.runner import Serving, run_study
     from shared.secret import read_secret
+
+    if check:
+        protocol = load_checked(config)
+        console.print(
+            f"{config}: study {protocol.name}, {len(protocol.variants)} variants x {protocol.trials} "
+            f"trials of {protocol.trial_seconds:g} s: every setting and every variant's agent in each "
+            "seat it plays checked; ready to serve"
+        )
+        return
 
     hosts, sealing = None, b""
     if listen or connect:
@@ -294,12 +317,9 @@ def study(
             raise UsageError("--dashboard-token", str(dashboard_token), str(error)) from None
         if dashboard_port == port:
             raise UsageError("--dashboard-port", port, "the participants' port: give another")
+        free_port(host, dashboard_port, "--dashboard-port")
         board = Web(host, dashboard_port, cert, key, trusted=trusted)
-    protocol = StudyConfig.load(config)
-    for variant in protocol.variants:  # adaptive agents' thresholds: refused now, not at a trial
-        for role in protocol.roles:
-            if (adapter := variant.adaptive(other(role), protocol.seed)) is not None:
-                core.threshold(adapter)
+    protocol = load_checked(config)
     directory = out / protocol.name
 
     def show(gateway) -> None:  # noqa: ANN001 - a Gateway
@@ -314,6 +334,7 @@ def study(
 
     if (cert is None) != (key is None):
         raise UsageError("--cert/--key", str(cert or key), "give both, or neither")
+    free_port(host, port)  # before the pool starts and anything is written
     web = Web(host, port, cert, key, tuple(origin or ()), per_address, trusted)
     serving = Serving(
         max_matches, trial_timeout, test_token=test_token, hosts=hosts, link_secret=signed,

@@ -64,6 +64,42 @@ PORTS = Range(0, 65535)
 PRIORITY = Range(0, 39)  # nice steps a process may raise itself by (from 19 to -20)
 
 
+def given(context: typer.Context, name: str) -> bool:
+    """Whether the command's option `name` (its parameter's name) was given, on the command line or
+    from the environment, rather than left at its default: an option that another makes do nothing
+    is refused only when it was asked for."""
+    source = context.get_parameter_source(name)
+    return source is not None and source.name in ("COMMANDLINE", "ENVIRONMENT")
+
+
+def refuse_beside(
+    context: typer.Context, option: str, value: object, why: str, others: dict[str, str]
+) -> None:
+    """Refuse (UsageError) the first of `others` (parameter name -> option) given beside `option`,
+    which makes it do nothing (`why`)."""
+    for name, other in others.items():
+        if given(context, name):
+            raise UsageError(other, f"with {option} {value}", f"does nothing there ({why}): leave one out")
+
+
+def free_port(host: str, port: int, option: str = "--port") -> None:
+    """Refuse (UsageError) a port something else already listens on, before anything starts (a
+    server that found out only when it bound the port had started its pool and written files)."""
+    import errno
+    import socket
+
+    if port == 0:  # any free port
+        return
+    try:
+        with socket.create_server((host, port)):
+            pass
+    except OSError as error:
+        problem = (
+            "in use by another program" if error.errno == errno.EADDRINUSE else error.strerror or str(error)
+        )
+        raise UsageError(option, port, f"{problem} on {host}: give another port") from None
+
+
 def number(default: object, limits: Range, help: str) -> Any:
     """A numeric option that refuses a value outside `limits` before the command starts: one line
     naming the option, the value and the range, exit status 2 (click's usage error). Whole numbers

@@ -28,6 +28,7 @@ from services.options import (
     adapter_options,
     bus_options,
     console,
+    free_port,
     game_frames,
     in_pool,
     keys_help,
@@ -174,6 +175,7 @@ def human(
             console.print(f"{role}: {link}")
         console.print(f"watch: {gateway.url}?watch=1")
 
+    free_port(host, port)
     run_human(bus, match, tokens, host, port, stop_on_signals(), show)
 
 

@@ -27,3 +27,28 @@ def _usage_error(line: str) -> UsageError:
 
 class Failure(RuntimeError):
     """What was asked could not be done, for a reason outside the command line. Exit status 1."""
+
+
+# The optional packages, by the extra of pyproject.toml that installs them: what needs a missing one
+# says which extra to install and how, never Python's bare ModuleNotFoundError.
+EXTRAS = {
+    "torch": "train",
+    "stable_baselines3": "train",
+    "sb3_contrib": "train",
+    "tqdm": "train",
+    "ray": "ray",
+}
+
+
+def install_line(extra: str) -> str:
+    """How to install an extra: in a checkout, with the lockfile's versions, or as a package."""
+    package = f"team-space-fortress[{extra}]"
+    return f"pip install -c requirements.lock -e '.[{extra}]' in the checkout (or '{package}')"
+
+
+def missing_extra(error: BaseException) -> str:
+    """The line for an optional package that is not installed, or "" for any other error."""
+    name = (getattr(error, "name", None) or "").partition(".")[0]
+    if not isinstance(error, ModuleNotFoundError) or name not in EXTRAS:
+        return ""
+    return f"needs the `{EXTRAS[name]}` extra ({name} is not installed): {install_line(EXTRAS[name])}"

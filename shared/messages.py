@@ -135,6 +135,9 @@ class Message:
     TYPE: ClassVar[str] = ""
     ID: ClassVar[str] = ""
     CHECKS: ClassVar[dict[str, Check]] = {}
+    # Fields the type gained after its first version: a record written before lacks them and reads
+    # with the field's default (docs/contract.md, "Versions"); every other field is required.
+    ADDED: ClassVar[frozenset[str]] = frozenset()
 
     frame: int
     sender: str
@@ -220,6 +223,7 @@ class Action(MatchMessage):
         "failures": _int(0, MAX_FRAME),
         "failure": _text(r"[ -~]{0,200}"),
     }
+    ADDED: ClassVar[frozenset[str]] = frozenset(("failures", "failure"))  # with policy failures
 
     role: str = "bait"
     action: int = 0
@@ -311,6 +315,7 @@ class Summary(MatchMessage):
         "drops": _named(_int(0, 2**63)),
         "failures": lambda v: isinstance(v, dict) and set(v) <= set(ROLES) and all(map(_COUNT, v.values())),
     }
+    ADDED: ClassVar[frozenset[str]] = frozenset(("failures",))  # with policy failures
 
     kills: int = 0
     kills_per_minute: float = 0.0
@@ -720,7 +725,9 @@ def _build(record: dict, expected: type[M]) -> M:
         raise MessageError("shape", f"unexpected fields {sorted(set(record) - names)}")
     for name, check in checks.items():
         if name not in record:
+            if name in expected.ADDED:
+                continue
             raise MessageError("shape", f"missing field {name!r}")
         if not check(record[name]):
             raise MessageError("range", f"bad {expected.TYPE}.{name}: {str(record[name])[:80]}")
-    return expected(**{name: record[name] for name in checks})
+    return expected(**{name: record[name] for name in checks if name in record})

@@ -8,8 +8,10 @@ import os
 import shlex
 import shutil
 import signal
+import socket
 import subprocess
 import sys
+import time
 from collections.abc import Iterator
 from importlib import resources
 from pathlib import Path
@@ -22,7 +24,7 @@ from services.agent.library_test import empty_library
 from services.cli import app
 from services.entry import run
 from services.recorder.recording_test import M, record_match
-from shared.errors import UsageError
+from shared.errors import UsageError, install_line
 
 BAITS = "B1, B2, B3, B4, B5, B6, B7, B8, B9, circle, idle, random"
 SHOOTERS = "S1, S2, S3, S4, S5, S6, S7, mirror, idle, random"
@@ -211,7 +213,7 @@ MISTAKES = [
         refused("--strategy", "oracle", STRATEGY_CHOICES),
     ),
     (
-        "match --adaptive bait --bait zz --shooter zz",
+        "match --adaptive bait --shooter zz",
         2,
         "tsf match: --shooter zz: no policy of the shooter seat",
     ),
@@ -293,6 +295,44 @@ MISTAKES = [
     ),
     ("study {garbage}", 2, "tsf study: CONFIG {garbage}: not a study: Expected '=' after a key"),
     ("study {tmp}/empty.toml", 2, "tsf study: CONFIG {tmp}/empty.toml: not a study: "),
+    # Options that another makes do nothing, or that together ask for nothing, are refused.
+    (
+        "eval --games {garbage} --partner B1",
+        2,
+        "tsf eval: --partner with --games {garbage}: does nothing there (its games are analysed as they "
+        "were played): leave one out",
+    ),
+    ("eval --games {garbage} --sessions", 2, "tsf eval: --sessions with --games {garbage}: does nothing"),
+    ("eval --games {garbage} --seeds 3", 2, "tsf eval: --seeds with --games {garbage}: does nothing"),
+    (
+        "eval --no-identify --no-performance",
+        2,
+        "tsf eval: --no-identify with --no-performance: measures nothing",
+    ),
+    (
+        "match --adaptive shooter --shooter S4",
+        2,
+        "tsf match: --shooter with --adaptive shooter: does nothing there (the adaptive agent plays that "
+        "seat): leave one out",
+    ),
+    ("match --adaptive bait --bait B5", 2, "tsf match: --bait with --adaptive bait: does nothing there"),
+    (
+        "study {tmp}/typo.toml",
+        2,
+        "tsf study: CONFIG {tmp}/typo.toml: not a study: trial_secnds: no such setting; valid: name, "
+        "variants, trials, trial_seconds,",
+    ),
+    (
+        "study {tmp}/text.toml",
+        2,
+        'tsf study: CONFIG {tmp}/text.toml: not a study: crowd.bonus.max = "2": a number expected',
+    ),
+    (
+        "study {tmp}/s55.toml --check",
+        2,
+        "tsf study: CONFIG {tmp}/s55.toml: not a study: variant B8-S5 (the shooter seat): shooter = S55: "
+        f"no policy of the shooter seat; valid: {SHOOTERS}",
+    ),
     ("study {tmp}/long.toml --max-matches 0", 2, "tsf study: --max-matches 0: no match could run"),
     ("study {tmp}/long.toml --listen nowhere", 2, "tsf study: --listen nowhere: not a zenoh endpoint"),
     (
@@ -509,6 +549,9 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
     (tmp / "empty.toml").write_text("")
     study = (resources.files("services.study") / "configs" / "static.toml").read_text()
     (tmp / "long.toml").write_text(study.replace("trial_seconds = 60", "trial_seconds = 1e9"))
+    (tmp / "typo.toml").write_text(study.replace("trial_seconds = 60", "trial_secnds = 60"))
+    (tmp / "text.toml").write_text(f'{study}\n[crowd.bonus]\nper_kill = 0.1\nmax = "2"\n')
+    (tmp / "s55.toml").write_text(study.replace('shooter = "S5"', 'shooter = "S55"'))
     names = {"done": done, "torn": torn, "tampered": tmp / "tampered.tsflog", "garbage": tmp / "garbage"}
     return {"tmp": str(tmp), **{name: str(path) for name, path in names.items()}}
 
@@ -573,7 +616,10 @@ def test_train_without_the_train_extra_says_which_extra(
     monkeypatch.delitem(sys.modules, "services.training.loop", raising=False)
     status, lines = tsf(["train", library.learned([])[0]], capsys)
     assert status == 1 and len(lines) == 1
-    assert lines[0].startswith("tsf train: import of torch halted") and "the `train` extra" in lines[0]
+    assert (
+        lines[0]
+        == f"tsf train: training needs the `train` extra (torch is not installed): {install_line('train')}"
+    )
 
 
 def test_debug_shows_the_traceback(files: dict[str, str], capsys: pytest.CaptureFixture) -> None:
@@ -619,4 +665,82 @@ def test_an_adaptive_match_or_study_without_thresholds_for_the_library_stops_bef
     for command in (["match", "--adaptive", "shooter", "--lockstep"], ["study", study]):
         status, lines = tsf([*command, "--out", str(out)], capsys)
         assert status == 2 and len(lines) == 1 and not out.exists()
-        assert lines[0].startswith(f"tsf {command[0]}: {said} {mine}")
+        assert lines[0].startswith(f"tsf {command[0]}: ") and f"{said} {mine}" in lines[0]
+
+
+def test_a_study_is_checked_without_serving(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """`tsf study --check` is a lab's pre-flight: it says the study is ready, and starts and writes
+    nothing; a config with a mistake is refused the same way, before anything is written."""
+    out = tmp_path / "studies"
+    for name in ("static", "adaptive"):
+        study = str(resources.files("services.study") / "configs" / f"{name}.toml")
+        status = run(app, ["study", study, "--check", "--out", str(out)])
+        said = capsys.readouterr().out.replace("\n", " ")
+        assert status == 0 and f"study {name}," in said and "ready to serve" in said and not out.exists()
+    typo = tmp_path / "typo.toml"
+    typo.write_text('name = "x"\n[[variants]]\nname = "a"\nbait = "B1"\nshooter = "S55"\n')
+    status, lines = tsf(["study", str(typo), "--out", str(out)], capsys)
+    assert status == 2 and len(lines) == 1 and "shooter = S55: no policy of the shooter seat" in lines[0]
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("command", ["study", "play", "human"])
+def test_a_busy_port_is_one_line_before_anything_starts(
+    command: str, tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    """A port another program listens on is refused at once, naming --port: no pool started, no
+    study directory or bonuses.csv written."""
+    study = str(resources.files("services.study") / "configs" / "static.toml")
+    args = {"study": ["study", study, "--out", str(tmp_path / "s")], "play": ["play", "--out", str(tmp_path)]}
+    with socket.create_server(("127.0.0.1", 0)) as busy:
+        port = busy.getsockname()[1]
+        line = [*args.get(command, ["human", "--match", "m"]), "--port", str(port)]
+        status, lines = tsf(line, capsys)
+    assert status == 2 and lines == [
+        f"tsf {command}: --port {port}: in use by another program on 127.0.0.1: give another port"
+    ]
+    assert not (tmp_path / "s").exists() and list(tmp_path.iterdir()) == []
+
+
+def test_a_plug_in_in_the_working_directory_loads(tmp_path: Path) -> None:
+    """`my_lab/partners.py` in the working directory is found as docs/adapter.md shows it, by the
+    installed `tsf` as by `python -m`."""
+    tsf_script = Path(sys.executable).with_name("tsf")
+    if not tsf_script.exists():
+        pytest.skip("no installed tsf script beside this Python")
+    (tmp_path / "my_lab").mkdir()
+    (tmp_path / "my_lab" / "partners.py").write_text(
+        "class Alice:\n    key, role, view = 'alice', 'bait', 'world'\n\n"
+        "    def reset(self, seed=None): ...\n\n    def act(self, obs):\n        return 9\n"
+    )
+    done = subprocess.run(
+        [str(tsf_script), "game", "--bait", "my_lab.partners:Alice", "--frames", "30"],
+        cwd=tmp_path, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "game seed=0: 0 kills in 30 frames" in done.stdout
+
+
+def test_an_unreachable_ray_address_is_one_line_within_seconds(tmp_path: Path) -> None:
+    """Ray's client would retry for minutes: the address has REACH seconds to answer."""
+    pytest.importorskip("ray", reason="the `ray` extra is not installed")
+    from services.jobs.ray_engine import REACH
+
+    command = [
+        sys.executable,
+        "-m",
+        "services.cli",
+        "sweep",
+        "--ray",
+        "127.0.0.1:1",
+        "--out",
+        str(tmp_path / "t.json"),
+    ]
+    started = time.monotonic()
+    done = subprocess.run(command, capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    took = time.monotonic() - started
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 1 and lines[-1].startswith(
+        "tsf sweep: --ray 127.0.0.1:1: no Ray cluster reached"
+    )
+    assert took < REACH + 30  # the wait itself is REACH; the rest, importing Ray on a loaded machine

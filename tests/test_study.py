@@ -39,7 +39,7 @@ def test_stand_ins_run_the_study_with_a_drop_out_who_resumes(tmp_path, wait_unti
     leaver = asyncio.run(stand_in(url, leave_after=10, test=TEST))
     assert not leaver.done and leaver.agents == ["Agent 1"] and leaver.participant == "P001"
     refused = asyncio.run(stand_in(url, resume=(leaver.participant, "not-the-key"), test=TEST))
-    assert refused.refused == "unknown participant or resume key"
+    assert refused.refused.startswith("unknown participant or resume key. If this is wrong, please contact")
     back = asyncio.run(stand_in(url, resume=(leaver.participant, leaver.key), test=TEST))
     second = asyncio.run(stand_in(url, test=TEST))
     dropped = tmp_path / "recordings" / "e2e-P001-s1t1.study.json"

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
 from concurrent.futures import ThreadPoolExecutor
 
 import pytest
@@ -56,6 +57,9 @@ def test_the_dashboard_shows_the_study_live_and_a_spectator_watches_a_match(tmp_
         first = page.evaluate("dash.overview")
         (seen,) = first["participants"]
         assert seen["id"] == "P001" and seen["done"] == 0 and seen["trials"] == 2
+        assert seen["state"] == "playing" and first["counts"]["roles"][seen["role"]] == 1
+        (running,) = first["matches"]
+        assert (running["variant"], running["person"]) == ("s", seen["role"])
         assert first["hosts"] == [{"host": "local", "slots": Serving().max_matches, "used": 1}]
         assert "W-" not in json.dumps(first)  # no worker ids, only the study's own
 
@@ -64,10 +68,19 @@ def test_the_dashboard_shows_the_study_live_and_a_spectator_watches_a_match(tmp_
         spectator.goto(board.rstrip("/") + watch)
         wait_in_page(spectator, "tsf.drawn > 10", 30_000)  # frames arrive and are drawn
         assert spectator.evaluate("tsf.role") is None  # a spectator: no seat, nothing to send
+        assert spectator.evaluate("tsf.watching") == {"type": "watching", "match": running["match"],
+                                                      "variant": "s", "person": seen["role"]}  # fmt: skip
+        if os.environ.get("TSF_SHOTS"):
+            page.screenshot(path=f"{os.environ['TSF_SHOTS']}/dashboard.png", full_page=True)
+            spectator.screenshot(path=f"{os.environ['TSF_SHOTS']}/dashboard_watch.png")
         spectator.keyboard.down("Space")  # a spectator's keys go nowhere (checked in the recording)
         wait_in_page(page, "dash.overview.participants[0].done >= 1", 60_000)  # live: counts change
         wait_in_page(page, "dash.overview.participants[0].done === 2", 60_000)
         wait_in_page(page, "dash.overview.matches.length === 0", 30_000)
+        wait_in_page(page, "dash.overview.participants[0].state === 'finished'", 30_000)
+        assert page.evaluate("dash.overview.counts.variants") == [
+            {"variant": "s", "bait": 2 * (seen["role"] == "bait"), "shooter": 2 * (seen["role"] == "shooter")}
+        ]
         report = participant.result(timeout=60)
         assert report.done
         spectator.close()

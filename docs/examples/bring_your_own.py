@@ -58,9 +58,14 @@ def tsf(*args: str, library: Path | None, check: bool = True) -> subprocess.Comp
 def train(path: Path, steps: int) -> None:
     """Step 1: a bait of your own. Any SB3 feed-forward actor-critic trained on tsf/Role-v0 will do."""
     import gymnasium
-    from stable_baselines3 import PPO
 
     import services  # noqa: F401 - registers tsf/Role-v0
+    from shared.errors import missing_extra
+
+    try:
+        from stable_baselines3 import PPO
+    except ModuleNotFoundError as error:  # one line that says what to install, not a traceback
+        raise SystemExit(f"step 1 (train) {missing_extra(error) or error}") from None
 
     print(f"\n# train: PPO bait against S5, {steps} steps -> {path}", flush=True)
     env = gymnasium.make("tsf/Role-v0", role="bait", partner="S5")

@@ -23,6 +23,7 @@ from services.options import (
     number,
     output,
     progress_bars,
+    refuse_beside,
 )
 from services.population.adaptive import WINDOWS, AdapterConfig
 from shared.bus import BusConfig, stop_on_signals
@@ -66,9 +67,17 @@ def diversity(
             (out / f"cem_{role}.csv").write_text("\n".join([header, *rows]) + "\n")
 
 
+# The options of `tsf eval` that choose or play games: nothing with --games, whose games were played.
+PLAYING = (
+    "seeds", "window", "strategy", "strategy_window", "partner", "partners_from", "identify_seeds",
+    "sessions", "workers", "job_games", "sweep_id", "ray",
+)  # fmt: skip
+
+
 @commands.command("eval")
 @bus_options
 def eval_command(
+    context: typer.Context,
     role: Role = typer.Option("shooter", help="The adaptive agent's seat; the partners play the other."),
     seeds: int = number(5, GAMES, "Seeded one-minute games per partner and agent."),
     window: Annotated[
@@ -138,7 +147,11 @@ def eval_command(
 
     if role not in ROLES:
         raise UsageError("--role", role, "not a seat", ROLES)
+    if not (identify or performance):
+        raise UsageError("--no-identify", "with --no-performance", "measures nothing: leave one out")
     if games is not None:
+        played_only = {name: f"--{name.replace('_', '-')}" for name in PLAYING}
+        refuse_beside(context, "--games", games, "its games are analysed as they were played", played_only)
         from services.evaluation.evaluation import EvalReport
         from services.evaluation.results import read_games
         from services.evaluation.team import compare

@@ -30,7 +30,7 @@ from services.population.families import SPEC
 from services.sim.observation import VIEWS
 from services.sim.play import play, summarize
 from shared.bus import BusConfig, stop_on_signals
-from shared.errors import Failure, UsageError
+from shared.errors import Failure, UsageError, missing_extra
 from shared.game import ROLES, SEEDS, GameConfig, Range
 
 commands = typer.Typer()
@@ -114,7 +114,7 @@ def train(
     try:
         from services.training.loop import train_library
     except ModuleNotFoundError as error:
-        raise Failure(f"{error}: training needs the `train` extra, pip install -e '.[train]'") from None
+        raise Failure(f"training {missing_extra(error) or error}") from None
     started = time.monotonic()
     console.print(f"training {', '.join(todo)} into {out}, {jobs} at a time")
     options = {"steps": steps, "seed": seed, "run_dir": runs, "figures": figures}

@@ -36,7 +36,7 @@ from services.agent.proxy import PROXY
 from services.agent.scripted import scripted_keys
 from services.sim.batch_play import team_score
 from services.sim.observation import VIEWS
-from shared.errors import UsageError
+from shared.errors import UsageError, missing_extra
 from shared.game import N_ACTIONS, OBS_SIZE, ROLES, Policy
 from shared.messages import POLICY_NAME
 from shared.provenance import provenance
@@ -110,7 +110,7 @@ def network_arrays(path: Path, meta: dict, option: str = "MODEL") -> dict[str, n
         from stable_baselines3.common.policies import ActorCriticPolicy
         from stable_baselines3.common.save_util import load_from_zip_file
     except ModuleNotFoundError as error:
-        raise UsageError(option, path, f"reading a model needs the `train` extra ({error})") from None
+        raise UsageError(option, path, f"reading a model {missing_extra(error) or error}") from None
     if not path.is_file():
         raise UsageError(option, path, "no such file")
     try:

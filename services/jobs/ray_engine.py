@@ -21,7 +21,7 @@ from typing import Any
 
 from services.jobs import kinds
 from services.jobs.core import Hashes, JournalFile, Spec, check
-from shared.errors import Failure, UsageError
+from shared.errors import Failure, UsageError, install_line
 
 RETRIES = 3  # a job's re-runs after its node or worker process is lost (Ray's max_retries)
 
@@ -46,6 +46,36 @@ def _job(
         return [], kinds.failure_line(error), "job", here
 
 
+REACH = 6.0  # seconds a cluster's address has to answer in: Ray's own client retries for minutes
+
+
+def connect(ray: Any, address: str) -> None:
+    """`ray.init` at `address`, or a Failure within REACH seconds: Ray retries an address where no
+    cluster answers (nothing listens, a firewall drops it, another server answers) for minutes, so
+    it waits in a thread of its own, left behind (a daemon) if it does not return in time."""
+    done: list[BaseException | None] = []
+
+    def init() -> None:
+        try:
+            ray.init(
+                address=None if address == "local" else address,
+                logging_level=logging.WARNING, log_to_driver=False, configure_logging=False,
+            )  # fmt: skip
+            done.append(None)
+        except BaseException as error:  # noqa: BLE001 - handed to the caller's thread
+            done.append(error)
+
+    thread = threading.Thread(target=init, daemon=True, name="ray-init")
+    thread.start()
+    thread.join(None if address == "local" else REACH)  # a private cluster starts as long as it takes
+    if not done:
+        raise Failure(f"--ray {address}: no Ray cluster reached (no answer within {REACH:g} s)")
+    if isinstance(done[0], (ConnectionError, RuntimeError, ValueError)):
+        raise Failure(f"--ray {address}: no Ray cluster reached ({' '.join(str(done[0]).split())[:200]})")
+    if done[0] is not None:
+        raise done[0]
+
+
 class OnRay:
     """A run's engine on the Ray cluster at `address` (`auto`, `HOST:PORT`, `ray://HOST:10001`, or
     `local` for a private one on this machine) for as long as the `with` block lasts; `run` has
@@ -61,17 +91,9 @@ class OnRay:
         try:
             import ray
         except ModuleNotFoundError:
-            raise UsageError("--ray", self.address, "needs the `ray` extra: pip install '.[ray]'") from None
+            raise UsageError("--ray", self.address, f"needs the `ray` extra: {install_line('ray')}") from None
         self.ray, self.ours = ray, kinds.hashes()
-        try:
-            ray.init(
-                address=None if self.address == "local" else self.address,
-                logging_level=logging.WARNING, log_to_driver=False, configure_logging=False,
-            )  # fmt: skip
-        except (ConnectionError, RuntimeError, ValueError) as error:
-            raise Failure(
-                f"--ray {self.address}: no Ray cluster reached ({' '.join(str(error).split())[:200]})"
-            ) from None
+        connect(ray, self.address)
         self._stack = ExitStack()
         self._stack.callback(ray.shutdown)
         self.journal_file = self._stack.enter_context(JournalFile(self.journal, self.ours))

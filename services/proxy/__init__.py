@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from types import ModuleType
 
-from shared.errors import Failure
+from shared.errors import Failure, missing_extra
 
 
 def trainer() -> ModuleType:
@@ -13,7 +13,5 @@ def trainer() -> ModuleType:
     try:
         from services.proxy import train
     except ModuleNotFoundError as error:
-        raise Failure(
-            f"{error}: training a proxy needs the `train` extra, pip install -e '.[train]'"
-        ) from None
+        raise Failure(f"training a proxy {missing_extra(error) or error}") from None
     return train

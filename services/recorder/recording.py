@@ -37,6 +37,7 @@ class Recording:
     adapter: list[AdapterStatus] = field(default_factory=list)
     gaps: list[tuple[int, int]] = field(default_factory=list)
     undecodable: int = 0
+    why: str = ""  # the first undecodable record's reason (MessageError), to say what is wrong
     duplicates: list[int] = field(default_factory=list)  # frames whose state came again (first kept)
     starts: int = 0  # start records: more than one means two matches in one log
     summaries: int = 0
@@ -84,7 +85,7 @@ class Recording:
             *([f"{self.starts} start records (more than one match)"] if self.starts > 1 else []),
             *([f"{self.summaries} summaries (more than one match)"] if self.summaries > 1 else []),
             *([f"frames {_text(_ranges(self.duplicates))} recorded twice"] if self.duplicates else []),
-            *([f"{self.undecodable} undecodable records"] if self.undecodable else []),
+            *([f"{self.undecodable} undecodable records ({self.why})"] if self.undecodable else []),
         ]
 
 
@@ -113,8 +114,9 @@ def load(path: str | Path) -> Recording:
             continue
         try:
             message = decode_any(record.data)
-        except MessageError:
+        except MessageError as error:
             recording.undecodable += 1
+            recording.why = recording.why or f"first: {error}"
             continue
         if isinstance(message, State):
             if message.frame in seen:

@@ -7,12 +7,11 @@ import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import msgpack
 import pytest
 
 from services.agent.player import Player
 from services.recorder.export import TABLES, export, read
-from services.recorder.log import GapTracker, LogWriter, read_log
+from services.recorder.log import GapTracker, LogWriter
 from services.recorder.recording import Recording, load, replay
 from services.sim.engine import Game
 from services.sim.match import event_messages, start_message, state_message, summary_message
@@ -137,27 +136,6 @@ def test_applied_actions_are_the_answers(recorded: tuple[Recording, list[State]]
 
 def test_replay_reproduces(recorded: tuple[Recording, list[State]]) -> None:
     assert replay(recorded[0]) == []
-
-
-def as_version_1(data: bytes) -> bytes:
-    """A message as schema version 1 wrote it: `v` 1, and the id `match` first in the envelope."""
-    record = msgpack.unpackb(data, raw=False)
-    head = {"v": 1, "type": record.pop("type"), "match": record.pop("match")}
-    del record["v"]
-    return msgpack.packb({**head, **record}, use_bin_type=True)
-
-
-def test_version_1_recording_loads(tmp_path: Path) -> None:
-    """A recording made before schema version 2 loads and replays as the same match."""
-    states = record_match(tmp_path / "v2.tsflog")
-    records, damage = read_log(tmp_path / "v2.tsflog")
-    assert not damage
-    with LogWriter(tmp_path / "v1.tsflog") as log:
-        for record in records:
-            log.write(record.key, as_version_1(record.data), record.t)
-    old = load(tmp_path / "v1.tsflog")
-    assert old.clean and old.undecodable == 0 and old.states == states
-    assert len(old.actions) == 2 * FRAMES and replay(old) == []
 
 
 def test_replay_reports_tampered_frame(tmp_path: Path) -> None:

@@ -27,6 +27,7 @@ from pathlib import Path
 
 from services.population.adaptive import AdapterConfig
 from services.population.seat import ADAPTIVE_KIND, SeatSpec
+from services.study import settings
 from services.study.crowd import FAILS, Crowd
 from shared.errors import UsageError
 from shared.game import DURATION, FPS, ROLES, SEEDS, other
@@ -42,6 +43,17 @@ DEFAULT_CONSENT = (
 SET_UP = 2.0  # seconds a game takes to set up on a warm pool (p99 under 1 s measured), as the page says
 AROUND = 20.0  # seconds a game takes beyond its length (the offer read, Ready, its end): study and slot time
 DEFAULT_END = "Thank you for taking part. You may close this window now."
+REDIRECTED_END = "Thank you for taking part."  # the default end text where the page then redirects
+# What the consent text says of a practice game and of attention checks where the study has them and
+# the text does not place {practice} or {checks}: added at its end.
+PRACTICE_TEXT = "Before them you play a practice game of {seconds} seconds, which does not count."
+CHECKS_TEXT = (
+    "Before some sessions a short attention check asks you to click the button it names; "
+    "missing {fails} of them ends the study for you."
+)
+# Settings added after studies had begun: left out of the study's hash while at their default, so
+# that a journal begun before they existed is still this study's (as a message's ADDED fields).
+LATER = {"show_points": True}
 PRACTICE = ("practice", "circle", "mirror")  # the practice partner: the library's scripted bait and shooter
 
 
@@ -114,6 +126,9 @@ class StudyConfig:
     # partner (PRACTICE); it is no trial: not in the journal, its recording apart in practice/.
     practice_seconds: float = 0.0
     crowd: Crowd = field(default_factory=Crowd)  # a platform's ids, redirects, bonus (study/crowd.py)
+    # The page shows the team's points beside the fortresses destroyed, and how they are counted;
+    # false: only the fortresses destroyed (the study's score), points neither shown nor explained.
+    show_points: bool = True
 
     def __post_init__(self) -> None:
         if not NAME.fullmatch(self.name):
@@ -132,12 +147,14 @@ class StudyConfig:
             raise ValueError(f"seed {self.seed}: outside the range {SEEDS}")
         if not self.roles or not set(self.roles) <= set(ROLES):
             raise ValueError(f"roles must be among {ROLES}")
+        if not set(self.instructions) <= set(ROLES):
+            raise ValueError(f"instructions: a text per role, among {ROLES}; not {sorted(self.instructions)}")
         try:
             self.consent_text()
         except (KeyError, IndexError, ValueError) as error:
             raise ValueError(
                 f"consent: cannot fill in {error} (the text may name {{games}}, {{seconds}}, "
-                "{minutes} and {pay}; a brace itself is written {{ or }})"
+                "{minutes}, {pay}, {practice} and {checks}; a brace itself is written {{ or }})"
             ) from None
         if any(s > len(self.variants) for s in self.crowd.attention_checks):
             raise ValueError(f"crowd.attention_checks: sessions are 1 to {len(self.variants)}")
@@ -152,33 +169,45 @@ class StudyConfig:
         return round(self.trial_seconds * FPS)
 
     def consent_text(self) -> str:
-        """The consent text as shown: the study's numbers filled in, and its pay."""
+        """The consent text as shown: the study's numbers filled in, what comes besides the games (a
+        practice game, attention checks) and its pay; each the text does not place is added."""
         games = self.trials * len(self.variants)
-        minutes = math.ceil(games * (self.trial_seconds + AROUND) / 60)
+        minutes = math.ceil((games * (self.trial_seconds + AROUND) + self.practice_seconds) / 60)
         counted = f"{games} game{'s' if games != 1 else ''}"
+        practice = PRACTICE_TEXT.format(seconds=f"{self.practice_seconds:g}") if self.practice_seconds else ""
+        checks = CHECKS_TEXT.format(fails=FAILS) if self.crowd.attention_checks else ""
         shown = self.consent.format(
-            games=counted, seconds=f"{self.trial_seconds:g}", minutes=minutes, pay=self.pay
-        )
+            games=counted, seconds=f"{self.trial_seconds:g}", minutes=minutes, pay=self.pay,
+            practice=practice, checks=checks,
+        )  # fmt: skip
+        placed = {name: f"{{{name}}}" in self.consent for name in ("practice", "checks")}
+        added = [text for name, text in (("practice", practice), ("checks", checks)) if not placed[name]]
+        shown = " ".join([shown, *filter(None, added)])
         return shown if not self.pay or "{pay}" in self.consent else f"{shown}\n\nPay: {self.pay}"
+
+    def end_text(self, redirected: bool) -> str:
+        """The end text as shown: the default one tells the participant to close the window only
+        where no redirect takes them back to the platform."""
+        return REDIRECTED_END if redirected and self.end == DEFAULT_END else self.end
 
     @classmethod
     def load(cls, path: str | Path) -> StudyConfig:
         """Read a study's TOML file (services/study/configs/ has the original two experiments); a
         file that is not a study's is a UsageError that says why."""
         try:
-            data = tomllib.loads(Path(path).read_text())
-            variants = tuple(Variant.read(**v) for v in data.pop("variants", []))
-            if "roles" in data:
-                data["roles"] = tuple(data["roles"])
-            if "crowd" in data:
-                data["crowd"] = Crowd.from_toml(data["crowd"])
-            return cls(variants=variants, **data)
-        except (ValueError, TypeError) as error:  # TOML syntax, unknown or missing fields, bad values
+            return settings.build(cls, tomllib.loads(Path(path).read_text()))
+        except UnicodeDecodeError:
+            raise UsageError("CONFIG", path, "not a study: not text (UTF-8)") from None
+        except ValueError as error:  # TOML syntax, unknown or missing settings, bad kinds or values
             raise UsageError("CONFIG", path, f"not a study: {error}") from None
 
     def hash(self) -> str:
         """The protocol's fingerprint; the platform's logistics (`crowd`) may change mid-study."""
-        protocol = {k: v for k, v in dataclasses.asdict(self).items() if k != "crowd"}
+        protocol = {
+            k: v
+            for k, v in dataclasses.asdict(self).items()
+            if k != "crowd" and not (k in LATER and LATER[k] == v)
+        }
         protocol["variants"] = [variant.names for variant in self.variants]
         if self.crowd.attention_checks:  # these do change what participants go through
             protocol["attention_checks"] = self.crowd.attention_checks
@@ -235,6 +264,7 @@ class Participant:
     code: str = ""  # the completion code shown at the end (for the platform's payment)
     link: dict[str, str] = field(default_factory=dict)  # the platform's study and session ids, if given
     checks: list[bool] = field(default_factory=list)  # each attention check answered: passed?
+    refused: list[str] = field(default_factory=list)  # each time they came back and were refused: why
 
     @property
     def screened(self) -> bool:
@@ -323,6 +353,8 @@ class Study:
                 self._add(Participant(**record["participant"]))
             elif "check" in record:
                 self.participants[record["id"]].checks.append(record["check"])
+            elif "refused" in record:
+                self.participants[record["id"]].refused.append(record["refused"])
             else:
                 self._attempt(record["id"], record["attempt"])
         self.journal = Journal(self.path)
@@ -368,6 +400,15 @@ class Study:
         """Write down an attention check's outcome."""
         participant.checks.append(passed)
         self.journal.append({"id": participant.id, "check": passed})
+
+    def by_worker(self, worker: str) -> Participant:
+        """The participant of a crowd-sourcing worker id that has taken part (`taken`)."""
+        return self.participants[self.workers[worker.casefold()]]
+
+    def refused(self, participant: Participant, why: str) -> None:
+        """Write down that a returning participant was refused, and why (a short code)."""
+        participant.refused.append(why)
+        self.journal.append({"id": participant.id, "refused": why})
 
     def resume(self, participant: str, key: str) -> Participant | None:
         """The participant with this id and key, or None."""

@@ -22,8 +22,10 @@ from urllib.parse import quote, urlsplit
 
 from services.recorder.recording import load
 from services.recorder.service import recording_path
+from shared.page import Check
 
 BONUSES = "bonuses.csv"  # in the study's directory
+RESUMES = ("session", "never")  # Crowd.resume's values
 FAILS = 2  # failed attention checks that screen a participant out (Prolific's minimum)
 WORDS = ("RED", "GREEN", "BLUE", "PURPLE", "ORANGE", "YELLOW")
 
@@ -53,7 +55,7 @@ class Bonus:
 class Crowd:
     """How the study meets a crowd-sourcing platform. `participant`, `study`, `session`: the link's
     parameter names of its ids; `completion_url` and `screened_out_url`: where the page sends a
-    participant who finished or was screened out (`{code}` is replaced by their completion code;
+    participant who finished or was screened out (`{code}` is replaced by the completion code;
     empty: no redirect); `bonus`: the pay rule, if any; `attention_checks`: the sessions before
     whose first trial an attention check comes."""
 
@@ -62,6 +64,16 @@ class Crowd:
     session: str = "SESSION_ID"
     completion_url: str = ""
     screened_out_url: str = ""
+    # The platform's own completion code (Prolific's `cc`, fixed per study): shown at the end and put
+    # in for `{code}`; empty: each participant's own code (the journal keeps it either way).
+    completion_code: str = ""
+    # Whom a participant contacts when the study cannot go on for them (a refusal, a stop): shown
+    # on the page, e.g. "the researcher through Prolific's messages" or an address.
+    contact: str = ""
+    # Who may come back through the platform's link (a worker id that has begun): "session", one
+    # whose link carries the platform's session id they began with; "never", none (only the study's
+    # own resume link, participant id and key). With a link secret, any link signed for the id.
+    resume: str = "session"
     bonus: Bonus | None = None
     attention_checks: tuple[int, ...] = ()
 
@@ -69,16 +81,20 @@ class Crowd:
         if any(not isinstance(s, int) or s < 1 for s in self.attention_checks):
             checks = list(self.attention_checks)
             raise ValueError(f"crowd.attention_checks {checks}: give session numbers, 1 and on")
+        for name, most in (("completion_code", 64), ("contact", 200)):
+            if len(getattr(self, name)) > most or not getattr(self, name).isprintable():
+                raise ValueError(f"crowd.{name}: at most {most} printable characters")
+        if self.resume not in RESUMES:
+            raise ValueError(f"crowd.resume {self.resume!r}: one of {', '.join(RESUMES)}")
         for name in ("completion_url", "screened_out_url"):
             url = getattr(self, name)
             if url and (urlsplit(url).scheme not in ("https", "http") or not urlsplit(url).netloc):
                 raise ValueError(f"crowd.{name} {url!r}: give an http(s) address")
 
-    @classmethod
-    def from_toml(cls, table: dict) -> Crowd:
-        bonus = table.pop("bonus", None)
-        checks = tuple(table.pop("attention_checks", ()))
-        return cls(**table, bonus=Bonus(**bonus) if bonus is not None else None, attention_checks=checks)
+    def code(self, own: str) -> str:
+        """The completion code a participant is shown and sent back with: the platform's, if the
+        study gives it, else their `own`."""
+        return self.completion_code or own
 
     def redirect(self, url: str, code: str) -> str:
         """The address to send the participant to, with their completion code filled in."""
@@ -94,14 +110,14 @@ class Crowd:
         return link.get(self.participant, ""), link.get(self.study, ""), link.get(self.session, "")
 
 
-def attention_check(seed: str) -> tuple[dict, str]:
+def attention_check(seed: str) -> tuple[Check, str]:
     """An attention check (the page's `check` message: its text and buttons) and the answer that
     passes it; the word and the buttons' order are drawn from `seed`."""
     rng = random.Random(seed)
     options = rng.sample(WORDS, 4)
     word = rng.choice(options)
     text = f'Attention check: to show that you are reading, please click the button that says "{word}".'
-    return {"type": "check", "text": text, "options": options}, word
+    return Check(text=text, options=options), word
 
 
 def bonus_file(rows: list[tuple[str, float]]) -> str:

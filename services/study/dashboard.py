@@ -9,19 +9,19 @@ a seat: the dashboard only reads, and a spectator's bridge has no publisher and 
 token travels in the link's fragment (`#token=...`), which a browser never sends in a request.
 
 Messages (up, first and only): `dashboard` (token) or `watch` (token, match). Down: `study` (the
-overview below, once a second) or the spectator's `welcome`, frames and `end`, then a close
-once the match is over. The overview is read on the study server's own event loop (its state
-lives there), and is a pure function of the study and its admission (`overview`).
+overview below, once a second) or the spectator's `watching` (the match's variant and the
+person's seat), `welcome`, frames and `end`, then a close once the match is over. The overview
+is read on the study server's own event loop (its state lives there), and is a pure function of
+the study, its admission and who is connected (`overview`).
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import logging
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 
 import zenoh
 from websockets.asyncio.server import ServerConnection
@@ -29,11 +29,15 @@ from websockets.asyncio.server import ServerConnection
 from services.human.core import PerAddress, Quiet
 from services.human.gateway import Gateway, Web, client_address, receive_first, refuse, watch
 from services.runtime.launch import watcher_bus
-from services.study.core import Admission, Study
+from services.study.core import Admission, Participant, Study
+from shared.page import DashboardHello, Overview, Watching
 from shared.secret import same_secret
 
 log = logging.getLogger("tsf.study.dashboard")
-PAGES = {"/": "dashboard.html", "/dashboard.js": "dashboard.js", "/watch": "index.html", "/tsf.js": "tsf.js"}
+PAGES = {
+    "/": "dashboard.html", "/dashboard.js": "dashboard.js", "/watch": "index.html", "/tsf.js": "tsf.js",
+    "/contract.js": "contract.js",
+}  # fmt: skip
 EVERY = 1.0  # seconds between two overviews sent down
 WRONG = "not the dashboard's token"
 TOO_MANY = "too many attempts: wait a minute"
@@ -42,24 +46,60 @@ NOT_RUNNING = "no such match is running"
 TOKEN_LENGTH = range(16, 65)  # the token's accepted length (characters)
 
 
-def overview(study: Study, admission: Admission) -> dict:
+STATES = ("playing", "finished", "screened out", "dropped", "refused")  # a participant's, as shown
+
+
+def state(study: Study, participant: Participant, connected: bool) -> str:
+    """Where a participant stands: `playing` (their page is connected), `finished`, `screened out`,
+    `refused` (they came back and were refused, and are not playing), else `dropped` (they left
+    before the end, and may come back)."""
+    if participant.screened:
+        return "screened out"
+    if study.next_trial(participant) is None:
+        return "finished"
+    if connected:
+        return "playing"
+    return "refused" if participant.refused else "dropped"
+
+
+def about(study: Study, match: str) -> dict:
+    """A running match as the spectator's view names it: the variant that plays (the study's own
+    name, never shown to participants) and the person's seat; a practice game's variant is
+    `practice`."""
+    owner = study.participants.get(match.removeprefix(f"{study.config.name}-").split("-", 1)[0])
+    if owner is None:
+        return {"variant": "", "person": ""}
+    session = next((a["session"] for a in owner.attempts if a["match"] == match), None)
+    variant = "practice" if session is None else study.config.variants[owner.order[session - 1]].name
+    return {"variant": variant, "person": owner.role}
+
+
+def overview(study: Study, admission: Admission, connected: Collection[str] = ()) -> dict:
     """What the experimenter sees: each participant (the study's anonymous id, never a worker id)
-    with trials done, failed and replayed, the running attempt; the queue; the running matches
-    and where; this machine's and each match host's slots."""
+    with their state (STATES), trials done, failed and replayed, attention checks passed, times
+    refused, the running attempt; trials done per variant and role, and participants per role and
+    state; the queue; the running matches, their variant and the person's seat, and where; this
+    machine's and each match host's slots. `connected`: the participants whose page is open."""
     prefix = f"{study.config.name}-"
 
     def owner(match: str) -> str:  # match ids are <study>-<participant>-s<session>t<trial>[-a<attempt>]
         return match.removeprefix(prefix).split("-", 1)[0]
 
-    total = len(study.config.variants) * study.config.trials
+    config = study.config
+    total = len(config.variants) * config.trials
+    done = {(v.name, role): 0 for v in config.variants for role in config.roles}
     participants = []
     for p in study.participants.values():
         statuses = [a["status"] for a in p.attempts]
         running = [a["match"] for a in p.attempts if a["status"] in ("running", "dropped")]
+        for a in p.attempts:
+            if a["status"] == "done":
+                done[config.variants[p.order[a["session"] - 1]].name, p.role] += 1
         participants.append({
-            "id": p.id, "role": p.role, "trials": total, "done": statuses.count("done"),
-            "failed": statuses.count("failed"), "replayed": sum(a["attempt"] > 1 for a in p.attempts),
-            "match": running[-1] if running else None,
+            "id": p.id, "role": p.role, "state": state(study, p, p.id in connected), "trials": total,
+            "done": statuses.count("done"), "failed": statuses.count("failed"),
+            "replayed": sum(a["attempt"] > 1 for a in p.attempts), "checks": p.checks,
+            "refused": len(p.refused), "match": running[-1] if running else None,
         })  # fmt: skip
     used: dict[str, int] = {}
     for where in admission.running.values():
@@ -69,9 +109,17 @@ def overview(study: Study, admission: Admission) -> dict:
         "type": "study",
         "study": study.config.name,
         "participants": participants,
+        "counts": {
+            "variants": [
+                {"variant": v.name, **{role: done[v.name, role] for role in config.roles}}
+                for v in config.variants
+            ],
+            "roles": {role: sum(p["role"] == role for p in participants) for role in config.roles},
+            "states": {s: sum(p["state"] == s for p in participants) for s in STATES},
+        },
         "queue": [{"match": m, "participant": owner(m)} for m in admission.waiting],
         "matches": [
-            {"match": m, "participant": owner(m), "host": where or "local"}
+            {"match": m, "participant": owner(m), **about(study, m), "host": where or "local"}
             for m, where in admission.running.items()
         ],
         "hosts": [{"host": h or "local", "slots": n, "used": used.get(h, 0)} for h, n in slots.items()],
@@ -90,7 +138,8 @@ def read_token(text: str) -> str:
 class Dashboard:
     """The dashboard's web server, started beside the study's (`with`); `show()` the overview, read
     on `loop` (the study server's), `endpoint(match)` the running match's sim endpoint ("" for one
-    on a match host, then watched through `router`), None when not running."""
+    on a match host, then watched through `router`), None when not running; `describe(match)` its
+    variant and the person's seat (`about`), which the spectator's view shows."""
 
     def __init__(
         self,
@@ -101,8 +150,9 @@ class Dashboard:
         endpoint: Callable[[str], str | None],
         low_latency: bool = True,
         router: zenoh.Session | None = None,
+        describe: Callable[[str], dict] = lambda match: {"variant": "", "person": ""},
     ) -> None:
-        self.token, self.loop, self.show, self.endpoint = token, loop, show, endpoint
+        self.token, self.loop, self.show, self.endpoint, self.describe = token, loop, show, endpoint, describe
         self.low_latency, self.router = low_latency, router
         self.gateway = Gateway(None, self.handle, web, PAGES)
         self.attempts = PerAddress(ATTEMPTS, ATTEMPT_BURST)
@@ -134,7 +184,7 @@ class Dashboard:
         address = client_address(ws, self.gateway.web.trusted)
         refusal = (
             TOO_MANY if not self.attempts.allow(address)
-            else WRONG if not self.token or not same_secret(first.get("token"), self.token)
+            else WRONG if not self.token or not same_secret(first.token, self.token)
             else ""
         )  # fmt: skip
         if refusal:
@@ -142,13 +192,14 @@ class Dashboard:
                 log.warning("dashboard: refused a socket from %s: %s (said once a minute)", address, refusal)
             await refuse(ws, refusal)
             return
-        if first["type"] == "dashboard":
+        if isinstance(first, DashboardHello):
             while True:
-                await ws.send(json.dumps(await self.on_study(self.show)))
+                shown = {k: v for k, v in (await self.on_study(self.show)).items() if k != "type"}
+                await ws.send(Overview(**shown).encode())
                 with contextlib.suppress(TimeoutError):
                     await asyncio.wait_for(ws.wait_closed(), EVERY)
                     return
-        await self.spectate(ws, first.get("match", ""))
+        await self.spectate(ws, first.match or "")
 
     async def spectate(self, ws: ServerConnection, match: str) -> None:
         """The match's frames, drawn by the participants' page; closed once the match has ended."""
@@ -157,6 +208,8 @@ class Dashboard:
             await refuse(ws, NOT_RUNNING)
             return
         own = bool(endpoint)  # a local match's sim, dialled by a session of the spectator's own
+        described = await self.on_study(lambda: self.describe(match))
+        await ws.send(Watching(match=match, **described).encode())
         bus = watcher_bus(endpoint, self.low_latency)
         z = await asyncio.to_thread(zenoh.open, bus.to_zenoh()) if own else self.router
         watching = asyncio.ensure_future(watch(ws, z, match))

@@ -26,7 +26,10 @@ def test_the_overview_counts_each_participants_trials_and_shows_queue_matches_an
     admission.start("x")  # another match on the host, so that the next one waits
     admission.start("y")
     assert not admission.start(waiting)
-    shown = overview(study, admission)
+    study.check(second, False)
+    study.check(second, True)
+    study.refused(third, "unproven")
+    shown = overview(study, admission, {first.id})
     study.close()
 
     assert [(p["id"], p["done"], p["failed"], p["replayed"], p["match"]) for p in shown["participants"]] == [
@@ -35,8 +38,25 @@ def test_the_overview_counts_each_participants_trials_and_shows_queue_matches_an
         (third.id, 0, 0, 0, None),
     ]
     assert all(p["trials"] == 4 for p in shown["participants"])
+    assert [(p["state"], p["checks"], p["refused"]) for p in shown["participants"]] == [
+        ("playing", [], 0),
+        ("dropped", [False, True], 0),
+        ("refused", [], 1),
+    ]
+    roles = study.config.roles
+    assert shown["counts"]["roles"] == {r: sum(p.role == r for p in (first, second, third)) for r in roles}
+    assert shown["counts"]["variants"] == [
+        {"variant": v.name, **{r: int(r == first.role and v == trial.variant) for r in roles}}
+        for v in study.config.variants
+    ]
+    assert shown["counts"]["states"] == {
+        "playing": 1, "finished": 0, "screened out": 0, "dropped": 1, "refused": 1,
+    }  # fmt: skip
     assert shown["queue"] == [{"match": waiting, "participant": second.id}]
-    assert shown["matches"][0] == {"match": running.match, "participant": first.id, "host": "local"}
+    assert shown["matches"][0] == {
+        "match": running.match, "participant": first.id, "variant": running.variant.name,
+        "person": first.role, "host": "local",
+    }  # fmt: skip
     local, host = {"host": "local", "slots": 1, "used": 1}, {"host": "lab-2", "slots": 2, "used": 2}
     assert shown["hosts"] == [local, host]
     assert "W-1" not in str(shown)  # the platform's ids stay in the study's file

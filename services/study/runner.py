@@ -56,7 +56,7 @@ import zenoh
 from websockets.asyncio.server import ServerConnection
 from websockets.protocol import State
 
-from services.human.core import BadInput, Controls, PerAddress, Quiet, RateLimit
+from services.human.core import BadInput, Controls, PerAddress, Quiet, RateLimit, points
 from services.human.gateway import Bridge, Gateway, Outbox, Web, client_address, receive_first, refuse
 from services.population.seat import PERSON, SeatSpec
 from services.recorder.service import recording_path
@@ -74,13 +74,29 @@ from services.study.core import (
     worker_id,
 )
 from services.study.crowd import FAILS, attention_check, write_bonuses
-from services.study.dashboard import Dashboard, overview
+from services.study.dashboard import Dashboard, about, overview
 from services.study.judge import Judge, judge
 from services.study.remote import Remote
+from shared import page
 from shared.bus import BusConfig, until_stopped
 from shared.errors import UsageError
-from shared.game import FPS, ROLES, other
+from shared.game import FPS, ROLES, GameConfig, other
 from shared.messages import State as GameState
+from shared.page import (
+    Answer,
+    ConsentText,
+    Declined,
+    Done,
+    Hello,
+    Keys,
+    PageMessage,
+    ParticipantId,
+    Problem,
+    Queue,
+    Screened,
+    Stopped,
+    Wait,
+)
 from shared.secret import same_secret, signature
 
 log = logging.getLogger("tsf.study")
@@ -96,11 +112,21 @@ RECONNECT_BURST = 5  # reconnects of one participant at once (reloads), and fail
 SCREENED = "Thank you. This study cannot go on: two attention checks were not passed."
 BUSY = "Too many people are starting right now. Please try again in a minute."
 TAKEN = "This worker id has already taken part in this study."
+NOT_YOURS = (
+    "This worker id has begun this study, but this link does not show that it is yours: open the "
+    "study from the platform's own link (the one you began with) to go on where you left off."
+)
+UNKNOWN = "unknown participant or resume key"
+CONTACT = "the researchers, through the platform you came from"  # without [crowd] contact
 NO_WORKER = "This link's ids are not ones this study can take (letters, digits and _ . : @ + - only)."
 DECLINED = "You declined to take part. Nothing about you was recorded. You may close this window now."
 SETTING_UP = "Your next game is being set up."
 UNSIGNED = "This link is not signed for its worker id. Please open the link exactly as the study gave it."
 RECONNECTS = "Too many reconnects. Please wait a minute, then reload the page."
+STOPPED = (
+    "The study has stopped for now. Everything you did so far is kept: open your study link again "
+    "later to go on where you left off (a game cut short is played again)."
+)
 
 
 @dataclass(frozen=True)
@@ -146,8 +172,8 @@ class Socket:
         self.answer = ""  # the last answer to an attention check
         self.tasks = [asyncio.ensure_future(self._read()), asyncio.ensure_future(self._pump())]
 
-    def send(self, message: dict) -> None:
-        self.outbox.offer(json.dumps(message), control=True)
+    def send(self, message: PageMessage) -> None:
+        self.outbox.offer(message.encode(), control=True)
 
     @property
     def closed(self) -> bool:
@@ -159,10 +185,10 @@ class Socket:
         try:
             async for text in self.ws:
                 message = self.controls.receive(text, ("consent", "decline", "ready", "keys", "answer"))
-                if message is not None and message["type"] == "answer":
-                    self.answer = message["answer"]
-                if message is not None and message["type"] != "keys":
-                    self.events.put_nowait(message["type"])
+                if isinstance(message, Answer):
+                    self.answer = message.answer
+                if message is not None and not isinstance(message, Keys):
+                    self.events.put_nowait(message.TYPE)
         except BadInput as error:
             await self.ws.close(1008, str(error))
         except websockets.ConnectionClosed:
@@ -391,7 +417,7 @@ class TrialRunner:
             place = admission.place(match)
             if place != told:
                 wait = round(admission.wait(place, self.match_seconds))
-                socket.send({"type": "queue", "place": place, "wait": wait})
+                socket.send(Queue(place=place, wait=wait))
                 told = place
             with contextlib.suppress(TimeoutError):  # held: asked again as the lag falls
                 async with asyncio.timeout(1.0 if admission.held else None):
@@ -444,7 +470,7 @@ class TrialRunner:
             self.matches.lag, self.pool.z, trial.match, trial.role, socket.controls, socket.outbox, obs
         )
 
-    async def play(self, socket: Socket, trial: Trial, obs: bool, offer: dict) -> dict | None:
+    async def play(self, socket: Socket, trial: Trial, obs: bool, offer: page.Trial) -> dict | None:
         """Run one trial: wait for a free match, start it (its processes start while the participant
         reads the `offer`, and its sim waits for them: a warm start), then play it from their Ready
         for at most its length and `trial_timeout`. Returns the sidecar and `played` (whether the
@@ -459,7 +485,7 @@ class TrialRunner:
                 settle(self.study, trial, None, [f"its match cannot be set up: {error}"])
             else:
                 log.error("the practice game %s cannot be set up: %s", trial.match, error)
-            socket.send({"type": "problem", "text": PROBLEM})
+            socket.send(Problem(text=PROBLEM))
             await socket.close()
             return None
         if not await self.slot(socket, trial.match):
@@ -469,7 +495,7 @@ class TrialRunner:
                 self.matches.admission.end(trial.match)
                 self.matches.notify()
                 return None
-            socket.send({"type": "wait", "reason": SETTING_UP, "seconds": round(SET_UP)})
+            socket.send(Wait(reason=SETTING_UP, seconds=round(SET_UP)))
             host = self.matches.admission.running[trial.match]  # Admission.LOCAL: this machine
             if not trial.practice:
                 self.study.record(trial, "running")
@@ -505,7 +531,7 @@ class TrialRunner:
         socket: Socket,
         trial: Trial,
         seat: Bridge,
-        offer: dict,
+        offer: page.Trial,
         running: asyncio.Future,
         stop: threading.Event,
     ) -> bool:
@@ -562,6 +588,14 @@ class Front:
             log.warning("refused %s: %s (said once a minute per address)", address, line)
         await refuse(socket.ws, reason)
 
+    async def stopping(self) -> None:
+        """The server stops: tell everyone playing that their progress is kept, and close."""
+        contact = self.study.config.crowd.contact
+        text = STOPPED + (f" If it stays stopped, please contact {contact}." if contact else "")
+        for socket, _ in list(self.playing.values()):
+            socket.send(Stopped(text=text))
+        await asyncio.gather(*(socket.close() for socket, _ in list(self.playing.values())))
+
     async def handle(self, ws: ServerConnection, z: zenoh.Session | None) -> None:
         hello = await receive_first(ws, ("hello",))
         if hello is None:
@@ -578,8 +612,8 @@ class Front:
                 older[0].gone.set()
                 await older[1].wait()  # its trial ended and set down (resumed below)
             self.playing[participant.id] = (socket, left)
-            test = bool(self.serving.test_token) and same_secret(hello.get("test"), self.serving.test_token)
-            await Visit(self.study, self.runner, socket, participant, hello.get("obs", False) and test).run()
+            test = bool(self.serving.test_token) and same_secret(hello.test, self.serving.test_token)
+            await Visit(self.study, self.runner, socket, participant, bool(hello.obs) and test).run()
         finally:
             if participant is not None and self.playing.get(participant.id, (None,))[0] is socket:
                 del self.playing[participant.id]
@@ -587,7 +621,7 @@ class Front:
             for task in socket.tasks:
                 task.cancel()
 
-    async def admit(self, socket: Socket, hello: dict) -> Participant | None:
+    async def admit(self, socket: Socket, hello: Hello) -> Participant | None:
         """The participant who resumes (id and key), or a new one once they consent: ids are
         issued only then, at a limited rate, and once per crowd-sourcing worker id."""
         study, config = self.study, self.study.config
@@ -602,31 +636,33 @@ class Front:
             elif not self.reconnects.allow(f"participant {participant.id}"):
                 await self.over_limit(socket, address, RECONNECTS, f"too many reconnects of {participant.id}")
                 return None
+        if hello.participant is not None:
+            participant = study.resume(hello.participant, hello.key or "")
+            if participant is None:
+                await self.refuse(socket, study.participants.get(hello.participant), UNKNOWN, "resume key")
             return participant
-        ids = [worker_id(v) for v in config.crowd.ids(hello.get("link", {}))]
-        worker = ids[0] or worker_id(hello.get("worker"))
+        ids = [worker_id(v) for v in config.crowd.ids(hello.link or {})]
+        worker = ids[0] or worker_id(hello.worker)
         if worker is None or None in ids:
             await refuse(socket.ws, NO_WORKER)
             return None
         if self.serving.link_secret and not (
-            worker and same_secret(hello.get("sig"), signature(self.serving.link_secret, worker))
+            worker and same_secret(hello.sig, signature(self.serving.link_secret, worker))
         ):
             await refuse(socket.ws, UNSIGNED)
             return None
         link = {k: v for k, v in zip(("study", "session"), ids[1:], strict=True) if v}
-        if study.taken(worker):
-            await refuse(socket.ws, TAKEN)
-            return None
-        socket.send({"type": "consent", "text": config.consent_text()})
+        if study.taken(worker):  # back through the platform's link: another tab, browser or device
+            return await self.returning(socket, study.by_worker(worker), link)
+        socket.send(ConsentText(text=config.consent_text()))
         answer = await socket.wait_for(("consent", "decline"))
         if answer == "decline":  # no id, nothing written
-            socket.send({"type": "declined", "text": DECLINED})
+            socket.send(Declined(text=DECLINED))
             await socket.close()
         if answer != "consent":
             return None
         if study.taken(worker):  # a second window of the same worker consented first
-            await refuse(socket.ws, TAKEN)
-            return None
+            return await self.returning(socket, study.by_worker(worker), link)
         if socket.closed:  # consented and left: no id, no match
             return None
         if not (self.per_address.allow(address) and self.arrivals.allow()):
@@ -634,8 +670,47 @@ class Front:
             return None
         participant = study.arrive(worker, link)
         log.info("participant %s arrives and plays the %s", participant.id, participant.role)
-        socket.send({"type": "participant", "participant": participant.id, "key": participant.key})
+        socket.send(ParticipantId(participant=participant.id, key=participant.key))
         return participant
+
+    def proven(self, participant: Participant, link: dict[str, str]) -> bool:
+        """Whether a returning worker id's link shows that it is the participant's own: signed for
+        the id (with a link secret, checked before this), or carrying the platform's session id
+        they began with ([crowd] resume = "session"); a worker id alone never does."""
+        if self.serving.link_secret:
+            return True
+        began = participant.link.get("session", "")
+        return self.study.config.crowd.resume == "session" and bool(began) and link.get("session") == began
+
+    async def returning(
+        self, socket: Socket, participant: Participant, link: dict[str, str]
+    ) -> Participant | None:
+        """A worker id that has taken part comes back through a link (a crashed tab, another
+        browser, a phone): resumed where they left off if the link is proven theirs (a finished
+        or screened-out one is shown their end again), else refused, journalled and logged."""
+        if self.proven(participant, link):
+            log.info("participant %s resumes through the platform's link", participant.id)
+            socket.send(ParticipantId(participant=participant.id, key=participant.key))
+            return participant
+        finished = self.study.next_trial(participant) is None or participant.screened
+        await self.refuse(
+            socket, participant, TAKEN if finished else NOT_YOURS, "taken" if finished else "unproven"
+        )
+        return None
+
+    async def refuse(self, socket: Socket, participant: Participant | None, text: str, why: str) -> None:
+        """Refuse a returning participant with whom to contact; journalled (the dashboard shows it)
+        and logged."""
+        contact = self.study.config.crowd.contact or CONTACT
+        if participant is not None:
+            self.study.refused(participant, why)
+        log.warning(
+            "refused %s from %s: %s",
+            participant.id if participant else "a resume",
+            socket.ws.remote_address[0],
+            why,
+        )
+        await refuse(socket.ws, f"{text.rstrip('.')}. If this is wrong, please contact {contact}.")
 
 
 class Visit:
@@ -653,15 +728,16 @@ class Visit:
             obs,
         )
 
-    def offer(self, trial: Trial, last: int | None, again: bool) -> dict:
+    def offer(self, trial: Trial, last: int | None, again: bool) -> page.Trial:
         """The `trial` message: where the game sits in the study, what to read first."""
         config = self.study.config
-        return {
-            "type": "trial", "role": trial.role, "agent": trial.agent, "last": last,
-            "session": trial.session, "sessions": len(config.variants),
-            "trial": trial.trial, "trials": config.trials, "again": again, "practice": trial.practice,
-            "instructions": config.instructions.get(trial.role, ""),
-        }  # fmt: skip
+        return page.Trial(
+            role=trial.role, agent=trial.agent, last=last, session=trial.session,
+            sessions=len(config.variants), trial=trial.trial, trials=config.trials, again=again,
+            practice=trial.practice,
+            instructions=config.instructions.get(trial.role, ""),
+            points=points(GameConfig()) if config.show_points else None,
+        )  # fmt: skip
 
     async def attend(self, trial: Trial) -> bool:
         """The attention check due before `trial`, if any; False (the page sent on to the
@@ -675,7 +751,7 @@ class Visit:
             self.study.check(participant, socket.answer == word)
         if participant.screened:
             redirect = config.crowd.redirect(config.crowd.screened_out_url, participant.code)
-            socket.send({"type": "screened", "text": SCREENED, "redirect": redirect})
+            socket.send(Screened(text=SCREENED, redirect=redirect))
             log.info("participant %s is screened out: %d attention checks failed", participant.id, FAILS)
             await socket.close()
             return False
@@ -710,13 +786,15 @@ class Visit:
                 failures, again = failures + (not sidecar["played"]), True
                 if failures < RETRIES:
                     continue
-                socket.send({"type": "problem", "text": PROBLEM})
+                socket.send(Problem(text=PROBLEM))
                 await socket.close()
                 return
             last, failures, again = sidecar["kills"], 0, False
-        config = study.config
-        redirect = config.crowd.redirect(config.crowd.completion_url, participant.code)
-        socket.send({"type": "done", "text": config.end, "code": participant.code, "redirect": redirect})
+        crowd = study.config.crowd
+        code = crowd.code(participant.code)
+        redirect = crowd.redirect(crowd.completion_url, code)
+        text = study.config.end_text(bool(redirect))
+        socket.send(Done(text=text, code=code, redirect=redirect))
         log.info("participant %s is done", participant.id)
         await socket.close()
 
@@ -768,7 +846,8 @@ def run_study(
         pool.__enter__()
         judging = Judge()
         runner = TrialRunner(study, serving, matches, pool, judging, remote)
-        gateway = Gateway(None, Front(study, serving, runner, web.trusted).handle, web)
+        front = Front(study, serving, runner, web.trusted)
+        gateway = Gateway(None, front.handle, web)
         # A running match holds a thread (run_trial) for its length, its start-up another: asyncio's
         # default pool (cores + 4 threads) would cap the matches at a handful, whatever hosts add.
         gateway.loop.set_default_executor(ThreadPoolExecutor(THREADS, thread_name_prefix="study"))
@@ -776,12 +855,14 @@ def run_study(
             remote.on_change = lambda: gateway.loop.call_soon_threadsafe(matches.notify)
         board = serving.dashboard and Dashboard(
             serving.dashboard_token, serving.dashboard, gateway.loop,
-            lambda: overview(study, matches.admission), matches.endpoints.get, serving.low_latency,
-            remote and remote.z,
+            lambda: overview(study, matches.admission, front.playing), matches.endpoints.get,
+            serving.low_latency, remote and remote.z, lambda match: about(study, match),
         )  # fmt: skip
         with gateway, board or contextlib.nullcontext():
             on_ready(gateway)
             until_stopped(stop)
+            with contextlib.suppress(TimeoutError):  # the pages say so before their matches end
+                asyncio.run_coroutine_threadsafe(front.stopping(), gateway.loop).result(5.0)
             matches.stop_all()
             with contextlib.suppress(TimeoutError):  # a match's thread that hangs: leave it to exit
                 asyncio.run_coroutine_threadsafe(matches.drained(), gateway.loop).result(DRAIN)

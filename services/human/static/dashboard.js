@@ -39,13 +39,29 @@ function count(n, one, many) {
   return `${n} ${n === 1 ? one : many || `${one}s`}`;
 }
 
+// Attention checks as answered: one mark each, passed or failed.
+function checks(results) {
+  return results.length ? results.map((passed) => (passed ? "\u2713" : "\u2717")).join(" ") : "";
+}
+
 function draw(o) {
   document.getElementById("study").textContent = `Study ${o.study}`;
-  status.textContent = `${count(o.participants.length, "participant")}, ` +
+  const states = Object.entries(o.counts.states).filter(([, n]) => n).map(([s, n]) => `${n} ${s}`);
+  status.textContent = `${count(o.participants.length, "participant")}` +
+    (states.length ? ` (${states.join(", ")})` : "") + `, ` +
     `${count(o.matches.length, "match", "matches")} running, ${o.queue.length} waiting; ` +
     `updated ${new Date().toLocaleTimeString()}`;
-  rows("participants", o.participants, (p) => [p.id, p.role, p.done, p.failed, p.replayed, p.match || ""]);
-  rows("matches", o.matches, (m) => [m.match, m.participant, m.host, watchLink(m.match)]);
+  rows("participants", o.participants, (p) => [p.id, p.role, p.state, `${p.done} of ${p.trials}`, p.failed,
+    p.replayed, checks(p.checks), p.refused, p.match || ""]);
+  const roles = Object.keys(o.counts.roles);
+  document.getElementById("variant-head").replaceChildren(...["Variant", ...roles.map((r) =>
+    `Trials done by ${r} participants (${o.counts.roles[r]} in all)`)].map((heading) => {
+    const th = document.createElement("th");
+    th.textContent = heading;
+    return th;
+  }));
+  rows("variants", o.counts.variants, (v) => [v.variant, ...roles.map((r) => v[r])]);
+  rows("matches", o.matches, (m) => [m.match, m.participant, m.variant, m.person, m.host, watchLink(m.match)]);
   rows("queue", o.queue, (q, i) => [i + 1, q.match, q.participant]);
   rows("hosts", o.hosts, (h) => [h.host, h.used, h.slots]);
 }
@@ -55,6 +71,7 @@ const socket = new WebSocket(scheme + location.host + "/ws");
 socket.onopen = () => socket.send(JSON.stringify({ type: "dashboard", ...(token ? { token } : {}) }));
 socket.onmessage = (event) => {
   const message = JSON.parse(event.data);
+  if (!Object.hasOwn(CONTRACT.down, message.type)) return;  // not the page's contract (contract.js)
   if (message.type === "refused") {
     dash.refused = message.reason;
     document.body.classList.add("refused");

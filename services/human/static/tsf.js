@@ -2,7 +2,8 @@
 // The sim is the clock; this page only draws (once per frame received, so at the game's 30 fps)
 // and reports key changes. Three ways in: a seat link (?role=R&token=T, from `tsf play`), a
 // spectator's link (?watch=1: a match or its live replay, playing no seat), or the study's front
-// door (no token: consent, role, sessions of trials; see services/study/runner.py).
+// door (no token: consent, role, sessions of trials; see services/study/runner.py). Every message in
+// and out is one of the page's contract (shared/page.py, generated into contract.js, loaded first).
 "use strict";
 
 const COLOURS = {
@@ -17,18 +18,28 @@ const INSTRUCTIONS = {
     "Fly into the green hexagon around the fortress to draw its attention: it turns toward you " +
     "and fires shells at you. Keep moving so that they miss.\n\n" +
     "While the fortress fires at you, its shield opens at the back (magenta): that is when your " +
-    "partner, the shooter, can destroy it. Your team's score is the number of fortresses destroyed.",
+    "partner, the shooter, can destroy it.",
   shooter: "You are the SHOOTER (the cyan ship).\n\n" +
     "Wait outside the green hexagon, on the far side from the bait. When the fortress fires at the " +
     "bait, its shield opens at the back (magenta): fire your missiles into the opening to destroy " +
-    "it. Missiles that hit the closed shield cost points.\n\nYour team's score is the number of " +
-    "fortresses destroyed.",
+    "it.",
 };
+// The team's score, and how points are counted where the page shows them (`points`: the rule the
+// server sends, null where the study hides points).
+function scoring(rule) {
+  const score = "\n\nYour team's score is the number of fortresses destroyed.";
+  if (!rule) return score;
+  const signed = (n) => (n > 0 ? `+${n}` : `${n}`);
+  return `${score} The game also counts points: ${signed(rule.kill)} for each fortress destroyed, ` +
+    `${signed(rule.death)} for each ship destroyed (yours or your teammate's), ${signed(rule.shield_hit)} ` +
+    "for each missile that hits the closed shield. Points can go below zero.";
+}
 // Every rule that kills a ship (shared/game.py DEATH_CAUSES: shell, border, shield), for both roles.
 const DEATHS = "\n\nYour ship is destroyed if a shell hits it, if it touches the blue shield, or if it " +
   "leaves the arena (the edge kills). A destroyed ship stays out until the round ends: when the " +
   "fortress is destroyed, or one second after both ships are down. An agent teammate whose partner " +
-  "is down flies into the wall on purpose, so that you both come back sooner.";
+  "is down flies into the fortress's shield (or the arena's edge, when that is nearer) on purpose, " +
+  "so that you both come back sooner.";
 const CONTROLS = "\n\nControls: \u2190 or A turn left, \u2192 or D turn right, \u2191 or W thrust, SPACE fire; " +
   "M sound on or off.";
 const OWN = ["participant", "key", "worker", "workerId", "watch", "match", "role", "token", "obs", "sig"]; // not the link's
@@ -52,6 +63,8 @@ const held = { left: false, right: false, thrust: false, fire: false };
 // drawn (bench/human.py times it).
 const tsf = (window.tsf = {
   phase: "connecting", role: null, frame: null, geometry: null, drawn: 0, events: [], said: [], onDraw: null,
+  points: null, study: false, // how points count (null: not shown); whether this is the study's page
+  watching: null, // a dashboard spectator's match: {variant, person}
 });
 let socket = null;
 let onGo = null;
@@ -72,7 +85,7 @@ function show(heading, body, button, action) {
 }
 
 function instructions(role, extra) {
-  return (extra || INSTRUCTIONS[role] || "") + DEATHS + CONTROLS;
+  return (extra || INSTRUCTIONS[role] || "") + scoring(tsf.points) + DEATHS + CONTROLS;
 }
 
 function ready() {
@@ -83,15 +96,20 @@ function ready() {
 }
 
 const handlers = {
+  watching(m) {  // the dashboard's spectator: which variant plays, and which seat is the person's
+    tsf.watching = m;
+  },
   welcome(m) {
     tsf.role = m.role;
     tsf.geometry = m;
     if (m.role === null) {  // a spectator: frames are drawn as they come
       tsf.phase = "waiting";
-      show("Watching", `Match ${m.match}: waiting for its frames\u2026`);
+      const who = tsf.watching ? `\n\nVariant ${tsf.watching.variant}; the person plays the ${tsf.watching.person}.` : "";
+      show("Watching", `Match ${m.match}: waiting for its frames\u2026${who}`);
       return;
     }
     tsf.phase = "instructions";
+    tsf.points = m.points || null;
     show(`You play the ${m.role}`, instructions(m.role), "Start", ready);
   },
   refused(m) {
@@ -123,14 +141,23 @@ const handlers = {
   end(m) {
     tsf.phase = "ended";
     release();
-    show("Time is up", `Your team destroyed ${m.kills} fortress${m.kills === 1 ? "" : "es"} ` +
-      `(points ${m.points}).`);
+    const result = `Your team destroyed ${m.kills} fortress${m.kills === 1 ? "" : "es"}` +
+      (tsf.points ? ` (points ${m.points}).` : ".");
+    if (m.frame < m.frames) {  // stopped before its time: never "Time is up" with time left
+      const left = Math.ceil((m.frames - m.frame) / ((tsf.geometry && tsf.geometry.fps) || 30));
+      show("The game was stopped", `This game ended early, with ${left} s left. ${result}` +
+        (tsf.study ? "\n\nYour progress is kept; what happens next is shown here." : ""));
+      return;
+    }
+    show("Time is up", result);
   },
   // The study's messages.
   participant(m) {
+    tsf.study = true;
     localStorage.setItem("tsf-participant", JSON.stringify({ participant: m.participant, key: m.key }));
   },
   consent(m) {
+    tsf.study = true;
     tsf.phase = "consent";
     show("Before we start", m.text, "I agree", () => {
       send({ type: "consent" });
@@ -147,8 +174,10 @@ const handlers = {
     show(after ? title.textContent : "Please wait", `${after}${m.reason} This takes about ${m.seconds} seconds.`);
   },
   trial(m) {
+    tsf.study = true;
     tsf.role = m.role;
     tsf.phase = "instructions";
+    tsf.points = m.points || null;
     const last = m.last === null || m.last === undefined ? "" :
       `Last game: your team destroyed ${m.last} fortress${m.last === 1 ? "" : "es"}.\n\n`;
     const again = m.again ? "The last game could not be completed; please play it again.\n\n" : "";
@@ -193,6 +222,11 @@ const handlers = {
   screened(m) {
     farewell("Thank you", m.text, m.redirect);
   },
+  stopped(m) {  // the server stops: progress kept, the participant's resume key too
+    tsf.phase = "stopped";
+    release();
+    show("The study has stopped", m.text);
+  },
 };
 
 // The study is over for this participant: say so, and go back to the platform's address if given.
@@ -234,18 +268,21 @@ function connect() {
   };
   socket.onmessage = (event) => {
     const message = JSON.parse(event.data);
+    if (!Object.hasOwn(CONTRACT.down, message.type)) return;  // not the page's contract (contract.js)
     const handle = handlers[message.type];
     if (handle) handle(message);
   };
   socket.onclose = (event) => {
-    if (["refused", "ended", "done"].includes(tsf.phase)) return;
+    if (["refused", "done", "stopped"].includes(tsf.phase) || (tsf.phase === "ended" && !tsf.study)) return;
     tsf.phase = "closed";
-    show("Disconnected", event.reason || "The connection to the game was lost. Reload the page to go on.");
+    const kept = tsf.study ? " Your progress so far is kept: reload this page, or open your study link " +
+      "again, to go on where you left off." : " Reload the page to go on.";
+    show("Disconnected", (event.reason ? `${event.reason.replace(/\.$/, "")}.` : "The connection to the game was lost.") + kept);
   };
 }
 
-function sendKeys() {
-  send({ type: "keys", ...held });
+function sendKeys() {  // the fields the contract names, each held or not
+  send({ type: "keys", ...Object.fromEntries(CONTRACT.up.keys.map((key) => [key, held[key]])) });
 }
 
 function release() {
@@ -511,7 +548,8 @@ function ship(g, [cx, cy], heading, role, thrusting, frame) {
   ctx.arc(r * 0.25, 0, r * 0.22, 0, 2 * Math.PI);
   ctx.fill();
   ctx.restore();
-  label(role.toUpperCase() + (role === tsf.role ? " (you)" : ""), cx, cy - r - 12, body, "bold 12px sans-serif");
+  const who = role === tsf.role ? " (you)" : tsf.watching && role === tsf.watching.person ? " (person)" : "";
+  label(role.toUpperCase() + who, cx, cy - r - 12, body, "bold 12px sans-serif");
 }
 
 function ring([cx, cy], radius, alpha, colour) {
@@ -585,9 +623,11 @@ function hud(g, s) {
   ctx.fillStyle = COLOURS.text;
   ctx.font = "bold 18px sans-serif";
   ctx.textAlign = "left";
-  ctx.fillText(`Fortresses destroyed ${s.kills}    Points ${s.points}`, 12, 27);
+  ctx.fillText(`Fortresses destroyed ${s.kills}` + (tsf.points || !tsf.study ? `    Points ${s.points}` : ""), 12, 27);
   ctx.textAlign = "right";
-  ctx.fillText(`${tsf.role ? `You: ${tsf.role}    ` : ""}Time left ${time}`, canvas.width - 12, 27);
+  const seat = tsf.role ? `You: ${tsf.role}    ` :
+    tsf.watching ? `Variant ${tsf.watching.variant}, person: ${tsf.watching.person}    ` : "";
+  ctx.fillText(`${seat}Time left ${time}`, canvas.width - 12, 27);
 }
 
 connect();

@@ -32,8 +32,8 @@ import shutil
 import subprocess
 import sys
 import time
-from collections.abc import Callable
-from contextlib import AbstractContextManager
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager, contextmanager
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -121,7 +121,8 @@ class Grow:
         else:
             bound.write_text(json.dumps({"population": self.spec.text_hash}) + "\n")
 
-    def population(self) -> dict[str, list[Member]]:
+    def population(self) -> dict[str, list[tuple[Member, str]]]:
+        """Every member of each seat with its split side; the events runs trained first."""
         done = self.out / "population.json"
         if not done.exists():
             runs = [run for role in ROLES for run in self.spec.events_runs(role)]
@@ -155,7 +156,7 @@ class Grow:
         return {
             role: [(Member(**{k: v for k, v in row.items() if k != "split"}), row["split"]) for row in rows]
             for role, rows in record.items()
-        }  # type: ignore[misc]
+        }
 
     def crossplay(self, stage: str, partners: dict[str, list[str]]) -> dict[str, Grid]:
         """Every partner of each seat with every candidate teammate of the other seat, over the
@@ -167,15 +168,15 @@ class Grow:
             for role in ROLES:
                 candidates = self.candidates(other(role), responses=stage != "grouping")
                 teams = [(p, c) if role == "bait" else (c, p) for p in partners[role] for c in candidates]
-                plan[role] = (partners[role], candidates, len(jobs))
-                jobs += pair_jobs(f"{stage}-{role}", teams, seeds)
+                mine = pair_jobs(f"{stage}-{role}", teams, seeds)
+                plan[role] = (partners[role], candidates, slice(len(jobs), len(jobs) + len(mine)))
+                jobs += mine
             games = sum(job.size for job in jobs)
             self.say(f"{stage}: {games:,} games of cross-play")
             values = self._jobs(stage, jobs, roots=[self.population_dir, self.responses_dir])
             record = {}
-            for role, (rows, columns, first) in plan.items():
-                count = len(pair_jobs(f"{stage}-{role}", [(p, c) for p in rows for c in columns], seeds))
-                flat = [v for job in values[first : first + count] for v in job]
+            for role, (rows, columns, theirs) in plan.items():
+                flat = [v for job in values[theirs] for v in job]
                 record[role] = {
                     "partners": rows,
                     "candidates": columns,
@@ -189,6 +190,7 @@ class Grow:
         }
 
     def groups(self, grouping: dict[str, Grid]) -> dict[str, dict]:
+        """Each seat's training members grouped by what works with them (choice.groups)."""
         done = self.out / "groups.json"
         if not done.exists():
             record = {}
@@ -230,9 +232,7 @@ class Grow:
                 if ours == "shooter":
                     recipe["frame"] = "world"
                 recipes[f"{RESPONSE[ours]}{j + 1}"] = recipe
-        trained = (
-            library.manifest(self.responses_dir) if (self.responses_dir / "registry.toml").exists() else {}
-        )
+        trained = library.manifest(self.responses_dir) if _is_library(self.responses_dir) else {}
         todo = [k for k in recipes if k not in trained]
         if not todo:
             return
@@ -262,45 +262,30 @@ class Grow:
     def library(
         self, selection: dict, held_out: dict[str, Grid], groups: dict, grouping: dict[str, Grid]
     ) -> dict:
-        """The grown library and its tables and figures."""
-        done = self.out / "summary.json"
-        if done.exists():
-            return json.loads(done.read_text())
-        names = self._build_library(selection)
-        self._tables()
+        """The grown library with its tables (built once), and the figures on the test population
+        (computed from the files each time: summary.json and summary.md)."""
+        if not (self.library_dir / "calibration.json").exists():
+            self._build_library(selection)
+            self._tables()
+        names = json.loads((self.library_dir / "members.json").read_text())
         sides = self._sides()
         summary: dict = {"population": self.spec.text_hash, "members": names, "seats": {}}
         for ours, steps in selection.items():
-            partner_role = other(ours)
-            grid = held_out[partner_role]
+            grid = held_out[other(ours)]
             chosen = steps[-1]["library"]
             study = [c for c in grid.candidates if c in self.spec.seats[ours].library]
             test = [p for p in grid.partners if sides[p] == "test"]
+            people = [p for p in test if p.startswith("human(")]
+            members = [p for p in test if p not in people]
             figures = {}
-            for label, rows in (
-                ("members", [p for p in test if not p.startswith("human(")]),
-                ("with stand-ins", test),
-            ):
-                kills = _rows(grid, rows).columns(chosen)
-                study_kills = _rows(grid, rows).columns(study)
-                single, mean = choice.best_single(kills)
-                study_single, study_mean = choice.best_single(study_kills)
-                figures[label] = {
-                    "partners": len(rows),
-                    "headroom": round(choice.headroom(kills), 4),
-                    "oracle": round(choice.oracle(kills), 4),
-                    "best_single": chosen[single],
-                    "best_single_mean": round(mean, 4),
-                    "study_best_single": study[study_single],
-                    "study_best_single_mean": round(study_mean, 4),
-                    "study_headroom": round(choice.headroom(study_kills), 4),
-                }
+            for label, rows in (("members", members), ("stand-ins", people), ("both", test)):
+                figures[label] = figures_on(_rows(grid, rows), chosen, study)
             summary["seats"][ours] = {
                 "curve": steps,
                 "test": figures,
                 "groups": self._group_table(ours, chosen, grid, groups, grouping),
             }
-        _write(done, summary)
+        _write(self.out / "summary.json", summary)
         (self.out / "summary.md").write_text(markdown(summary))
         return summary
 
@@ -318,9 +303,7 @@ class Grow:
         ]
         if not responses:
             return chosen
-        trained = (
-            library.registry(self.responses_dir) if (self.responses_dir / "registry.toml").exists() else {}
-        )
+        trained = library.registry(self.responses_dir) if _is_library(self.responses_dir) else {}
         return chosen + [k for k, r in trained.items() if r.role == role]
 
     def _build_library(self, selection: dict) -> dict[str, str]:
@@ -328,9 +311,7 @@ class Grow:
         a self-contained library (the study's library is not needed to play it)."""
         entries, files, names = {}, {}, {}
         study = library.registry(library.LIBRARY)
-        responses = (
-            library.registry(self.responses_dir) if (self.responses_dir / "registry.toml").exists() else {}
-        )
+        responses = library.registry(self.responses_dir) if _is_library(self.responses_dir) else {}
         for ours, steps in selection.items():
             for i, name in enumerate(steps[-1]["library"]):
                 key = f"{PREFIX[ours]}{i + 1}"
@@ -480,25 +461,44 @@ class Grow:
             return run(jobs)
 
     def _roots(self, roots: list[Path]) -> AbstractContextManager[None]:
-        return _library_roots([r for r in roots if (r / "registry.toml").exists()])
+        return _library_roots([r for r in roots if _is_library(r)])
 
 
-class _library_roots:  # noqa: N801 - used as a `with` statement
+@contextmanager
+def _library_roots(roots: list[Path]) -> Iterator[None]:
     """TSF_LIBRARY naming `roots` (beside the shipped library) while the block runs: what the
     workers started in it and the games played in it use."""
-
-    def __init__(self, roots: list[Path]) -> None:
-        self.value = os.pathsep.join(str(r.resolve()) for r in roots)
-
-    def __enter__(self) -> None:
-        self.before = os.environ.get("TSF_LIBRARY")
-        os.environ["TSF_LIBRARY"] = self.value
-
-    def __exit__(self, *exc: object) -> None:
-        if self.before is None:
+    before = os.environ.get("TSF_LIBRARY")
+    os.environ["TSF_LIBRARY"] = os.pathsep.join(str(r.resolve()) for r in roots)
+    try:
+        yield
+    finally:
+        if before is None:
             os.environ.pop("TSF_LIBRARY", None)
         else:
-            os.environ["TSF_LIBRARY"] = self.before
+            os.environ["TSF_LIBRARY"] = before
+
+
+def _is_library(root: Path) -> bool:
+    return (root / "registry.toml").exists()
+
+
+def figures_on(grid: Grid, chosen: list[str], study: list[str]) -> dict:
+    """A library's held-out oracle headroom on `grid`'s partners, its best single member, and the
+    study library's (its policies among the candidates) on the same partners."""
+    kills, study_kills = grid.columns(chosen), grid.columns(study)
+    single, mean = choice.best_single(kills)
+    study_single, study_mean = choice.best_single(study_kills)
+    return {
+        "partners": len(grid.partners),
+        "headroom": round(choice.headroom(kills), 4),
+        "oracle": round(choice.oracle(kills), 4),
+        "best_single": chosen[single],
+        "best_single_mean": round(mean, 4),
+        "study_best_single": study[study_single],
+        "study_best_single_mean": round(study_mean, 4),
+        "study_headroom": round(choice.headroom(study_kills), 4),
+    }
 
 
 def _rows(grid: Grid, partners: list[str]) -> Grid:

@@ -77,7 +77,8 @@ def test_a_small_population_grows_a_library_and_a_second_run_resumes_from_its_fi
         rooms = [step["headroom"] for step in curve]
         assert rooms == sorted(set(rooms))  # each member added adds room
         assert seat["test"]["members"]["partners"] > 0
-        assert seat["test"]["with stand-ins"]["partners"] == 2 * seat["test"]["members"]["partners"]
+        assert seat["test"]["stand-ins"]["partners"] == seat["test"]["members"]["partners"]  # one skill
+        assert seat["test"]["both"]["partners"] == 2 * seat["test"]["members"]["partners"]
     monkeypatch.setenv("TSF_LIBRARY", str(out / "library"))
     members = json.loads((out / "library" / "members.json").read_text())
     assert set(members) == {k for k in library.registry() if k.startswith(("GB", "GS"))}

@@ -231,6 +231,12 @@ def study(
         "server by a name, as behind a reverse proxy).",
     ),
     per_address: int = typer.Option(8, min=0, help="Sockets one address may hold at once (0: no cap)."),
+    max_lag: float = number(
+        25.0,
+        Range(0.0, 1000.0),
+        "Milliseconds this machine's matches' frames may reach the server late (the worst of the last "
+        "5 s) before new matches wait until they catch up (0: never).",
+    ),
     trusted_proxy: list[str] | None = typer.Option(
         None,
         help="A reverse proxy's address (e.g. 127.0.0.1) whose X-Forwarded-For names the client: the "
@@ -340,6 +346,7 @@ def study(
         max_matches, trial_timeout, test_token=test_token, hosts=hosts, link_secret=signed,
         host_secret=sealing, dashboard=board, dashboard_token=token,
         arrivals=arrivals, arrivals_per_address=arrivals_per_address, reconnects=reconnects,
+        max_lag=max_lag / 1e3,
     )  # fmt: skip
     done = run_study(protocol, directory, web, stop_on_signals(), show, serving)
     finished = sum(done.next_trial(p) is None for p in done.participants.values())

@@ -31,6 +31,7 @@ from services.sim import observation as ob
 from services.table.table import stderr
 from shared.errors import UsageError
 from shared.game import ROLES, GameConfig
+from shared.processes import end_with_parent
 from shared.provenance import provenance
 
 VERSION = 1
@@ -170,7 +171,7 @@ def measure(
     teams = [(t, p) if role == "bait" else (p, t) for p, t in pairs]
     chunks = batches(teams, workers, max(1, LANES // games))  # a game is the same in any batch
     if workers > 1:
-        with ProcessPoolExecutor(workers) as pool:
+        with ProcessPoolExecutor(workers, initializer=end_with_parent) as pool:  # none outlives us
             played = [row for chunk in pool.map(_play, chunks, [games] * len(chunks)) for row in chunk]
     else:
         played = [row for chunk in chunks for row in _play(chunk, games)]

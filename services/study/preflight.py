@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from services.adapter.seat import ADAPTIVE_KIND, PERSON, SeatSpec, check_live
+from services.population.seat import ADAPTIVE_KIND, PERSON, SeatSpec, check_live
 from services.runtime.launch import MatchPlan
 from services.study.core import PRACTICE, StudyConfig, Variant
 from shared.errors import UsageError

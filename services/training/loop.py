@@ -34,6 +34,7 @@ from services.training.algorithms import ALGORITHMS, HYPERPARAMETERS, export, ma
 from services.training.env import RecipeVecEnv, curve_partner
 from shared.errors import UsageError
 from shared.game import ROLES, GameConfig, Policy
+from shared.processes import end_with_parent
 
 EVAL_SEEDS = range(10_000, 10_016)  # the curve's games: seeds that no table or test plays
 CURVE = ("steps", "seconds", "kills_per_minute", "stderr", "mean_return")
@@ -219,7 +220,8 @@ def train_library(keys: list[str], out: Path, jobs: int = 1, **options: object) 
     prepare(out, keys)
     recipes = library.registry(out)
     entries: dict[str, dict] = {}
-    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+    spawn = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(jobs, mp_context=spawn, initializer=end_with_parent) as pool:  # none outlives us
         for role in ROLES:
             group = [k for k in keys if recipes[k].role == role]
             futures = {k: pool.submit(train, k, out, **options) for k in group}

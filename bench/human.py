@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import dataclasses
 import json
 import math
 import random
@@ -208,7 +209,7 @@ def play_test(
                     frame = page.evaluate("window.tsf.frame")
                     action = policy.act(as_observation(frame["obs"], policy.view))
                     delay = rng.lognormvariate(math.log(timing.reaction_ms), 0.2) / 1000
-                    planned.append((now + delay, action_keys(action)))
+                    planned.append((now + delay, dataclasses.asdict(action_keys(action))))
                     decide = now + rng.uniform(*timing.decide_ms) / 1000
                 while planned and planned[0][0] <= now:
                     _, wanted = planned.pop(0)

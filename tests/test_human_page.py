@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 import io
+import json
 import os
 import shutil
 import subprocess
@@ -63,7 +64,8 @@ def game_frames(seed: int, bait: str | int, shooter: str | int, role: str, frame
         game.step(*actions)
         state = state_message(game, "page", "sim", tuple(actions))
         shown = [e for e in map(event_view, event_messages(game, "page", "sim")) if e is not None]
-        yield view(state, narrator(state)), shown
+        # as the page gets them: the JSON of the contract's messages
+        yield json.loads(view(state, narrator(state)).encode()), [json.loads(e.encode()) for e in shown]
 
 
 def scene(game: list, pick) -> tuple[dict, list[dict]]:  # noqa: ANN001 - a predicate

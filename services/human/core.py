@@ -2,14 +2,10 @@
 holds, and what the page is sent. No web server and no bus here (services/human/gateway.py is the
 shell), so every rule about a person's input is tested directly.
 
-The browser protocol is JSON text frames. Up (browser -> gateway):
-
-    {"type": "join", "role": "bait", "token": "...", "obs": false}   first message, claims a seat
-    {"type": "watch"}                                                 or: watch, playing no seat
-    {"type": "ready"}                                                 instructions read: play
-    {"type": "keys", "left": b, "right": b, "thrust": b, "fire": b}   the held keys, on every change
-
-Down (gateway -> browser): `welcome` (the seat and the arena's geometry) or `refused` (why), then
+The browser protocol is JSON text frames, every message typed and validated in shared/page.py (the
+page's contract, docs/contract.md). Up (browser -> gateway): `join` (a seat and its token, first)
+or `watch` (playing no seat), then `ready` and `keys` (the held keys, on every change). Down
+(gateway -> browser): `welcome` (the seat and the arena's geometry) or `refused` (why), then
 `setup` (the match's own numbers), `state` (one frame to draw, with what it means for the person:
 Narrator), `event` (a kill, death, shield hit or respawn, as it happens) and `end` (the match's
 result). The study runner (services/study/runner.py) uses the same socket with `hello` and
@@ -18,7 +14,6 @@ result). The study runner (services/study/runner.py) uses the same socket with `
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from collections.abc import Callable
@@ -28,95 +23,35 @@ from services.agent.policy import stalled
 from shared.errors import UsageError
 from shared.game import ROLES, GameConfig, join_action, other, split_action
 from shared.messages import GameEvent, State, Summary
+from shared.page import GEOMETRY, End, EventView, Keys, PageError, PageMessage, Ready, StateView, decode
 from shared.secret import same_secret
 
-KEYS = ("left", "right", "thrust", "fire")
-MAX_MESSAGE = 1024  # bytes: the largest message a browser has reason to send (a hello with its link)
 RATE = 60.0  # messages a second a connection may send on average (a person changes keys far less)
 BURST = 60  # and at once
 STRIKES = 300  # messages dropped (bad or over the rate) before the connection is closed
 
 
-class BadInput(ValueError):
-    """A browser message that does not meet the protocol; `reason` is a short code for counting."""
-
-    def __init__(self, reason: str, detail: str) -> None:
-        super().__init__(f"{reason}: {detail}")
-        self.reason = reason
+# A browser message that does not meet the page's contract (or comes too fast); `reason` is a short
+# code for counting. The contract's own error: one kind of bad input, whichever check found it.
+BadInput = PageError
 
 
-def parse(text: str | bytes, allowed: tuple[str, ...]) -> dict:
+def parse(text: str | bytes, allowed: tuple[str, ...]) -> PageMessage:
     """A browser's text frame -> the validated message, or BadInput. `allowed`: the types accepted
     now (a join only first, keys only after it)."""
-    if not isinstance(text, str):
-        raise BadInput("binary", "only text frames are accepted")
-    if len(text.encode()) > MAX_MESSAGE:
-        raise BadInput("too_large", f"{len(text)} characters")
-    try:
-        message = json.loads(text)
-    except ValueError:
-        raise BadInput("undecodable", "not JSON") from None
-    if not isinstance(message, dict) or message.get("type") not in allowed:
-        kind = message.get("type") if isinstance(message, dict) else type(message).__name__
-        raise BadInput("type", f"{kind!r} where {allowed} was expected")
-    fields = _FIELDS[message["type"]]
-    if not set(message) - {"type"} <= set(fields) or not all(
-        check(message[name]) for name, check in fields.items() if name in message
-    ):
-        raise BadInput("shape", f"bad {message['type']} message")
-    if message["type"] == "keys" and set(message) != {"type", *KEYS}:
-        raise BadInput("shape", "a keys message names all four keys")
-    return message
+    return decode(text, allowed)
 
 
-def _is_bool(v: object) -> bool:
-    return isinstance(v, bool)
-
-
-def _short_text(v: object) -> bool:
-    return isinstance(v, str) and 0 < len(v) <= 64
-
-
-LINK_PARAMS = 6  # the link's parameters a study's hello may carry
-
-
-def _link(v: object) -> bool:
-    """The link's parameters (services/study/crowd.py): a few names and values, each short."""
-    return isinstance(v, dict) and len(v) <= LINK_PARAMS and all(map(_short_text, [*v, *v.values()]))
-
-
-_FIELDS: dict[str, dict[str, Callable[[object], bool]]] = {
-    "join": {"role": lambda v: v in ROLES, "token": _short_text, "obs": _is_bool},
-    "watch": {"token": _short_text, "match": _short_text},  # both for the study's dashboard only
-    "dashboard": {"token": _short_text},  # services/study/dashboard.py
-    "ready": {},
-    "keys": dict.fromkeys(KEYS, _is_bool),
-    # the study runner's messages (services/study/runner.py)
-    "hello": {
-        "participant": _short_text,
-        "key": _short_text,
-        "obs": _is_bool,
-        "worker": _short_text,
-        "sig": _short_text,
-        "test": _short_text,
-        "link": _link,
-    },
-    "consent": {},
-    "decline": {},
-    "answer": {"answer": _short_text},  # to an attention check (services/study/crowd.py)
-}
-
-
-def keys_action(keys: dict[str, bool]) -> int:
+def keys_action(keys: Keys) -> int:
     """Held keys -> the action index. Left and right together cancel, as on a keyboard's joystick."""
-    turn = 1 if keys["left"] and not keys["right"] else 2 if keys["right"] and not keys["left"] else 0
-    return join_action(turn, int(keys["thrust"]), int(keys["fire"]))
+    turn = 1 if keys.left and not keys.right else 2 if keys.right and not keys.left else 0
+    return join_action(turn, int(keys.thrust), int(keys.fire))
 
 
-def action_keys(action: int) -> dict[str, bool]:
+def action_keys(action: int) -> Keys:
     """The key state that plays `action` (what a scripted stand-in presses)."""
     turn, thrust, fire = split_action(action)
-    return {"left": turn == 1, "right": turn == 2, "thrust": bool(thrust), "fire": bool(fire)}
+    return Keys(left=turn == 1, right=turn == 2, thrust=bool(thrust), fire=bool(fire))
 
 
 class RateLimit:
@@ -168,7 +103,7 @@ class Controls:
     drops: dict[str, int] = field(default_factory=dict)
     limit: RateLimit = field(default_factory=RateLimit)
 
-    def receive(self, text: str | bytes, allowed: tuple[str, ...] = ("ready", "keys")) -> dict | None:
+    def receive(self, text: str | bytes, allowed: tuple[str, ...] = ("ready", "keys")) -> PageMessage | None:
         """Take one message; returns it if valid and within the rate, else counts the drop and
         returns None. Raises BadInput("strikes") once too many were dropped: close the connection."""
         try:
@@ -180,9 +115,9 @@ class Controls:
             if sum(self.drops.values()) >= STRIKES:
                 raise BadInput("strikes", f"{STRIKES} bad or excess messages") from None
             return None
-        if message["type"] == "ready":
+        if isinstance(message, Ready):
             self.ready = True
-        elif message["type"] == "keys":
+        elif isinstance(message, Keys):
             self.action = keys_action(message)
         return message
 
@@ -216,30 +151,30 @@ class SeatBook:
 
 
 def setup(config: GameConfig) -> dict:
-    """The numbers the page draws with (services/sim/render.py draws the same picture)."""
-    names = (
-        "fps", "frames", "arena_x", "arena_y", "fortress_radius", "shield_radius", "region_radius",
-        "ship_radius", "missile_radius", "shell_radius", "rear_arc",
-    )  # fmt: skip
-    return {name: getattr(config, name) for name in names}
+    """The numbers the page draws with (services/sim/render.py draws the same picture): the fields
+    of the `welcome` and `setup` messages (shared/page.py GEOMETRY)."""
+    return {name: getattr(config, name) for name in GEOMETRY}
 
 
-def view(state: State, narration: dict | None = None) -> dict:
+def view(
+    state: State, narration: dict | None = None, obs: bool = False, role: str | None = None
+) -> StateView:
     """One frame as the page draws it, rounded to what a screen shows (a tenth of a pixel), with the
-    actions that led to it (the page draws a thrusting ship's flame) and the Narrator's fields."""
-    return {
-        "type": "state",
-        "frame": state.frame,
-        "frames": state.frames,
-        "ships": [[_r(x), _r(y), _r(heading), alive] for x, y, _, _, heading, alive in state.ships],
-        "fortress": [_r(state.fortress[0]), *state.fortress[1:4]],  # facing, alive, vulnerable, lock
-        "missiles": [[_r(m[0]), _r(m[1]), int(m[4])] for m in state.missiles],
-        "shells": [[_r(s[0]), _r(s[1])] for s in state.shells],
-        "kills": state.kills,
-        "points": state.points,
-        "applied": state.applied,
+    actions that led to it (the page draws a thrusting ship's flame) and the Narrator's fields;
+    with `obs`, `role`'s observation values too."""
+    return StateView(
+        frame=state.frame,
+        frames=state.frames,
+        ships=[[_r(x), _r(y), _r(heading), alive] for x, y, _, _, heading, alive in state.ships],
+        fortress=[_r(state.fortress[0]), *state.fortress[1:4]],  # facing, alive, vulnerable, lock
+        missiles=[[_r(m[0]), _r(m[1]), int(m[4])] for m in state.missiles],
+        shells=[[_r(s[0]), _r(s[1])] for s in state.shells],
+        kills=state.kills,
+        points=state.points,
+        applied=state.applied,
         **(narration or {"respawn": None, "ending": False}),
-    }
+        obs=state.obs[role] if obs and role is not None else None,
+    )
 
 
 NARRATED = ("kill", "death", "shield_hit", "respawn", "reset", "fortress_respawn")  # what the page shows
@@ -247,12 +182,12 @@ NARRATED = ("kill", "death", "shield_hit", "respawn", "reset", "fortress_respawn
 NO_ROUND_ENDING = ("idle", "random")
 
 
-def event_view(event: GameEvent) -> dict | None:
+def event_view(event: GameEvent) -> EventView | None:
     """A game event as the page shows it (a death with its cause in `detail`), or None for those it
     does not show (missiles, shells and locks are seen in the frames)."""
     if event.kind not in NARRATED:
         return None
-    return {"type": "event", **{name: getattr(event, name) for name in ("frame", "kind", "role", "detail")}}
+    return EventView(frame=event.frame, kind=event.kind, role=event.role, detail=event.detail)
 
 
 class Narrator:
@@ -279,17 +214,16 @@ class Narrator:
         return {"respawn": respawn, "ending": ending}
 
 
-def end(summary: Summary, frames: int) -> dict:
+def end(summary: Summary, frames: int) -> End:
     """The match's result as the page shows it; `frame` short of the planned `frames`: it was
     stopped early (the page says so, never "Time is up")."""
-    return {
-        "type": "end",
-        "kills": summary.kills,
-        "kills_per_minute": round(summary.kills_per_minute, 2),
-        "points": summary.points,
-        "frame": summary.frame,
-        "frames": frames,
-    }
+    return End(
+        kills=summary.kills,
+        kills_per_minute=round(summary.kills_per_minute, 2),
+        points=summary.points,
+        frame=summary.frame,
+        frames=frames,
+    )
 
 
 def points(config: GameConfig) -> dict[str, int]:

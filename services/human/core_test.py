@@ -8,7 +8,6 @@ import pytest
 
 from services.human.core import (
     BURST,
-    LINK_PARAMS,
     STRIKES,
     BadInput,
     Controls,
@@ -22,10 +21,11 @@ from services.human.core import (
 from services.sim.engine import Game
 from services.sim.match import state_message
 from shared.game import DEATH_CAUSES, GameConfig, split_action
+from shared.page import LINK_PARAMS, EventView, Keys, Watch, decode_down
 
 
-def keys(**held: bool) -> dict[str, bool]:
-    return {"left": False, "right": False, "thrust": False, "fire": False, **held}
+def keys(**held: bool) -> Keys:
+    return Keys(**{"left": False, "right": False, "thrust": False, "fire": False, **held})
 
 
 def test_key_state_maps_to_the_action_encoding() -> None:
@@ -38,7 +38,7 @@ def test_key_state_maps_to_the_action_encoding() -> None:
     for action in range(12):
         assert keys_action(action_keys(action)) == action
         turn, thrust, fire = split_action(action)
-        assert action_keys(action)["thrust"] == bool(thrust) and action_keys(action)["fire"] == bool(fire)
+        assert action_keys(action).thrust == bool(thrust) and action_keys(action).fire == bool(fire)
 
 
 @pytest.mark.parametrize(
@@ -64,17 +64,17 @@ def test_bad_messages_are_refused_with_a_reason(text: str | bytes, reason: str) 
 
 def test_a_message_type_is_only_taken_where_it_is_expected() -> None:
     join = json.dumps({"type": "join", "role": "bait", "token": "abc"})
-    assert parse(join, ("join",))["role"] == "bait"
+    assert parse(join, ("join",)).role == "bait"
     with pytest.raises(BadInput):
         parse(join, ("ready", "keys"))
-    assert parse('{"type": "watch"}', ("join", "watch")) == {"type": "watch"}
+    assert parse('{"type": "watch"}', ("join", "watch")) == Watch()
     with pytest.raises(BadInput, match="shape"):
         parse('{"type": "watch", "role": "bait"}', ("join", "watch"))  # a spectator claims nothing
 
 
 def test_controls_hold_the_latest_keys_and_count_drops() -> None:
     controls = Controls()
-    assert controls.receive(json.dumps({"type": "keys", **keys(left=True, fire=True)}))
+    assert controls.receive(keys(left=True, fire=True).encode())
     assert controls.action == 5 and not controls.ready
     assert controls.receive("garbage") is None
     assert controls.action == 5 and controls.drops == {"undecodable": 1}
@@ -95,12 +95,12 @@ def test_rate_limit_allows_a_burst_then_the_rate() -> None:
 def test_a_flooding_connection_is_cut_off() -> None:
     now = [0.0]
     controls = Controls(limit=RateLimit(clock=lambda: now[0]))
-    message = json.dumps({"type": "keys", **keys(thrust=True)})
+    message = keys(thrust=True).encode()
     taken = [controls.receive(message) is not None for _ in range(BURST)]
     assert all(taken) and controls.action == 2
     with pytest.raises(BadInput) as error:
         for _ in range(STRIKES):
-            controls.receive(json.dumps({"type": "keys", **keys(fire=True)}))
+            controls.receive(keys(fire=True).encode())
     assert error.value.reason == "strikes"
     assert controls.action == 2  # nothing over the rate was played
     assert controls.drops == {"rate": STRIKES}
@@ -127,16 +127,20 @@ def test_view_carries_what_the_page_draws() -> None:
         game.step(1, 5)  # bait fires, shooter turns left and fires
     state = state_message(game, "m1", "sim", (1, 5))
     frame = view(state)
-    assert frame["frame"] == 40 and frame["frames"] == 60
-    assert [s[:3] for s in frame["ships"]] == [
+    assert frame.frame == 40 and frame.frames == 60
+    assert [s[:3] for s in frame.ships] == [
         [round(s.x, 1), round(s.y, 1), round(s.heading, 1)] for s in game.ships
     ]
-    assert len(frame["missiles"]) == len(game.missiles) > 0
-    assert {m[2] for m in frame["missiles"]} == {0, 1}  # both ships' missiles, by owner
-    assert frame["fortress"][0] == round(game.facing, 1)
-    assert frame["applied"] == [1, 5]  # the page draws a thrusting ship's flame from these
-    assert frame["respawn"] is None and frame["ending"] is False  # not narrated: nothing to say
-    json.dumps(frame)  # what goes down the socket
+    assert len(frame.missiles) == len(game.missiles) > 0
+    assert {m[2] for m in frame.missiles} == {0, 1}  # both ships' missiles, by owner
+    assert frame.fortress[0] == round(game.facing, 1)
+    assert frame.applied == [1, 5]  # the page draws a thrusting ship's flame from these
+    assert frame.respawn is None and frame.ending is False  # not narrated: nothing to say
+    assert decode_down(frame.encode()) == frame  # what goes down the socket, as the page's contract reads it
+    assert (
+        "obs" not in json.loads(frame.encode())
+        and view(state, obs=True, role="bait").obs == state.obs["bait"]
+    )
 
 
 def test_one_address_gets_its_burst_then_its_rate_and_others_are_untouched():
@@ -171,7 +175,7 @@ def test_the_both_dead_count_down_reaches_zero_on_the_reset_frame() -> None:
     assert {e.role for e in deaths} == {"bait", "shooter"} and all(e.detail in DEATH_CAUSES for e in deaths)
     reset = next(e.frame for e in events if e.kind == "reset")
     both_dead = max(e.frame for e in deaths)
-    counts = {v["frame"]: v["respawn"] for v in views}
+    counts = {v.frame: v.respawn for v in views}
     assert counts[both_dead] == game.config.respawn_delay
     assert [counts[f] for f in range(both_dead, reset)] == list(range(game.config.respawn_delay, 0, -1))
     assert counts[reset] is None and counts[both_dead - 1] is None  # ships alive: no count-down
@@ -198,14 +202,13 @@ def test_the_page_is_sent_the_events_it_shows() -> None:
     from shared.messages import GameEvent
 
     death = GameEvent(match="m", frame=7, sender="sim", kind="death", role="bait", detail="border")
-    shown = {"type": "event", "frame": 7, "kind": "death", "role": "bait", "detail": "border"}
-    assert event_view(death) == shown
+    assert event_view(death) == EventView(frame=7, kind="death", role="bait", detail="border")
     assert event_view(GameEvent(match="m", frame=7, sender="sim", kind="missile", role="bait")) is None
 
 
 def test_a_hello_carries_a_few_short_link_parameters_and_nothing_else():
     six = {f"P{i}": "v" * 40 for i in range(LINK_PARAMS)}
-    assert parse(json.dumps({"type": "hello", "link": six}), ("hello",))["link"] == six
+    assert parse(json.dumps({"type": "hello", "link": six}), ("hello",)).link == six
     for link in ({**six, "more": "x"}, {"STUDY_ID": 7}, {"STUDY_ID": ""}, {"x" * 65: "v"}, ["STUDY_ID"]):
         with pytest.raises(BadInput) as error:
             parse(json.dumps({"type": "hello", "link": link}), ("hello",))

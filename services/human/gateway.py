@@ -15,7 +15,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import ipaddress
-import json
 import logging
 import mimetypes
 import ssl
@@ -33,7 +32,6 @@ from websockets.datastructures import Headers
 from websockets.http11 import Request, Response
 
 from services.human.core import (
-    MAX_MESSAGE,
     NO_ROUND_ENDING,
     BadInput,
     Controls,
@@ -50,10 +48,11 @@ from shared import keys
 from shared.bus import BusConfig, Drops, session, subscribe, until_stopped
 from shared.game import HUMAN, GameConfig
 from shared.messages import Action, GameEvent, Message, MessageError, Start, State, Summary
+from shared.page import MAX_MESSAGE, Join, PageMessage, Ready, Refused, Setup, Welcome
 
 log = logging.getLogger("tsf.human")
 STATIC = Path(__file__).parent / "static"
-PAGES = {"/": "index.html", "/index.html": "index.html", "/tsf.js": "tsf.js"}
+PAGES = {"/": "index.html", "/index.html": "index.html", "/tsf.js": "tsf.js", "/contract.js": "contract.js"}
 SOCKET_PATH = "/ws"
 JOIN_TIMEOUT = 60.0  # seconds a new socket has to say who it is
 REFUSED = 4003  # WebSocket close code: seat refused
@@ -191,10 +190,7 @@ class Bridge:
                 policy="",
             )
             self.publisher.put(action.encode())
-        frame = view(state, self.narrator(state))
-        if self.obs and self.role is not None:
-            frame["obs"] = state.obs[self.role]
-        self.outbox.offer(json.dumps(frame, separators=(",", ":")))
+        self.outbox.offer(view(state, self.narrator(state), self.obs, self.role).encode())
 
     def _on_start(self, start: Start) -> None:
         self._check(start)
@@ -202,17 +198,17 @@ class Bridge:
         partner = next((p for r, p in start.policies.items() if r != self.role), HUMAN)
         ends = self.role is not None and partner not in (HUMAN, *NO_ROUND_ENDING)
         self.narrator = Narrator(self.role, ends, self.config.respawn_delay)
-        self.outbox.offer(json.dumps({"type": "setup", **setup(self.config)}), control=True)
+        self.outbox.offer(Setup(**setup(self.config)).encode(), control=True)
 
     def _on_event(self, event: GameEvent) -> None:
         self._check(event)
         shown = event_view(event)
         if shown is not None:
-            self.outbox.offer(json.dumps(shown, separators=(",", ":")), control=True)
+            self.outbox.offer(shown.encode(), control=True)
 
     def _on_summary(self, summary: Summary) -> None:
         self._check(summary)
-        self.outbox.offer(json.dumps(end(summary, self.config.frames)), control=True)
+        self.outbox.offer(end(summary, self.config.frames).encode(), control=True)
         self.summary.set()
 
     def close(self) -> None:
@@ -231,7 +227,7 @@ async def play_seat(ws: ServerConnection, bridge: Bridge, outbox: Outbox) -> Non
             except BadInput as error:
                 await ws.close(1008, str(error))
                 break
-            if message is not None and message["type"] == "ready":
+            if isinstance(message, Ready):
                 bridge.live()
     finally:
         pump.cancel()
@@ -239,7 +235,7 @@ async def play_seat(ws: ServerConnection, bridge: Bridge, outbox: Outbox) -> Non
             await pump
 
 
-async def receive_first(ws: ServerConnection, allowed: tuple[str, ...]) -> dict | None:
+async def receive_first(ws: ServerConnection, allowed: tuple[str, ...]) -> PageMessage | None:
     """The socket's first message, validated; None (and the socket closed) if it is bad or late."""
     try:
         text = await asyncio.wait_for(ws.recv(), JOIN_TIMEOUT)
@@ -254,7 +250,7 @@ async def receive_first(ws: ServerConnection, allowed: tuple[str, ...]) -> dict 
 async def refuse(ws: ServerConnection, reason: str) -> None:
     """Say why and close; a client that has gone already is simply gone (no traceback)."""
     with contextlib.suppress(websockets.ConnectionClosed):
-        await ws.send(json.dumps({"type": "refused", "reason": reason}))
+        await ws.send(Refused(reason=reason).encode())
         await ws.close(REFUSED, reason[:120])
 
 
@@ -415,28 +411,19 @@ def seat_handler(match: str, book: SeatBook, done: threading.Event | None = None
         join = await receive_first(ws, ("join", "watch"))
         if join is None:
             return
-        if join["type"] == "watch":
+        if not isinstance(join, Join):
             await watch(ws, z, match)
             return
-        reason = book.claim(join["role"], join["token"], ws)
+        reason = book.claim(join.role, join.token, ws)
         if reason:
-            log.info("refused a connection for %s: %s", join["role"], reason)
+            log.info("refused a connection for %s: %s", join.role, reason)
             await refuse(ws, reason)
             return
-        outbox, role = Outbox(asyncio.get_running_loop()), join["role"]
-        bridge = Bridge(z, match, role, Controls(), outbox, join.get("obs", False))
+        outbox, role = Outbox(asyncio.get_running_loop()), join.role
+        bridge = Bridge(z, match, role, Controls(), outbox, bool(join.obs))
         try:
-            await ws.send(
-                json.dumps(
-                    {
-                        "type": "welcome",
-                        "match": match,
-                        "role": role,
-                        **setup(bridge.config),
-                        "points": points(bridge.config),
-                    }
-                )
-            )
+            welcome = Welcome(match=match, role=role, **setup(bridge.config), points=points(bridge.config))
+            await ws.send(welcome.encode())
             log.info("a person took the %s seat of %s", role, match)
             await play_seat(ws, bridge, outbox)
         except websockets.ConnectionClosed:
@@ -456,7 +443,9 @@ async def watch(ws: ServerConnection, z: zenoh.Session, match: str) -> None:
     outbox = Outbox(asyncio.get_running_loop())
     bridge = Bridge(z, match, None, Controls(), outbox)
     try:
-        await ws.send(json.dumps({"type": "welcome", "match": match, "role": None, **setup(bridge.config)}))
+        await ws.send(
+            Welcome(match=match, role=None, **setup(bridge.config), points=points(bridge.config)).encode()
+        )
         await play_seat(ws, bridge, outbox)
     except websockets.ConnectionClosed:
         pass

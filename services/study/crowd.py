@@ -22,6 +22,7 @@ from urllib.parse import quote, urlsplit
 
 from services.recorder.recording import load
 from services.recorder.service import recording_path
+from shared.page import Check
 
 BONUSES = "bonuses.csv"  # in the study's directory
 RESUMES = ("session", "never")  # Crowd.resume's values
@@ -109,14 +110,14 @@ class Crowd:
         return link.get(self.participant, ""), link.get(self.study, ""), link.get(self.session, "")
 
 
-def attention_check(seed: str) -> tuple[dict, str]:
+def attention_check(seed: str) -> tuple[Check, str]:
     """An attention check (the page's `check` message: its text and buttons) and the answer that
     passes it; the word and the buttons' order are drawn from `seed`."""
     rng = random.Random(seed)
     options = rng.sample(WORDS, 4)
     word = rng.choice(options)
     text = f'Attention check: to show that you are reading, please click the button that says "{word}".'
-    return {"type": "check", "text": text, "options": options}, word
+    return Check(text=text, options=options), word
 
 
 def bonus_file(rows: list[tuple[str, float]]) -> str:

@@ -41,9 +41,7 @@ def test_an_attention_check_comes_before_the_first_trial_of_its_sessions_once():
     assert due == [(1, 1), (3, 1)]
     assert crowd.check_due(3, 1, answered=0)  # resumed past session 1's check: asked before going on
     check, word = attention_check("seed")
-    assert (
-        attention_check("seed") == (check, word) and word in check["options"] and f'"{word}"' in check["text"]
-    )
+    assert attention_check("seed") == (check, word) and word in check.options and f'"{word}"' in check.text
     assert len({attention_check(str(i))[1] for i in range(20)}) > 1  # the word changes
     with pytest.raises(ValueError, match="attention_checks"):
         Crowd(attention_checks=(0,))

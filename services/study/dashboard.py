@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import json
 import logging
 import threading
 from collections.abc import Callable, Collection
@@ -30,10 +29,14 @@ from websockets.asyncio.server import ServerConnection
 from services.human.gateway import Gateway, Web, receive_first, refuse, watch
 from services.runtime.launch import watcher_bus
 from services.study.core import Admission, Participant, Study
+from shared.page import DashboardHello, Overview, Watching
 from shared.secret import same_secret
 
 log = logging.getLogger("tsf.study.dashboard")
-PAGES = {"/": "dashboard.html", "/dashboard.js": "dashboard.js", "/watch": "index.html", "/tsf.js": "tsf.js"}
+PAGES = {
+    "/": "dashboard.html", "/dashboard.js": "dashboard.js", "/watch": "index.html", "/tsf.js": "tsf.js",
+    "/contract.js": "contract.js",
+}  # fmt: skip
 EVERY = 1.0  # seconds between two overviews sent down
 WRONG = "not the dashboard's token"
 NOT_RUNNING = "no such match is running"
@@ -173,17 +176,18 @@ class Dashboard:
         first = await receive_first(ws, ("dashboard", "watch"))
         if first is None:
             return
-        if not self.token or not same_secret(first.get("token"), self.token):
+        if not self.token or not same_secret(first.token, self.token):
             log.warning("dashboard: refused a socket from %s: %s", ws.remote_address[0], WRONG)
             await refuse(ws, WRONG)
             return
-        if first["type"] == "dashboard":
+        if isinstance(first, DashboardHello):
             while True:
-                await ws.send(json.dumps(await self.on_study(self.show)))
+                shown = {k: v for k, v in (await self.on_study(self.show)).items() if k != "type"}
+                await ws.send(Overview(**shown).encode())
                 with contextlib.suppress(TimeoutError):
                     await asyncio.wait_for(ws.wait_closed(), EVERY)
                     return
-        await self.spectate(ws, first.get("match", ""))
+        await self.spectate(ws, first.match or "")
 
     async def spectate(self, ws: ServerConnection, match: str) -> None:
         """The match's frames, drawn by the participants' page; closed once the match has ended."""
@@ -192,11 +196,8 @@ class Dashboard:
             await refuse(ws, NOT_RUNNING)
             return
         own = bool(endpoint)  # a local match's sim, dialled by a session of the spectator's own
-        await ws.send(
-            json.dumps(
-                {"type": "watching", "match": match, **await self.on_study(lambda: self.describe(match))}
-            )
-        )
+        described = await self.on_study(lambda: self.describe(match))
+        await ws.send(Watching(match=match, **described).encode())
         bus = watcher_bus(endpoint, self.low_latency)
         z = await asyncio.to_thread(zenoh.open, bus.to_zenoh()) if own else self.router
         watching = asyncio.ensure_future(watch(ws, z, match))

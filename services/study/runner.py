@@ -64,8 +64,24 @@ from services.study.crowd import FAILS, attention_check, write_bonuses
 from services.study.dashboard import Dashboard, about, overview
 from services.study.judge import Judge, judge
 from services.study.remote import Remote
+from shared import page
 from shared.bus import BusConfig, until_stopped
 from shared.game import FPS, ROLES, GameConfig, other
+from shared.page import (
+    Answer,
+    ConsentText,
+    Declined,
+    Done,
+    Hello,
+    Keys,
+    PageMessage,
+    ParticipantId,
+    Problem,
+    Queue,
+    Screened,
+    Stopped,
+    Wait,
+)
 from shared.secret import same_secret, signature
 
 log = logging.getLogger("tsf.study")
@@ -133,8 +149,8 @@ class Socket:
         self.answer = ""  # the last answer to an attention check
         self.tasks = [asyncio.ensure_future(self._read()), asyncio.ensure_future(self._pump())]
 
-    def send(self, message: dict) -> None:
-        self.outbox.offer(json.dumps(message), control=True)
+    def send(self, message: PageMessage) -> None:
+        self.outbox.offer(message.encode(), control=True)
 
     @property
     def closed(self) -> bool:
@@ -146,10 +162,10 @@ class Socket:
         try:
             async for text in self.ws:
                 message = self.controls.receive(text, ("consent", "decline", "ready", "keys", "answer"))
-                if message is not None and message["type"] == "answer":
-                    self.answer = message["answer"]
-                if message is not None and message["type"] != "keys":
-                    self.events.put_nowait(message["type"])
+                if isinstance(message, Answer):
+                    self.answer = message.answer
+                if message is not None and not isinstance(message, Keys):
+                    self.events.put_nowait(message.TYPE)
         except BadInput as error:
             await self.ws.close(1008, str(error))
         except websockets.ConnectionClosed:
@@ -358,7 +374,7 @@ class TrialRunner:
             place = admission.place(match)
             if place != told:
                 wait = round(admission.wait(place, self.match_seconds))
-                socket.send({"type": "queue", "place": place, "wait": wait})
+                socket.send(Queue(place=place, wait=wait))
                 told = place
             await first(self.matches.changed.wait(), socket.gone.wait())
             if socket.gone.is_set():
@@ -406,7 +422,7 @@ class TrialRunner:
         z = self.remote.z if hosted and self.remote else self.pool.z
         return Bridge(z, trial.match, trial.role, socket.controls, socket.outbox, obs)
 
-    async def play(self, socket: Socket, trial: Trial, obs: bool, offer: dict) -> dict | None:
+    async def play(self, socket: Socket, trial: Trial, obs: bool, offer: page.Trial) -> dict | None:
         """Run one trial: wait for a free match, start it (its processes start while the participant
         reads the `offer`, and its sim waits for them: a warm start), then play it from their Ready
         for at most its length and `trial_timeout`. Returns the sidecar, or None if the participant
@@ -418,7 +434,7 @@ class TrialRunner:
             self.matches.admission.end(trial.match)
             self.matches.notify()
             return None
-        socket.send({"type": "wait", "reason": SETTING_UP, "seconds": round(SET_UP)})
+        socket.send(Wait(reason=SETTING_UP, seconds=round(SET_UP)))
         host = self.matches.admission.running[trial.match]  # Admission.LOCAL: this machine
         plan = self.plan(trial)
         if not trial.practice:
@@ -449,7 +465,7 @@ class TrialRunner:
         socket: Socket,
         trial: Trial,
         seat: Bridge,
-        offer: dict,
+        offer: page.Trial,
         running: asyncio.Future,
         stop: threading.Event,
     ) -> bool:
@@ -500,7 +516,7 @@ class Front:
         contact = self.study.config.crowd.contact
         text = STOPPED + (f" If it stays stopped, please contact {contact}." if contact else "")
         for socket, _ in list(self.playing.values()):
-            socket.send({"type": "stopped", "text": text})
+            socket.send(Stopped(text=text))
         await asyncio.gather(*(socket.close() for socket, _ in list(self.playing.values())))
 
     async def handle(self, ws: ServerConnection, z: zenoh.Session | None) -> None:
@@ -519,8 +535,8 @@ class Front:
                 older[0].gone.set()
                 await older[1].wait()  # its trial ended and set down (resumed below)
             self.playing[participant.id] = (socket, left)
-            test = bool(self.serving.test_token) and same_secret(hello.get("test"), self.serving.test_token)
-            await Visit(self.study, self.runner, socket, participant, hello.get("obs", False) and test).run()
+            test = bool(self.serving.test_token) and same_secret(hello.test, self.serving.test_token)
+            await Visit(self.study, self.runner, socket, participant, bool(hello.obs) and test).run()
         finally:
             if participant is not None and self.playing.get(participant.id, (None,))[0] is socket:
                 del self.playing[participant.id]
@@ -528,32 +544,32 @@ class Front:
             for task in socket.tasks:
                 task.cancel()
 
-    async def admit(self, socket: Socket, hello: dict) -> Participant | None:
+    async def admit(self, socket: Socket, hello: Hello) -> Participant | None:
         """The participant who resumes (id and key), or a new one once they consent: ids are
         issued only then, at a limited rate, and once per crowd-sourcing worker id."""
         study, config = self.study, self.study.config
-        if "participant" in hello:
-            participant = study.resume(hello["participant"], hello.get("key", ""))
+        if hello.participant is not None:
+            participant = study.resume(hello.participant, hello.key or "")
             if participant is None:
-                await self.refuse(socket, study.participants.get(hello["participant"]), UNKNOWN, "resume key")
+                await self.refuse(socket, study.participants.get(hello.participant), UNKNOWN, "resume key")
             return participant
-        ids = [worker_id(v) for v in config.crowd.ids(hello.get("link", {}))]
-        worker = ids[0] or worker_id(hello.get("worker"))
+        ids = [worker_id(v) for v in config.crowd.ids(hello.link or {})]
+        worker = ids[0] or worker_id(hello.worker)
         if worker is None or None in ids:
             await refuse(socket.ws, NO_WORKER)
             return None
         if self.serving.link_secret and not (
-            worker and same_secret(hello.get("sig"), signature(self.serving.link_secret, worker))
+            worker and same_secret(hello.sig, signature(self.serving.link_secret, worker))
         ):
             await refuse(socket.ws, UNSIGNED)
             return None
         link = {k: v for k, v in zip(("study", "session"), ids[1:], strict=True) if v}
         if study.taken(worker):  # back through the platform's link: another tab, browser or device
             return await self.returning(socket, study.by_worker(worker), link)
-        socket.send({"type": "consent", "text": config.consent_text()})
+        socket.send(ConsentText(text=config.consent_text()))
         answer = await socket.wait_for(("consent", "decline"))
         if answer == "decline":  # no id, nothing written
-            socket.send({"type": "declined", "text": DECLINED})
+            socket.send(Declined(text=DECLINED))
             await socket.close()
         if answer != "consent":
             return None
@@ -566,7 +582,7 @@ class Front:
             return None
         participant = study.arrive(worker, link)
         log.info("participant %s arrives and plays the %s", participant.id, participant.role)
-        socket.send({"type": "participant", "participant": participant.id, "key": participant.key})
+        socket.send(ParticipantId(participant=participant.id, key=participant.key))
         return participant
 
     def proven(self, participant: Participant, link: dict[str, str]) -> bool:
@@ -586,7 +602,7 @@ class Front:
         or screened-out one is shown their end again), else refused, journalled and logged."""
         if self.proven(participant, link):
             log.info("participant %s resumes through the platform's link", participant.id)
-            socket.send({"type": "participant", "participant": participant.id, "key": participant.key})
+            socket.send(ParticipantId(participant=participant.id, key=participant.key))
             return participant
         finished = self.study.next_trial(participant) is None or participant.screened
         await self.refuse(
@@ -624,16 +640,16 @@ class Visit:
             obs,
         )
 
-    def offer(self, trial: Trial, last: int | None, again: bool) -> dict:
+    def offer(self, trial: Trial, last: int | None, again: bool) -> page.Trial:
         """The `trial` message: where the game sits in the study, what to read first."""
         config = self.study.config
-        return {
-            "type": "trial", "role": trial.role, "agent": trial.agent, "last": last,
-            "session": trial.session, "sessions": len(config.variants),
-            "trial": trial.trial, "trials": config.trials, "again": again, "practice": trial.practice,
-            "instructions": config.instructions.get(trial.role, ""),
-            "points": points(GameConfig()) if config.show_points else None,
-        }  # fmt: skip
+        return page.Trial(
+            role=trial.role, agent=trial.agent, last=last, session=trial.session,
+            sessions=len(config.variants), trial=trial.trial, trials=config.trials, again=again,
+            practice=trial.practice,
+            instructions=config.instructions.get(trial.role, ""),
+            points=points(GameConfig()) if config.show_points else None,
+        )  # fmt: skip
 
     async def attend(self, trial: Trial) -> bool:
         """The attention check due before `trial`, if any; False (the page sent on to the
@@ -647,7 +663,7 @@ class Visit:
             self.study.check(participant, socket.answer == word)
         if participant.screened:
             redirect = config.crowd.redirect(config.crowd.screened_out_url, participant.code)
-            socket.send({"type": "screened", "text": SCREENED, "redirect": redirect})
+            socket.send(Screened(text=SCREENED, redirect=redirect))
             log.info("participant %s is screened out: %d attention checks failed", participant.id, FAILS)
             await socket.close()
             return False
@@ -679,7 +695,7 @@ class Visit:
                 failures += 1
                 if failures < RETRIES:
                     continue
-                socket.send({"type": "problem", "text": PROBLEM})
+                socket.send(Problem(text=PROBLEM))
                 await socket.close()
                 return
             last, failures = sidecar["kills"], 0
@@ -687,7 +703,7 @@ class Visit:
         code = crowd.code(participant.code)
         redirect = crowd.redirect(crowd.completion_url, code)
         text = study.config.end_text(bool(redirect))
-        socket.send({"type": "done", "text": text, "code": code, "redirect": redirect})
+        socket.send(Done(text=text, code=code, redirect=redirect))
         log.info("participant %s is done", participant.id)
         await socket.close()
 

@@ -1,10 +1,10 @@
 """A headless stand-in participant: a policy that goes through the study as a person would, over the
-same WebSocket protocol as the page (consent, ready, held keys), so a whole study runs end to end
+same WebSocket protocol as the page (consent, ready, held keys), each message read and sent
+through the page's contract (shared/page.py), so a whole study runs end to end
 without anyone at a keyboard (tests, and dry runs of a new study config)."""
 
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import dataclass, field
 
@@ -14,6 +14,26 @@ from services.adapter.partners import make_partner
 from services.human.core import action_keys
 from services.sim.observation import as_observation
 from services.sim.play import policy_seed
+from shared.page import (
+    Answer,
+    Check,
+    Consent,
+    ConsentText,
+    Done,
+    End,
+    Hello,
+    ParticipantId,
+    Problem,
+    Queue,
+    Ready,
+    Refused,
+    Screened,
+    StateView,
+    Stopped,
+    Trial,
+    Wait,
+    decode_down,
+)
 
 
 @dataclass
@@ -72,77 +92,77 @@ async def stand_in(
     127.0.0.2 and on)."""
     policies = policies or {"bait": "circle", "shooter": "mirror"}
     report = StandInReport()
-    hello: dict = {"type": "hello", "obs": True, **({"test": test} if test else {})}
-    hello.update({"worker": worker} if worker else {})
-    hello.update({"sig": sig} if sig else {})
-    hello.update({"link": link} if link else {})
-    if resume:
-        hello.update(participant=resume[0], key=resume[1])
+    hello = Hello(
+        obs=True, test=test or None, worker=worker or None, sig=sig or None, link=link or None,
+        **({"participant": resume[0], "key": resume[1]} if resume else {}),
+    )  # fmt: skip
     policy, held, ready, queued, since = None, None, None, 0.0, time.monotonic()
     socket = url.replace("http", "ws", 1).rstrip("/") + "/ws"
     local = {"local_addr": (address, 0)} if address else {}
     async with websockets.connect(socket, ssl=ssl, **local) as ws:
-        await ws.send(json.dumps(hello))
+        await ws.send(hello.encode())
         async for text in ws:
-            message = json.loads(text)
-            kind = message["type"]
-            if kind == "consent":
-                report.consent = message["text"]
-                await ws.send(json.dumps({"type": "consent"}))
+            message = decode_down(text)  # the page's contract, as the page reads it
+            if isinstance(message, ConsentText):
+                report.consent = message.text
+                await ws.send(Consent().encode())
                 since = time.monotonic()
-            elif kind == "participant":
-                report.participant, report.key = message["participant"], message["key"]
-            elif kind == "check":
+            elif isinstance(message, ParticipantId):
+                report.participant, report.key = message.participant, message.key
+            elif isinstance(message, Check):
                 report.checks += 1
-                word = message["text"].split('"')[1]  # the button the check names
-                answer = word if attentive else next(o for o in message["options"] if o != word)
-                await ws.send(json.dumps({"type": "answer", "answer": answer}))
-            elif kind == "queue":
-                report.queued = max(report.queued, message["place"])
+                word = message.text.split('"')[1]  # the button the check names
+                answer = word if attentive else next(o for o in message.options if o != word)
+                await ws.send(Answer(answer=answer).encode())
+            elif isinstance(message, Queue):
+                report.queued = max(report.queued, message.place)
                 queued = queued or time.monotonic()
-            elif kind == "trial":
+            elif isinstance(message, Trial):
                 report.offers.append(time.monotonic() - since)
                 if queued:
                     report.waits.append(time.monotonic() - queued)
                     queued = 0.0
-                report.again += message.get("again", False)
-                report.role = message["role"]
-                report.agents.append(message["agent"])
+                report.again += message.again
+                report.role = message.role
+                report.agents.append(message.agent)
                 policy = make_partner(policies[report.role], report.role)
                 policy.reset(policy_seed(seed + len(report.agents) - 1, report.role))
-                await ws.send(json.dumps({"type": "ready"}))
+                await ws.send(Ready().encode())
                 ready = time.monotonic()
-            elif kind == "state":
+            elif isinstance(message, StateView):
                 if ready is not None:
                     report.first_frames.append(time.monotonic() - ready)
                     ready = None
-                if policy is None or "obs" not in message:
+                if policy is None or message.obs is None:
                     continue
                 report.states += 1
                 if leave_after and report.states >= leave_after:
                     return report
-                keys = action_keys(policy.act(as_observation(message["obs"], policy.view)))
+                keys = action_keys(policy.act(as_observation(message.obs, policy.view)))
                 if keys != held:  # a person's keyboard reports changes, not frames
                     held = keys
-                    await ws.send(json.dumps({"type": "keys", **keys}))
-            elif kind == "wait":
+                    await ws.send(keys.encode())
+            elif isinstance(message, Wait):
                 report.set_ups += 1
-            elif kind == "end":
-                report.kills.append(message["kills"])
-                left = message["frames"] - message["frame"]
+            elif isinstance(message, End):
+                report.kills.append(message.kills)
+                left = message.frames - message.frame
                 report.cut += [left] if left > 0 else []
                 since = time.monotonic()
-            elif kind == "done":
-                report.done, report.end, report.code = True, message["text"], message.get("code", "")
-                report.redirect = message.get("redirect", "")
+            elif isinstance(message, Done):
+                report.done, report.end, report.code = True, message.text, message.code
+                report.redirect = message.redirect
                 return report
-            elif kind == "screened":
-                report.screened, report.end, report.redirect = True, message["text"], message["redirect"]
+            elif isinstance(message, Screened):
+                report.screened, report.end, report.redirect = True, message.text, message.redirect
                 return report
-            elif kind == "stopped":
-                report.stopped = message["text"]
+            elif isinstance(message, Stopped):
+                report.stopped = message.text
                 return report
-            elif kind in ("refused", "problem"):
-                report.refused = message.get("reason") or message.get("text", "")
+            elif isinstance(message, Refused):
+                report.refused = message.reason
+                return report
+            elif isinstance(message, Problem):
+                report.refused = message.text
                 return report
     return report

@@ -71,6 +71,7 @@ const socket = new WebSocket(scheme + location.host + "/ws");
 socket.onopen = () => socket.send(JSON.stringify({ type: "dashboard", ...(token ? { token } : {}) }));
 socket.onmessage = (event) => {
   const message = JSON.parse(event.data);
+  if (!Object.hasOwn(CONTRACT.down, message.type)) return;  // not the page's contract (contract.js)
   if (message.type === "refused") {
     dash.refused = message.reason;
     document.body.classList.add("refused");

@@ -2,7 +2,8 @@
 // The sim is the clock; this page only draws (once per frame received, so at the game's 30 fps)
 // and reports key changes. Three ways in: a seat link (?role=R&token=T, from `tsf play`), a
 // spectator's link (?watch=1: a match or its live replay, playing no seat), or the study's front
-// door (no token: consent, role, sessions of trials; see services/study/runner.py).
+// door (no token: consent, role, sessions of trials; see services/study/runner.py). Every message in
+// and out is one of the page's contract (shared/page.py, generated into contract.js, loaded first).
 "use strict";
 
 const COLOURS = {
@@ -267,6 +268,7 @@ function connect() {
   };
   socket.onmessage = (event) => {
     const message = JSON.parse(event.data);
+    if (!Object.hasOwn(CONTRACT.down, message.type)) return;  // not the page's contract (contract.js)
     const handle = handlers[message.type];
     if (handle) handle(message);
   };
@@ -279,8 +281,8 @@ function connect() {
   };
 }
 
-function sendKeys() {
-  send({ type: "keys", ...held });
+function sendKeys() {  // the fields the contract names, each held or not
+  send({ type: "keys", ...Object.fromEntries(CONTRACT.up.keys.map((key) => [key, held[key]])) });
 }
 
 function release() {

@@ -22,6 +22,7 @@ from services.study.crowd import Crowd
 from services.study.runner import STOPPED
 from services.study.standin import stand_in
 from shared.messages import Summary
+from shared.page import End
 
 VARIANT = (Variant.read("s", "B5", "S5"),)
 CONTACT = "the researcher at lab@example.org"
@@ -69,9 +70,7 @@ def test_a_game_cut_short_is_said_to_be(tmp_path) -> None:
     """The `end` message carries the frame the game ended at and the frames it was to last: the
     page says "stopped" for one that ended early, "Time is up" only for one that ran its time."""
     summary = Summary(match="m", frame=59, sender="sim", kills=1, points=80)
-    assert end(summary, 900) | {"kills_per_minute": 0} == {
-        "type": "end", "kills": 1, "kills_per_minute": 0, "points": 80, "frame": 59, "frames": 900,
-    }  # fmt: skip
+    assert end(summary, 900) == End(kills=1, kills_per_minute=0.0, points=80, frame=59, frames=900)
 
 
 def test_consent_names_the_practice_and_the_checks_and_the_end_matches_the_redirect() -> None:

@@ -626,20 +626,16 @@ class Front:
         issued only then, at a limited rate, and once per crowd-sourcing worker id."""
         study, config = self.study, self.study.config
         address = client_address(socket.ws, self.trusted)
-        if "participant" in hello:
-            participant = study.resume(hello["participant"], hello.get("key", ""))
+        if hello.participant is not None:
+            participant = study.resume(hello.participant, hello.key or "")
             if participant is None:
                 if not self.reconnects.allow(address):
                     await self.over_limit(socket, address, RECONNECTS, "too many failed resumes")
                     return None
-                await refuse(socket.ws, "unknown participant or resume key")
+                await self.refuse(socket, study.participants.get(hello.participant), UNKNOWN, "resume key")
             elif not self.reconnects.allow(f"participant {participant.id}"):
                 await self.over_limit(socket, address, RECONNECTS, f"too many reconnects of {participant.id}")
                 return None
-        if hello.participant is not None:
-            participant = study.resume(hello.participant, hello.key or "")
-            if participant is None:
-                await self.refuse(socket, study.participants.get(hello.participant), UNKNOWN, "resume key")
             return participant
         ids = [worker_id(v) for v in config.crowd.ids(hello.link or {})]
         worker = ids[0] or worker_id(hello.worker)

@@ -60,7 +60,7 @@ def train(path: Path, steps: int) -> None:
     import gymnasium
     from stable_baselines3 import PPO
 
-    import services  # noqa: F401 - registers tsf/Role-v0
+    from services.agent import envs  # noqa: F401 - registers tsf/Role-v0
 
     print(f"\n# train: PPO bait against S5, {steps} steps -> {path}", flush=True)
     env = gymnasium.make("tsf/Role-v0", role="bait", partner="S5")

@@ -38,7 +38,7 @@ from services.sim import observation as ob
 from services.sim.sampling import batch_probs
 from services.table.table import Table
 from shared.errors import Failure, UsageError
-from shared.game import ROLES, GameConfig, other, split_action
+from shared.game import FPS, ROLES, GameConfig, other, split_action
 
 GROUPS = ("pairs", "bait stand-in", "shooter stand-in")
 STUDY_PAIRS = 2.6  # kills/min: the original study's human-human teams
@@ -117,7 +117,7 @@ def statistics(actions: np.ndarray, opened: np.ndarray, kills_per_minute: float)
     inner = np.concatenate(per_key) if any(len(r) for r in per_key) else np.array([len(actions)])
     after = np.searchsorted(when, opened, side="right")
     latency = [when[i] - f for i, f in zip(after, opened, strict=True) if i < len(when)]
-    seconds = len(actions) / 30.0
+    seconds = len(actions) / FPS
     return {
         "key_changes_per_s": len(when) / seconds,
         "frozen_share": float(runs[runs >= FROZEN].sum() / len(actions)),
@@ -214,7 +214,7 @@ def traits(trials: list[Trial]) -> dict[str, float]:
     for name, runs in holds.items():
         out[f"{name}_hold_median_ms"], out[f"{name}_hold_p90_ms"] = _ms(runs, 50), _ms(runs, 90)
     out["lapse_share"] = lapsed / max(alive, 1)
-    out["fires_per_s"] = presses / (frames / 30.0)
+    out["fires_per_s"] = presses / (frames / FPS)
     out["fires_open_share"] = open_presses / presses if presses else None
     return out
 
@@ -377,7 +377,7 @@ def signature(actions: np.ndarray, obs: np.ndarray, kills_per_minute: float, pol
     starts = np.flatnonzero(np.diff(np.concatenate([[0], frozen.astype(np.int64)])) == 1)
     pressed = fire_presses(keys)
     open_share = obs[pressed, ob.FORTRESS + ob.F_VULNERABLE] > 0.0
-    seconds = frames / 30.0
+    seconds = frames / FPS
     return np.array(
         [
             *likelihoods,

@@ -158,7 +158,7 @@ class MatchHost:
 
     def __init__(self, bus: BusConfig, name: str, slots: int, out: Path, secret: bytes) -> None:
         self.bus, self.name, self.out = bus, name, out
-        self.host = Host(keys.check_match(name), slots, out, secret)
+        self.host = Host(keys.check_name(name), slots, out, secret)
         self.drops = Drops(self.host.sender)
         self.played = 0
         try:

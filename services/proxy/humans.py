@@ -32,6 +32,7 @@ from services.population.human_like import (
     rules_of,
 )
 from services.population.keys import LAPSE, changes, fire_presses, shortest_runs, still
+from services.population.seat import seats_of
 from services.proxy.data import pairs, person_seats, study_record
 from services.recorder.recording import load
 from services.sim import observation as ob
@@ -76,7 +77,7 @@ def calibration(
     plan = [
         (skill, group, team) for skill in skills for group, ts in teams(skill, table).items() for team in ts
     ]
-    kills = play_teams([team for *_, team in plan], list(range(seeds)), config)
+    kills = play_teams([seats_of(team) for *_, team in plan], list(range(seeds)), config)
     rows = []
     for skill in skills:
         for group in GROUPS:
@@ -240,7 +241,7 @@ def simulated(people: dict[str, tuple[str, str]], role: str, seeds: int = FIT_SE
         for skill in FIT_SKILLS:
             person = f"human({policy},skill={skill:g})"
             teams.append((person, agent) if role == "bait" else (agent, person))
-    kills, played, opened = play_teams(teams, list(range(seeds)), record=True)
+    kills, played, opened = play_teams(list(map(seats_of, teams)), list(range(seeds)), record=True)
     seat = ROLES.index(role)
     tables = []
     for p in range(len(kinds)):
@@ -403,7 +404,8 @@ def design(policy: str, agent: str, role: str) -> tuple[np.ndarray, np.ndarray]:
     teams = [
         (human_with(policy, d), agent) if role == "bait" else (agent, human_with(policy, d)) for d in drawn
     ]
-    kills, played, _, obs = play_teams(teams, list(range(DESIGN_GAMES)), record=True, world_of=role)
+    played_teams = list(map(seats_of, teams))
+    kills, played, _, obs = play_teams(played_teams, list(range(DESIGN_GAMES)), record=True, world_of=role)
     actions = played[..., ROLES.index(role)]
     inner = networks.load(policy)
     signatures = np.array(

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from services.population.adaptive import AdapterConfig
-from services.population.seat import ADAPTIVE_KIND, SeatSpec
+from services.population.seat import AdaptiveSeat, SeatSpec
 from services.study.crowd import FAILS, Crowd
 from shared.errors import UsageError
 from shared.game import DURATION, FPS, ROLES, SEEDS, other
@@ -60,7 +60,7 @@ class Variant:
     adapter: SeatSpec | None = None
 
     def __post_init__(self) -> None:
-        if self.adapter and self.adapter.kind != ADAPTIVE_KIND:
+        if self.adapter and not isinstance(self.adapter, AdaptiveSeat):
             raise ValueError(f"variant {self.name}: {str(self.adapter)!r} names no adaptive agent")
 
     @classmethod

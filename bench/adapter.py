@@ -22,6 +22,7 @@ import numpy as np
 from services.adapter.service import build, run_adapter
 from services.evaluation.evaluate import play_games
 from services.population.adaptive import STRATEGIES, AdapterConfig
+from services.population.seat import seats_of
 from services.runtime.launch import service_command
 from shared.bus import BusConfig, free_endpoint
 from shared.game import FPS
@@ -33,7 +34,8 @@ WINDOW = 800
 def in_process(role: str, strategy: str, frames: int) -> np.ndarray:
     """Seconds per frame of scoring + update for a partner's recorded game."""
     partner = "B5" if role == "shooter" else "S5"
-    stream = play_games([(partner, "S5" if role == "shooter" else "B5", 0)], role, record=True)[0]
+    teammate = "S5" if role == "shooter" else "B5"
+    stream = play_games([(*seats_of([partner, teammate]), 0)], role, record=True)[0]
     window = AdapterConfig.window if "skill" in strategy else WINDOW  # the skill model's T
     adapter, scorer = build(AdapterConfig(role, window, strategy))
     costs = []

@@ -23,6 +23,7 @@ import numpy as np
 from services.agent import library
 from services.evaluation.evaluate import play_teams
 from services.population.human_like import SKILLS
+from services.population.seat import seats_of
 from services.proxy.humans import STUDY_PAIRS, calibration
 from services.table.table import Table
 from shared.game import GameConfig
@@ -53,14 +54,16 @@ def evidence(seeds: list[int]) -> None:
     print(f"\nlibrary pairs (each bait with its best shooter), a pure delay ({len(seeds)} seeds)")
     print(f"{'delay':>14s}" + "".join(f"{seat:>18s}" for seat in seats))
     for d in DELAYS:
-        cells = [mean_se(play_teams([team(b, s, d) for b, s in pairs], seeds)) for team in seats.values()]
+        cells = [
+            mean_se(play_teams([seats_of(team(b, s, d)) for b, s in pairs], seeds)) for team in seats.values()
+        ]
         print(f"{d:3d} fr {d * 1000 / 30:4.0f} ms" + "".join(f"{c:>18s}" for c in cells))
     humans = [(f"human({b})", f"human({s})") for b, s in pairs]
     print(f"\nthe rule numbers marked (assumption), varied ({len(seeds)} seeds)")
     print(f"{'rules':>22s}{'library pairs':>18s}{'typical stand-ins':>20s}")
     for name, changes in RULES.items():
         config = GameConfig().replace(**changes)
-        cells = [mean_se(play_teams(teams, seeds, config)) for teams in (pairs, humans)]
+        cells = [mean_se(play_teams(list(map(seats_of, teams)), seeds, config)) for teams in (pairs, humans)]
         print(f"{name:>22s}{cells[0]:>18s}{cells[1]:>20s}")
 
 
@@ -79,7 +82,7 @@ def learning(people: int) -> None:
     for skill in SKILLS:
         person = f"skill={skill},session={STUDY_TRIALS}"
         teams = [(f"human({b},{person})", f"human({s},{person})") for b, s in pairs]
-        kills[skill] = play_teams(teams, seeds).reshape(len(pairs), people, STUDY_TRIALS)
+        kills[skill] = play_teams(list(map(seats_of, teams)), seeds).reshape(len(pairs), people, STUDY_TRIALS)
     for trial in range(STUDY_TRIALS):
         cells = [mean_se(k[:, :, trial]) for k in kills.values()]
         print(f"{trial + 1:6d}" + "".join(f"{c:>16s}" for c in cells))

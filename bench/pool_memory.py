@@ -20,7 +20,7 @@ from pathlib import Path
 
 from proc import rss_kib
 
-from services.population.seat import KEY, SeatSpec
+from services.population.seat import PolicySeat
 from services.runtime.launch import MatchPlan
 from services.runtime.pool import Pool
 from shared.errors import Failure
@@ -54,7 +54,7 @@ def main() -> None:
         for i in range(args.warmup + args.matches):
             plan = MatchPlan(
                 match=f"mem-{i}", seed=i, frames=args.frames, directory=Path(out),
-                bait=SeatSpec(KEY, "B3"), shooter=SeatSpec(KEY, "S5"),
+                bait=PolicySeat("B3"), shooter=PolicySeat("S5"),
             )  # fmt: skip
             try:
                 pool.run(plan)

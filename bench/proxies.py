@@ -33,6 +33,7 @@ from services.agent import library, networks, seats
 from services.evaluation.evaluate import play_games
 from services.evaluation.identification import windowed
 from services.population.partners import make_partner
+from services.population.seat import seats_of
 from services.proxy.data import extract
 from services.proxy.synthetic import record_trial, trial_seed
 from services.proxy.train import Settings, train
@@ -84,7 +85,7 @@ def identify(partner_name: str, source: str, games: int) -> tuple[str, float]:
 def team(partner_name: str, games: int) -> dict[str, tuple[float, float]]:
     """Kills per minute (mean, standard error) of the partner with each shooter of SHOOTERS."""
     plan = [(partner_name, shooter, 2000 + seed) for shooter in SHOOTERS for seed in range(games)]
-    outcomes = play_games(plan, "shooter")
+    outcomes = play_games([(*seats_of(names), seed) for *names, seed in plan], "shooter")
     out = {}
     for i, shooter in enumerate(SHOOTERS):
         values = [o.kills_per_minute for o in outcomes[i * games : (i + 1) * games]]

@@ -1,5 +1,6 @@
-"""Team Space Fortress services. Importing the package registers the Gymnasium id `tsf/Role-v0`
-(services/agent/envs.py).
+"""Team Space Fortress services. Importing the package loads nothing else: the Gymnasium id
+`tsf/Role-v0` is registered by importing services/agent/envs.py, so that a live service never
+pays for gymnasium's import and its env registry.
 
 numpy's BLAS runs one thread per process unless OPENBLAS_NUM_THREADS says otherwise: bulk play
 (sweeps, `tsf eval`, the vectorised env) runs one process per core, and BLAS threads that spin
@@ -10,7 +11,3 @@ for a core beside them slow a batch's network inference several times over (one 
 import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
-from services.agent.envs import register as _register  # noqa: E402 - after the BLAS setting
-
-_register()

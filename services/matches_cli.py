@@ -163,13 +163,13 @@ def play_command(
 ) -> None:
     """Play a match from a browser, with an agent or another person; prints the link(s) to open."""
     from services.human.play import play_with_people
-    from services.population.seat import PERSON, SeatSpec, check_live
+    from services.population.seat import PersonSeat, SeatSpec, check_live
     from services.runtime.launch import MatchPlan, new_match_id
 
     if role not in ROLES:
         raise typer.BadParameter("role is bait or shooter")
     partner_role = other(role)
-    seats = {role: SeatSpec(PERSON)}
+    seats = {role: PersonSeat()}
     if partner == "adaptive":
         seats[partner_role] = SeatSpec.adaptive_agent(adapter(role=partner_role, seed=seed))
     else:

@@ -314,7 +314,7 @@ def in_pool(match: str, pool: str) -> bool:
         keys.check_match(match)
         return False
     try:
-        keys.check_match(pool)
+        keys.check_name(pool)
     except UsageError:
         raise UsageError("--pool", pool, "invalid pool name: use 1-64 letters, digits, '-' or '_'") from None
     return True

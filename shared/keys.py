@@ -3,10 +3,13 @@
 tsf/<match>/state                 sim -> all       one State per frame
 tsf/<match>/action/<role>         agent or human -> sim, one Action per state
 tsf/<match>/policy/<role>         adapter or operator -> agent: which library policy to play
+tsf/<match>/start                 sim -> all       the match's Start (config, seats), once, before its states
 tsf/<match>/event                 sim -> all       game events (kills, deaths, ...)
 tsf/<match>/summary               sim -> all       the match result, once, at the end
 tsf/<match>/adapter               adapter -> all   AdapterStatus: similarity scores, belief, choice
 tsf/<match>/alive/<service>[/<role>]  liveliness tokens, one per running service
+
+A match id is never one of the namespaces below (`sweep`, `host`, `pool`): tsf/pool/... is a pool's.
 
 tsf/sweep/<sweep>/coordinator       liveliness token of a sweep's coordinator
 tsf/sweep/<sweep>/worker/<worker>   liveliness token of a sweep worker
@@ -36,12 +39,22 @@ from shared.game import ROLES, check_role
 PREFIX = "tsf"
 SERVICES = ("sim", "agent", "recorder", "adapter", "human")
 _MATCH_ID = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
+NAMESPACES = ("sweep", "host", "pool")  # tsf/<namespace>/...: keys that are no match's
+
+
+def check_name(name: str) -> str:
+    """A match, sweep, host, pool or worker id is one key chunk: letters, digits, '-' and '_' only
+    (no wildcards, no '/')."""
+    if not isinstance(name, str) or not _MATCH_ID.match(name):
+        raise UsageError("--match", name, "invalid match id: use 1-64 letters, digits, '-' or '_'")
+    return name
 
 
 def check_match(match: str) -> str:
-    """A match id is one key chunk: letters, digits, '-' and '_' only (no wildcards, no '/')."""
-    if not isinstance(match, str) or not _MATCH_ID.match(match):
-        raise UsageError("--match", match, "invalid match id: use 1-64 letters, digits, '-' or '_'")
+    """A match id: one key chunk (`check_name`) that is not a namespace, whose keys it would share."""
+    if check_name(match) in NAMESPACES:
+        names = ", ".join(f"tsf/{n}" for n in NAMESPACES)
+        raise UsageError("--match", match, f"is a bus namespace ({names}), not a match id: choose another")
     return match
 
 
@@ -110,20 +123,20 @@ def everything(match: str) -> str:
 
 def job_worker(sweep: str, worker: str = "*") -> str:
     """A sweep worker's liveliness token (the default `*` matches every worker of the sweep)."""
-    return f"{PREFIX}/sweep/{check_match(sweep)}/worker/{_worker(worker)}"
+    return f"{PREFIX}/sweep/{check_name(sweep)}/worker/{_worker(worker)}"
 
 
 def job_coordinator(sweep: str) -> str:
     """The coordinator's liveliness token: workers leave when it goes away."""
-    return f"{PREFIX}/sweep/{check_match(sweep)}/coordinator"
+    return f"{PREFIX}/sweep/{check_name(sweep)}/coordinator"
 
 
 def job_order(sweep: str, worker: str) -> str:
-    return f"{PREFIX}/sweep/{check_match(sweep)}/job/{_worker(worker)}"
+    return f"{PREFIX}/sweep/{check_name(sweep)}/job/{_worker(worker)}"
 
 
 def job_result(sweep: str) -> str:
-    return f"{PREFIX}/sweep/{check_match(sweep)}/result"
+    return f"{PREFIX}/sweep/{check_name(sweep)}/result"
 
 
 def host_alive(host: str = "*") -> str:
@@ -136,11 +149,11 @@ def host_status(host: str = "*") -> str:
 
 
 def host_offer(host: str) -> str:
-    return f"{PREFIX}/host/{check_match(host)}/offer"
+    return f"{PREFIX}/host/{check_name(host)}/offer"
 
 
 def host_stop(host: str) -> str:
-    return f"{PREFIX}/host/{check_match(host)}/stop"
+    return f"{PREFIX}/host/{check_name(host)}/stop"
 
 
 def host_done(host: str = "*") -> str:
@@ -149,26 +162,26 @@ def host_done(host: str = "*") -> str:
 
 def host_recording(host: str, match: str = "*") -> str:
     """A recording a host serves, chunk by chunk (the default `*`: every one, the host's queryable)."""
-    return f"{PREFIX}/host/{check_match(host)}/recording/{_worker(match)}"
+    return f"{PREFIX}/host/{check_name(host)}/recording/{_worker(match)}"
 
 
 def pool_order(pool: str) -> str:
-    return f"{PREFIX}/pool/{check_match(pool)}/order"
+    return f"{PREFIX}/pool/{check_name(pool)}/order"
 
 
 def pool_stop(pool: str) -> str:
-    return f"{PREFIX}/pool/{check_match(pool)}/stop"
+    return f"{PREFIX}/pool/{check_name(pool)}/stop"
 
 
 def pool_alive(pool: str, service: str = "*") -> str:
     """A pool service's liveliness token (the default `*` matches each of the pool's services)."""
     if service != "*" and service not in SERVICES:
         raise UsageError("--service", service, "unknown service", SERVICES)
-    return f"{PREFIX}/pool/{check_match(pool)}/alive/{service}"
+    return f"{PREFIX}/pool/{check_name(pool)}/alive/{service}"
 
 
 def _worker(worker: str) -> str:
-    return worker if worker == "*" else check_match(worker)
+    return worker if worker == "*" else check_name(worker)
 
 
 class Key(NamedTuple):
@@ -193,21 +206,21 @@ def parse(key: object) -> Key:
     if len(chunks) >= 4 and chunks[:2] == [PREFIX, "sweep"]:
         _, _, sweep, kind, *rest = chunks
         if kind in ("coordinator", "result") and not rest:
-            return Key(check_match(sweep), kind)
+            return Key(check_name(sweep), kind)
         if kind in ("worker", "job") and len(rest) == 1:
-            return Key(check_match(sweep), kind, worker=check_match(rest[0]))
+            return Key(check_name(sweep), kind, worker=check_name(rest[0]))
     if len(chunks) >= 4 and chunks[:2] == [PREFIX, "host"]:
         _, _, host, kind, *rest = chunks
         if kind in _HOST and not rest:
-            return Key("", kind, worker=check_match(host))
+            return Key("", kind, worker=check_name(host))
         if kind == "recording" and len(rest) == 1:
-            return Key(check_match(rest[0]), kind, worker=check_match(host))
+            return Key(check_match(rest[0]), kind, worker=check_name(host))
     if len(chunks) >= 4 and chunks[:2] == [PREFIX, "pool"]:
         _, _, pool, kind, *rest = chunks
         if kind in ("order", "stop") and not rest:
-            return Key("", kind, worker=check_match(pool))
+            return Key("", kind, worker=check_name(pool))
         if kind == "alive" and len(rest) == 1 and rest[0] in SERVICES:
-            return Key("", kind, service=rest[0], worker=check_match(pool))
+            return Key("", kind, service=rest[0], worker=check_name(pool))
     if len(chunks) >= 3 and chunks[0] == PREFIX:
         _, match, kind, *rest = chunks
         if kind in _PLAIN and not rest:

@@ -38,6 +38,16 @@ def test_match_id_limits() -> None:
     assert keys.check_match("A" * 64) == "A" * 64
 
 
+@pytest.mark.parametrize("namespace", keys.NAMESPACES)
+def test_a_namespace_is_no_match_id(namespace: str) -> None:
+    with pytest.raises(ValueError, match=f"--match {namespace}: is a bus namespace"):
+        keys.state(namespace)
+    assert (
+        keys.pool_order(namespace) == f"tsf/pool/{namespace}/order"
+    )  # a pool, sweep or host may be named so
+    assert keys.parse(f"tsf/host/{namespace}/alive").worker == namespace
+
+
 MATCH_KEYS = [
     keys.state,
     keys.start,
@@ -90,18 +100,15 @@ def test_unknown_service(service: str) -> None:
         (keys.job_worker("s1", "w-2"), keys.Key("s1", "worker", worker="w-2")),
         (keys.job_order("s1", "w-2"), keys.Key("s1", "job", worker="w-2")),
         (keys.job_result("s1"), keys.Key("s1", "result")),
-        ("tsf/sweep/state", keys.Key("sweep", "state")),  # a match may be called sweep
         (keys.host_alive("lab-2"), keys.Key("", "alive", worker="lab-2")),
         (keys.host_status("lab-2"), keys.Key("", "status", worker="lab-2")),
         (keys.host_offer("lab-2"), keys.Key("", "offer", worker="lab-2")),
         (keys.host_stop("lab-2"), keys.Key("", "stop", worker="lab-2")),
         (keys.host_done("lab-2"), keys.Key("", "done", worker="lab-2")),
         (keys.host_recording("lab-2", M), keys.Key(M, "recording", worker="lab-2")),
-        ("tsf/host/state", keys.Key("host", "state")),  # a match may be called host
         (keys.pool_order("lab"), keys.Key("", "order", worker="lab")),
         (keys.pool_stop("lab"), keys.Key("", "stop", worker="lab")),
         (keys.pool_alive("lab", "sim"), keys.Key("", "alive", service="sim", worker="lab")),
-        ("tsf/pool/state", keys.Key("pool", "state")),  # a match may be called pool
     ],
 )
 def test_parse_inverts_every_builder(key: str, parts: keys.Key) -> None:
@@ -125,6 +132,9 @@ def test_parse_inverts_every_builder(key: str, parts: keys.Key) -> None:
         keys.pool_alive("lab"),
         "tsf/pool/lab/alive/ghost",
         "tsf/pool/lab/order/x",
+        "tsf/sweep/state",  # no match is called sweep, host or pool: their keys are namespaces
+        "tsf/host/state",
+        "tsf/pool/state",
         "other/m/state",
         "bait",
         "",

@@ -59,7 +59,7 @@ def train(path: Path, steps: int) -> None:
     """Step 1: a bait of your own. Any SB3 feed-forward actor-critic trained on tsf/Role-v0 will do."""
     import gymnasium
 
-    import services  # noqa: F401 - registers tsf/Role-v0
+    from services.agent import envs  # noqa: F401 - registers tsf/Role-v0
     from shared.errors import missing_extra
 
     try:

@@ -139,11 +139,8 @@ def eval_command(
     eval` reached with --connect): identification, team performance, the test against the best
     static policy, and the figures. Resumable; the numbers do not depend on the workers. With
     --games, an evaluation's games are analysed again (an analysis newer than the games)."""
-    from services.evaluation.evaluation import KINDS, EvalPlan, evaluate
+    from services.evaluation.evaluation import KINDS, EvalPlan, evaluate, reanalyse
     from services.jobs.engine import on_workers, open_engine
-    from services.population.human_like import STAND_INS
-    from services.population.partners import fitted_people
-    from services.population.seat import HUMANS
 
     if role not in ROLES:
         raise UsageError("--role", role, "not a seat", ROLES)
@@ -152,30 +149,20 @@ def eval_command(
     if games is not None:
         played_only = {name: f"--{name.replace('_', '-')}" for name in PLAYING}
         refuse_beside(context, "--games", games, "its games are analysed as they were played", played_only)
-        from services.evaluation.evaluation import EvalReport
-        from services.evaluation.results import read_games
-        from services.evaluation.team import compare
-
-        played = read_games(games)
-        nothing = EvalPlan(role, identify=False, performance=False)
-        summary = EvalReport(nothing, None, played, compare(played), None).write(out)
+        summary = reanalyse(games, role, out)
         console.print(summary.read_text())
         console.print(f"written to {out}")
         return
     partners = partner or []
     if partners_from is not None:
+        from services.proxy.study import partners_from as study_partners
+
         if partner:
             raise UsageError("--partners-from", partners_from, "give --partner or --partners-from, not both")
-        if (partners_from / STAND_INS).is_file():
-            people = {name: f"{HUMANS}{partners_from}@{name}" for name in fitted_people(partners_from)[1]}
-            console.print(f"partners: fitted stand-ins of {', '.join(people)}")
-        else:
-            from services.proxy.study import study_partners
-
-            people, excluded = study_partners(partners_from, other(role), out / "proxies")
-            for line in excluded:
-                console.print(f"excluded {line}")
-            console.print(f"partners: proxies of {', '.join(people)}")
+        people, excluded = study_partners(partners_from, other(role), out / "proxies")
+        for line in excluded:
+            console.print(f"excluded {line}")
+        console.print(f"partners: {', '.join(people.values())}")
         partners = list(people.values())
     plan = EvalPlan(
         role, tuple(partners), seeds, tuple(window or EvalPlan.windows),

@@ -17,9 +17,10 @@ import math
 import numpy as np
 
 from services.sim import observation as ob
+from shared.game import FPS
 
-FRAMES_PER_MINUTE = 1800  # 30 frames per second
-GUARD_FRAMES = 450  # 15 s under the adapted policy before it is judged
+FRAMES_PER_MINUTE = 60 * FPS
+GUARD_FRAMES = 15 * FPS  # 15 s under the adapted policy before it is judged
 GUARD_P = 0.05
 
 

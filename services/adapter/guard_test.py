@@ -9,6 +9,7 @@ from scipy import stats
 from services.adapter.core import build
 from services.adapter.guard import GUARD_FRAMES, Guard, poisson_cdf
 from services.evaluation.evaluate import play_games
+from services.evaluation.evaluate_test import seated
 from services.population.adaptive import AdapterConfig
 from services.sim import observation as ob
 
@@ -46,7 +47,7 @@ def test_the_guard_trips_when_kills_fall_short_of_the_promise_and_not_before():
 def test_a_guarded_game_switches_at_most_once_more_and_reports_it():
     config = AdapterConfig("shooter", 400, "bayes-dwell-ood-guard")
     plain = AdapterConfig("shooter", 400, "bayes-dwell-ood")
-    outcome, plain = play_games([("human(B3)", config, 1), ("human(B3)", plain, 1)], "shooter")
+    outcome, plain = play_games(seated([("human(B3)", config, 1), ("human(B3)", plain, 1)]), "shooter")
     assert outcome.switches <= plain.switches + 1
     if outcome.guarded:  # fell back to the best static policy
         payoff = build(AdapterConfig("shooter")).payoff

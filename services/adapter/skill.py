@@ -29,7 +29,7 @@ import numpy as np
 
 from services.agent import library
 from services.population.keys import LAPSE, changes, shortest_runs, still
-from shared.game import split_action
+from shared.game import FPS, split_action
 from shared.provenance import provenance
 
 LEVELS = ("novice", "typical", "practised", "library")  # the skill table's skills, then P's partners
@@ -50,7 +50,7 @@ def window_features(actions: np.ndarray, alive: np.ndarray, best: float) -> np.n
     return np.array(
         [
             shortest_runs([actions])["hold_ms"],
-            len(changes(keys)) / len(actions) * 30.0,
+            len(changes(keys)) / len(actions) * FPS,
             lapsed.sum() / max(alive.sum(), 1),
             best,
         ]

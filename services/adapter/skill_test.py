@@ -14,6 +14,7 @@ from services.adapter.core_test import PAYOFF, keys_held, toy_model
 from services.adapter.skill import LEVELS, skill_path
 from services.agent import library
 from services.evaluation.evaluate import play_games, setup
+from services.evaluation.evaluate_test import seated
 from services.population.adaptive import AdapterConfig
 from services.sim import observation as ob
 from shared.errors import UsageError
@@ -64,7 +65,7 @@ def test_the_shipped_model_recovers_the_stand_ins_skill() -> None:
     names = [f"human({s},skill={k})" for s in ("B1", "B5") for k in LEVELS[:-1]] + ["B1", "B5"]
     games = [(name, config, seed) for name in names for seed in (96, 97)]
     adapter = build_lanes(config, len(games), setup("shooter").payoff)
-    play_games(games, "shooter", adapters={config: adapter})
+    play_games(seated(games), "shooter", adapters={config: adapter})
     read = {}
     for (name, _, _), levels in zip(games, adapter.levels, strict=True):
         level = re.search(r"skill=(\w+)", name)[1] if "skill" in name else "library"

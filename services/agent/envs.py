@@ -6,9 +6,11 @@
 
 A partner is anything a seat can play (a library or scripted key, an SB3 `.zip`, a `module:attr`;
 services/agent/seats.py `policy_for`) or a policy object; the batched form also takes a list
-(each game draws one). Importing the `services` package registers the id, and pyproject.toml names
-`register` under the `gymnasium.envs` entry point for tools that load plugins. Entry points are
-strings, so registering imports nothing but gymnasium.
+(each game draws one). Importing this module registers the id (`from services.agent import envs`,
+or `gymnasium.make("services.agent.envs:tsf/Role-v0")`), and pyproject.toml names `register`
+under the `gymnasium.envs` entry point for tools that load plugins. Entry points are strings, so
+registering imports nothing but gymnasium; the rest of `services` never imports this module, so
+no live service loads gymnasium.
 """
 
 from __future__ import annotations
@@ -85,3 +87,6 @@ def env(**options: Any) -> AECEnv:
     from pettingzoo.utils.wrappers import AssertOutOfBoundsWrapper, OrderEnforcingWrapper
 
     return OrderEnforcingWrapper(AssertOutOfBoundsWrapper(raw_env(**options)))
+
+
+register()

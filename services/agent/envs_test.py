@@ -1,3 +1,6 @@
+import subprocess
+import sys
+
 import gymnasium
 import numpy as np
 import pytest
@@ -5,8 +8,7 @@ from gymnasium.utils.env_checker import check_env
 from pettingzoo.test import api_test, parallel_api_test, seed_test
 from pettingzoo.test.render_test import collect_render_results
 
-import services  # noqa: F401 - importing the package registers tsf/Role-v0
-from services.agent import envs
+from services.agent import envs  # importing it registers tsf/Role-v0
 from services.agent.scripted import MirrorShooter
 from services.sim.env import RoleEnv
 from services.sim.vec_env import RoleVectorEnv
@@ -59,3 +61,16 @@ def test_the_pettingzoo_factories_pass_pettingzoo_checks():
     for frame in collect_render_results(envs.env(config=SHORT, render_mode="rgb_array")):
         assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[2] == 3
     assert envs.raw_env().metadata["name"] == "tsf_v0" and envs.env().metadata["is_parallelizable"]
+
+
+def test_no_service_imports_gymnasium():
+    """Only this module loads gymnasium (and registers the id): a live service never pays for it."""
+    code = (
+        "import sys, services.cli, services.sim.service, services.agent.service, services.adapter.service, "
+        "services.recorder.service, services.study.runner, services.evaluation.evaluation\n"
+        "assert 'gymnasium' not in sys.modules, 'gymnasium imported'\n"
+        "from services.agent import envs\n"
+        "import gymnasium\n"
+        "assert envs.ENV_ID in gymnasium.envs.registration.registry\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)

@@ -31,6 +31,7 @@ from services.agent import networks
 from services.population.adaptive import AdapterConfig
 from services.population.human_like import SESSION_TRIALS
 from services.population.partners import PartnerError, Partners
+from services.population.seat import SeatSpec
 from services.sim.observation import observe
 from services.table.table import DEFAULT_TABLE
 from shared.game import OBS_SIZE, ROLES, GameConfig, Policy, bait_first, other
@@ -69,18 +70,16 @@ class Outcome:
     scores: np.ndarray | None = None  # (frames, K) the partner's scores under the library, when scored
 
 
-Agent = str | AdapterConfig  # a static library key of our seat, or an adaptive agent
-
-
 def play_games(
-    games: list[tuple[str, Agent, int]],
+    games: list[tuple[SeatSpec, SeatSpec, int]],
     role: str,
     config: GameConfig | None = None,
     record: bool = False,
     adapters: dict[AdapterConfig, AdapterLanes] | None = None,
     score: bool = False,
 ) -> list[Outcome]:
-    """Games of (partner name, our agent, seed), our seat `role`, as the lanes of one batch. An
+    """Games of (partner, our agent, seed), our seat `role`, as the lanes of one batch: our agent is
+    a static library policy of our seat or the adaptive agent (`SeatSpec.adaptive`). An
     adaptive agent's games go on with its adapter in `adapters` (a session's next trial; one lane
     per game of that agent, in order), else with a new one. With `record`, each outcome keeps the
     partner's states and actions and both seats' actions, frame by frame; with `score`, the
@@ -91,17 +90,18 @@ def play_games(
     s, partner_role = setup(role), other(role)
     seeds = np.array([seed for *_, seed in games], np.int64)
     batch = BatchGame(len(games), config, seeds)
-    partners = Partners([name for name, *_ in games], partner_role, seeds)
+    partners = Partners([partner for partner, *_ in games], partner_role, seeds)
+    configs = [agent.adaptive(role) for _, agent, _ in games]
     adaptive: dict[AdapterConfig, list[int]] = {}
-    for lane, (_, agent, _) in enumerate(games):
-        if isinstance(agent, AdapterConfig):
-            adaptive.setdefault(agent, []).append(lane)
+    for lane, config in enumerate(configs):
+        if config is not None:
+            adaptive.setdefault(config, []).append(lane)
     scored = np.arange(len(games)) if score else np.array(sorted(sum(adaptive.values(), [])), np.int64)
     groups = []  # (lanes, their rows among the scored, the adapter)
     for agent, lanes in adaptive.items():
         adapter = (adapters or {}).get(agent) or core.build_lanes(agent, len(lanes), s.payoff)
         groups.append((np.array(lanes), np.searchsorted(scored, lanes), adapter))
-    ours = [s.payoff.ours.index(agent) if isinstance(agent, str) else -1 for _, agent, _ in games]
+    ours = [-1 if c else s.payoff.ours.index(str(a)) for (_, a, _), c in zip(games, configs, strict=True)]
     for lanes, _, adapter in groups:
         for lane, policy in zip(lanes.tolist(), adapter.policy.tolist(), strict=True):
             ours[lane] = policy  # the initial policy, or where a session's adapter left off
@@ -117,8 +117,8 @@ def play_games(
         try:
             partner_actions = partners.act(observed, frame)
         except PartnerError as error:
-            name, _, seed = games[error.lane]
-            raise PartnerError(f"partner {name}, seed {seed}: {error.problem}") from None
+            partner, _, seed = games[error.lane]
+            raise PartnerError(f"partner {partner}, seed {seed}: {error.problem}") from None
         our_actions = seat.act(batch)
         if len(scored):
             now = s.scorer.observed({v: observed(v)[scored] for v in s.scorer.views}, partner_actions[scored])
@@ -153,13 +153,13 @@ def play_games(
 
 
 def play_teams(
-    teams: list[tuple[str, str]],
+    teams: list[tuple[SeatSpec, SeatSpec]],
     seeds: list[int],
     config: GameConfig | None = None,
     record: bool = False,
     world_of: str = "",
 ) -> np.ndarray | tuple[np.ndarray, ...]:
-    """The (teams, seeds) kills/min of games of (bait partner, shooter partner) by name, one per
+    """The (teams, seeds) kills/min of games of (bait partner, shooter partner), one per
     team and seed, as the lanes of one batch: both seats played by partners (stand-ins, library
     keys, wrappers). With `record`, also the (teams, seeds, frames, 2) actions, bait first, and
     the (teams, seeds, frames + 1) flags of the states in which the fortress has just fired (opened);
@@ -202,12 +202,12 @@ def batches(items: list, workers: int, lanes: int = LANES) -> list[list]:
     return [items[a:b] for a, b in itertools.pairwise(bounds)]
 
 
-def play_session(partner: str, agent: Agent, person: int, role: str) -> list[Outcome]:
+def play_session(partner: SeatSpec, agent: SeatSpec, person: int, role: str) -> list[Outcome]:
     """The trials of one session (human_like.SESSION_TRIALS games, seeds person * trials + i) with
     the same partner, one after the other; an adaptive agent's adapter in each trial is the
     previous one's `next_trial()`."""
-    adaptive = isinstance(agent, AdapterConfig)
-    adapters = {agent: core.build_lanes(agent, 1, setup(role).payoff)} if adaptive else {}
+    config = agent.adaptive(role)
+    adapters = {config: core.build_lanes(config, 1, setup(role).payoff)} if config else {}
     outcomes: list[Outcome] = []
     for trial in range(SESSION_TRIALS):
         outcomes += play_games([(partner, agent, person * SESSION_TRIALS + trial)], role, adapters=adapters)

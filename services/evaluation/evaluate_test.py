@@ -16,7 +16,7 @@ from services.evaluation.identification import follow_lag, windowed
 from services.evaluation.results import TeamGame, read_games, write_results
 from services.evaluation.team import compare, holm, known_partner, paired_tests, variants
 from services.population.adaptive import AdapterConfig
-from services.population.seat import SeatSpec
+from services.population.seat import AdaptiveSeat, PolicySeat, SeatSpec, seats_of
 from services.sim.batch_play import play_batch
 from services.sim.engine import Game
 from services.sim.observation import observe, world_values
@@ -24,6 +24,14 @@ from services.sim.sampling import lane_uniforms, sample
 from services.table.table import DEFAULT_TABLE, Table
 from shared.errors import UsageError
 from shared.game import GameConfig
+
+
+def seated(games: list[tuple]) -> list[tuple[SeatSpec, SeatSpec, int]]:
+    """(partner name, our key or AdapterConfig, seed) games as play_games takes them: as seats."""
+    return [
+        (SeatSpec.parse(p), AdaptiveSeat(a) if isinstance(a, AdapterConfig) else SeatSpec.parse(a), seed)
+        for p, a, seed in games
+    ]
 
 
 def test_windowed_means_match_brute_force() -> None:
@@ -52,7 +60,7 @@ def test_variant_names_round_trip() -> None:
 
 def test_adaptive_game_switches_to_the_best_response_and_is_deterministic() -> None:
     config = AdapterConfig("shooter", 150, "cem")
-    first, again = play_games([("B3", config, 4), ("B3", config, 4)], "shooter")
+    first, again = play_games(seated([("B3", config, 4), ("B3", config, 4)]), "shooter")
     assert first == again
     assert first.timeline[0][1:] == ("B3", Table.load(DEFAULT_TABLE).best_shooter("B3"))
     assert first.timeline[0][0] == 150  # decided on the warm-up's last frame, played from the next
@@ -65,9 +73,11 @@ def test_a_session_is_its_games_one_after_another_with_the_adapter_carried() -> 
     the first trial is the same game and the next ones start where the adapter left off."""
     forgetting = AdapterConfig("shooter", 150, "bayes-dwell-ood-guard")
     remembering = dataclasses.replace(forgetting, strategy="bayes-dwell-ood-guard-memory")
-    alone = play_games([("B3", forgetting, seed) for seed in (3, 4, 5)], "shooter")  # person 1's seeds
-    assert play_session("B3", forgetting, 1, "shooter") == alone
-    carried = play_session("B3", remembering, 1, "shooter")
+    alone = play_games(
+        seated([("B3", forgetting, seed) for seed in (3, 4, 5)]), "shooter"
+    )  # person 1's seeds
+    assert play_session(PolicySeat("B3"), AdaptiveSeat(forgetting), 1, "shooter") == alone
+    carried = play_session(PolicySeat("B3"), AdaptiveSeat(remembering), 1, "shooter")
     assert carried[0] == alone[0] and alone[1].timeline[0][0] >= 150  # warm-up first
     assert sum(o.switches for o in carried[1:]) < sum(o.switches for o in alone[1:])
 
@@ -145,8 +155,8 @@ def test_batched_adaptive_games_decide_as_the_scalar_engine_replays_them() -> No
     policies, the same kills; and our seat's every action is the draw of the policy the timeline
     says was playing; under the guard and with human-like partners too."""
     config = GameConfig(frames=900)
-    played = play_games(GAMES, "shooter", config, record=True, score=True)
-    assert play_games(GAMES[1:2], "shooter", config)[0] == dataclasses.replace(
+    played = play_games(seated(GAMES), "shooter", config, record=True, score=True)
+    assert play_games(seated(GAMES[1:2]), "shooter", config)[0] == dataclasses.replace(
         played[1], values=None, actions=None, scores=None, pairs=None
     )
     s = setup("shooter")
@@ -179,7 +189,9 @@ def test_teams_of_partners_play_both_seats_as_the_batched_pair_games() -> None:
     """Library keys on both seats draw as play_batch's seats do, so the games are the same;
     recorded actions and openings come back per team and seed."""
     frames = GameConfig(frames=300)
-    kills, actions, opened = play_teams([("B5", "S4"), ("human(B5)", "S4")], [0, 1], frames, record=True)
+    kills, actions, opened = play_teams(
+        [seats_of(["B5", "S4"]), seats_of(["human(B5)", "S4"])], [0, 1], frames, record=True
+    )
     pair = play_batch(networks.load("B5"), networks.load("S4"), [0, 1], frames)
     assert kills[0].tolist() == [r.kills_per_minute for r in pair]
     assert actions.shape == (2, 2, 300, 2) and opened.shape == (2, 2, 301)

@@ -116,6 +116,14 @@ class EvalReport:
         return summary
 
 
+def reanalyse(games: Path, role: str, out: Path) -> Path:
+    """An evaluation's team games (its team.csv) analysed again, not played: the comparison,
+    per_partner.csv, the figure and summary.md into `out` (no identification); the summary's path."""
+    played = results.read_games(games)
+    nothing = EvalPlan(role, identify=False, performance=False)
+    return EvalReport(nothing, None, played, team.compare(played), None).write(out)
+
+
 def evaluate(
     plan: EvalPlan, run: Runner = HERE, progress: Callable[[str], Progress] | None = None
 ) -> EvalReport:

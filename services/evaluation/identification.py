@@ -15,6 +15,7 @@ from services.jobs.core import spec
 from services.jobs.kinds import Runner, in_process
 from services.population.adaptive import AdapterConfig
 from services.population.partners import SWITCH_AT
+from services.population.seat import SeatSpec
 from shared.game import check_role
 
 FOLLOW_HOLD = 30  # frames the estimate must stay on the new type to count as following it
@@ -44,7 +45,8 @@ def bayes_estimates(scores: np.ndarray, config: AdapterConfig, payoff: Payoff) -
 
 def _scores(games: list[tuple[str, str, int]], role: str) -> list[np.ndarray]:
     """Each game's partner scores: frames (rows) under each library policy of its role (columns)."""
-    return [outcome.scores for outcome in play_games(games, role, score=True)]
+    seats = [(SeatSpec.parse(p), SeatSpec.parse(a, "--agent"), seed) for p, a, seed in games]
+    return [outcome.scores for outcome in play_games(seats, role, score=True)]
 
 
 def _switch_game(first: str, second: str, seed: int, role: str) -> tuple[str, str, int]:

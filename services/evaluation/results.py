@@ -10,7 +10,7 @@ from pathlib import Path
 
 from services.agent import library
 from services.population.partners import group_of
-from services.population.seat import ADAPTIVE_KIND, SeatSpec
+from services.population.seat import AdaptiveSeat, SeatSpec
 from shared.errors import UsageError
 from shared.provenance import lines as provenance_lines
 from shared.provenance import provenance
@@ -67,7 +67,7 @@ def _csv(path: Path, header: list[str], rows: Iterable[Iterable]) -> None:
 
 def _group_table(comparison: dict) -> list[str]:
     groups = list(comparison["per_group"])
-    agents = sorted(comparison["agents"], key=lambda a: (SeatSpec.parse(a).kind == ADAPTIVE_KIND, a))
+    agents = sorted(comparison["agents"], key=lambda a: (isinstance(SeatSpec.parse(a), AdaptiveSeat), a))
     rows = [
         f"| {a} | " + " | ".join(f"{comparison['per_group'][g][a]['mean']:.2f}" for g in groups) + " |"
         for a in agents

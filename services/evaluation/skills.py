@@ -27,6 +27,7 @@ from services.agent import library
 from services.agent.policy import end_round_batch
 from services.evaluation.evaluate import batches, play_games, play_teams, setup
 from services.population.adaptive import AdapterConfig
+from services.population.seat import SeatSpec, seats_of
 from services.sim import observation as ob
 from services.table.table import stderr
 from shared.errors import UsageError
@@ -152,7 +153,7 @@ class SkillTable:
 
 
 def _play(teams: list[tuple[str, str]], games: int) -> list[list[float]]:
-    return play_teams(teams, list(range(games))).tolist()
+    return play_teams(list(map(seats_of, teams)), list(range(games))).tolist()
 
 
 def measure(
@@ -233,7 +234,7 @@ def skill_model(
     sd = np.zeros_like(mean)
     for i, style in enumerate(payoff.partners):  # one batch per style
         names = [stand_in(style, skill) for skill in SKILLS] + [style]
-        games = [(name, teammate, seed) for name in names for seed in seeds]
+        games = [(SeatSpec.parse(name), SeatSpec.parse(teammate), seed) for name in names for seed in seeds]
         played = play_games(games, table.role, record=True, score=True)
         scores, states = np.stack([o.scores for o in played]), np.stack([o.values for o in played])
         actions = np.stack([o.actions for o in played])

@@ -16,7 +16,7 @@ from services.jobs.kinds import Runner, in_process
 from services.population.adaptive import AdapterConfig
 from services.population.human_like import SESSION_TRIALS
 from services.population.partners import group_of
-from services.population.seat import ADAPTIVE_KIND, SeatSpec, plugins_in
+from services.population.seat import AdaptiveSeat, SeatSpec, plugins_in
 from shared.game import check_role
 
 JOB_GAMES = 256  # games of a team or identification job (the lanes of one batch): tsf eval --job-games
@@ -25,9 +25,9 @@ HERE = in_process(KINDS)  # the runner that plays them in this process
 
 
 def _team_batch(games: list[tuple[str, str, int]], role: str) -> list[list]:
-    """Each game's [kills/min, switches, guarded]."""
-    agents = [SeatSpec.parse(agent, "--agent").adaptive(role) or agent for _, agent, _ in games]
-    played = play_games([(p, a, seed) for (p, _, seed), a in zip(games, agents, strict=True)], role)
+    """Each game's [kills/min, switches, guarded] (the job's names read as seats here, once)."""
+    seats = [(SeatSpec.parse(p), SeatSpec.parse(a, "--agent"), seed) for p, a, seed in games]
+    played = play_games(seats, role)
     return [[o.kills_per_minute, o.switches, int(o.guarded)] for o in played]
 
 
@@ -107,7 +107,7 @@ def paired_tests(diff: np.ndarray, margin: float = MARGIN) -> dict:
 
 def _session_games(partner: str, agent: str, person: int, role: str) -> list[list]:
     """Each trial's [seed, kills/min, switches, guarded]."""
-    played = play_session(partner, SeatSpec.parse(agent, "--agent").adaptive(role) or agent, person, role)
+    played = play_session(SeatSpec.parse(partner), SeatSpec.parse(agent, "--agent"), person, role)
     seeds = [person * SESSION_TRIALS + trial for trial in range(SESSION_TRIALS)]
     return [
         [seed, o.kills_per_minute, o.switches, int(o.guarded)] for seed, o in zip(seeds, played, strict=True)
@@ -189,7 +189,7 @@ def compare(games: list[TeamGame]) -> dict:
         grid.setdefault(g.agent, {})[(g.partner, g.seed)] = g.kills_per_minute
     values = {a: np.array([g[u] for u in units]) for a, g in grid.items()}
     agents = {a: _summary(v) for a, v in values.items()}
-    statics = [a for a in values if SeatSpec.parse(a).kind != ADAPTIVE_KIND]
+    statics = [a for a in values if not isinstance(SeatSpec.parse(a), AdaptiveSeat)]
     best = max(statics, key=lambda a: agents[a]["mean"])
     partners = sorted({u[0] for u in units})
 
@@ -198,7 +198,7 @@ def compare(games: list[TeamGame]) -> dict:
 
     tests = {}
     for a in values:
-        if SeatSpec.parse(a).kind != ADAPTIVE_KIND:
+        if not isinstance(SeatSpec.parse(a), AdaptiveSeat):
             continue
         diff = values[a] - values[best]
         by_partner = partner_means(a) - partner_means(best)

@@ -15,6 +15,7 @@ from services.evaluation.evaluate import batches, play_games, setup
 from services.evaluation.identification import windowed
 from services.jobs.core import spec
 from services.jobs.kinds import Progress, Runner, in_process
+from services.population.seat import SeatSpec
 from shared.game import ROLES, GameConfig, other
 
 JOB_GAMES = 3  # games of one job: three games' streams stay under a message's 64 KiB
@@ -27,7 +28,8 @@ def _self_scores(games: list[list]) -> np.ndarray:
     """log pi(a | s) of library policies' own actions over games of [policy, teammate, seed] (one
     policy's), (games, frames), the games as the lanes of one batch."""
     policy = networks.load(games[0][0])
-    played = play_games([(k, mate, int(seed)) for k, mate, seed in games], other(policy.role), record=True)
+    seats = [(SeatSpec.parse(k), SeatSpec.parse(mate), int(seed)) for k, mate, seed in games]
+    played = play_games(seats, other(policy.role), record=True)
     return np.array([log_probs([policy], o.values, o.actions)[:, 0] for o in played])
 
 

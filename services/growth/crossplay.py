@@ -7,6 +7,7 @@ from __future__ import annotations
 import itertools
 
 from services.evaluation.evaluate import play_teams
+from services.population.seat import seats_of
 from services.jobs.core import Spec, spec
 
 PAIRS = 128  # teams of one job (x seeds games): a batch of a few hundred lanes
@@ -34,7 +35,7 @@ def run_pair_jobs(args: list[dict]) -> list[list]:
     )
     for seeds, group in by_seeds:
         jobs = list(group)
-        teams = [tuple(t) for i in jobs for t in args[i]["teams"]]
+        teams = [seats_of(t) for i in jobs for t in args[i]["teams"]]
         kills = play_teams(teams, list(seeds)).tolist()
         for i in jobs:
             out[i] = [k for row in kills[: len(args[i]["teams"])] for k in row]

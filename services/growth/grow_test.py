@@ -11,6 +11,7 @@ import pytest
 
 from services.evaluation.evaluate import play_teams
 from services.growth.crossplay import pair_jobs, run_pair_jobs
+from services.population.seat import seats_of
 
 SMALL = """
 seed = 7
@@ -42,7 +43,7 @@ def test_pair_jobs_play_the_games_they_stand_for():
     ]
     jobs = pair_jobs("t", teams, [0, 1])
     assert [job.size for job in jobs] == [6]
-    expected = play_teams(teams, [0, 1]).ravel().tolist()
+    expected = play_teams([seats_of(t) for t in teams], [0, 1]).ravel().tolist()
     assert run_pair_jobs([job.args for job in jobs]) == [expected]
     split = pair_jobs("t", teams * 50, [3, 4])  # more teams than a job holds
     assert len(split) == 2 and sum(job.size for job in split) == 300

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from services.human.core import SeatBook
 from services.human.gateway import Gateway, Web, seat_handler
-from services.population.seat import PERSON
+from services.population.seat import PersonSeat
 from services.runtime.launch import MatchPlan, run_match
 from shared.bus import BusConfig, free_endpoint
 from shared.messages import State, Summary
@@ -32,7 +32,7 @@ def play_with_people(
     """Run `plan`, whose seats with the policy `human` are played from browsers: each such seat gets
     a fresh token, and `on_links` the links to open, before the sim waits for the players. `stop`
     ends the match and its processes (run_match)."""
-    people = [role for role, spec in plan.seats.items() if spec.kind == PERSON]
+    people = [role for role, spec in plan.seats.items() if isinstance(spec, PersonSeat)]
     if not people:
         raise ValueError("no seat of this match is played by a person")
     tokens = {role: secrets.token_urlsafe(9) for role in people}

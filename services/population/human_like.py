@@ -48,9 +48,9 @@ from services.sim.engine import fortress_turn, steer
 from services.sim.jit import compiled
 from services.sim.play import game_seed, policy_seed
 from services.sim.sampling import batch_probs, lane_uniforms, sample
-from shared.game import N_ACTIONS, GameConfig, join_action, split_action
+from shared.game import FPS, N_ACTIONS, GameConfig, join_action, split_action
 
-FRAME_MS = 1000.0 / 30.0
+FRAME_MS = 1000.0 / FPS
 SESSION_TRIALS = 3  # the study plays three one-minute trials with the same partner
 STAND_INS = "stand_ins.json"  # what `tsf humans fit` writes into DIR
 SKILLS = {"novice": 0.0, "typical": 0.65, "practised": 1.0}  # typical: calibrated (docs/humans.md)
@@ -216,7 +216,7 @@ class HumanLike:
         lapses = trait("lapses", np.exp(_pick(np.log(between(LAPSES_PER_MINUTE, skill)), draws[:, 1])))
         look = trait("look_ms", between(LOOK_MS, skill)) / FRAME_MS  # frames between looks, on average
         self.mu[lanes], self.look[lanes] = mu, look
-        self.lapse[lanes] = lapses / (60.0 * 30.0) * look  # a lapse can start at any look
+        self.lapse[lanes] = lapses / (60.0 * FPS) * look  # a lapse can start at any look
         self.slip[lanes] = trait("slip", _pick(between(SLIP, skill), draws[:, 2]))
         foresight = trait("foresight", between(FORESIGHT, skill) + FORESIGHT_SD * draws[:, 3])
         self.foresight[lanes] = np.clip(foresight, 0.0, 1.0)

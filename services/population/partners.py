@@ -62,15 +62,17 @@ from services.agent.scripted import SCRIPTED
 from services.agent.seats import policy_of
 from services.population.human_like import STAND_INS, HumanLike
 from services.population.seat import (
-    ADAPTIVE_KIND,
-    FITTED,
     HUMANS,
     KEY,
-    PERSON,
     PROXY_KIND,
-    RULE,
     WRAPPERS,
+    AdaptiveSeat,
+    FittedSeat,
+    PersonSeat,
+    PolicySeat,
+    RuleSeat,
     SeatSpec,
+    WrapperSeat,
 )
 from services.sim.engine import Game
 from services.sim.observation import as_observation, world_values
@@ -307,7 +309,12 @@ def _sampled(partner: Partner) -> bool:
     return getattr(type(partner), "act", None) in _SAMPLED
 
 
-def _delay(spec: SeatSpec, option: str = "--partner") -> int:
+def _lane_wrapper(spec: SeatSpec) -> str:
+    """The wrapper `spec` is, where its lanes are a wrapper's batched form ("" otherwise)."""
+    return spec.wrapper if isinstance(spec, WrapperSeat) and spec.wrapper in LANE_WRAPPERS else ""
+
+
+def _delay(spec: WrapperSeat, option: str = "--partner") -> int:
     """delayed(...)'s frames: DELAY, or frames=N (0 to 60)."""
     if not spec.settings:
         return DELAY
@@ -320,9 +327,9 @@ def _delay(spec: SeatSpec, option: str = "--partner") -> int:
 def shape(spec: SeatSpec, leaf: Leaf) -> tuple:
     """What a partner's batched form depends on: its wrappers, their settings and nesting, and the
     view of the policies inside, not which policies they are."""
-    if spec.kind in LANE_WRAPPERS:
-        setting = _delay(spec) if spec.kind == "delayed" else None
-        return (spec.kind, setting, *(shape(inner, leaf) for inner in spec.inner))
+    if wrapper := _lane_wrapper(spec):
+        setting = _delay(spec) if wrapper == "delayed" else None
+        return (wrapper, setting, *(shape(inner, leaf) for inner in spec.inner))
     partner = leaf(spec)
     if isinstance(partner, HumanLike) and all(_sampled(p) for p in (partner.first, partner.second) if p):
         return ("human", partner.key)  # one batched form per hand on project policies (HumanLanes)
@@ -332,7 +339,7 @@ def shape(spec: SeatSpec, leaf: Leaf) -> tuple:
 def lanes(specs: list[SeatSpec], leaf: Leaf, stream: int, streams: Iterator[int], offset: int = 0) -> Lanes:
     """The batched form of partners of one `shape`, one spec per lane: their policies draw from
     `stream`, every other draw of the wrappers from the next of `streams` (unique in one form)."""
-    kind, first = specs[0].kind, specs[0]
+    kind, first = _lane_wrapper(specs[0]), specs[0]
 
     def inner(i: int, stream: int = stream, offset: int = offset) -> Lanes:
         return lanes([spec.inner[i] for spec in specs], leaf, stream, streams, offset)
@@ -362,17 +369,17 @@ def form(specs: list[SeatSpec], role: str, leaf: Leaf) -> Lanes:
 
 
 class Partners:
-    """Every lane's partner, by name: the lanes of partners of one shape are played by one
-    batched form."""
+    """Every lane's partner: the lanes of partners of one shape are played by one batched form,
+    the lanes of one partner by the same policies."""
 
-    def __init__(self, names: list[str], role: str, keys: np.ndarray) -> None:
-        specs = {name: SeatSpec.parse(name) for name in dict.fromkeys(names)}
+    def __init__(self, specs: list[SeatSpec], role: str, keys: np.ndarray) -> None:
+        one = {spec: spec for spec in specs}  # equal specs: one of them, built once (leaves)
         leaf = leaves(role)
-        shapes = {name: shape(spec, leaf) for name, spec in specs.items()}
+        shapes = {spec: shape(spec, leaf) for spec in one.values()}
         self.groups: list[tuple[np.ndarray, Lanes]] = []
-        for kind in dict.fromkeys(shapes[name] for name in names):
-            rows = np.array([lane for lane, name in enumerate(names) if shapes[name] == kind])
-            partner = form([specs[names[lane]] for lane in rows], role, leaf)
+        for kind in dict.fromkeys(shapes[one[spec]] for spec in specs):
+            rows = np.array([lane for lane, spec in enumerate(specs) if shapes[one[spec]] == kind])
+            partner = form([one[specs[lane]] for lane in rows], role, leaf)
             partner.reset(np.asarray(keys)[rows])
             self.groups.append((rows, partner))
 
@@ -411,7 +418,7 @@ def build(spec: SeatSpec, role: str, option: str = "--partner") -> Partner:
     """What plays `role`'s seat in a single game as `spec` says, fresh: a policy, or a partner made
     of policies (a wrapper as one lane of its batched form). A person or an adaptive agent is no
     partner (UsageError): a gateway or the adapter plays them."""
-    if spec.kind in LANE_WRAPPERS:
+    if _lane_wrapper(spec):
         leaf = leaves(role, option)
         try:
             return OneGame(form([spec], role, leaf), str(spec), role)
@@ -419,24 +426,24 @@ def build(spec: SeatSpec, role: str, option: str = "--partner") -> Partner:
             raise
         except ValueError as error:  # a switch of partners that read different views
             raise UsageError(option, str(spec), str(error)) from None
-    if spec.kind == "human":
+    if isinstance(spec, WrapperSeat):  # human(...): the hand of a simulated person
         inner = [build(partner, role, option) for partner in spec.inner]
         try:
             return HumanLike.from_arguments(inner, [f"{name}={value}" for name, value in spec.settings])
         except ValueError as error:
             raise UsageError(option, str(spec), str(error)) from None
-    if spec.kind == FITTED:
+    if isinstance(spec, FittedSeat):
         return _fitted(spec.key, role)
-    if spec.kind == RULE:
+    if isinstance(spec, RuleSeat):
         kind = SCRIPTED[spec.key]
         if kind.role != role:
             raise UsageError(option, str(spec), f"{spec.key} plays the {kind.role} seat, not the {role} seat")
         partner = kind(**dict(spec.settings))
         partner.key = str(spec)
         return partner
-    if spec.kind in (PERSON, ADAPTIVE_KIND):
+    if isinstance(spec, PersonSeat | AdaptiveSeat):
         raise UsageError(option, str(spec), "a person or an adaptive agent, not a policy")
-    return policy_of(spec.kind, spec.key, role, option)  # a key, a .zip, a module:attr, a proxy:DIR
+    return policy_of(spec.how, spec.key, role, option)  # a key, a .zip, a module:attr, a proxy:DIR
 
 
 def fitted_people(directory: Path, name: str = "") -> tuple[str, dict[str, dict]]:
@@ -469,13 +476,14 @@ def _fitted(name: str, role: str) -> Partner:
 def group_of(name: str) -> str:
     """A partner's group in the population: its outer wrapper, library, a proxy, or outside."""
     spec = SeatSpec.parse(name)
-    if spec.kind == PROXY_KIND:
+    if isinstance(spec, PolicySeat) and spec.how == PROXY_KIND:
         return "proxy"
-    if spec.kind == FITTED:
+    if isinstance(spec, FittedSeat):
         return "fitted"
-    if spec.kind in WRAPPERS:
-        return {"switch": "switching", "human": "human-like"}.get(spec.kind, spec.kind)
-    return "library" if spec.kind == KEY and name in library.registry() else "outside"
+    if isinstance(spec, WrapperSeat):
+        return {"switch": "switching", "human": "human-like"}.get(spec.wrapper, spec.wrapper)
+    is_key = isinstance(spec, PolicySeat) and spec.how == KEY
+    return "library" if is_key and name in library.registry() else "outside"
 
 
 # Hand-written partners of each seat: its scripted rule, smaller and larger, slower and faster.

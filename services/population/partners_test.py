@@ -26,6 +26,7 @@ from services.population.partners import (
     make_partner,
     population,
 )
+from services.population.seat import SeatSpec, seats_of
 from services.sim.batch import BatchGame
 from services.sim.observation import observe
 from services.sim.play import policy_seed
@@ -58,7 +59,7 @@ class Constant(Counting):
 def played(name: str, lanes: int, frames: int, first: float = 0.0) -> np.ndarray:
     """(frames, lanes) actions of `name` in lanes of game seeds 0..lanes-1; frame t's observations
     are t + first everywhere (Counting acts on them)."""
-    partners = Partners([name] * lanes, "bait", np.arange(lanes))
+    partners = Partners([SeatSpec.parse(name)] * lanes, "bait", np.arange(lanes))
     rows = [
         partners.act(lambda view, t=t: np.full((lanes, 64), t + first, np.float32), t) for t in range(frames)
     ]
@@ -121,12 +122,13 @@ def test_switching_changes_policy_at_its_frame() -> None:
 
 def test_forms_follow_the_partner_and_plug_ins_are_played_as_they_are() -> None:
     names = ["noisy(switch(B1,B5))", "noisy(switch(B7,B2))", "noisy(B1)", "switch(B1,B5)", "noisy(B2)"]
-    assert [len(rows) for rows, _ in Partners(names, "bait", np.arange(5)).groups] == [2, 2, 1]
-    ((_, plug_in),) = Partners([CONSTANT] * 2, "bait", np.arange(2)).groups
+    groups = Partners(list(seats_of(names)), "bait", np.arange(5)).groups
+    assert [len(rows) for rows, _ in groups] == [2, 2, 1]
+    ((_, plug_in),) = Partners(list(seats_of([CONSTANT] * 2)), "bait", np.arange(2)).groups
     assert isinstance(plug_in, EachLane) and plug_in.copies[0] is not plug_in.copies[1]
-    ((_, hand),) = Partners(["human(B1,B5)"] * 2, "bait", np.arange(2)).groups
+    ((_, hand),) = Partners(list(seats_of(["human(B1,B5)"] * 2)), "bait", np.arange(2)).groups
     assert isinstance(hand, HumanLanes)
-    ((_, on_a_wrapper),) = Partners(["human(noisy(B4))"] * 2, "bait", np.arange(2)).groups
+    ((_, on_a_wrapper),) = Partners(list(seats_of(["human(noisy(B4))"] * 2)), "bait", np.arange(2)).groups
     assert isinstance(on_a_wrapper, EachLane)
 
 
@@ -150,7 +152,10 @@ def test_a_partner_acts_the_same_in_a_single_game_as_among_many_lanes() -> None:
     partners under test in the bait seat), past the switches' frame."""
     keys, frames = np.arange(20, 20 + len(MIXED)), SWITCH_AT + 30
     game = BatchGame(len(MIXED), GameConfig(frames=frames), keys)
-    together, shooters = Partners(MIXED, "bait", keys), Partners(["S5"] * len(MIXED), "shooter", keys)
+    together, shooters = (
+        Partners(list(seats_of(MIXED)), "bait", keys),
+        Partners(list(seats_of(["S5"] * len(MIXED))), "shooter", keys),
+    )
     singles = [make_partner(name, "bait") for name in MIXED]
     for partner, key in zip(singles, keys.tolist(), strict=True):
         partner.reset(policy_seed(key, "bait"))

@@ -34,8 +34,7 @@ from services.population.adaptive import ADAPTIVE, AdapterConfig, setting_text
 from shared.errors import UsageError
 from shared.game import HUMAN
 
-KEY = BY_KEY  # a policy's kinds (KEY, ZIP, PLUGIN, PROXY_KIND) are outside.policy_kind's
-RULE, FITTED, PERSON, ADAPTIVE_KIND = "rule", "fitted", "person", "adaptive"
+KEY = BY_KEY  # how a policy is found (KEY, ZIP, PLUGIN, PROXY_KIND) is outside.policy_kind's
 HUMANS = "humans:"  # stand-ins fitted by `tsf humans fit`: humans:DIR@NAME (services/proxy/humans.py)
 WRAPPERS = {
     "noisy": (1,),
@@ -47,31 +46,24 @@ WRAPPERS = {
 # their values: partners.build; human's are human_like.SETTINGS (skill, input_ms, the model's parameters)
 WRAPPER_SETTINGS = {"delayed": ("frames",), "human": ("skill", "input_ms", "reaction_ms", "...")}
 POLICIES = (KEY, ZIP, PLUGIN, PROXY_KIND)  # a policy by its key: services/agent/seats.policy_of
-KINDS = (*POLICIES, RULE, FITTED, PERSON, ADAPTIVE_KIND, *WRAPPERS)
 _CALL = re.compile(r"^(\w+)\((.*)\)$")
 
 
 @dataclass(frozen=True)
 class SeatSpec:
-    """One seat's player: its kind (KINDS), and what that kind needs. `key` is a key, a rule's name,
-    a .zip path, a module:attr, a proxy:DIR or humans:DIR@NAME; `settings` a rule's numbers or a
-    wrapper's settings as written; `inner` a wrapper's partners; `adapter` the adaptive agent's
-    whole config."""
-
-    kind: str
-    key: str = ""
-    settings: tuple[tuple[str, float | str], ...] = ()
-    inner: tuple[SeatSpec, ...] = ()
-    adapter: AdapterConfig | None = None
+    """One seat's player, read from its name once (`parse`) and named back (`str`). What plays is
+    its type: `PolicySeat` (a key, a .zip, a module:attr, a proxy:DIR), `RuleSeat` (a scripted
+    rule with other settings), `FittedSeat` (humans:DIR@NAME), `PersonSeat`, `AdaptiveSeat` (the
+    adaptive agent's whole config) and `WrapperSeat` (a wrapper's partners and settings)."""
 
     @classmethod
     def parse(cls, name: str, option: str = "--partner") -> SeatSpec:
         """The seat a name stands for; a UsageError about `option` for a name that is none."""
         name = name.strip()
         if name == HUMAN:
-            return cls(PERSON)
+            return PersonSeat()
         if name.startswith(ADAPTIVE):
-            return cls(ADAPTIVE_KIND, adapter=AdapterConfig.parse(name, option))
+            return AdaptiveSeat(AdapterConfig.parse(name, option))
         call = _CALL.match(name)
         if call and call[1] in WRAPPERS:
             parts = arguments(call[2])
@@ -83,46 +75,110 @@ class SeatSpec:
             named = tuple(tuple(part.strip() for part in s.partition("=")[::2]) for s in settings)
             if named and call[1] not in WRAPPER_SETTINGS:
                 raise UsageError(option, name, f"{call[1]}(...) takes no settings")
-            return cls(call[1], settings=named, inner=tuple(cls.parse(part, option) for part in parts))
+            return WrapperSeat(call[1], tuple(cls.parse(part, option) for part in parts), named)
         if call and call[1] in SCRIPTED:
-            return cls(RULE, call[1], rule_settings(name, call[1], call[2], option))
+            return RuleSeat(call[1], rule_settings(name, call[1], call[2], option))
         if name.startswith(HUMANS):
-            return cls(FITTED, name)
+            return FittedSeat(name)
         if not name:
             raise UsageError(option, name, "no seat named")
-        return cls(policy_kind(name), name)
+        return PolicySeat(name, policy_kind(name))
 
-    def __str__(self) -> str:
-        if self.kind == PERSON:
-            return HUMAN
-        if self.kind == ADAPTIVE_KIND:
-            return self.adapter.name
-        if self.kind in WRAPPERS:
-            settings = (f"{setting}={value}" for setting, value in self.settings)
-            return f"{self.kind}({','.join([*map(str, self.inner), *settings])})"
-        if self.kind == RULE:
-            return f"{self.key}({','.join(f'{s}={setting_text(v)}' for s, v in self.settings)})"
-        return self.key
-
-    @classmethod
-    def adaptive_agent(cls, config: AdapterConfig) -> SeatSpec:
+    @staticmethod
+    def adaptive_agent(config: AdapterConfig) -> AdaptiveSeat:
         """The seat of the adaptive agent `config`, whole (its role and seed come from where it plays)."""
-        return cls(ADAPTIVE_KIND, adapter=config)
+        return AdaptiveSeat(config)
 
     def adaptive(self, role: str, seed: int = 0) -> AdapterConfig | None:
         """The adaptive agent it names, in `role`'s seat of a game of `seed`; None for any other."""
-        return replace(self.adapter, role=role, seed=seed) if self.adapter else None
+        return None
 
     def walk(self) -> Iterator[SeatSpec]:
         """This spec and every spec inside it."""
         yield self
-        for spec in self.inner:
-            yield from spec.walk()
 
     @property
     def plugins(self) -> tuple[str, ...]:
         """The `module:attr` plug-ins it names, inside wrappers too: what a worker must import."""
-        return tuple(dict.fromkeys(s.key for s in self.walk() if s.kind == PLUGIN))
+        found = (s.key for s in self.walk() if isinstance(s, PolicySeat) and s.how == PLUGIN)
+        return tuple(dict.fromkeys(found))
+
+
+@dataclass(frozen=True)
+class PolicySeat(SeatSpec):
+    """A policy by its key; `how` is where the key is found (outside.policy_kind: a library or
+    scripted key, a .zip, a module:attr, a proxy:DIR)."""
+
+    key: str
+    how: str = KEY
+
+    def __str__(self) -> str:
+        return self.key
+
+
+@dataclass(frozen=True)
+class RuleSeat(SeatSpec):
+    """A scripted rule with other settings than its own (any of its constructor's numbers)."""
+
+    key: str
+    settings: tuple[tuple[str, float], ...] = ()
+
+    def __str__(self) -> str:
+        return f"{self.key}({','.join(f'{s}={setting_text(v)}' for s, v in self.settings)})"
+
+
+@dataclass(frozen=True)
+class FittedSeat(SeatSpec):
+    """Participant NAME's stand-in fitted by `tsf humans fit`: humans:DIR@NAME."""
+
+    key: str
+
+    def __str__(self) -> str:
+        return self.key
+
+
+@dataclass(frozen=True)
+class PersonSeat(SeatSpec):
+    """A person: no agent plays the seat, a gateway does."""
+
+    def __str__(self) -> str:
+        return HUMAN
+
+
+@dataclass(frozen=True)
+class AdaptiveSeat(SeatSpec):
+    """The adaptive agent, with its whole AdapterConfig (its seat and seed come from where it plays)."""
+
+    adapter: AdapterConfig
+
+    def __str__(self) -> str:
+        return self.adapter.name
+
+    def adaptive(self, role: str, seed: int = 0) -> AdapterConfig:
+        return replace(self.adapter, role=role, seed=seed)
+
+
+@dataclass(frozen=True)
+class WrapperSeat(SeatSpec):
+    """A wrapper (WRAPPERS) of one or two partners, with its settings as written."""
+
+    wrapper: str
+    inner: tuple[SeatSpec, ...]
+    settings: tuple[tuple[str, str], ...] = ()
+
+    def __str__(self) -> str:
+        settings = (f"{setting}={value}" for setting, value in self.settings)
+        return f"{self.wrapper}({','.join([*map(str, self.inner), *settings])})"
+
+    def walk(self) -> Iterator[SeatSpec]:
+        yield self
+        for spec in self.inner:
+            yield from spec.walk()
+
+
+def seats_of(names: Iterable[str], option: str = "--partner") -> tuple[SeatSpec, ...]:
+    """Each name's seat, in order (a team's, read from a job's or a table's names)."""
+    return tuple(SeatSpec.parse(name, option) for name in names)
 
 
 def plugins_in(names: Iterable[str]) -> tuple[str, ...]:
@@ -137,11 +193,11 @@ def check_live(spec: SeatSpec, role: str, option: str) -> SeatSpec:
     policy by key (library, scripted, .zip, plug-in, proxy; loaded to see which seat it plays).
     Partners made of policies (wrappers, rules with other settings) play in bulk only, and the
     adaptive agent takes its seat through the adapter (MatchPlan)."""
-    if spec.kind == KEY:
+    if isinstance(spec, PolicySeat) and spec.how == KEY:
         check_seat(spec.key, role, option)
-    elif spec.kind in POLICIES:
-        policy_of(spec.kind, spec.key, role, option)  # loaded to see which seat it plays
-    elif spec.kind != PERSON:
+    elif isinstance(spec, PolicySeat):
+        policy_of(spec.how, spec.key, role, option)  # loaded to see which seat it plays
+    elif not isinstance(spec, PersonSeat):
         raise UsageError(option, str(spec), "plays in bulk evaluations only, not in a live match")
     return spec
 

@@ -7,12 +7,15 @@ from services.population.adaptive import INITIAL, STRATEGIES, WINDOWS, AdapterCo
 from services.population.partners import make_partner, population
 from services.population.seat import (
     KEY,
-    PERSON,
     PLUGIN,
     PROXY_KIND,
-    RULE,
     ZIP,
+    AdaptiveSeat,
+    PersonSeat,
+    PolicySeat,
+    RuleSeat,
     SeatSpec,
+    WrapperSeat,
     check_live,
     plugins_in,
 )
@@ -34,28 +37,28 @@ adapters = st.builds(
 )
 numbers = st.floats(allow_nan=False, allow_infinity=False)
 leaves = st.one_of(
-    st.sampled_from(["B1", "B5", "S7", "circle", "mirror", "idle", "random"]).map(lambda k: SeatSpec(KEY, k)),
-    st.from_regex(r"\A[a-z][a-z0-9_/]{0,12}\.zip\Z").map(lambda k: SeatSpec(ZIP, k)),
-    st.from_regex(r"\A[a-z][a-z0-9_.]{0,8}:[A-Za-z][A-Za-z0-9_]{0,8}\Z").map(lambda k: SeatSpec(PLUGIN, k)),
-    st.from_regex(r"\Aproxy:[a-z0-9_/]{1,12}\Z").map(lambda k: SeatSpec(PROXY_KIND, k)),
+    st.sampled_from(["B1", "B5", "S7", "circle", "mirror", "idle", "random"]).map(
+        lambda k: PolicySeat(k, KEY)
+    ),
+    st.from_regex(r"\A[a-z][a-z0-9_/]{0,12}\.zip\Z").map(lambda k: PolicySeat(k, ZIP)),
+    st.from_regex(r"\A[a-z][a-z0-9_.]{0,8}:[A-Za-z][A-Za-z0-9_]{0,8}\Z").map(lambda k: PolicySeat(k, PLUGIN)),
+    st.from_regex(r"\Aproxy:[a-z0-9_/]{1,12}\Z").map(lambda k: PolicySeat(k, PROXY_KIND)),
     st.lists(
         st.tuples(st.sampled_from(["radius", "speed"]), numbers), max_size=2, unique_by=lambda s: s[0]
-    ).map(lambda s: SeatSpec(RULE, "circle", tuple(s))),
+    ).map(lambda s: RuleSeat("circle", tuple(s))),
 )
 partners = st.recursive(
     leaves,
     lambda inner: st.one_of(
         st.tuples(st.sampled_from(["noisy", "delayed", "sticky"]), inner).map(
-            lambda w: SeatSpec(w[0], inner=(w[1],))
+            lambda w: WrapperSeat(w[0], (w[1],))
         ),
-        st.tuples(inner, inner).map(lambda pair: SeatSpec("switch", inner=pair)),
-        st.lists(inner, min_size=1, max_size=2).map(lambda hands: SeatSpec("human", inner=tuple(hands))),
+        st.tuples(inner, inner).map(lambda pair: WrapperSeat("switch", pair)),
+        st.lists(inner, min_size=1, max_size=2).map(lambda hands: WrapperSeat("human", tuple(hands))),
     ),
     max_leaves=5,
 )
-specs = st.one_of(
-    partners, st.just(SeatSpec(PERSON)), adapters.map(lambda a: SeatSpec("adaptive", adapter=a))
-)
+specs = st.one_of(partners, st.just(PersonSeat()), adapters.map(AdaptiveSeat))
 
 
 @given(specs)
@@ -82,7 +85,7 @@ def test_old_names_read_as_before():
         for name in (name for group in population(role).values() for name in group):
             assert str(SeatSpec.parse(name)) == name
             assert make_partner(name, role).key == name
-    assert SeatSpec.parse(HUMAN).kind == PERSON and SeatSpec.parse("S5").adaptive("shooter") is None
+    assert SeatSpec.parse(HUMAN) == PersonSeat() and SeatSpec.parse("S5").adaptive("shooter") is None
 
 
 @pytest.mark.parametrize(
@@ -103,10 +106,9 @@ def test_a_name_that_is_no_seat_is_one_usage_error(name):
 def test_plugins_are_found_inside_wrappers_and_a_live_seat_is_a_person_or_a_key():
     assert SeatSpec.parse("noisy(switch(B5,my.mod:Alice))").plugins == ("my.mod:Alice",)
     assert plugins_in(["human(proxy:/p0)", "a.zip", "sticky(b.c:D)", "b.c:D"]) == ("b.c:D",)
-    assert (
-        check_live(SeatSpec.parse(HUMAN), "bait", "--bait").kind == PERSON
-        and check_live(SeatSpec.parse("B5"), "bait", "--bait").kind == KEY
-    )
+    assert check_live(SeatSpec.parse(HUMAN), "bait", "--bait") == PersonSeat() and check_live(
+        SeatSpec.parse("B5"), "bait", "--bait"
+    ) == PolicySeat("B5", KEY)
     for name in ("noisy(B5)", "circle(radius=100)", "adaptive-T400-cem"):
         with pytest.raises(UsageError, match="bulk evaluations only"):
             check_live(SeatSpec.parse(name), "bait", "--bait")

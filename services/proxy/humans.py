@@ -32,13 +32,14 @@ from services.population.human_like import (
     rules_of,
 )
 from services.population.keys import LAPSE, changes, fire_presses, shortest_runs, still
+from services.population.seat import seats_of
 from services.proxy.data import pairs, person_seats, study_record
 from services.recorder.recording import load
 from services.sim import observation as ob
 from services.sim.sampling import batch_probs
 from services.table.table import Table
 from shared.errors import Failure, UsageError
-from shared.game import ROLES, GameConfig, other, split_action
+from shared.game import FPS, ROLES, GameConfig, other, split_action
 
 GROUPS = ("pairs", "bait stand-in", "shooter stand-in")
 STUDY_PAIRS = 2.6  # kills/min: the original study's human-human teams
@@ -76,7 +77,7 @@ def calibration(
     plan = [
         (skill, group, team) for skill in skills for group, ts in teams(skill, table).items() for team in ts
     ]
-    kills = play_teams([team for *_, team in plan], list(range(seeds)), config)
+    kills = play_teams([seats_of(team) for *_, team in plan], list(range(seeds)), config)
     rows = []
     for skill in skills:
         for group in GROUPS:
@@ -117,7 +118,7 @@ def statistics(actions: np.ndarray, opened: np.ndarray, kills_per_minute: float)
     inner = np.concatenate(per_key) if any(len(r) for r in per_key) else np.array([len(actions)])
     after = np.searchsorted(when, opened, side="right")
     latency = [when[i] - f for i, f in zip(after, opened, strict=True) if i < len(when)]
-    seconds = len(actions) / 30.0
+    seconds = len(actions) / FPS
     return {
         "key_changes_per_s": len(when) / seconds,
         "frozen_share": float(runs[runs >= FROZEN].sum() / len(actions)),
@@ -214,7 +215,7 @@ def traits(trials: list[Trial]) -> dict[str, float]:
     for name, runs in holds.items():
         out[f"{name}_hold_median_ms"], out[f"{name}_hold_p90_ms"] = _ms(runs, 50), _ms(runs, 90)
     out["lapse_share"] = lapsed / max(alive, 1)
-    out["fires_per_s"] = presses / (frames / 30.0)
+    out["fires_per_s"] = presses / (frames / FPS)
     out["fires_open_share"] = open_presses / presses if presses else None
     return out
 
@@ -240,7 +241,7 @@ def simulated(people: dict[str, tuple[str, str]], role: str, seeds: int = FIT_SE
         for skill in FIT_SKILLS:
             person = f"human({policy},skill={skill:g})"
             teams.append((person, agent) if role == "bait" else (agent, person))
-    kills, played, opened = play_teams(teams, list(range(seeds)), record=True)
+    kills, played, opened = play_teams(list(map(seats_of, teams)), list(range(seeds)), record=True)
     seat = ROLES.index(role)
     tables = []
     for p in range(len(kinds)):
@@ -377,7 +378,7 @@ def signature(actions: np.ndarray, obs: np.ndarray, kills_per_minute: float, pol
     starts = np.flatnonzero(np.diff(np.concatenate([[0], frozen.astype(np.int64)])) == 1)
     pressed = fire_presses(keys)
     open_share = obs[pressed, ob.FORTRESS + ob.F_VULNERABLE] > 0.0
-    seconds = frames / 30.0
+    seconds = frames / FPS
     return np.array(
         [
             *likelihoods,
@@ -403,7 +404,8 @@ def design(policy: str, agent: str, role: str) -> tuple[np.ndarray, np.ndarray]:
     teams = [
         (human_with(policy, d), agent) if role == "bait" else (agent, human_with(policy, d)) for d in drawn
     ]
-    kills, played, _, obs = play_teams(teams, list(range(DESIGN_GAMES)), record=True, world_of=role)
+    played_teams = list(map(seats_of, teams))
+    kills, played, _, obs = play_teams(played_teams, list(range(DESIGN_GAMES)), record=True, world_of=role)
     actions = played[..., ROLES.index(role)]
     inner = networks.load(policy)
     signatures = np.array(

@@ -14,6 +14,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from services.agent.library import file_hash
+from services.population.human_like import STAND_INS
+from services.population.partners import fitted_people
+from services.population.seat import HUMANS
 from services.proxy import trainer
 from services.proxy.data import study_record
 from shared.errors import UsageError
@@ -68,3 +71,12 @@ def study_partners(
             trainer().train(paths, role, target, settings, PER_PERSON_HELD_OUT, by="recording")
         partners[person] = f"proxy:{target}"
     return partners, excluded
+
+
+def partners_from(directory: Path, role: str, out: Path) -> tuple[dict[str, str], list[str]]:
+    """The partners of `role`'s seat by participant, from a directory of `tsf humans fit` (each
+    participant's fitted stand-in, humans:DIR@NAME) or a study's recordings (one proxy each, trained
+    into `out` if need be, `study_partners`); and a line for each participant left out."""
+    if (directory / STAND_INS).is_file():
+        return {name: f"{HUMANS}{directory}@{name}" for name in fitted_people(directory)[1]}, []
+    return study_partners(directory, role, out)

@@ -38,7 +38,7 @@ from scipy import stats
 from services.adapter import cem
 from services.agent import library, networks
 from services.population.adaptive import AdapterConfig
-from services.population.seat import ADAPTIVE_KIND, SeatSpec
+from services.population.seat import AdaptiveSeat, SeatSpec
 from services.report.load import Match
 from services.table.table import Table
 from shared.game import FPS, ROLES, GameConfig, Policy, other
@@ -71,7 +71,7 @@ def adaptive_seat(match: Match) -> str | None:
     if not adapter.empty:
         return str(adapter["role"].iloc[0])
     named = {r: match.policies[r] for r in ROLES if match.policies[r]}  # a person's seat may name nothing
-    return next((r for r, name in named.items() if SeatSpec.parse(name).kind == ADAPTIVE_KIND), None)
+    return next((r for r, name in named.items() if isinstance(SeatSpec.parse(name), AdaptiveSeat)), None)
 
 
 def person_seats(match: Match) -> list[str]:

@@ -22,7 +22,7 @@ from pathlib import Path
 from services.adapter import core
 from services.agent.outside import record_name
 from services.population.adaptive import AdapterConfig
-from services.population.seat import ADAPTIVE_KIND, KEY, PERSON, SeatSpec, check_live
+from services.population.seat import AdaptiveSeat, PersonSeat, PolicySeat, SeatSpec, check_live
 from services.recorder.log import make_way
 from services.recorder.recording import Recording, load
 from services.recorder.service import recording_path
@@ -50,8 +50,8 @@ class MatchPlan:
     seed: int = 0
     frames: int = 1800
     mode: str = "realtime"
-    bait: SeatSpec = SeatSpec(KEY, "circle")
-    shooter: SeatSpec = SeatSpec(KEY, "mirror")
+    bait: SeatSpec = PolicySeat("circle")
+    shooter: SeatSpec = PolicySeat("mirror")
     directory: Path = Path("recordings")
     low_latency: bool = True
     peers: tuple[str, ...] = ()  # endpoints the sim also connects to (a human gateway's session)
@@ -65,7 +65,7 @@ class MatchPlan:
         (the AdapterConfig has checked the adaptive seat's options; its out-of-library thresholds
         are checked here, or the adapter would stop with them once the match had begun)."""
         keys.check_match(self.match)
-        adaptive = [role for role, spec in self.seats.items() if spec.kind == ADAPTIVE_KIND]
+        adaptive = [role for role, spec in self.seats.items() if isinstance(spec, AdaptiveSeat)]
         for role, spec in self.seats.items():
             if role not in adaptive:
                 check_live(spec, role, f"--{role}")
@@ -101,7 +101,7 @@ class MatchPlan:
         policies, adapter = self.policies(), self.adapter
         return MatchOrder(
             match=self.match, frame=0, sender=sender, seed=self.seed, frames=self.frames, mode=self.mode,
-            **{role: "" if self.seats[role].kind == PERSON else policies[role] for role in ROLES},
+            **{role: "" if isinstance(self.seats[role], PersonSeat) else policies[role] for role in ROLES},
             names=self.names(), adapter=adapter.name if adapter else "",
             adaptive=adapter.role if adapter else "",
             wait_players=self.wait_players, wait_services=self.wait_services, folder=folder,
@@ -112,7 +112,7 @@ class MatchPlan:
         is no service's): once all are up, the match is ready for its people."""
         match = self.match
         tokens = {keys.alive(match, "sim"), keys.alive(match, "recorder")}
-        agents = [role for role, spec in self.seats.items() if spec.kind != PERSON]
+        agents = [role for role, spec in self.seats.items() if not isinstance(spec, PersonSeat)]
         tokens |= {keys.alive(match, "agent", role) for role in agents}
         return tokens | ({keys.alive(match, "adapter")} if self.adapter is not None else set())
 
@@ -193,7 +193,7 @@ def run_match(
         if plan.adapter is not None:
             processes.start("adapter", service_command("adapter", peer_bus, *match, *plan.adapter.to_args()))
         for role, policy in policies.items():
-            if plan.seats[role].kind == PERSON:
+            if isinstance(plan.seats[role], PersonSeat):
                 continue
             processes.start(
                 f"agent-{role}",

@@ -70,7 +70,7 @@ class Pool:
         low_latency: bool = True,
         peers: tuple[str, ...] = (),
     ) -> None:
-        self.name, self.directory = keys.check_match(name), Path(directory)
+        self.name, self.directory = keys.check_name(name), Path(directory)
         self.endpoint = free_endpoint()
         self.sim_bus, self.client_bus = match_buses(self.endpoint, low_latency, peers)
         self.services = ("sim", "agent", "recorder", *(("adapter",) if adaptive else ()))

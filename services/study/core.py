@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from services.population.adaptive import AdapterConfig
-from services.population.seat import ADAPTIVE_KIND, SeatSpec
+from services.population.seat import AdaptiveSeat, SeatSpec
 from services.study import settings
 from services.study.crowd import FAILS, Crowd
 from shared.errors import UsageError
@@ -73,7 +73,7 @@ class Variant:
     adapter: SeatSpec | None = None
 
     def __post_init__(self) -> None:
-        if self.adapter and self.adapter.kind != ADAPTIVE_KIND:
+        if self.adapter and not isinstance(self.adapter, AdaptiveSeat):
             raise ValueError(f"variant {self.name}: {str(self.adapter)!r} names no adaptive agent")
 
     @classmethod

@@ -22,7 +22,7 @@ from pathlib import Path
 import zenoh
 
 from services.agent import library
-from services.population.seat import ADAPTIVE_KIND, SeatSpec
+from services.population.seat import AdaptiveSeat, SeatSpec
 from services.recorder.service import recording_path
 from services.runtime.launch import MatchPlan
 from services.runtime.pool import Pool, pool_name
@@ -69,7 +69,7 @@ def plan_of(offer: MatchOffer, directory: Path) -> MatchPlan:
     seats = {role: SeatSpec.parse(getattr(offer, role), f"--{role}") for role in ROLES if role not in empty}
     if offer.adapter or empty:
         adapter = SeatSpec.parse(offer.adapter, "adapter") if offer.adapter else None
-        if len(empty) != 1 or adapter is None or adapter.kind != ADAPTIVE_KIND:
+        if len(empty) != 1 or not isinstance(adapter, AdaptiveSeat):
             raise UsageError("adapter", offer.adapter, "not an adaptive agent for the one empty seat")
         seats[empty[0]] = adapter
     return MatchPlan(
@@ -158,7 +158,7 @@ class MatchHost:
 
     def __init__(self, bus: BusConfig, name: str, slots: int, out: Path, secret: bytes) -> None:
         self.bus, self.name, self.out = bus, name, out
-        self.host = Host(keys.check_match(name), slots, out, secret)
+        self.host = Host(keys.check_name(name), slots, out, secret)
         self.drops = Drops(self.host.sender)
         self.played = 0
         try:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from services.population.seat import ADAPTIVE_KIND, PERSON, SeatSpec, check_live
+from services.population.seat import AdaptiveSeat, PersonSeat, check_live
 from services.runtime.launch import MatchPlan
 from services.study.core import PRACTICE, StudyConfig, Variant
 from shared.errors import UsageError
@@ -27,9 +27,9 @@ def load_checked(path: str | Path) -> StudyConfig:
             agent = other(role)
             spec = variant.seat(agent)
             try:
-                if spec.kind != ADAPTIVE_KIND:  # the setting named as the file names it
+                if not isinstance(spec, AdaptiveSeat):  # the setting named as the file names it
                     check_live(spec, agent, f"{agent} =")
-                MatchPlan("preflight", config.seed, config.frames, **{role: SeatSpec(PERSON), agent: spec})
+                MatchPlan("preflight", config.seed, config.frames, **{role: PersonSeat(), agent: spec})
             except UsageError as error:
                 problem = f"not a study: variant {variant.name} (the {agent} seat): {error}"
                 raise UsageError("CONFIG", path, problem) from None

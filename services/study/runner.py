@@ -58,7 +58,7 @@ from websockets.protocol import State
 
 from services.human.core import BadInput, Controls, PerAddress, Quiet, RateLimit, points
 from services.human.gateway import Bridge, Gateway, Outbox, Web, client_address, receive_first, refuse
-from services.population.seat import PERSON, SeatSpec
+from services.population.seat import PersonSeat
 from services.recorder.service import recording_path
 from services.runtime.launch import MatchPlan
 from services.runtime.pool import Pool, pool_name
@@ -431,7 +431,7 @@ class TrialRunner:
     def plan(self, trial: Trial) -> MatchPlan:
         """The trial's match: the participant's seat a person's, the other the variant's agent."""
         agent = other(trial.role)
-        seats = {trial.role: SeatSpec(PERSON), agent: trial.variant.seat(agent)}
+        seats = {trial.role: PersonSeat(), agent: trial.variant.seat(agent)}
         config, serving = self.study.config, self.serving
         frames, directory = (
             (self.practice_frames, self.practice) if trial.practice else (config.frames, self.recordings)

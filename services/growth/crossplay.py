@@ -7,8 +7,8 @@ from __future__ import annotations
 import itertools
 
 from services.evaluation.evaluate import play_teams
-from services.population.seat import seats_of
 from services.jobs.core import Spec, spec
+from services.population.seat import seats_of
 
 PAIRS = 128  # teams of one job (x seeds games): a batch of a few hundred lanes
 

@@ -136,11 +136,18 @@ def skill_table(
             raise UsageError(
                 "--teammate", " ".join(teammate or []) or "(none)", f"name teammates {into} lacks"
             )
-        added = measure(before.role, new, list(before.styles), before.skills, before.games, workers)
+        with progress_bars() as shown:
+            added = measure(
+                before.role, new, list(before.styles), before.skills, before.games, workers, shown("games")
+            )
         table = before.extend(added)
     else:
         partner_role = other(role)
-        table = measure(role, _keys(teammate, role), _keys(style, partner_role), games=games, workers=workers)
+        with progress_bars() as shown:
+            table = measure(
+                role, _keys(teammate, role), _keys(style, partner_role), games=games, workers=workers,
+                progress=shown("games"),
+            )  # fmt: skip
     table.save(out)
     text = summary(table, _p_best(table))
     out.with_suffix(".md").write_text(text)

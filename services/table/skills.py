@@ -15,7 +15,9 @@ from __future__ import annotations
 import json
 import math
 import statistics
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -160,19 +162,24 @@ def measure(
     skills: tuple[str, ...] = SKILLS,
     games: int = 20,
     workers: int = 1,
+    progress: Callable[[int, int], None] | None = None,
 ) -> SkillTable:
-    """Play every (stand-in, teammate) pair over seeds 0..games-1, `workers` batches at once."""
+    """Play every (stand-in, teammate) pair over seeds 0..games-1, `workers` batches at once;
+    `progress(games done, games in all)` is told as each batch comes back."""
     if role not in ROLES:
         raise ValueError(f"unknown role {role!r}; expected one of {ROLES}")
     partners = [stand_in(style, skill) for style in styles for skill in skills]
     pairs = [(p, t) for p in partners for t in teammates]
     teams = [(t, p) if role == "bait" else (p, t) for p, t in pairs]
     chunks = batches(teams, workers, max(1, LANES // games))  # a game is the same in any batch
-    if workers > 1:
-        with ProcessPoolExecutor(workers) as pool:
-            played = [row for chunk in pool.map(_play, chunks, [games] * len(chunks)) for row in chunk]
-    else:
-        played = [row for chunk in chunks for row in _play(chunk, games)]
+    told = progress or (lambda done, total: None)
+    played: list[list[float]] = []
+    told(0, len(teams) * games)
+    with ProcessPoolExecutor(workers) if workers > 1 else nullcontext() as pool:
+        rows = pool.map(_play, chunks, [games] * len(chunks)) if pool else (_play(c, games) for c in chunks)
+        for chunk in rows:  # in the chunks' order, as each comes back
+            played += chunk
+            told(len(played) * games, len(teams) * games)
     results: dict[str, dict[str, list[float]]] = {p: {} for p in partners}
     for (p, t), row in zip(pairs, played, strict=True):
         results[p][t] = row

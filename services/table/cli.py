@@ -184,7 +184,8 @@ def skill_model_command(
         raise UsageError("--table", table, f"not a skill table of tsf skill-table ({error})") from None
     if set(skills.styles) != set(library.keys(other(skills.role))):
         raise UsageError("--table", table, "its styles are not the partner library in use")
-    model = skill_model(skills, window)
+    with progress_bars() as shown:
+        model = skill_model(skills, window, progress=shown("styles played"))
     console.print(f"skill model written to {model.save(out, ' '.join(['tsf', *sys.argv[1:]]))}")
 
 

@@ -224,19 +224,24 @@ def summary(table: SkillTable, p_best: dict[str, str]) -> str:
 
 
 def skill_model(
-    table: SkillTable, window: int = AdapterConfig.window, seeds: tuple = MODEL_SEEDS
+    table: SkillTable,
+    window: int = AdapterConfig.window,
+    seeds: tuple = MODEL_SEEDS,
+    progress: Callable[[int, int], None] | None = None,
 ) -> SkillModel:
     """The adapter's skill model for the table's seat: the table's means, and each level's FEATURES
     per style (mean and standard deviation over the windows the adapter reads: every EVERY frames
     from the end of its warm-up, of games of each stand-in and of the library policy itself, with
-    the table's best static teammate, over `seeds`)."""
+    the table's best static teammate, over `seeds`); `progress(styles done, styles)` as it goes."""
     payoff = setup(table.role).payoff
+    told = progress or (lambda done, total: None)
     if set(payoff.partners) != set(table.styles) or not set(payoff.ours) <= set(table.teammates):
         raise UsageError("--table", table.role, "its styles and teammates are not the libraries' in use")
     teammate, first = table.best_static(), AdapterConfig(window=window).warmup_frames
     mean = np.zeros((len(payoff.partners), len(LEVELS), len(FEATURES)))
     sd = np.zeros_like(mean)
     for i, style in enumerate(payoff.partners):  # one batch per style
+        told(i, len(payoff.partners))
         names = [stand_in(style, skill) for skill in SKILLS] + [style]
         games = [(name, teammate, seed) for name in names for seed in seeds]
         played = play_games(games, table.role, record=True, score=True)
@@ -251,6 +256,7 @@ def skill_model(
                 read.append(keys.features(means.means().max(axis=1)))
         windows = np.stack(read, axis=1).reshape(len(names), len(seeds) * len(read), len(FEATURES))
         mean[i], sd[i] = windows.mean(axis=1), windows.std(axis=1)
+    told(len(payoff.partners), len(payoff.partners))
     values = np.array(
         [[[table.mean(stand_in(s, k), t) for t in payoff.ours] for k in SKILLS] for s in payoff.partners]
     )

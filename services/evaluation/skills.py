@@ -15,7 +15,9 @@ from __future__ import annotations
 import json
 import math
 import statistics
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -163,19 +165,24 @@ def measure(
     skills: tuple[str, ...] = SKILLS,
     games: int = 20,
     workers: int = 1,
+    progress: Callable[[int, int], None] | None = None,
 ) -> SkillTable:
-    """Play every (stand-in, teammate) pair over seeds 0..games-1, `workers` batches at once."""
+    """Play every (stand-in, teammate) pair over seeds 0..games-1, `workers` batches at once;
+    `progress(games done, games in all)` is told as each batch comes back."""
     if role not in ROLES:
         raise ValueError(f"unknown role {role!r}; expected one of {ROLES}")
     partners = [stand_in(style, skill) for style in styles for skill in skills]
     pairs = [(p, t) for p in partners for t in teammates]
     teams = [(t, p) if role == "bait" else (p, t) for p, t in pairs]
     chunks = batches(teams, workers, max(1, LANES // games))  # a game is the same in any batch
-    if workers > 1:
-        with ProcessPoolExecutor(workers, initializer=end_with_parent) as pool:  # none outlives us
-            played = [row for chunk in pool.map(_play, chunks, [games] * len(chunks)) for row in chunk]
-    else:
-        played = [row for chunk in chunks for row in _play(chunk, games)]
+    told = progress or (lambda done, total: None)
+    played: list[list[float]] = []
+    told(0, len(teams) * games)
+    with ProcessPoolExecutor(workers, initializer=end_with_parent) if workers > 1 else nullcontext() as pool:
+        rows = pool.map(_play, chunks, [games] * len(chunks)) if pool else (_play(c, games) for c in chunks)
+        for chunk in rows:  # in the chunks' order, as each comes back
+            played += chunk
+            told(len(played) * games, len(teams) * games)
     results: dict[str, dict[str, list[float]]] = {p: {} for p in partners}
     for (p, t), row in zip(pairs, played, strict=True):
         results[p][t] = row
@@ -220,19 +227,24 @@ def summary(table: SkillTable, p_best: dict[str, str]) -> str:
 
 
 def skill_model(
-    table: SkillTable, window: int = AdapterConfig.window, seeds: tuple = MODEL_SEEDS
+    table: SkillTable,
+    window: int = AdapterConfig.window,
+    seeds: tuple = MODEL_SEEDS,
+    progress: Callable[[int, int], None] | None = None,
 ) -> SkillModel:
     """The adapter's skill model for the table's seat: the table's means, and each level's FEATURES
     per style (mean and standard deviation over the windows the adapter reads: every EVERY frames
     from the end of its warm-up, of games of each stand-in and of the library policy itself, with
-    the table's best static teammate, over `seeds`)."""
+    the table's best static teammate, over `seeds`); `progress(styles done, styles)` as it goes."""
     payoff = setup(table.role).payoff
+    told = progress or (lambda done, total: None)
     if set(payoff.partners) != set(table.styles) or not set(payoff.ours) <= set(table.teammates):
         raise UsageError("--table", table.role, "its styles and teammates are not the libraries' in use")
     teammate, first = table.best_static(), AdapterConfig(window=window).warmup_frames
     mean = np.zeros((len(payoff.partners), len(LEVELS), len(FEATURES)))
     sd = np.zeros_like(mean)
     for i, style in enumerate(payoff.partners):  # one batch per style
+        told(i, len(payoff.partners))
         names = [stand_in(style, skill) for skill in SKILLS] + [style]
         games = [(SeatSpec.parse(name), SeatSpec.parse(teammate), seed) for name in names for seed in seeds]
         played = play_games(games, table.role, record=True, score=True)
@@ -247,6 +259,7 @@ def skill_model(
                 read.append(keys.features(means.means().max(axis=1)))
         windows = np.stack(read, axis=1).reshape(len(names), len(seeds) * len(read), len(FEATURES))
         mean[i], sd[i] = windows.mean(axis=1), windows.std(axis=1)
+    told(len(payoff.partners), len(payoff.partners))
     values = np.array(
         [[[table.mean(stand_in(s, k), t) for t in payoff.ours] for k in SKILLS] for s in payoff.partners]
     )

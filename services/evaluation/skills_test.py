@@ -30,7 +30,11 @@ def test_best_responses_gains_and_the_file_read_back(tmp_path):
 
 @pytest.mark.slow
 def test_a_skill_table_is_its_seeds_games_in_any_batches(monkeypatch):
-    table = measure("bait", ["B6", "B1"], ["S4"], ("novice", "practised"), games=3)
+    told: list[tuple[int, int]] = []
+    table = measure(
+        "bait", ["B6", "B1"], ["S4"], ("novice", "practised"), games=3, progress=lambda *p: told.append(p)
+    )
+    assert told[0] == (0, 12) and told[-1] == (12, 12)  # 2 stand-ins x 2 baits x 3 games
     assert all(len(table.results[p][t]) == 3 for p in table.partners for t in table.teammates)
     monkeypatch.setattr(skills, "LANES", 3)  # one pair a batch, two worker processes
     assert measure("bait", ["B6", "B1"], ["S4"], ("novice", "practised"), games=3, workers=2) == table

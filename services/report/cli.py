@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from services.options import GAMES, Role, console, number, output
+from services.options import GAMES, Role, console, number, output, progress_bars
 from shared.errors import Failure, UsageError
 
 commands = typer.Typer()
@@ -31,9 +31,10 @@ def report_command(
     from shared import provenance
 
     try:
-        report = build_report(
-            recordings, out, table or DEFAULT_TABLE, partner_role, trial or None, reference_games
-        )
+        with progress_bars() as shown:
+            report = build_report(
+                recordings, out, table or DEFAULT_TABLE, partner_role, trial or None, reference_games, shown
+            )
     except StaleTable as error:
         console.print(f"[red]{error}[/]")
         raise typer.Exit(1) from None

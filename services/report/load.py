@@ -15,6 +15,7 @@ and an attempt whose `status` is not `done` (a participant who dropped out) is n
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -64,13 +65,17 @@ class Problem:
     used: bool  # True: noted, but the recording is still in the analyses
 
 
-def load_matches(paths: list[Path], parquet: Path) -> tuple[list[Match], list[Problem]]:
+def load_matches(
+    paths: list[Path], parquet: Path, progress: Callable[[int, int], None] | None = None
+) -> tuple[list[Match], list[Problem]]:
     """Check and export each recording into `parquet` (`<name>.<table>.parquet`); the usable ones, and
-    every problem."""
+    every problem. `progress(done, total)` is told before each recording and at the end."""
     matches: list[Match] = []
     problems: list[Problem] = []
     names: set[str] = set()
-    for path in paths:
+    told = progress or (lambda done, total: None)
+    for done, path in enumerate(paths):
+        told(done, len(paths))
         name = _unique(path.name.removesuffix(".tsflog"), names)
 
         def problem(reason: str, used: bool = False, name: str = name, path: Path = path) -> None:
@@ -100,6 +105,7 @@ def load_matches(paths: list[Path], parquet: Path) -> tuple[list[Match], list[Pr
         export(recording, parquet, name)
         tables = {t: pd.read_parquet(path) for t, path in table_paths(parquet, name).items()}
         matches.append(Match(name, path, tables, meta))
+    told(len(paths), len(paths))
     return matches, problems
 
 

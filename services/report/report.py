@@ -7,6 +7,7 @@ behind the figures), DIR/parquet/<match>.<table>.parquet (each recording's table
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -42,12 +43,15 @@ def build_report(
     partner_role: str | None = None,
     trial: str | None = None,
     reference_games: int = REFERENCE_GAMES,
+    shown: Callable[[str], Callable[[int, int], None]] | None = None,
 ) -> Report:
     """Load, analyse, draw and write everything; a recording that cannot be used is named in the
-    report and left out, and the rest still builds."""
+    report and left out, and the rest still builds. `shown(step)` gives the (done, total) callback
+    of each long step (the recordings replayed, the reference games)."""
+    step = shown or (lambda name: lambda done, total: None)
     (out / "figures").mkdir(parents=True, exist_ok=True)
     (out / "data").mkdir(parents=True, exist_ok=True)
-    matches, problems = load_matches(recordings, out / "parquet")
+    matches, problems = load_matches(recordings, out / "parquet", step("recordings replayed"))
     table = Table.load(table_path)
 
     partners = analysis.partner_vectors(matches, partner_role)
@@ -55,10 +59,12 @@ def build_report(
         problems.append(Problem(row.match, "", f"no recorded actions of the {row.partner_role} seat", True))
     partners = partners[partners["frames"] > 0].reset_index(drop=True)
     config = _common_config(matches)
-    references = {
-        role: analysis.reference_vectors(role, table, reference_games, config)
-        for role in sorted(set(partners["partner_role"]))
-    }
+    roles = sorted(set(partners["partner_role"]))
+    told, references = step("reference games of the library's seats"), {}
+    for done, role in enumerate(roles):
+        told(done, len(roles))
+        references[role] = analysis.reference_vectors(role, table, reference_games, config)
+    told(len(roles), len(roles))
     points, variance = analysis.policy_space(partners, references)
     similarity = analysis.similarity_to_optimal(partners, table)
     correlations = analysis.correlations(similarity)

@@ -136,11 +136,18 @@ def skill_table(
             raise UsageError(
                 "--teammate", " ".join(teammate or []) or "(none)", f"name teammates {into} lacks"
             )
-        added = measure(before.role, new, list(before.styles), before.skills, before.games, workers)
+        with progress_bars() as shown:
+            added = measure(
+                before.role, new, list(before.styles), before.skills, before.games, workers, shown("games")
+            )
         table = before.extend(added)
     else:
         partner_role = other(role)
-        table = measure(role, _keys(teammate, role), _keys(style, partner_role), games=games, workers=workers)
+        with progress_bars() as shown:
+            table = measure(
+                role, _keys(teammate, role), _keys(style, partner_role), games=games, workers=workers,
+                progress=shown("games"),
+            )  # fmt: skip
     table.save(out)
     text = summary(table, _p_best(table))
     out.with_suffix(".md").write_text(text)
@@ -177,7 +184,8 @@ def skill_model_command(
         raise UsageError("--table", table, f"not a skill table of tsf skill-table ({error})") from None
     if set(skills.styles) != set(library.keys(other(skills.role))):
         raise UsageError("--table", table, "its styles are not the partner library in use")
-    model = skill_model(skills, window)
+    with progress_bars() as shown:
+        model = skill_model(skills, window, progress=shown("styles played"))
     console.print(f"skill model written to {model.save(out, ' '.join(['tsf', *sys.argv[1:]]))}")
 
 

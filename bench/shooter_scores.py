@@ -9,6 +9,7 @@ by cause) and fires. docs/library.md compares the speed-cap try of S1-S3 with it
 from __future__ import annotations
 
 import argparse
+from functools import cache, partial
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,7 @@ import numpy as np
 from services.agent import library, networks
 from services.sim.batch import BatchGame
 from services.sim.batch_play import RoleLanes, results
+from services.sim.observation import observe
 from services.sim.play import summarize
 
 
@@ -31,7 +33,8 @@ def scores(shooter, baits: list[str], games: int) -> tuple[list, float, list]:  
     ]
     moved, frames = 0.0, 0
     while not batch.done[0]:
-        batch.step(*(seat.act(batch) for seat in seats))
+        frame = int(batch.state.frame[0])
+        batch.step(*(seat.act(cache(partial(observe, batch, seat.role)), frame) for seat in seats))
         s, alive = batch.state, batch.state.alive[:, 1]
         moved += float(np.hypot(s.vx[alive, 1], s.vy[alive, 1]).sum())
         frames += int(alive.sum())

@@ -180,7 +180,7 @@ def library_add(
 ) -> None:
     """Export an SB3 model into a library of yours: numpy weights, registry and manifest entries with
     hashes and provenance. List the directory in TSF_LIBRARY to play its keys everywhere."""
-    from services.agent.outside import add
+    from services.agent.add import add
 
     entry = add(key, model, role, library_dir, view.value, partner, games)
     console.print(f"{key}: {library_dir / entry['file']} sha256 {entry['sha256'][:12]}")

@@ -64,10 +64,13 @@ def test_the_pettingzoo_factories_pass_pettingzoo_checks():
 
 
 def test_no_service_imports_gymnasium():
-    """Only this module loads gymnasium (and registers the id): a live service never pays for it."""
+    """Only this module loads gymnasium (and registers the id): a live service never pays for it,
+    nor for numba (the bulk engine's)."""
     code = (
-        "import sys, services.cli, services.sim.service, services.agent.service, services.adapter.service, "
-        "services.recorder.service, services.study.runner, services.evaluation.evaluation\n"
+        "import sys, services.sim.service, services.agent.service, services.adapter.service, "
+        "services.recorder.service, services.study.runner\n"
+        "assert not {'gymnasium', 'numba'} & set(sys.modules), 'gymnasium or numba imported'\n"
+        "import services.cli, services.evaluation.evaluation\n"
         "assert 'gymnasium' not in sys.modules, 'gymnasium imported'\n"
         "from services.agent import envs\n"
         "import gymnasium\n"

@@ -14,9 +14,9 @@ so a spec is loaded (`load`) without being classified again.
 A `.zip` is read with SB3 (the `train` extra) and played as numpy arrays (networks.JointPolicy): the
 network's distribution over the 12 actions with networks.FLOOR mixed in is what `probs` reports and
 what `act` draws from, so the adapter's likelihoods are exact. It reads the observation view it
-was trained on ("world", RoleEnv's default, unless told). `train.add` writes one into a library
-directory of your own (weights, registry and manifest entries); TSF_LIBRARY then makes its key a
-library key.
+was trained on ("world", RoleEnv's default, unless told). `services/agent/add.py` writes one into
+a library directory of your own (weights, registry and manifest entries); TSF_LIBRARY then makes
+its key a library key.
 """
 
 from __future__ import annotations
@@ -29,17 +29,14 @@ from pathlib import Path
 
 import numpy as np
 
-from services.agent import library, networks, proxy
+from services.agent import proxy
 from services.agent.library import PROXY_FAMILY
 from services.agent.networks import JointPolicy, Network
 from services.agent.proxy import PROXY
-from services.agent.scripted import scripted_keys
-from services.sim.batch_play import team_score
 from services.sim.observation import VIEWS
 from shared.errors import UsageError, missing_extra
 from shared.game import N_ACTIONS, OBS_SIZE, ROLES, Policy
 from shared.messages import POLICY_NAME
-from shared.provenance import provenance
 
 ACTIVATIONS = {"Tanh": "tanh", "ReLU": "relu"}  # torch module name: networks.Network's name
 KEY = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
@@ -184,60 +181,3 @@ def linear_arrays(layers: list, meta: dict) -> dict[str, np.ndarray]:
         arrays[f"b{i}"] = m.bias.detach().cpu().numpy().astype(np.float32)
     arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
     return arrays
-
-
-def add(
-    key: str, model: Path, role: str, directory: Path, view: str = "world", partner: str = "", games: int = 10
-) -> dict:
-    """Export an SB3 model, or a proxy directory (services/proxy), into the library at `directory`
-    (created if need be, never the shipped one): weights/KEY.npz, a registry entry and a manifest
-    entry with hashes and provenance, scored with `partner` (default: library.DEFAULT_PARTNER) over
-    `games` games. Returns the manifest entry."""
-    check_view(role, view)
-    directory = Path(directory)
-    if directory.resolve() == library.LIBRARY.resolve():
-        raise UsageError("--library", directory, "is the shipped library; give a directory of your own")
-    if not KEY.match(key):
-        raise UsageError("KEY", key, "a key is a letter, then letters, digits, - and _")
-    taken = [*library.registry(), *scripted_keys("bait"), *scripted_keys("shooter")]
-    if (directory / "registry.toml").exists():
-        taken += list(library.registry(directory))
-    if key in taken:
-        raise UsageError("KEY", key, "is a policy key already")
-    source = Path(model)
-    if source.is_dir():  # a proxy (services/proxy): its network as it is, its own view
-        arrays, family, view = proxy_arrays(source, key, role)
-        source = source / "proxy.npz"
-    else:
-        arrays, family = (
-            network_arrays(Path(model), {"key": key, "role": role, "view": view}),
-            library.OUTSIDE,
-        )
-    meta = json.loads(bytes(arrays["meta"]).decode())
-    path = directory / "weights" / f"{key}.npz"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    np.savez(path, **arrays)
-    description = f"{meta['policy_class']} from {Path(model).name}"
-    fields = {
-        "role": role,
-        "family": family,
-        "view": view,
-        "features": "all",
-        "description": description,
-    }
-    with open(directory / "registry.toml", "a") as f:  # JSON strings are TOML basic strings
-        f.write(f"\n[{key}]\n" + "".join(f"{name} = {json.dumps(value)}\n" for name, value in fields.items()))
-    library._registry.cache_clear()
-    entry = {
-        "file": str(path.relative_to(directory)),
-        "sha256": library.file_hash(path),
-        "algorithm": meta["policy_class"],
-        "source": {"file": str(Path(model).resolve()), "sha256": library.file_hash(source)},
-        "provenance": provenance(**library.provenance_hashes()),
-    }
-    library.record_entry(directory, key, entry)
-    if games:
-        mate = networks.load(partner or library.DEFAULT_PARTNER[role])
-        entry["score"] = team_score(networks.load(key, root=directory), mate, range(games))
-        library.record_entry(directory, key, entry)
-    return entry

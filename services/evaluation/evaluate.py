@@ -20,7 +20,7 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass, field
-from functools import cache, partial
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -32,7 +32,6 @@ from services.population.adaptive import AdapterConfig
 from services.population.human_like import SESSION_TRIALS
 from services.population.partners import PartnerError, Partners
 from services.population.seat import SeatSpec
-from services.sim.observation import observe
 from services.table.table import DEFAULT_TABLE
 from shared.game import OBS_SIZE, ROLES, GameConfig, Policy, bait_first, other
 
@@ -85,7 +84,7 @@ def play_games(
     partner's states and actions and both seats' actions, frame by frame; with `score`, the
     partner's scores under the library (the Scorer), frame by frame."""
     from services.sim.batch import BatchGame
-    from services.sim.batch_play import RoleLanes
+    from services.sim.batch_play import RoleLanes, play_lanes
 
     s, partner_role = setup(role), other(role)
     seeds = np.array([seed for *_, seed in games], np.int64)
@@ -111,15 +110,11 @@ def play_games(
     seen: list[np.ndarray] = []  # the partner's states, frame by frame (record)
     scores = np.zeros((len(games), frames, len(s.payoff.partners))) if score else None
     pairs = np.zeros((len(games), frames, 2), np.int64) if record else None
-    while not batch.done[0]:
-        frame = int(batch.state.frame[0])
-        observed = cache(partial(observe, batch, partner_role))  # each view once a frame
-        try:
-            partner_actions = partners.act(observed, frame)
-        except PartnerError as error:
-            partner, _, seed = games[error.lane]
-            raise PartnerError(f"partner {partner}, seed {seed}: {error.problem}") from None
-        our_actions = seat.act(batch)
+    partner_seat = ROLES.index(partner_role)
+
+    def each_frame(frame: int, seen_by: list, actions: list[np.ndarray]) -> None:
+        """The adaptive lanes' updates (a switch plays from the next frame) and what is recorded."""
+        observed, partner_actions = seen_by[partner_seat], actions[partner_seat]
         if len(scored):
             now = s.scorer.observed({v: observed(v)[scored] for v in s.scorer.views}, partner_actions[scored])
             states = observed("world")[scored]  # what AdapterLanes.update reads: stalls, the guard's kills
@@ -130,13 +125,17 @@ def play_games(
                 outcomes[lanes[j]].switches += 1
                 chosen = (s.payoff.partners[adapter.partner[j]], s.payoff.ours[adapter.policy[j]])
                 outcomes[lanes[j]].timeline.append((frame + 1, *chosen))
-        pair = bait_first(partner_role, partner_actions, our_actions)
         if scores is not None:
             scores[:, frame] = now
         if pairs is not None:
             seen.append(observed("world").copy())
-            pairs[:, frame] = np.stack(pair, axis=1)
-        batch.step(*pair)
+            pairs[:, frame] = np.stack(actions, axis=1)
+
+    try:
+        play_lanes(batch, bait_first(partner_role, partners, seat), each_frame)
+    except PartnerError as error:
+        partner, _, seed = games[error.lane]
+        raise PartnerError(f"partner {partner}, seed {seed}: {error.problem}") from None
     for lanes, _, adapter in groups:
         for lane, guarded in zip(lanes.tolist(), adapter.guarded.tolist(), strict=True):
             outcomes[lane].guarded = guarded
@@ -166,25 +165,25 @@ def play_teams(
     with `world_of` a role, also the (teams, seeds, frames, OBS_SIZE) world view of its seat in each
     frame's state (what a fit of that seat's person reads)."""
     from services.sim.batch import BatchGame
+    from services.sim.batch_play import play_lanes
 
     keys = np.array([seed for _ in teams for seed in seeds], np.int64)
     batch = BatchGame(len(keys), config, keys)
-    seats = {
-        role: Partners([team[i] for team in teams for _ in seeds], role, keys) for i, role in enumerate(ROLES)
-    }
+    seats = [Partners([team[i] for team in teams for _ in seeds], role, keys) for i, role in enumerate(ROLES)]
     played = np.zeros((len(keys), batch.config.frames, 2), np.int64) if record else None
     opened = np.zeros((len(keys), batch.config.frames + 1), bool)
     world = np.zeros((len(keys), batch.config.frames, OBS_SIZE), np.float32) if world_of else None
-    while not batch.done[0]:
-        frame = int(batch.state.frame[0])
-        seen = {r: cache(partial(observe, batch, r)) for r in ROLES}  # each view once a frame
-        bait, shooter = (seat.act(seen[r], frame) for r, seat in seats.items())
+
+    def each_frame(frame: int, seen_by: list, actions: list[np.ndarray]) -> None:
         if played is not None:
-            played[:, frame] = np.stack([bait, shooter], axis=1)
+            played[:, frame] = np.stack(actions, axis=1)
         if world is not None:
-            world[:, frame] = seen[world_of]("world")
-        batch.step(bait, shooter)
-        opened[:, frame + 1] = batch.state.vulnerable == batch.config.vulnerable_frames
+            world[:, frame] = seen_by[ROLES.index(world_of)]("world")
+        if frame:  # the state the last step left
+            opened[:, frame] = batch.state.vulnerable == batch.config.vulnerable_frames
+
+    play_lanes(batch, seats, each_frame)
+    opened[:, int(batch.state.frame[0])] = batch.state.vulnerable == batch.config.vulnerable_frames
     shape = (len(teams), len(seeds))
     kills = batch.kills_per_minute().reshape(shape)
     if played is None:

@@ -13,7 +13,7 @@ pytest.importorskip("torch", reason="the `train` extra is not installed")
 
 import torch as th  # noqa: E402
 
-from services.agent import library, networks, outside  # noqa: E402
+from services.agent import add, library, networks  # noqa: E402
 from services.agent.networks import ProxyPolicy, inputs  # noqa: E402
 from services.agent.seats import policy_for  # noqa: E402
 from services.cli import app  # noqa: E402
@@ -92,7 +92,7 @@ def test_numpy_probs_are_the_torch_softmax(proxy, tmp_path):
         remembering.probs(obs[1]), remembering.probs_given(obs[1:2], np.array([[first, 0]]))[0]
     )
     with pytest.raises(UsageError, match="reads its own last actions"):
-        outside.add("HELD", held, "bait", tmp_path / "lib", games=0)
+        add.add("HELD", held, "bait", tmp_path / "lib", games=0)
 
 
 def test_a_proxy_plays_as_a_key_and_as_a_partner(proxy, capsys):

@@ -13,7 +13,7 @@ with the number of distinct policies, not of pairs.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from functools import cache, partial
 
 import numpy as np
@@ -23,6 +23,8 @@ from services.sim.observation import observe
 from services.sim.play import GameResult, summarize
 from services.sim.sampling import act_lanes, lane_uniforms
 from shared.game import ROLES, GameConfig, Policy, bait_first
+
+Observed = Callable[[str], np.ndarray]  # a seat's observation of every lane, in a view
 
 
 class RoleLanes:
@@ -38,10 +40,28 @@ class RoleLanes:
         self.keys = np.asarray(keys)
         self.stream = ROLES.index(role) if stream is None else stream
 
-    def act(self, batch: BatchGame) -> np.ndarray:
+    def act(self, observed: Observed, frame: int) -> np.ndarray:
         """Every lane's action this frame: each policy in use asked once, for its lanes."""
-        uniforms = lane_uniforms(self.keys, self.stream, batch.state.frame)
-        return act_lanes(self.policies, self.choice, cache(partial(observe, batch, self.role)), uniforms)
+        uniforms = lane_uniforms(self.keys, self.stream, frame)
+        return act_lanes(self.policies, self.choice, observed, uniforms)
+
+
+def play_lanes(
+    batch: BatchGame,
+    seats: Sequence,
+    each_frame: Callable[[int, list[Observed], list[np.ndarray]], None] | None = None,
+) -> None:
+    """The one whole-game loop of bulk play: every frame, each seat (bait first; anything with
+    `act(observed, frame)`: RoleLanes, the population's Partners) answers for every lane from its
+    observations, each view observed once a frame, then `each_frame(frame, observed, actions)` (an
+    adapter's update, a recording) sees them before the step; until the batch's games end."""
+    while not batch.done[0]:
+        frame = int(batch.state.frame[0])
+        observed = [cache(partial(observe, batch, role)) for role in ROLES]
+        actions = [seat.act(seen, frame) for seat, seen in zip(seats, observed, strict=True)]
+        if each_frame is not None:
+            each_frame(frame, observed, actions)
+        batch.step(*actions)
 
 
 def play_batch(
@@ -67,8 +87,7 @@ def play_pairs(
         RoleLanes(role, policies, choice, seeds)
         for role, policies, choice in zip(ROLES, (baits, shooters), (bait_of, shooter_of), strict=True)
     ]
-    while not batch.done[0]:
-        batch.step(*(seat.act(batch) for seat in seats))
+    play_lanes(batch, seats)
     return results(batch, seeds)
 
 

@@ -1,4 +1,4 @@
-"""Recordings that earlier versions of the project wrote, kept in tests/data/recordings (how each was
+"""Recordings that earlier versions of the project wrote, kept in tests/data/old-recordings (how each was
 made: its README), read, replayed and exported by this version: one per schema version and per
 change of a recorded message's fields. A field a type gained later reads as its documented
 default (shared/messages.py, each type's ADDED); a recording that is truly damaged still says so."""
@@ -18,7 +18,7 @@ from services.recorder.log import LogWriter, read_log
 from services.recorder.recording import load, replay
 from shared.messages import RECORDED, SCHEMA_VERSION, Action, Summary
 
-CORPUS = Path(__file__).parent / "data" / "recordings"
+CORPUS = Path(__file__).parent / "data" / "old-recordings"
 # name: (schema version, whether its actions and summary carry `failures`, whether an adapter played)
 RECORDINGS = {
     "v1-2026-11-22": (1, False, False),  # the first recorded contract: no adapter status yet

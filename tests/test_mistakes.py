@@ -77,6 +77,11 @@ MISTAKES = [
         2,
         "tsf library: --population {tmp}/empty.toml: lacks 'bait'",
     ),
+    (
+        "library grow --out {tmp}/grown-other",
+        2,
+        "tsf library: --out {tmp}/grown-other: was grown from another population spec (0123456789abcdef)",
+    ),
     ("train --steps 0", 2, "Invalid value for '--steps'"),
     ("train", 2, "tsf train: KEYS (none): give library keys or --all, not both"),
     ("train B1 --all", 2, "tsf train: KEYS B1: give library keys or --all, not both"),
@@ -547,6 +552,8 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
     torn.write_bytes(done.read_bytes()[: done.stat().st_size // 2])
     (tmp / "garbage").write_text("this is no recording\n")
     (tmp / "empty.toml").write_text("")
+    (tmp / "grown-other").mkdir()  # a grown library's run of another population spec
+    (tmp / "grown-other" / "spec.json").write_text('{"population": "0123456789abcdef"}')
     study = (resources.files("services.study") / "configs" / "static.toml").read_text()
     (tmp / "long.toml").write_text(study.replace("trial_seconds = 60", "trial_seconds = 1e9"))
     (tmp / "typo.toml").write_text(study.replace("trial_seconds = 60", "trial_secnds = 60"))

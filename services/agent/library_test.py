@@ -200,3 +200,23 @@ def test_manifest_hash_changes_with_the_manifest(tmp_path, role):
     manifest[key]["seed"] += 1
     (root / "manifest.json").write_text(json.dumps(manifest))
     assert library.manifest_hash(root) != before
+
+
+def test_the_grown_library_is_named_and_plays_with_its_own_table(tmp_path, monkeypatch):
+    """TSF_LIBRARY=grown is the library shipped beside the study's (a directory of that name here
+    would be taken instead); its members play and its table is bound to it."""
+    from services.agent.networks import load
+    from services.table.table import Table
+
+    monkeypatch.setenv("TSF_LIBRARY", "grown")
+    monkeypatch.chdir(tmp_path)
+    assert library.roots() == [library.LIBRARY, library.NAMED["grown"]]
+    grown = [k for k in library.registry() if k.startswith(("GB", "GS"))]
+    assert grown and all(library.registry()[k].root == library.NAMED["grown"] for k in grown)
+    table = Table.load(library.table_path())  # checked against the libraries in use
+    assert set(table.baits) | set(table.shooters) == set(grown)
+    for key in grown:
+        policy = load(key)
+        assert policy.probs(np.zeros(64, np.float32)).sum() == pytest.approx(1.0)
+    (tmp_path / "grown").mkdir()
+    assert library.roots()[-1] == Path("grown")

@@ -36,7 +36,12 @@ LIBRARY = Path(__file__).parent / "library"
 CANDIDATES = LIBRARY / "candidates.toml"
 # Libraries shipped beside the study's, by the name TSF_LIBRARY may give instead of a directory:
 # `grown` is the library grown for coverage by `tsf library grow` (docs/library.md, "The grown library").
-NAMED = {"grown": Path(__file__).parent / "grown"}
+# `population` holds the partner population's trained members (PB01a.., PS01a..), which its
+# cross-play and test figures name.
+NAMED = {
+    "grown": Path(__file__).parent / "grown",
+    "population": Path(__file__).parents[1] / "population" / "members",
+}
 OUTSIDE = "outside"  # the family of a policy added from outside (a network over all 12 actions)
 PROXY_FAMILY = "proxy"  # the family of a proxy added from recorded people (services/proxy)
 

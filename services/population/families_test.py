@@ -46,7 +46,7 @@ def test_stand_ins_at_each_skill():
     ("change", "says"),
     [
         (("seed = 2026", "sead = 2026"), "unknown key sead"),
-        (("games = 2 ", "games = 3 "), "games = 3"),
+        (("games = 4 ", "games = 3 "), "games = 3"),
         (('skills = ["novice"', 'skills = ["newbie"'), "skill=newbie"),
         (("levels = [0.25, 0.5, 1.0]", "levels = [0.5, 0.25, 1.0]"), "increasing fractions"),
         (('family = "circle"', 'family = "mirror"'), "the bait's rule is 'circle'"),

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import typer
 
-from services import matches_cli, provenance, services_cli
+from services import matches_cli, services_cli
 from services.adapter import cli as adapter_cli
 from services.agent import cli as agent_cli
 from services.jobs import cli as jobs_cli
@@ -14,6 +14,7 @@ from services.options import log_options
 from services.proxy import cli as proxy_cli
 from services.report import cli as report_cli
 from services.table import cli as table_cli
+from shared import provenance
 from shared.messages import SCHEMA_VERSION
 
 # `tsf --help`'s panels in order, each command (and command group) by task, the everyday ones first.

@@ -6,8 +6,8 @@ import re
 import subprocess
 import sys
 
-from services import provenance
 from services.cli import PANEL, PANELS, app, name_of
+from shared import provenance
 
 
 def test_every_command_and_group_sits_in_one_panel_of_the_help_in_the_panels_order():

@@ -10,7 +10,7 @@
 import gymnasium
 from stable_baselines3 import PPO
 
-import services  # noqa: F401  (registers tsf/Role-v0)
+from services.agent import envs  # noqa: F401  (registers tsf/Role-v0)
 
 env = gymnasium.make("tsf/Role-v0", role="bait", partner="S5")
 model = PPO("MlpPolicy", env, n_steps=512, batch_size=128, seed=0, verbose=0).learn(2048)

@@ -12,6 +12,9 @@ import pytest
 from services.agent import library, networks, seats
 from services.sim.engine import Game
 from services.sim.observation import observe
+from services.table.table import (
+    Table,  # imported here, not under the test's TSF_LIBRARY: its default table is read once
+)
 from shared.errors import UsageError
 from shared.game import N_ACTIONS, ROLES, GameConfig, Policy
 
@@ -205,9 +208,6 @@ def test_manifest_hash_changes_with_the_manifest(tmp_path, role):
 def test_the_grown_library_is_named_and_plays_with_its_own_table(tmp_path, monkeypatch):
     """TSF_LIBRARY=grown is the library shipped beside the study's (a directory of that name here
     would be taken instead); its members play and its table is bound to it."""
-    from services.agent.networks import load
-    from services.table.table import Table
-
     monkeypatch.setenv("TSF_LIBRARY", "grown")
     monkeypatch.chdir(tmp_path)
     assert library.roots() == [library.LIBRARY, library.NAMED["grown"]]
@@ -216,7 +216,7 @@ def test_the_grown_library_is_named_and_plays_with_its_own_table(tmp_path, monke
     table = Table.load(library.table_path())  # checked against the libraries in use
     assert set(table.baits) | set(table.shooters) == set(grown)
     for key in grown:
-        policy = load(key)
+        policy = networks.load(key)
         assert policy.probs(np.zeros(64, np.float32)).sum() == pytest.approx(1.0)
     (tmp_path / "grown").mkdir()
     assert library.roots()[-1] == Path("grown")

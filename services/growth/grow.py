@@ -334,11 +334,8 @@ class Grow:
         self._registry(self.library_dir, entries)
         manifest = {}
         for key, (root, name) in files.items():
-            entry = library.manifest(root)[name]
-            path = self.library_dir / "weights" / f"{key}.npz"
-            path.parent.mkdir(parents=True, exist_ok=True)
-            shutil.copyfile(root / entry["file"], path)
-            manifest[key] = entry | {"file": str(path.relative_to(self.library_dir)), "source": name}
+            entry = _copied(library.manifest(root)[name], root, self.library_dir, key)
+            manifest[key] = entry | {"source": name}
         _write(self.library_dir / "manifest.json", manifest)
         _write(self.library_dir / "members.json", names)
         return names
@@ -353,15 +350,10 @@ class Grow:
                 [k for k in shooters if k.startswith(PREFIX["shooter"])],
             )
             games = 16
-            cells = {cell_spec(job).id: job for job in jobs(baits, shooters, games, CHUNK)}
-            done = dict(
-                zip(
-                    cells,
-                    self._jobs("table", [cell_spec(j) for j in cells.values()], roots=[self.library_dir]),
-                    strict=True,
-                )
-            )
-            table = assemble(baits, shooters, games, {cells[k].id: v for k, v in done.items()}, CHUNK)
+            todo = jobs(baits, shooters, games, CHUNK)
+            values = self._jobs("table", [cell_spec(job) for job in todo], roots=[self.library_dir])
+            results = {job.id: v for job, v in zip(todo, values, strict=True)}
+            table = assemble(baits, shooters, games, results, CHUNK)
             table.save(self.library_dir / "table.json")
             heatmap(Table.load(self.library_dir / "table.json"), self.out / "table.png")
         # The adapter's calibration, by the command that makes it, in an interpreter of its own:
@@ -436,11 +428,7 @@ class Grow:
         manifest_path = target / "manifest.json"
         manifest = json.loads(manifest_path.read_text()) if manifest_path.exists() else {}
         for key in keys:
-            entry = entries[key]
-            path = target / "weights" / f"{key}.npz"
-            path.parent.mkdir(parents=True, exist_ok=True)
-            shutil.copyfile(source / entry["file"], path)
-            manifest[key] = entry | {"file": str(path.relative_to(target))}
+            manifest[key] = _copied(entries[key], source, target, key)
         _write(manifest_path, manifest)
 
     def _sides(self) -> dict[str, str]:
@@ -477,6 +465,15 @@ def _library_roots(roots: list[Path]) -> Iterator[None]:
             os.environ.pop("TSF_LIBRARY", None)
         else:
             os.environ["TSF_LIBRARY"] = before
+
+
+def _copied(entry: dict, source: Path, target: Path, key: str) -> dict:
+    """A trained policy's weights copied from the library at `source` into `target` as `key`; its
+    manifest entry, naming the new file."""
+    path = target / "weights" / f"{key}.npz"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(source / entry["file"], path)
+    return entry | {"file": str(path.relative_to(target))}
 
 
 def _is_library(root: Path) -> bool:

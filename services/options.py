@@ -21,7 +21,7 @@ from typing import Annotated, Any, Literal
 import typer
 from rich.console import Console
 
-from services.population.adaptive import STRATEGIES, AdapterConfig
+from services.population.adaptive import PARTNERS, STRATEGIES, AdapterConfig
 from shared import keys
 from shared.bus import BusConfig
 from shared.errors import UsageError
@@ -159,6 +159,7 @@ PEOPLE_RECORDINGS = typer.Argument(
 # Enumerated options: Literal types, so that --help lists the choices and click refuses the rest.
 Role = Literal[ROLES]
 Strategy = Literal[STRATEGIES]
+Partners = Literal[PARTNERS]
 Strategies = enum.StrEnum("Strategies", [(s, s) for s in STRATEGIES])  # repeatable: typer lists take Enums
 SimMode = Literal["realtime", "lockstep"]
 ZenohMode = Literal["peer", "client", "router"]
@@ -379,12 +380,12 @@ def adapter_options(*fixed: str) -> Callable[[Callable[..., None]], Callable[...
         own = [
             p for p in inspect.signature(command, eval_str=True).parameters.values() if p.name != "adapter"
         ]
-        kinds = {"role": Role, "strategy": Strategy}  # the enumerated fields, as choices
+        kinds = {"role": Role, "strategy": Strategy, "partners": Partners}  # the enumerated fields
         added = [
             inspect.Parameter(
                 f.name,
                 inspect.Parameter.KEYWORD_ONLY,
-                default=f.default,
+                default=f.metadata["default"],
                 annotation=Annotated[
                     kinds.get(f.name, type(f.default)), typer.Option(help=f.metadata["help"])
                 ],

@@ -16,6 +16,7 @@ from services.options import (
     PEOPLE_RECORDINGS,
     RAY,
     WORKERS,
+    Partners,
     Role,
     Strategies,
     bus_options,
@@ -69,8 +70,8 @@ def diversity(
 
 # The options of `tsf eval` that choose or play games: nothing with --games, whose games were played.
 PLAYING = (
-    "seeds", "window", "strategy", "strategy_window", "partner", "partners_from", "identify_seeds",
-    "sessions", "workers", "job_games", "sweep_id", "ray",
+    "seeds", "window", "strategy", "strategy_window", "partner", "partners_from", "held_out",
+    "identify_seeds", "sessions", "workers", "job_games", "sweep_id", "ray",
 )  # fmt: skip
 
 
@@ -100,6 +101,12 @@ def eval_command(
         help="A study's recordings: one proxy per participant of the partners' seat (trained into "
         "OUT/proxies, or loaded from there) as the partners, reported per participant and pooled; "
         "or a directory of `tsf humans fit`: each participant's fitted stand-in.",
+    ),
+    held_out: bool = typer.Option(
+        False,
+        help="Evaluate on the partner population's test split (partners the grown library never "
+        "saw, and their stand-ins), against the static policies of both libraries, with the "
+        "grown library's and the study's adaptive agents at --strategy-window (docs/adapter.md).",
     ),
     identify_seeds: int = number(3, GAMES, "Games per library partner for identification."),
     identify: bool = typer.Option(True, help="Measure identification accuracy."),
@@ -167,7 +174,7 @@ def eval_command(
     plan = EvalPlan(
         role, tuple(partners), seeds, tuple(window or EvalPlan.windows),
         tuple(s.value for s in strategy or ()), strategy_window, identify_seeds, identify,
-        performance, sessions, job_games,
+        performance, sessions, job_games, held_out,
     )  # fmt: skip
     with (
         open_engine(bus, sweep_id, out / "eval.journal", KINDS, workers, ray, stop_on_signals()) as engine,
@@ -199,11 +206,17 @@ def calibrate_adapter(
         2, GAMES, "Seeded one-minute games of each pair (seeds 0..N-1); 2 for the shipped one."
     ),
     ray: str | None = RAY,
+    partners: Partners = typer.Option(
+        "library",
+        help="library: the study's library policies (calibration.json); groups: the grown library's "
+        "partner groups' members, written into a copy of its groups.json at --out.",
+    ),
     *,
     bus: BusConfig,
 ) -> None:
     """Measure the adapter's out-of-library thresholds: one game of each library policy with each
-    of the other seat's, per seed, as jobs on the job system's workers or on Ray. Resumable."""
+    of the other seat's, per seed (or of each partner group's member with each member of ours), as
+    jobs on the job system's workers or on Ray. Resumable."""
     from services.evaluation.thresholds import KINDS, calibrate, write_calibration
     from services.jobs.engine import on_workers, open_engine
 
@@ -212,7 +225,12 @@ def calibrate_adapter(
         open_engine(bus, sweep_id, journal, KINDS, workers, ray, stop_on_signals()) as engine,
         progress_bars() as shown,
     ):
-        result = calibrate(seeds=list(range(seeds)), run=on_workers(engine), progress=shown("frames played"))
+        result = calibrate(
+            seeds=list(range(seeds)),
+            run=on_workers(engine),
+            progress=shown("frames played"),
+            partners=partners,
+        )
     for role, thresholds in result["thresholds"].items():
         console.print(f"{role}: " + ", ".join(f"T={t}: {v:.2f}" for t, v in thresholds.items()))
     console.print(f"written to {write_calibration(result, out)}")

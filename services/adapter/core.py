@@ -37,7 +37,7 @@ from __future__ import annotations
 import json
 import math
 import random
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -48,19 +48,31 @@ from services.adapter.skill import CONFIDENT, EVERY, LEVELS, Keys, SkillModel, s
 from services.agent import library
 from services.agent.policy import end_round_batch
 from services.population.adaptive import AdapterConfig
+from services.population.partners import build as build_partner
+from services.population.seat import SeatSpec
 from services.sim import observation as ob
 from services.table.table import DEFAULT_TABLE, Table
 from shared.errors import UsageError
 from shared.game import N_ACTIONS, Policy
 
+GROUPS = library.NAMED["grown"] / "groups.json"  # the grown library's partner groups (tsf library grow)
+
 
 @dataclass(frozen=True)
 class Payoff:
-    """The table P seen from our seat: values[i, j] = kills/min of partner type i with our policy j."""
+    """The table P seen from our seat: values[i, j] = kills/min of partner type i with our policy j.
+
+    The partner types are scored policies (`partners`). Where they are a population's members in
+    `groups` (the grown library's, `from_groups`), a member's row is its group's and the estimate
+    is the group: `types` names what the adapter identifies, `membership` maps members to them."""
 
     partners: tuple[str, ...]
     ours: tuple[str, ...]
     values: np.ndarray
+    groups: tuple[str, ...] = ()  # the partner groups, where the partners are their members
+    group: tuple[int, ...] = ()  # each partner's group
+    thresholds: dict[str, float] = field(default_factory=dict)  # out of the groups, by window
+    confusion: dict[str, np.ndarray] = field(default_factory=dict)  # the groups' (true, estimated), by window
 
     @classmethod
     def load(cls, role: str, table: Path = DEFAULT_TABLE) -> Payoff:
@@ -74,6 +86,57 @@ class Payoff:
         if role == "shooter":
             return cls(tuple(table.baits), tuple(table.shooters), grid)
         return cls(tuple(table.shooters), tuple(table.baits), grid.T)
+
+    @classmethod
+    def from_groups(cls, role: str, path: Path | None = None) -> Payoff:
+        """The grown library's partner groups seen from our seat `role` (groups.json, which `tsf
+        library grow` writes): every member of every group a partner type with its group's row,
+        our policies the grown library's members of our seat (by the names they play under)."""
+        path = path or groups_path()
+        try:
+            seat = json.loads(path.read_text())["seats"][role]
+        except (OSError, ValueError, KeyError) as error:
+            raise UsageError(
+                "--partners", "groups", f"no partner groups for the {role} seat ({error})"
+            ) from None
+        members = [(m, j) for j, g in enumerate(seat["groups"]) for m in g["members"]]
+        values = np.array([seat["groups"][j]["values"] for _, j in members], float)
+        return cls(
+            tuple(m for m, _ in members),
+            tuple(seat["teammates"]),
+            values,
+            tuple(g["name"] for g in seat["groups"]),
+            tuple(j for _, j in members),
+            {str(t): float(v) for t, v in seat.get("thresholds", {}).items()},
+            {str(t): np.array(c, float) for t, c in seat.get("confusion", {}).items()},
+        )
+
+    @property
+    def types(self) -> tuple[str, ...]:
+        """What the adapter identifies the partner as: a group, or a library policy."""
+        return self.groups or self.partners
+
+    @property
+    def membership(self) -> np.ndarray:
+        """(K, types): 1 where partner k is of that type (the identity without groups)."""
+        if not self.groups:
+            return np.eye(len(self.partners))
+        return np.eye(len(self.groups))[list(self.group)]
+
+    @property
+    def type_values(self) -> np.ndarray:
+        """(types, ours): each partner type's row."""
+        return self.values[np.argmax(self.membership, axis=0)]
+
+    def trust(self, window: int) -> np.ndarray | None:
+        """(estimated, true): how likely each group is the partner's when the filter estimates a
+        group, from how it errs on the groups' members each scored as if left out (the confusion
+        nearest `window`; `tsf calibrate-adapter --partners groups`); None without one."""
+        if not self.confusion:
+            return None
+        counts = self.confusion[min(self.confusion, key=lambda t: abs(int(t) - window))].T
+        seen = counts.sum(axis=1, keepdims=True)
+        return np.where(seen > 0, counts / np.where(seen > 0, seen, 1.0), np.eye(len(counts)))
 
     def best_response(self, partner: int) -> int:
         return int(np.argmax(self.values[partner]))
@@ -89,6 +152,24 @@ class Payoff:
         if config.initial == "random":
             return random.Random(config.seed).choice(self.ours)
         return self.ours[self.best_average()]
+
+
+def groups_path() -> Path:
+    """The partner groups in use: those of the last library TSF_LIBRARY names that has them (a
+    grown library being made), else the shipped grown library's."""
+    found = [root / GROUPS.name for root in library.roots() if (root / GROUPS.name).exists()]
+    return found[-1] if found else GROUPS
+
+
+def payoff_of(role: str, partners: str = "library", table: Path = DEFAULT_TABLE) -> Payoff:
+    """What an adaptive agent of our seat `role` chooses by: the table P over the study's library
+    (`library`), or the grown library's partner groups (`groups`)."""
+    return Payoff.from_groups(role) if partners == "groups" else Payoff.load(role, table)
+
+
+def scorer_of(payoff: Payoff, partner_role: str) -> Scorer:
+    """The payoff's partner types as scored policies (library keys, population members, rules)."""
+    return Scorer([build_partner(SeatSpec.parse(k), partner_role) for k in payoff.partners])
 
 
 class Window:
@@ -241,7 +322,9 @@ class AdapterLanes:
         self.frames = 0
         self.log_belief = np.full((lanes, k), -math.log(k))
         self.policy = np.full(lanes, payoff.ours.index(payoff.initial(config)))
-        self.partner = np.full(lanes, -1)  # the estimated type, -1 until warmup ends
+        self.membership, self.type_values = payoff.membership, payoff.type_values
+        self.trust = payoff.trust(config.window)  # the groups' estimate, corrected for its errors
+        self.partner = np.full(lanes, -1)  # the estimated type (payoff.types), -1 until warmup ends
         self.out_of_library = np.zeros(lanes, bool)
         self.candidate, self.held = self.policy.copy(), np.zeros(lanes, np.int64)
         self.fallback = payoff.best_average()  # out of library, or the guard tripped
@@ -280,12 +363,14 @@ class AdapterLanes:
         means = self.window.means()
         if self.bayes:
             belief = np.exp(self.log_belief)
-            self.partner = np.argmax(belief, axis=1)
-            self.expected = belief @ self.payoff.values
         else:
-            self.partner = np.argmax(means, axis=1)
-            belief = np.eye(len(self.payoff.partners))[self.partner]
-            self.expected = self.payoff.values[self.partner]
+            belief = np.eye(len(self.payoff.partners))[np.argmax(means, axis=1)]
+        types = belief @ self.membership  # a group's belief: its members'
+        self.partner = np.argmax(types, axis=1)
+        if self.trust is not None:  # what the estimate says of the partner's true group
+            self.expected = types @ self.trust @ self.type_values
+        else:
+            self.expected = belief @ self.payoff.values
         if self.skill is not None:
             if self.keys.filled and self.frames % EVERY == 0:
                 features = self.keys.features(means.max(axis=1))
@@ -384,7 +469,7 @@ class Adapter:
     @property
     def partner(self) -> str:
         estimate = int(self.lanes.partner[0])
-        return self.payoff.partners[estimate] if estimate >= 0 else ""
+        return self.payoff.types[estimate] if estimate >= 0 else ""
 
     @property
     def out_of_library(self) -> bool:
@@ -399,11 +484,16 @@ class Adapter:
         return bool(self.lanes.guarded[0])
 
     def belief(self) -> np.ndarray:
-        return np.exp(self.lanes.log_belief[0])
+        """The belief over the partner types (payoff.types): a group's is its members' sum."""
+        return np.exp(self.lanes.log_belief[0]) @ self.lanes.membership
 
     def status(self) -> dict:
-        """The adapter's view, as AdapterStatus fields."""
-        c = self.config
+        """The adapter's view, as AdapterStatus fields: the scores and belief of each partner type
+        (a group's score is its best member's)."""
+        c, membership = self.config, self.lanes.membership
+        means = self.lanes.window.means()[0]
+        scores = np.where(membership > 0, means[:, None], -np.inf).max(axis=0)
+        types = self.payoff.types
         return {
             "role": c.role,
             "strategy": c.strategy,
@@ -411,10 +501,8 @@ class Adapter:
             "filled": self.filled,
             "partner": self.partner,
             "policy": self.policy,
-            "scores": dict(zip(self.payoff.partners, map(float, self.lanes.window.means()[0]), strict=True)),
-            "belief": dict(zip(self.payoff.partners, map(float, self.belief()), strict=True))
-            if self.lanes.bayes
-            else {},
+            "scores": dict(zip(types, map(float, scores), strict=True)),
+            "belief": dict(zip(types, map(float, self.belief()), strict=True)) if self.lanes.bayes else {},
             "out_of_library": self.out_of_library,
         }
 
@@ -430,7 +518,7 @@ class Adapter:
 
 def initial_policy(config: AdapterConfig, table: Path = DEFAULT_TABLE) -> str:
     """What our agent plays before the first estimate."""
-    return Payoff.load(config.role, table).initial(config)
+    return payoff_of(config.role, config.partners, table).initial(config)
 
 
 def build(config: AdapterConfig, payoff: Payoff | None = None) -> Adapter:
@@ -441,14 +529,21 @@ def build(config: AdapterConfig, payoff: Payoff | None = None) -> Adapter:
 
 def build_lanes(config: AdapterConfig, lanes: int, payoff: Payoff | None = None) -> AdapterLanes:
     """The adapter core of `lanes` games at once (bulk evaluation)."""
-    payoff = payoff or Payoff.load(config.role)
-    return AdapterLanes(config, payoff, lanes, threshold(config), skill_model(config, payoff))
+    payoff = payoff or payoff_of(config.role, config.partners)
+    return AdapterLanes(config, payoff, lanes, threshold(config, payoff), skill_model(config, payoff))
 
 
-def threshold(config: AdapterConfig) -> float | None:
-    """The out-of-library threshold, for the strategies that have one."""
+def threshold(config: AdapterConfig, payoff: Payoff | None = None) -> float | None:
+    """The out-of-library threshold, for the strategies that have one: the groups' own (measured
+    with `tsf calibrate-adapter --partners groups`), or the library's calibration."""
     if "ood" not in config.strategy:
         return None
+    if config.partners == "groups":
+        thresholds = (payoff or payoff_of(config.role, "groups")).thresholds
+        if not thresholds:
+            remedy = f"measure them with `tsf calibrate-adapter --partners groups --out {groups_path()}`"
+            raise UsageError("--strategy", config.strategy, f"no out-of-group thresholds: {remedy}")
+        return thresholds[min(thresholds, key=lambda t: abs(int(t) - config.window))]
     try:
         return ood_threshold(config.partner_role, config.window)
     except StaleCalibration as error:

@@ -275,3 +275,55 @@ def test_lanes_decide_apart_with_the_guard_and_stalled_rounds() -> None:
                 "library",
                 "typical",
             ]
+
+
+# The same table as partner groups: members x1, x2 of group P (row as X's), y of Q (Y's), z of R.
+GROUPED = {
+    "version": 1,
+    "seats": {
+        "shooter": {
+            "teammates": ["a", "b", "c"],
+            "groups": [
+                {"name": "P", "members": ["x1", "x2"], "values": [5.0, 1.0, 2.0]},
+                {"name": "Q", "members": ["y"], "values": [0.0, 4.0, 3.0]},
+                {"name": "R", "members": ["z"], "values": [1.0, 1.0, 3.5]},
+            ],
+            "thresholds": {"150": -4.0, "400": -3.5},
+        }
+    },
+}
+
+
+def test_groups_are_identified_by_their_members_and_choose_by_their_rows(tmp_path) -> None:
+    (tmp_path / "groups.json").write_text(json.dumps(GROUPED))
+    payoff = Payoff.from_groups("shooter", tmp_path / "groups.json")
+    assert payoff.partners == ("x1", "x2", "y", "z") and payoff.types == ("P", "Q", "R")
+    assert payoff.membership.tolist() == [[1, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]
+    config = AdapterConfig("shooter", 20, "bayes-dwell-ood", warmup=10, partners="groups")
+    assert threshold(config, payoff) == -4.0  # the nearest calibrated window's
+    adapter = Adapter(AdapterLanes(config, payoff, 1, -4.0))
+    # the partner looks like x1 and x2 in turn: one group, whose answer is a, though no member
+    # alone is sure of it
+    for t in range(60):
+        scores = np.full(4, LOW)
+        scores[t % 2] = HIGH
+        adapter.update(scores)
+    assert adapter.partner == "P" and adapter.policy == "a"
+    assert adapter.belief().sum() == pytest.approx(1.0) and adapter.belief()[0] > 0.9
+    status = adapter.status()
+    assert set(status["scores"]) == set(status["belief"]) == {"P", "Q", "R"}
+    assert status["scores"]["P"] == pytest.approx(max(adapter.lanes.window.means()[0][:2]))
+    for _ in range(200):  # then like y: group Q, played with b
+        adapter.update(frame(2, 4))
+    assert (adapter.partner, adapter.policy) == ("Q", "b")
+
+
+def test_groups_missing_or_uncalibrated_are_one_line(tmp_path) -> None:
+    with pytest.raises(UsageError, match="no partner groups for the bait seat"):
+        Payoff.from_groups("bait", tmp_path / "none.json")
+    (tmp_path / "groups.json").write_text(json.dumps(GROUPED).replace('"thresholds"', '"was"'))
+    payoff = Payoff.from_groups("shooter", tmp_path / "groups.json")
+    with pytest.raises(UsageError, match="no out-of-group thresholds"):
+        threshold(AdapterConfig(partners="groups"), payoff)
+    with pytest.raises(UsageError, match="skill model knows the library's policies"):
+        AdapterConfig(strategy="bayes-dwell-ood-guard-skill", partners="groups")

@@ -21,13 +21,12 @@ import zenoh
 
 from services.adapter import core
 from services.adapter.core import Adapter, Pairing, Payoff, Scorer, threshold
-from services.agent import networks
 from services.population.adaptive import AdapterConfig
 from services.population.seat import SeatSpec
 from services.table.table import DEFAULT_TABLE
 from shared import keys
 from shared.bus import BusConfig, Drops, on_match_end, serve_orders, session, subscribe
-from shared.game import FPS
+from shared.game import FPS, other
 from shared.messages import Action, AdapterStatus, MatchOrder, MessageError, PolicySwitch, State, seat_actions
 
 log = logging.getLogger("tsf.adapter")
@@ -36,16 +35,17 @@ RESEND_FRAMES = 30  # ask again if the agent still plays another policy this man
 SCORE_HZ = FPS  # how often the paired frames are scored, in one batch
 
 
-def seat_of(role: str, table: Path = DEFAULT_TABLE) -> tuple[Payoff, Scorer]:
-    """The costly, read-only parts of an adaptive seat: the table seen from `role`'s seat and the
-    partner library's networks (scoring only reads them, so a pool's matches share them)."""
-    payoff = Payoff.load(role, table)
-    return payoff, Scorer([networks.load(k) for k in payoff.partners])
+def seat_of(role: str, table: Path = DEFAULT_TABLE, partners: str = "library") -> tuple[Payoff, Scorer]:
+    """The costly, read-only parts of an adaptive seat: what it chooses by, seen from `role`'s seat
+    (the table P, or the grown library's partner groups), and the partner types' policies (scoring
+    only reads them, so a pool's matches share them)."""
+    payoff = core.payoff_of(role, partners, table)
+    return payoff, core.scorer_of(payoff, other(role))
 
 
 def build(config: AdapterConfig, table: Path = DEFAULT_TABLE) -> tuple[Adapter, Scorer]:
     """The core for one adaptive seat of one match (its own Adapter: the window and estimates)."""
-    payoff, scorer = seat_of(config.role, table)
+    payoff, scorer = seat_of(config.role, table, config.partners)
     return core.build(config, payoff), scorer
 
 
@@ -222,7 +222,9 @@ def run_adapter(
     drops = Drops(SENDER)
     tick = adapting(status_hz)
     with session(bus) as z:
-        shell = AdapterShell(z, match, config, seat_of(config.role, table), drops, costs, stop)
+        shell = AdapterShell(
+            z, match, config, seat_of(config.role, table, config.partners), drops, costs, stop
+        )
         try:
             while not stop.wait(1.0 / SCORE_HZ):
                 tick([shell])
@@ -259,17 +261,18 @@ def run_adapter_pool(
     status loop for all; returns the drop counts (bad orders and bad input of every match)."""
     stop = stop or threading.Event()
     drops = Drops(SENDER)
-    seats: dict[str, tuple[Payoff, Scorer]] = {}  # each seat's, built at its first match
+    seats: dict[tuple[str, str], tuple[Payoff, Scorer]] = {}  # each seat's, built at its first match
     with session(bus) as z:
 
         def start(order: MatchOrder) -> list[AdapterShell]:
             config = config_of(order)
             if config is None:
                 return []
-            if config.role not in seats:
-                seats[config.role] = seat_of(config.role, table)
+            seat = (config.role, config.partners)
+            if seat not in seats:
+                seats[seat] = seat_of(config.role, table, config.partners)
             log.info("match %s: adapting the %s as %s", order.match, config.role, config.name)
-            return [AdapterShell(z, order.match, config, seats[config.role], drops)]
+            return [AdapterShell(z, order.match, config, seats[seat], drops)]
 
         serve_orders(z, pool, SENDER, start, drops, stop, 1.0 / SCORE_HZ, adapting(status_hz))
     if drops.total:

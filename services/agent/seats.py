@@ -1,12 +1,17 @@
 """What plays a seat: a policy by key, and the check that a key can play a seat.
 
-A key is a library policy (B1-B9, S1-S7, and those of TSF_LIBRARY: networks.py), a scripted one
+A key is a library policy (B1-B9, S1-S7, and those of TSF_LIBRARY: networks.py), a policy of a
+library shipped beside the study's (library.NAMED: the grown library's GB1.., GS1.. and the partner
+population's PB01a.., PS01a..; found by key with or without TSF_LIBRARY, since the adaptive agent
+plays the grown library's members and its groups name the population's), a scripted one
 (scripted.py), or a policy from outside the library: an SB3 `.zip`, a `module:attr` or a
 `proxy:DIR` (outside.py). `policy_for` classifies a key (outside.policy_kind) and loads it;
 `policy_of` loads a key already classified (a SeatSpec's kind and key).
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 from services.agent import library, outside
 from services.agent.networks import load
@@ -20,13 +25,25 @@ def seat_keys(role: str) -> list[str]:
     return [*library.keys(role), *scripted_keys(role)]
 
 
+def beside_keys(role: str) -> dict[str, Path]:
+    """The policies of the libraries shipped beside the study's (library.NAMED) that play `role`'s
+    seat, each with its library's directory (not listed by seat_keys, whose keys a user picks
+    from: the study's library and the scripted rules)."""
+    return {
+        k: r.root
+        for root in library.NAMED.values()
+        for k, r in library.registry(root).items()
+        if r.role == role
+    }
+
+
 def check_seat(key: str, role: str, option: str = "--policy") -> None:
     """Refuse (UsageError) a seat that is not one, or a library or scripted key that cannot play it:
     the line names the option, the value and every key that can."""
     if role not in ROLES:
         raise UsageError("--role", role, "not a seat", ROLES)
-    if key not in seat_keys(role):
-        other = [r for r in ROLES if key in seat_keys(r)]
+    if key not in seat_keys(role) and key not in beside_keys(role):
+        other = [r for r in ROLES if key in seat_keys(r) or key in beside_keys(r)]
         problem = f"plays the {other[0]} seat, not the {role}" if other else f"no policy of the {role} seat"
         raise UsageError(option, key, problem, seat_keys(role))
 
@@ -43,4 +60,8 @@ def policy_of(kind: str, key: str, role: str, option: str = "--policy") -> Polic
     if kind != outside.BY_KEY:
         return outside.load(kind, key, role, option)
     check_seat(key, role, option)
-    return load(key) if key in library.registry() else scripted_policy(key, role)
+    if key in library.registry():
+        return load(key)
+    if key in (beside := beside_keys(role)):
+        return load(key, root=beside[key])
+    return scripted_policy(key, role)

@@ -27,10 +27,9 @@ import numpy as np
 
 from services.adapter import core
 from services.adapter.core import AdapterLanes, Payoff, Scorer
-from services.agent import networks
 from services.population.adaptive import AdapterConfig
 from services.population.human_like import SESSION_TRIALS
-from services.population.partners import PartnerError, Partners
+from services.population.partners import PartnerError, Partners, build
 from services.population.seat import SeatSpec
 from services.table.table import DEFAULT_TABLE
 from shared.game import OBS_SIZE, ROLES, GameConfig, Policy, bait_first, other
@@ -40,19 +39,26 @@ LANES = 1024  # games per batch at most
 
 @dataclass(frozen=True)
 class Setup:
-    """What games of one adaptive seat need, loaded once per process."""
+    """What games of one adaptive seat need, loaded once per process: what it chooses by (the
+    table P over the study's library, or the grown library's partner groups) and the partner
+    types' scorer."""
 
     role: str
     payoff: Payoff
     scorer: Scorer
-    ours: dict[str, Policy]
 
 
 @cache
-def setup(role: str, table: Path = DEFAULT_TABLE) -> Setup:
-    payoff = Payoff.load(role, table)
-    scorer = Scorer([networks.load(k) for k in payoff.partners])
-    return Setup(role, payoff, scorer, {k: networks.load(k) for k in payoff.ours})
+def setup(role: str, partners: str = "library", table: Path = DEFAULT_TABLE) -> Setup:
+    payoff = core.payoff_of(role, partners, table)
+    return Setup(role, payoff, core.scorer_of(payoff, other(role)))
+
+
+@cache
+def policy(name: str, role: str) -> Policy:
+    """A static policy of our seat by the name it plays under (a key, a rule with its settings),
+    loaded once per process: every lane that plays it shares it, as a batch's policies do."""
+    return build(SeatSpec.parse(name, "--agent"), role)
 
 
 @dataclass
@@ -75,18 +81,18 @@ def play_games(
     config: GameConfig | None = None,
     record: bool = False,
     adapters: dict[AdapterConfig, AdapterLanes] | None = None,
-    score: bool = False,
+    score: str = "",
 ) -> list[Outcome]:
     """Games of (partner, our agent, seed), our seat `role`, as the lanes of one batch: our agent is
     a static library policy of our seat or the adaptive agent (`SeatSpec.adaptive`). An
     adaptive agent's games go on with its adapter in `adapters` (a session's next trial; one lane
     per game of that agent, in order), else with a new one. With `record`, each outcome keeps the
-    partner's states and actions and both seats' actions, frame by frame; with `score`, the
-    partner's scores under the library (the Scorer), frame by frame."""
+    partner's states and actions and both seats' actions, frame by frame; with `score` ("library"
+    or "groups"), the partner's scores under those partner types (their Scorer), frame by frame."""
     from services.sim.batch import BatchGame
     from services.sim.batch_play import RoleLanes, play_lanes
 
-    s, partner_role = setup(role), other(role)
+    partner_role = other(role)
     seeds = np.array([seed for *_, seed in games], np.int64)
     batch = BatchGame(len(games), config, seeds)
     partners = Partners([partner for partner, *_ in games], partner_role, seeds)
@@ -95,38 +101,43 @@ def play_games(
     for lane, config in enumerate(configs):
         if config is not None:
             adaptive.setdefault(config, []).append(lane)
-    scored = np.arange(len(games)) if score else np.array(sorted(sum(adaptive.values(), [])), np.int64)
-    groups = []  # (lanes, their rows among the scored, the adapter)
+    played: dict[str, int] = {}  # every policy our seat plays in the batch, by name: its index
+    for (_, agent, _), config in zip(games, configs, strict=True):
+        names = setup(role, config.partners).payoff.ours if config else (str(agent),)
+        for name in names:
+            played.setdefault(name, len(played))
+    groups = []  # (lanes, the adapter, its payoff's policies' indices among `played`, its scorer)
     for agent, lanes in adaptive.items():
+        s = setup(role, agent.partners)
         adapter = (adapters or {}).get(agent) or core.build_lanes(agent, len(lanes), s.payoff)
-        groups.append((np.array(lanes), np.searchsorted(scored, lanes), adapter))
-    ours = [-1 if c else s.payoff.ours.index(str(a)) for (_, a, _), c in zip(games, configs, strict=True)]
-    for lanes, _, adapter in groups:
-        for lane, policy in zip(lanes.tolist(), adapter.policy.tolist(), strict=True):
-            ours[lane] = policy  # the initial policy, or where a session's adapter left off
-    seat = RoleLanes(role, list(s.ours.values()), ours, seeds)
+        groups.append((np.array(lanes), adapter, np.array([played[n] for n in s.payoff.ours]), s.scorer))
+    ours = [-1 if c else played[str(a)] for (_, a, _), c in zip(games, configs, strict=True)]
+    for lanes, adapter, index, _ in groups:
+        for lane, chosen in zip(lanes.tolist(), index[adapter.policy].tolist(), strict=True):
+            ours[lane] = chosen  # the initial policy, or where a session's adapter left off
+    seat = RoleLanes(role, [policy(n, role) for n in played], ours, seeds)
+    scored_by = setup(role, score).scorer if score else None
     outcomes = [Outcome(0.0) for _ in games]
     frames = batch.config.frames
     seen: list[np.ndarray] = []  # the partner's states, frame by frame (record)
-    scores = np.zeros((len(games), frames, len(s.payoff.partners))) if score else None
+    scores = np.zeros((len(games), frames, len(scored_by.policies))) if score else None
     pairs = np.zeros((len(games), frames, 2), np.int64) if record else None
     partner_seat = ROLES.index(partner_role)
 
     def each_frame(frame: int, seen_by: list, actions: list[np.ndarray]) -> None:
         """The adaptive lanes' updates (a switch plays from the next frame) and what is recorded."""
         observed, partner_actions = seen_by[partner_seat], actions[partner_seat]
-        if len(scored):
-            now = s.scorer.observed({v: observed(v)[scored] for v in s.scorer.views}, partner_actions[scored])
-            states = observed("world")[scored]  # what AdapterLanes.update reads: stalls, the guard's kills
-            acted = partner_actions[scored]  # and the skill estimate
-        for lanes, rows, adapter in groups:
-            for j in np.flatnonzero(adapter.update(now[rows], states[rows], acted[rows])).tolist():
-                seat.choice[lanes[j]] = adapter.policy[j]
+        if groups:
+            states = observed("world")  # what AdapterLanes.update reads: stalls, the guard's kills
+        for lanes, adapter, index, scorer in groups:
+            now = scorer.observed({v: observed(v)[lanes] for v in scorer.views}, partner_actions[lanes])
+            for j in np.flatnonzero(adapter.update(now, states[lanes], partner_actions[lanes])).tolist():
+                seat.choice[lanes[j]] = index[adapter.policy[j]]
                 outcomes[lanes[j]].switches += 1
-                chosen = (s.payoff.partners[adapter.partner[j]], s.payoff.ours[adapter.policy[j]])
+                chosen = (adapter.payoff.types[adapter.partner[j]], adapter.payoff.ours[adapter.policy[j]])
                 outcomes[lanes[j]].timeline.append((frame + 1, *chosen))
         if scores is not None:
-            scores[:, frame] = now
+            scores[:, frame] = scored_by.observed({v: observed(v) for v in scored_by.views}, partner_actions)
         if pairs is not None:
             seen.append(observed("world").copy())
             pairs[:, frame] = np.stack(actions, axis=1)
@@ -136,7 +147,7 @@ def play_games(
     except PartnerError as error:
         partner, _, seed = games[error.lane]
         raise PartnerError(f"partner {partner}, seed {seed}: {error.problem}") from None
-    for lanes, _, adapter in groups:
+    for lanes, adapter, *_ in groups:
         for lane, guarded in zip(lanes.tolist(), adapter.guarded.tolist(), strict=True):
             outcomes[lane].guarded = guarded
     values = np.stack(seen, axis=1) if record else None
@@ -206,7 +217,7 @@ def play_session(partner: SeatSpec, agent: SeatSpec, person: int, role: str) -> 
     the same partner, one after the other; an adaptive agent's adapter in each trial is the
     previous one's `next_trial()`."""
     config = agent.adaptive(role)
-    adapters = {config: core.build_lanes(config, 1, setup(role).payoff)} if config else {}
+    adapters = {config: core.build_lanes(config, 1, setup(role, config.partners).payoff)} if config else {}
     outcomes: list[Outcome] = []
     for trial in range(SESSION_TRIALS):
         outcomes += play_games([(partner, agent, person * SESSION_TRIALS + trial)], role, adapters=adapters)

@@ -12,6 +12,7 @@ from scipy import stats
 from services.adapter import core
 from services.agent import networks
 from services.evaluation.evaluate import batches, play_games, play_session, play_teams, setup
+from services.evaluation.evaluate import policy as ours
 from services.evaluation.identification import follow_lag, windowed
 from services.evaluation.results import TeamGame, read_games, write_results
 from services.evaluation.team import compare, holm, known_partner, paired_tests, variants
@@ -144,6 +145,7 @@ GAMES = [
     ("delayed(B2)", "S6", 5),
     ("human(B1)", AdapterConfig("shooter", 150, GUARD), 6),
     ("human(B1,B5)", AdapterConfig("shooter", 150, GUARD), 7),
+    ("noisy(PB05a)", AdapterConfig("shooter", 150, "bayes", partners="groups"), 8),
 ]
 
 
@@ -155,15 +157,17 @@ def test_batched_adaptive_games_decide_as_the_scalar_engine_replays_them() -> No
     policies, the same kills; and our seat's every action is the draw of the policy the timeline
     says was playing; under the guard and with human-like partners too."""
     config = GameConfig(frames=900)
-    played = play_games(seated(GAMES), "shooter", config, record=True, score=True)
+    played = play_games(seated(GAMES), "shooter", config, record=True, score="library")
     assert play_games(seated(GAMES[1:2]), "shooter", config)[0] == dataclasses.replace(
         played[1], values=None, actions=None, scores=None, pairs=None
     )
-    s = setup("shooter")
+    library = setup("shooter").scorer
     for (_, agent, seed), outcome in zip(GAMES, played, strict=True):
         game = Game(config, seed)
-        adapter = core.build(agent, s.payoff) if isinstance(agent, AdapterConfig) else None
-        policy = s.ours[adapter.policy if adapter else agent]
+        adaptive = isinstance(agent, AdapterConfig)
+        s = setup("shooter", agent.partners if adaptive else "library")
+        adapter = core.build(agent, s.payoff) if adaptive else None
+        policy = ours(adapter.policy if adapter else agent, "shooter")
         timeline = []
         for frame, (bait, shooter) in enumerate(outcome.pairs.tolist()):
             probs = policy.probs(observe(game, "shooter", policy.view))
@@ -171,18 +175,20 @@ def test_batched_adaptive_games_decide_as_the_scalar_engine_replays_them() -> No
             values = world_values(game, "bait")
             np.testing.assert_allclose(outcome.values[frame], values, rtol=1e-6, atol=1e-6)  # float32
             assert outcome.actions[frame] == bait
-            scores = s.scorer(values, bait)
-            np.testing.assert_allclose(outcome.scores[frame], scores, rtol=1e-12)
-            if adapter is not None and adapter.update(scores, values):
+            np.testing.assert_allclose(outcome.scores[frame], library(values, bait), rtol=1e-12)
+            if adapter is not None and adapter.update(s.scorer(values, bait), values):
                 timeline.append((frame + 1, adapter.partner, adapter.policy))
-                policy = s.ours[adapter.policy]
+                policy = ours(adapter.policy, "shooter")
             game.step(bait, shooter)
         assert outcome.timeline == timeline and outcome.switches == len(timeline)
         assert outcome.kills_per_minute == game.kills_per_minute()
         assert outcome.guarded == (adapter is not None and adapter.guarded)
-    best = s.payoff.ours[s.payoff.best_response(s.payoff.partners.index("B3"))]  # the table's answer to B3
+    p = setup("shooter").payoff
+    best = p.ours[p.best_response(p.partners.index("B3"))]  # the table's answer to B3
     assert sum(o.switches for o in played) > 4 and played[0].timeline[0][1:] == ("B3", best)
-    assert [o.switches for o in played[5:]] == [1, 2]  # under the guard's doubling dwell
+    assert [o.switches for o in played[5:7]] == [1, 2]  # under the guard's doubling dwell
+    groups = setup("shooter", "groups").payoff
+    assert played[7].timeline and {e for _, e, _ in played[7].timeline} <= set(groups.groups)
 
 
 def test_teams_of_partners_play_both_seats_as_the_batched_pair_games() -> None:

@@ -15,7 +15,7 @@ import numpy as np
 from services.adapter import core
 from services.adapter.core import Payoff
 from services.agent import library
-from services.evaluation import figures, identification, results, team
+from services.evaluation import figures, held_out, identification, results, team
 from services.evaluation.results import TeamGame
 from services.jobs.kinds import Progress, Runner, in_process
 from services.population.adaptive import STRATEGIES, AdapterConfig
@@ -43,8 +43,14 @@ class EvalPlan:
     performance: bool = True
     sessions: bool = False  # team games as sessions of three trials with the same partner
     job_games: int | None = None  # games of one job (None: each measurement's default)
+    # The partner population's test split instead (held_out.py): its members and stand-ins, the
+    # static policies of both libraries, the grown library's adaptive agent and the study's, and
+    # identification of the test members' groups.
+    held_out: bool = False
 
     def __post_init__(self) -> None:
+        if self.held_out and not self.partners:
+            object.__setattr__(self, "partners", tuple(held_out.test_partners(self.partner_role)))
         if not self.partners:
             everyone = tuple(p for group in population(self.partner_role).values() for p in group)
             object.__setattr__(self, "partners", everyone)
@@ -75,7 +81,13 @@ class EvalPlan:
 
     @property
     def agents(self) -> list[str]:
-        """Every static policy of our seat, then the adaptive variants."""
+        """Every static policy of our seat, then the adaptive variants (held out: the grown
+        library's members too, and the two shipped adaptive agents at `strategy_window`)."""
+        if self.held_out:
+            shipped = [
+                AdapterConfig(self.role, self.strategy_window, partners=p).name for p in ("groups", "library")
+            ]
+            return held_out.statics(self.role) + shipped
         variants = team.variants(list(self.windows), list(self.strategies), self.strategy_window)
         return library.keys(self.role) + variants
 
@@ -131,7 +143,13 @@ def evaluate(
     system's workers); `progress(step)` gives the (done, total) callback of each step."""
     shown = progress or (lambda step: None)
     ident, games, comparison, curves = None, [], None, None
-    if plan.identify:
+    if plan.identify and plan.held_out:
+        seeds = list(range(plan.identify_seeds))
+        members = held_out.members(plan.partner_role)
+        ident = identification.identification(
+            plan.role, list(plan.windows), seeds, run, shown("identification"), plan.job_games, members
+        )
+    elif plan.identify:
         seeds = list(range(plan.identify_seeds))
         ident = identification.identification(
             plan.role, list(plan.windows), seeds, run, shown("identification"), plan.job_games
@@ -145,5 +163,9 @@ def evaluate(
             games = team.sessions(plan.role, partners, agents, seeds, run, shown("team games"))
         else:
             games = team.team(plan.role, partners, agents, seeds, run, shown("team games"), plan.job_games)
-        comparison = team.compare(games)
+        if plan.held_out:
+            groups = held_out.group_of(plan.role)
+            comparison = team.compare(games, lambda p: groups.get(p, "other"))
+        else:
+            comparison = team.compare(games)
     return EvalReport(plan, ident, games, comparison, curves)

@@ -100,6 +100,35 @@ def _group_tests(comparison: dict) -> list[str]:
     return [*lines, ""]
 
 
+def _at_a_glance(comparison: dict) -> list[str]:
+    """The results first: each adaptive variant's effect against the best static policy, in %, its
+    Holm-corrected p, how many partners it serves better, as well, worse, the share of the gain the
+    top tenth of partners carry and the share of the known-partner headroom it realises."""
+    best = comparison["best_static"]
+    base = comparison["agents"][best]["mean"]
+
+    def share(value: float | None) -> str:
+        return "-" if value is None else f"{100 * value:.0f} %"
+
+    lines = [
+        f"Every partner here is simulated ({comparison['partners']} partners, "
+        f"{comparison['units']} games per agent); the baseline is the best static policy, "
+        f"{best} ({base:.2f} kills/min), chosen on these same games.",
+        "",
+        "| adaptive | effect | p (Holm) | partners better / equal / worse | top tenth's share of the gain "
+        "| headroom realised |",
+        "| --- | --- | --- | --- | --- | --- |",
+    ]
+    for agent, t in comparison["tests"].items():
+        counts = t.get("per_partner", {})
+        lines.append(
+            f"| {agent} | {100 * t['mean_difference'] / base:+.1f} % | {t.get('p_holm', float('nan')):.2g} | "
+            f"{counts.get('better', '-')} / {counts.get('equal', '-')} / {counts.get('worse', '-')} | "
+            f"{share(t.get('top_tenth_share'))} | {share(t.get('headroom_realised'))} |"
+        )
+    return [*lines, ""]
+
+
 def _known_partner(comparison: dict) -> list[str]:
     """The headroom of choosing one static policy per partner, knowing the partner in advance."""
     known = comparison.get("known_partner")
@@ -130,7 +159,7 @@ def write_results(
 ) -> Path:
     """Every number behind the figures, as JSON and CSV, and a Markdown summary (summary.md)."""
     out.mkdir(parents=True, exist_ok=True)
-    lines = ["# Adapter evaluation", ""]
+    lines = ["# Adapter evaluation", "", *(_at_a_glance(comparison) if comparison else [])]
     if identification_result:
         (out / "identification.json").write_text(json.dumps(identification_result, indent=1) + "\n")
         keys = identification_result["partners"]
@@ -159,7 +188,14 @@ def write_results(
             out / "per_partner.csv",
             ["partner", "group", "agent", "kills_per_minute", "stderr", "games"],
             (
-                [p, group_of(p), a, f"{v['mean']:.4f}", f"{v['stderr']:.4f}", v["n"]]
+                [
+                    p,
+                    comparison.get("group_of", {}).get(p) or group_of(p),
+                    a,
+                    f"{v['mean']:.4f}",
+                    f"{v['stderr']:.4f}",
+                    v["n"],
+                ]
                 for p, by_agent in comparison["per_partner"].items()
                 for a, v in by_agent.items()
             ),

@@ -247,7 +247,7 @@ def skill_model(
         told(i, len(payoff.partners))
         names = [stand_in(style, skill) for skill in SKILLS] + [style]
         games = [(SeatSpec.parse(name), SeatSpec.parse(teammate), seed) for name in names for seed in seeds]
-        played = play_games(games, table.role, record=True, score=True)
+        played = play_games(games, table.role, record=True, score="library")
         scores, states = np.stack([o.scores for o in played]), np.stack([o.values for o in played])
         actions = np.stack([o.actions for o in played])
         means, keys, read = Window(len(games), len(payoff.partners), window), Keys(len(games), window), []

@@ -172,7 +172,7 @@ def known_partner(
     return np.array([grid[choice[u]][u] for u in units])
 
 
-def compare(games: list[TeamGame]) -> dict:
+def compare(games: list[TeamGame], group_of: Callable[[str], str] = group_of) -> dict:
     """Each agent's mean and standard error over the population, and each adaptive variant against
     the best static policy (chosen on this same data, which favours the static side): a one-sided
     paired t-test and a Wilcoxon signed-rank test over (partner, seed) pairs (with Holm's
@@ -180,7 +180,11 @@ def compare(games: list[TeamGame]) -> dict:
     size d_z = mean difference / sd of differences; per partner group, one-sided superiority and
     non-inferiority (margin MARGIN) tests; each variant's switches per game; and the headroom of
     knowing each partner in advance (`known_partner`) over the best static policy, overall and per
-    group: what any rule that picks one of these static policies per partner can gain."""
+    group: what any rule that picks one of these static policies per partner can gain, and the
+    share of it each variant realises. Per variant also how many partners it serves better, as well
+    or worse than the best static policy (a partner's mean beyond MARGIN either way), and the share
+    of its gain that the top tenth of partners carry. `group_of` names a partner's group (the
+    population's groups by default)."""
     from scipy import stats
 
     units = sorted({(g.partner, g.seed) for g in games})
@@ -215,6 +219,12 @@ def compare(games: list[TeamGame]) -> dict:
             "p_t_partners": float(stats.ttest_1samp(by_partner, 0.0, alternative="greater").pvalue),
             "partners_better": int((by_partner > 0).sum()),
             "partners": len(partners),
+            "per_partner": {
+                "better": int((by_partner > MARGIN).sum()),
+                "equal": int((abs(by_partner) <= MARGIN).sum()),
+                "worse": int((by_partner < -MARGIN).sum()),
+            },
+            "top_tenth_share": _top_share(by_partner),
         }
     holm_p = holm({a: t["p_t"] for a, t in tests.items()})
     for a, t in tests.items():
@@ -251,9 +261,14 @@ def compare(games: list[TeamGame]) -> dict:
         g: {a: _summary([grid[a][u] for u in units if group_of(u[0]) == g]) for a in values}
         for g in sorted(groups)
     }
+    overall = headroom(np.ones(len(units), dtype=bool))
+    for t in tests.values():
+        room = overall["mean_difference"]
+        t["headroom_realised"] = t["mean_difference"] / room if room > 0 else None
     return {
         "units": len(units),
         "partners": len(partners),
+        "group_of": {p: group_of(p) for p in partners},
         "best_static": best,
         "agents": agents,
         "tests": tests,
@@ -263,10 +278,20 @@ def compare(games: list[TeamGame]) -> dict:
         "switches": switching,
         "margin": MARGIN,
         "known_partner": {
-            "all": headroom(np.ones(len(units), dtype=bool)),
+            "all": overall,
             **{g: headroom(group_of_unit == g) for g in sorted(set(group_of_unit))},
         },
     }
+
+
+def _top_share(by_partner: np.ndarray) -> float | None:
+    """The share of the total gain over partners that the tenth of them with the largest gains
+    carry (None where there is no gain to share)."""
+    total = by_partner.sum()
+    if total <= 0:
+        return None
+    top = np.sort(by_partner)[::-1][: max(1, math.ceil(len(by_partner) / 10))]
+    return float(top.sum() / total)
 
 
 def _summary(values: list[float]) -> dict:

@@ -146,3 +146,42 @@ def nearest(rows: np.ndarray, members: np.ndarray, label: np.ndarray) -> np.ndar
     """The group of each row: that of the nearest group centre (rows shaped as `shape` makes them)."""
     centres = np.array([members[label == j].mean(axis=0) for j in range(label.max() + 1)])
     return ((rows[:, None, :] - centres[None]) ** 2).sum(axis=2).argmin(axis=1)
+
+
+def partner_groups(
+    grouping: Grid, label: np.ndarray, validation: Grid, members: list[str], teammates: list[str]
+) -> list[dict]:
+    """The adapter's view of one seat's partner groups: each group's members (the training members
+    of `grouping`, labelled `label`, and the `members` among the validation partners, each in the
+    group whose rows theirs is nearest) and the mean kills/min of the group's validation partners
+    (members and stand-ins) with each of `teammates`: the data the library was selected on, which
+    holds every candidate as a column."""
+    columns = list(grouping.candidates)
+    placed = nearest(
+        shape(validation.columns(columns).mean(axis=2)), shape(grouping.kills.mean(axis=2)), label
+    )
+    values = validation.columns(teammates).mean(axis=2)
+    out = []
+    for j in range(label.max() + 1):
+        rows = placed == j
+        mine = [p for p, g in zip(grouping.partners, label, strict=True) if g == j]
+        mine += [p for p, g in zip(validation.partners, placed, strict=True) if g == j and p in members]
+        means = values[rows].mean(axis=0) if rows.any() else _training_means(grouping, label == j, teammates)
+        out.append(
+            {
+                "name": f"G{j + 1}",
+                "members": mine,
+                "partners": int(rows.sum()),
+                "values": [round(float(v), 4) for v in means],
+            }
+        )
+    return out
+
+
+def _training_means(grouping: Grid, rows: np.ndarray, teammates: list[str]) -> np.ndarray:
+    """A group without validation partners: its training members' means (0 for a teammate that
+    was no candidate then, a best response trained after the grouping)."""
+    means = grouping.kills[rows].mean(axis=(0, 2))
+    return np.array(
+        [means[grouping.candidates.index(t)] if t in grouping.candidates else 0.0 for t in teammates]
+    )

@@ -15,8 +15,10 @@ checkpoint):
                candidate: the study's policies, the rules and the responses.
 6. selection   per seat, the greedy coverage selection on the validation population (choice.select).
 7. library     the grown library: the selected members under keys of their own (GB1.., GS1..), its
-               self-play table P, the adapter's calibration, the members against the partner groups
-               with standard errors, a heatmap, and the test population's figures (`summary.md`).
+               self-play table P, the adapter's calibration, the partner groups the adaptive agent
+               identifies (`groups.json`: each group's members and what each member of ours scores
+               with it), the members against the partner groups with standard errors, a heatmap,
+               and the test population's figures (`summary.md`).
 
 Which library plays while a stage runs is TSF_LIBRARY's business, as everywhere: the population and
 the responses are libraries of their own (`population/`, `responses/`), named in TSF_LIBRARY while
@@ -58,6 +60,7 @@ from shared.game import ROLES, other
 Engine = Callable[[str], AbstractContextManager[Runner]]  # a stage's name -> its jobs' runner
 Say = Callable[[str], None]
 PREFIX = {"bait": "GB", "shooter": "GS"}  # the grown library's keys
+GROUPS = "groups.json"  # the partner groups the adaptive agent identifies, in the grown library
 RESPONSE = {"bait": "RB", "shooter": "RS"}  # a best response's key while it is a candidate
 KINDS = SELF_PLAY | GROWTH  # the job kinds a run hands out (the grown library's table too)
 
@@ -267,6 +270,8 @@ class Grow:
         if not (self.library_dir / "calibration.json").exists():
             self._build_library(selection)
             self._tables()
+        if not (self.library_dir / GROUPS).exists():
+            self._partner_groups(selection, held_out, groups, grouping)
         names = json.loads((self.library_dir / "members.json").read_text())
         sides = self._sides()
         summary: dict = {"population": self.spec.text_hash, "members": names, "seats": {}}
@@ -364,6 +369,37 @@ class Grow:
         subprocess.run(command, env=env, check=True, stdout=subprocess.DEVNULL)
         (self.library_dir / "calibration.json.journal").unlink(missing_ok=True)  # done: not the library's
 
+    def _partner_groups(
+        self, selection: dict, held_out: dict[str, Grid], groups: dict, grouping: dict[str, Grid]
+    ) -> None:
+        """groups.json: per seat of ours, the partner groups the adaptive agent identifies (their
+        training and validation members) and the mean kills/min of each group with each member of
+        ours (services/adapter/core.py reads it as a Payoff), then their out-of-library thresholds
+        (`tsf calibrate-adapter --partners groups`)."""
+        sides, names = self._sides(), json.loads((self.library_dir / "members.json").read_text())
+        seats = {}
+        for ours, steps in selection.items():
+            partner_role = other(ours)
+            train = grouping[partner_role]
+            label = _labels(train, groups[partner_role]["groups"])
+            validation = _rows(
+                held_out[partner_role],
+                [p for p in held_out[partner_role].partners if sides[p] == "validation"],
+            )
+            members = [p for p in validation.partners if not p.startswith("human(")]
+            teammates = steps[-1]["library"]
+            seats[ours] = {
+                "teammates": [_key_of(names, t, ours) for t in teammates],
+                "names": teammates,
+                "groups": choice.partner_groups(train, label, validation, members, teammates),
+            }
+        _write(self.library_dir / GROUPS, {"version": 1, "population": self.spec.text_hash, "seats": seats})
+        command = [sys.executable, "-m", "services.cli", "calibrate-adapter", "--partners", "groups"]
+        command += ["--workers", str(self.workers), "--out", str(self.library_dir / GROUPS)]
+        env = os.environ | {"TSF_LIBRARY": str(self.library_dir.resolve())}  # its groups, its members
+        subprocess.run(command, env=env, check=True, stdout=subprocess.DEVNULL)
+        (self.library_dir / f"{GROUPS}.journal").unlink(missing_ok=True)
+
     def _group_table(
         self, ours: str, chosen: list[str], grid: Grid, groups: dict, grouping: dict[str, Grid]
     ) -> list[dict]:
@@ -371,10 +407,7 @@ class Grow:
         held-out partners each in the group whose members' rows theirs is nearest."""
         partner_role = other(ours)
         train = grouping[partner_role]
-        label = np.zeros(len(train.partners), np.int64)
-        for j, members in enumerate(groups[partner_role]["groups"]):
-            for m in members:
-                label[train.partners.index(m)] = j
+        label = _labels(train, groups[partner_role]["groups"])
         shared_columns = list(train.candidates)
         rows = choice.shape(grid.columns(shared_columns).mean(axis=2))
         assigned = choice.nearest(rows, choice.shape(train.kills.mean(axis=2)), label)
@@ -465,6 +498,20 @@ def _library_roots(roots: list[Path]) -> Iterator[None]:
             os.environ.pop("TSF_LIBRARY", None)
         else:
             os.environ["TSF_LIBRARY"] = before
+
+
+def _key_of(names: dict[str, str], name: str, role: str) -> str:
+    """The grown library's key of a selected member of `role`'s seat (members.json: key -> name)."""
+    return next(k for k, n in names.items() if n == name and k.startswith(PREFIX[role]))
+
+
+def _labels(grid: Grid, groups: list[list[str]]) -> np.ndarray:
+    """Each of `grid`'s partners' group, from the groups' member lists."""
+    label = np.zeros(len(grid.partners), np.int64)
+    for j, members in enumerate(groups):
+        for m in members:
+            label[grid.partners.index(m)] = j
+    return label
 
 
 def _copied(entry: dict, source: Path, target: Path, key: str) -> dict:

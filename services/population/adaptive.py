@@ -26,6 +26,12 @@ STRATEGIES = (
     "bayes-dwell-ood-guard-skill",
 )
 INITIAL = ("best-average", "random")
+# What the partner is identified as: `library`, one of the study's library policies, choosing by
+# the table P; `groups`, one of the grown library's partner groups, choosing among the grown
+# library's members (services/adapter/core.py, Payoff.from_groups). A name without the setting
+# reads as `library` (every name recorded before groups existed); the command line's default is
+# `groups` (COMMAND_LINE), the agent the project ships.
+PARTNERS = ("library", "groups")
 WINDOWS = Range(1, FRAMES.high)  # T: a window longer than a game never fills
 ADAPTIVE = "adaptive-"  # how every adaptive agent's name begins
 _NAME = re.compile(rf"^{ADAPTIVE}T(\d+)-([a-z-]+)$")
@@ -35,6 +41,7 @@ NAMED = {
     "dwell": int,
     "hazard": float,
     "noise": float,
+    "partners": str,
 }  # in a name after T, strategy
 
 
@@ -48,9 +55,12 @@ def setting_text(value: object) -> str:
     return repr(value)
 
 
-def _option(default: object, help: str) -> Any:
-    """A config field with its command-line help (services/cli.py builds the options from these)."""
-    return field(default=default, metadata={"help": help})
+def _option(default: object, help: str, command_line: object = None) -> Any:
+    """A config field with its command-line help and, where it differs, its command-line default
+    (services/options.py builds the options from these)."""
+    return field(
+        default=default, metadata={"help": help, "default": default if command_line is None else command_line}
+    )
 
 
 @dataclass(frozen=True)
@@ -67,10 +77,20 @@ class AdapterConfig:
     hazard: float = _option(0.0, "bayes: per-frame switching probability (0: 1/T).")
     noise: float = _option(0.05, "bayes: probability that the partner's action is a uniform slip.")
     seed: int = _option(0, "Draws the random initial policy.")
+    partners: str = _option(
+        "library",
+        "What the partner is identified as: groups (the grown library's partner groups, playing its "
+        "members) or library (the study's policies, playing by its table P).",
+        command_line="groups",
+    )
 
     def __post_init__(self) -> None:
         choices = (("--role", self.role, ROLES), ("--strategy", self.strategy, STRATEGIES))
-        for option, value, valid in (*choices, ("--initial", self.initial, INITIAL)):
+        for option, value, valid in (
+            *choices,
+            ("--initial", self.initial, INITIAL),
+            ("--partners", self.partners, PARTNERS),
+        ):
             if value not in valid:
                 raise UsageError(option, value, "unknown", valid)
         for option, value, limits in (
@@ -84,6 +104,10 @@ class AdapterConfig:
         for option, value in (("--hazard", self.hazard), ("--noise", self.noise)):
             if not 0.0 <= value < 1.0:
                 raise UsageError(option, value, "a probability in [0, 1)")
+        if self.partners == "groups" and "skill" in self.strategy:
+            raise UsageError(
+                "--strategy", self.strategy, "its skill model knows the library's policies, not groups"
+            )
 
     @property
     def partner_role(self) -> str:

@@ -78,6 +78,13 @@ def test_the_adaptive_name_carries_the_whole_config_but_seat_and_seed(config):
 def test_old_names_read_as_before():
     assert AdapterConfig.parse("adaptive-T400-bayes", role="bait") == AdapterConfig("bait", 400, "bayes")
     assert AdapterConfig().name == "adaptive-T400-bayes-dwell-ood-guard"  # the default's name is unchanged
+    # the grown library's agent says so in its name; every name without it is the study library's
+    grown = AdapterConfig(partners="groups")
+    assert grown.name == "adaptive-T400-bayes-dwell-ood-guard_partners-groups"
+    assert (
+        AdapterConfig.parse(grown.name) == grown
+        and AdapterConfig.parse(AdapterConfig().name).partners == "library"
+    )
     assert AdapterConfig(noise=0.1, initial="random", dwell=20).name == (
         "adaptive-T400-bayes-dwell-ood-guard_initial-random_dwell20_noise0.1"
     )

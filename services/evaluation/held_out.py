@@ -1,0 +1,75 @@
+"""The partner population's test split, as the shipped grown library's run left it: the partners
+that training, grouping and selection never saw (members and their human-like stand-ins), each
+with the partner group its results place it in. `tsf eval --held-out` measures the adaptive
+teammate on them.
+
+The grown library keeps its run's records (services/agent/grown/run-*.json, written by `tsf library
+grow`): the members' split sides (run-population.json), the training members' cross-play and
+groups (run-grouping.json, run-groups.json) and the held-out partners' cross-play with every
+candidate (run-held-out.json). A test partner's group is the one whose training members' rows
+(what works with them, scaled by their best) its own row is nearest: the rule the grown library's
+group table uses.
+"""
+
+from __future__ import annotations
+
+import json
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+
+from services.agent import library
+from services.growth import choice
+from services.growth.choice import Grid
+from services.population import families
+from shared.game import other
+
+RUN = library.NAMED["grown"]  # the shipped grown library, with its run's records
+
+
+def _read(name: str, run: Path) -> dict:
+    return json.loads((run / f"run-{name}.json").read_text())
+
+
+@cache
+def test_partners(partner_role: str, run: Path = RUN) -> dict[str, str]:
+    """Each test partner of `partner_role` (the members of the test split, then their stand-ins)
+    with its partner group's name (G1..), as the groups of the adaptive teammate in the other seat
+    name them."""
+    members = [m["name"] for m in _read("population", run)["members"][partner_role] if m["split"] == "test"]
+    spec = families.read()
+    names = members + [s for m in members for s in spec.stand_ins(m)]
+    grids = {n: _grid(_read(n, run)[partner_role]) for n in ("grouping", "held-out")}
+    train, held = grids["grouping"], grids["held-out"]
+    label = np.zeros(len(train.partners), np.int64)
+    for j, group in enumerate(_read("groups", run)[partner_role]["groups"]):
+        label[[train.partners.index(m) for m in group]] = j
+    rows = held.kills[[held.partners.index(n) for n in names]]
+    rows = Grid(tuple(names), held.candidates, rows).columns(list(train.candidates)).mean(axis=2)
+    placed = choice.nearest(choice.shape(rows), choice.shape(train.kills.mean(axis=2)), label)
+    return {n: f"G{g + 1}" for n, g in zip(names, placed.tolist(), strict=True)}
+
+
+def members(partner_role: str, run: Path = RUN) -> dict[str, str]:
+    """The test partners that are members (no stand-ins), with their groups."""
+    return {p: g for p, g in test_partners(partner_role, run).items() if not p.startswith("human(")}
+
+
+def statics(role: str, run: Path = RUN) -> list[str]:
+    """Every static policy of our seat `role` the comparison chooses its best from: the study's
+    library policies and the grown library's members (GB1.., GS1..; not those that are a study
+    policy under another key)."""
+    study = library.keys(role)
+    grown = json.loads((run / "members.json").read_text())
+    prefix = {"bait": "GB", "shooter": "GS"}[role]
+    return study + [key for key, name in grown.items() if key.startswith(prefix) and name not in study]
+
+
+def _grid(record: dict) -> Grid:
+    return Grid(tuple(record["partners"]), tuple(record["candidates"]), np.array(record["kills"], float))
+
+
+def group_of(role: str) -> dict[str, str]:
+    """Every test partner's group, for the comparison of the adaptive teammate in seat `role`."""
+    return test_partners(other(role))

@@ -359,7 +359,8 @@ def test_the_human_profile_seats_a_person_from_the_browser(inputs: dict, tmp_pat
 
     recording = load(tmp_path / f"{match}.tsflog")
     assert recording.summary is not None and recording.summary.frame == frames
-    assert recording.start.policies == {"bait": "human", "shooter": "adaptive-T400-bayes-dwell-ood-guard"}
+    shooter = "adaptive-T400-bayes-dwell-ood-guard_partners-groups"  # the grown library's agent, by default
+    assert recording.start.policies == {"bait": "human", "shooter": shooter}
     bait = [a for _, a in recording.actions if a.role == "bait"]
     assert bait and all(a.sender == "human/bait" for a in bait), "only the person played the bait"
     assert sum(1 for a in bait if a.action // 4 == 1) >= 15, "about a second of held left arrow arrived"

@@ -4,6 +4,7 @@ ends in one line that names the option, the value and what is accepted, exit sta
 
 from __future__ import annotations
 
+import json
 import os
 import shlex
 import shutil
@@ -667,12 +668,37 @@ def test_an_adaptive_match_or_study_without_thresholds_for_the_library_stops_bef
     mine = empty_library(tmp_path / "mine")  # no thresholds either
     monkeypatch.setenv("TSF_LIBRARY", str(mine))
     out = tmp_path / "recordings"
-    study = str(Path(library.__file__).parents[1] / "study" / "configs" / "adaptive.toml")
+    study = tmp_path / "study.toml"  # the study library's agent: the shipped configs play the grown one's
+    study.write_text(
+        'name = "x"\n[[variants]]\nname = "a"\nadapter = "adaptive-T400-bayes-dwell-ood-guard"\n'
+    )
     said = "--strategy bayes-dwell-ood-guard: no out-of-library thresholds at"
-    for command in (["match", "--adaptive", "shooter", "--lockstep"], ["study", study]):
+    for command in (
+        ["match", "--adaptive", "shooter", "--partners", "library", "--lockstep"],
+        ["study", str(study)],
+    ):
         status, lines = tsf([*command, "--out", str(out)], capsys)
         assert status == 2 and len(lines) == 1 and not out.exists()
         assert lines[0].startswith(f"tsf {command[0]}: ") and f"{said} {mine}" in lines[0]
+
+
+def test_an_adaptive_match_on_groups_without_thresholds_stops_before_it_starts(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture
+) -> None:
+    """The grown library's agent reads its partner groups from the last library in use that has
+    them: groups never calibrated are one line that says how to calibrate them."""
+    mine = empty_library(tmp_path / "mine")
+    grouped = json.loads((library.NAMED["grown"] / "groups.json").read_text())
+    for seat in grouped["seats"].values():
+        seat.pop("thresholds")
+    (mine / "groups.json").write_text(json.dumps(grouped))
+    monkeypatch.setenv("TSF_LIBRARY", str(mine))
+    out = tmp_path / "recordings"
+    status, lines = tsf(["match", "--adaptive", "shooter", "--lockstep", "--out", str(out)], capsys)
+    assert status == 2 and len(lines) == 1 and not out.exists()
+    assert (
+        "no out-of-group thresholds: measure them with `tsf calibrate-adapter --partners groups" in lines[0]
+    )
 
 
 def test_a_study_is_checked_without_serving(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:

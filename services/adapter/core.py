@@ -1,9 +1,15 @@
-"""The adapter's pure core: which library policy is the partner like, and what should we play.
+"""The adapter's pure core: which partner type is the partner like, and what should we play.
 
-Every frame, each library policy of the partner's role scores the partner's action in the state
-the partner saw (`Scorer`: log pi_k(a_t | s_t), the similarity score of cem.log_probs). A strategy
-turns those scores into an estimated partner type C and our policy D (`AdapterLanes`, for n games
-at once; one game's `Adapter` is its one-lane view):
+The partner types are what the adapter chooses by (`Payoff`): the study's library policies of the
+partner's role, with the self-play table P (`library`), or the grown library's partner groups
+(`groups`: groups.json, each group's members and what each member of ours scores with the group).
+Every frame, each type's policies (a library policy; a group's members) score the partner's action
+in the state the partner saw (`Scorer`: log pi_k(a_t | s_t), the similarity score of
+cem.log_probs). A group's belief is its members' sum, and its estimate is corrected for how it
+errs: the choice maximises the expected payoff under how likely each group is the partner's when
+the filter estimates a group, as measured on the groups' members each scored as if left out
+(`Payoff.trust`). A strategy turns the scores into an estimated partner type C and our policy D
+(`AdapterLanes`, for n games at once; one game's `Adapter` is its one-lane view):
 
 - `cem` (the study's): C is the policy with the highest mean log-probability over the last T
   frames (the window, `Window`); D is the best response to C in the self-play table P.

@@ -4,11 +4,9 @@ with the partner group its results place it in. `tsf eval --held-out` measures t
 teammate on them.
 
 The grown library keeps its run's records (services/agent/grown/run-*.json, written by `tsf library
-grow`): the members' split sides (run-population.json), the training members' cross-play and
-groups (run-grouping.json, run-groups.json) and the held-out partners' cross-play with every
-candidate (run-held-out.json). A test partner's group is the one whose training members' rows
-(what works with them, scaled by their best) its own row is nearest: the rule the grown library's
-group table uses.
+grow`): the members' split sides (run-population.json) and, per seat of ours, every held-out
+partner's group (run-summary.json: the group whose training members' rows, what works with them,
+its own row is nearest).
 """
 
 from __future__ import annotations
@@ -17,11 +15,7 @@ import json
 from functools import cache
 from pathlib import Path
 
-import numpy as np
-
 from services.agent import library
-from services.growth import choice
-from services.growth.choice import Grid
 from services.population import families
 from shared.game import other
 
@@ -39,16 +33,8 @@ def test_partners(partner_role: str, run: Path = RUN) -> dict[str, str]:
     name them."""
     members = [m["name"] for m in _read("population", run)["members"][partner_role] if m["split"] == "test"]
     spec = families.read()
-    names = members + [s for m in members for s in spec.stand_ins(m)]
-    grids = {n: _grid(_read(n, run)[partner_role]) for n in ("grouping", "held-out")}
-    train, held = grids["grouping"], grids["held-out"]
-    label = np.zeros(len(train.partners), np.int64)
-    for j, group in enumerate(_read("groups", run)[partner_role]["groups"]):
-        label[[train.partners.index(m) for m in group]] = j
-    rows = held.kills[[held.partners.index(n) for n in names]]
-    rows = Grid(tuple(names), held.candidates, rows).columns(list(train.candidates)).mean(axis=2)
-    placed = choice.nearest(choice.shape(rows), choice.shape(train.kills.mean(axis=2)), label)
-    return {n: f"G{g + 1}" for n, g in zip(names, placed.tolist(), strict=True)}
+    groups = _read("summary", run)["seats"][other(partner_role)]["partners"]
+    return {n: groups[n] for n in members + [s for m in members for s in spec.stand_ins(m)]}
 
 
 def members(partner_role: str, run: Path = RUN) -> dict[str, str]:
@@ -64,10 +50,6 @@ def statics(role: str, run: Path = RUN) -> list[str]:
     grown = json.loads((run / "members.json").read_text())
     prefix = {"bait": "GB", "shooter": "GS"}[role]
     return study + [key for key, name in grown.items() if key.startswith(prefix) and name not in study]
-
-
-def _grid(record: dict) -> Grid:
-    return Grid(tuple(record["partners"]), tuple(record["candidates"]), np.array(record["kills"], float))
 
 
 def group_of(role: str) -> dict[str, str]:

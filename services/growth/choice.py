@@ -148,6 +148,13 @@ def nearest(rows: np.ndarray, members: np.ndarray, label: np.ndarray) -> np.ndar
     return ((rows[:, None, :] - centres[None]) ** 2).sum(axis=2).argmin(axis=1)
 
 
+def place(grid: Grid, train: Grid, label: np.ndarray) -> np.ndarray:
+    """The group of each of `grid`'s (held-out) partners: the one whose training members' rows (what
+    works with them, scaled by their best: `shape`) its own row is nearest."""
+    rows = shape(grid.columns(list(train.candidates)).mean(axis=2))
+    return nearest(rows, shape(train.kills.mean(axis=2)), label)
+
+
 def partner_groups(
     grouping: Grid, label: np.ndarray, validation: Grid, members: list[str], teammates: list[str]
 ) -> list[dict]:
@@ -156,10 +163,7 @@ def partner_groups(
     group whose rows theirs is nearest) and the mean kills/min of the group's validation partners
     (members and stand-ins) with each of `teammates`: the data the library was selected on, which
     holds every candidate as a column."""
-    columns = list(grouping.candidates)
-    placed = nearest(
-        shape(validation.columns(columns).mean(axis=2)), shape(grouping.kills.mean(axis=2)), label
-    )
+    placed = place(validation, grouping, label)
     values = validation.columns(teammates).mean(axis=2)
     out = []
     for j in range(label.max() + 1):

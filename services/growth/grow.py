@@ -285,10 +285,13 @@ class Grow:
             figures = {}
             for label, rows in (("members", members), ("stand-ins", people), ("both", test)):
                 figures[label] = figures_on(_rows(grid, rows), chosen, study)
+            label = _labels(grouping[other(ours)], groups[other(ours)]["groups"])
+            assigned = choice.place(grid, grouping[other(ours)], label)
             summary["seats"][ours] = {
                 "curve": steps,
                 "test": figures,
-                "groups": self._group_table(ours, chosen, grid, groups, grouping),
+                "groups": self._group_table(chosen, grid, assigned, int(label.max()) + 1),
+                "partners": {p: f"G{g + 1}" for p, g in zip(grid.partners, assigned.tolist(), strict=True)},
             }
         _write(self.out / "summary.json", summary)
         (self.out / "summary.md").write_text(markdown(summary))
@@ -400,22 +403,13 @@ class Grow:
         subprocess.run(command, env=env, check=True, stdout=subprocess.DEVNULL)
         (self.library_dir / f"{GROUPS}.journal").unlink(missing_ok=True)
 
-    def _group_table(
-        self, ours: str, chosen: list[str], grid: Grid, groups: dict, grouping: dict[str, Grid]
-    ) -> list[dict]:
-        """Each member's kills/min (± s.e. over the group's partners) with each partner group: the
-        held-out partners each in the group whose members' rows theirs is nearest."""
-        partner_role = other(ours)
-        train = grouping[partner_role]
-        label = _labels(train, groups[partner_role]["groups"])
-        shared_columns = list(train.candidates)
-        rows = choice.shape(grid.columns(shared_columns).mean(axis=2))
-        assigned = choice.nearest(rows, choice.shape(train.kills.mean(axis=2)), label)
+    def _group_table(self, chosen: list[str], grid: Grid, assigned: np.ndarray, groups: int) -> list[dict]:
+        """Each member's kills/min (± s.e. over the group's partners) with each partner group."""
         out = []
         for name in chosen:
             column = grid.columns([name])[:, 0].mean(axis=1)
             row = {"member": name}
-            for j in range(label.max() + 1):
+            for j in range(groups):
                 values = column[assigned == j]
                 row[f"group {j + 1}"] = round(float(values.mean()), 3) if len(values) else None
                 row[f"group {j + 1} se"] = (

@@ -1,12 +1,13 @@
 """The adapter's per-frame cost with the full library at T = 800 (goal: <= 1 ms per frame).
 
-(a) In-process: one frame's scoring (every library policy of the partner's role) and update, for
-each adaptive seat and strategy, over the frames of a recorded game: mean, p50 and p99 (a -skill
-strategy in the shooter seat at T = 400, where its model was measured; its frames every second
-read the window's keys).
+(a) In-process: one frame's scoring (every library policy of the partner's role, or every member
+of the grown library's partner groups: `groups`) and update, for each adaptive seat and strategy,
+over the frames of a recorded game: mean, p50 and p99 (a -skill strategy in the shooter seat at
+T = 400, where its model was measured; its frames every second read the window's keys).
 (b) As a service under a real-time match: the adapter service (in this process) adapts the
-shooter while a sim and two agents run as processes at 30 Hz; the same per-frame cost as
-measured inside the service, and how many frames it scored.
+shooter while a sim and two agents run as processes at 30 Hz, as the study library's cem agent and
+as the grown library's default; the same per-frame cost as measured inside the service, and how
+many frames it scored.
 
     .venv/bin/python bench/adapter.py [--frames 900]
 """
@@ -29,15 +30,16 @@ from shared.game import FPS
 from shared.processes import Processes
 
 WINDOW = 800
+GROUPS = ("cem", "bayes-dwell-ood-guard")  # measured with the grown library's partner groups too
 
 
-def in_process(role: str, strategy: str, frames: int) -> np.ndarray:
+def in_process(role: str, strategy: str, frames: int, partners: str = "library") -> np.ndarray:
     """Seconds per frame of scoring + update for a partner's recorded game."""
     partner = "B5" if role == "shooter" else "S5"
     teammate = "S5" if role == "shooter" else "B5"
     stream = play_games([(*seats_of([partner, teammate]), 0)], role, record=True)[0]
     window = AdapterConfig.window if "skill" in strategy else WINDOW  # the skill model's T
-    adapter, scorer = build(AdapterConfig(role, window, strategy))
+    adapter, scorer = build(AdapterConfig(role, window, strategy, partners=partners))
     costs = []
     for values, action in list(zip(stream.values, stream.actions, strict=True))[:frames]:
         began = time.perf_counter()
@@ -46,12 +48,11 @@ def in_process(role: str, strategy: str, frames: int) -> np.ndarray:
     return np.array(costs)
 
 
-def as_service(frames: int) -> tuple[np.ndarray, float]:
+def as_service(frames: int, config: AdapterConfig) -> tuple[np.ndarray, float]:
     """Per-frame costs inside the adapter service during a real-time match, and the match's seconds."""
     match, endpoint = "bench-adapter", free_endpoint()
     costs: list[float] = []
     stop = threading.Event()
-    config = AdapterConfig("shooter", WINDOW, "cem")
     thread = threading.Thread(
         target=run_adapter,
         args=(BusConfig(connect=(endpoint,)), match, config, stop),
@@ -91,9 +92,13 @@ def main() -> None:
             if "skill" in strategy and role != "shooter":
                 continue  # a skill model is shipped for the shooter seat only
             print(line(f"in-process, {role} seat, {strategy}", in_process(role, strategy, 1800)))
-    costs, seconds = as_service(args.frames)
-    print(line("service, real-time match, shooter, cem", costs))
-    print(f"  the match: {args.frames} frames at 30 Hz in {seconds:.1f} s (with start-up)")
+        for strategy in GROUPS:
+            costs = in_process(role, strategy, 1800, "groups")
+            print(line(f"in-process, {role} seat, {strategy}, groups", costs))
+    for config in (AdapterConfig("shooter", WINDOW, "cem"), AdapterConfig(window=WINDOW, partners="groups")):
+        costs, seconds = as_service(args.frames, config)
+        print(line(f"service, real-time match, shooter, {config.strategy}, {config.partners}", costs))
+        print(f"  the match: {args.frames} frames at 30 Hz in {seconds:.1f} s (with start-up)")
 
 
 if __name__ == "__main__":

@@ -165,7 +165,7 @@ def evaluate(
             games = team.team(plan.role, partners, agents, seeds, run, shown("team games"), plan.job_games)
         if plan.held_out:
             groups = held_out.group_of(plan.role)
-            comparison = team.compare(games, lambda p: groups.get(p, "other"))
+            comparison = team.compare(games, lambda p: groups.get(p, "other"), held_out.KINDS)
         else:
             comparison = team.compare(games)
     return EvalReport(plan, ident, games, comparison, curves)

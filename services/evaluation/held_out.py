@@ -20,6 +20,11 @@ from services.population import families
 from shared.game import other
 
 RUN = library.NAMED["grown"]  # the shipped grown library, with its run's records
+STAND_IN = "human("  # how a member played through a stand-in is named (families.Spec.stand_ins)
+KINDS = {  # the parts of the test population each result is also given for
+    "members": lambda partner: not partner.startswith(STAND_IN),
+    "stand-ins": lambda partner: partner.startswith(STAND_IN),
+}
 
 
 def _read(name: str, run: Path) -> dict:
@@ -39,7 +44,7 @@ def test_partners(partner_role: str, run: Path = RUN) -> dict[str, str]:
 
 def members(partner_role: str, run: Path = RUN) -> dict[str, str]:
     """The test partners that are members (no stand-ins), with their groups."""
-    return {p: g for p, g in test_partners(partner_role, run).items() if not p.startswith("human(")}
+    return {p: g for p, g in test_partners(partner_role, run).items() if KINDS["members"](p)}
 
 
 def statics(role: str, run: Path = RUN) -> list[str]:

@@ -126,6 +126,14 @@ def _at_a_glance(comparison: dict) -> list[str]:
             f"{counts.get('better', '-')} / {counts.get('equal', '-')} / {counts.get('worse', '-')} | "
             f"{share(t.get('top_tenth_share'))} | {share(t.get('headroom_realised'))} |"
         )
+    for name, by_agent in comparison.get("by_subset", {}).items():
+        for agent, t in by_agent.items():
+            c, room = t["per_partner"], t["known_partner_percent"]
+            realised = t["percent"] / room if room and room > 0 else None
+            lines.append(
+                f"| {agent}, {name} ({t['partners']}) | {t['percent']:+.1f} % | {t['p_holm']:.2g} | "
+                f"{c['better']} / {c['equal']} / {c['worse']} | - | {share(realised)} |"
+            )
     return [*lines, ""]
 
 
@@ -163,8 +171,11 @@ def write_results(
     if identification_result:
         (out / "identification.json").write_text(json.dumps(identification_result, indent=1) + "\n")
         keys = identification_result["partners"]
+        held_out = identification_result.get("held_out")
         lines += [
-            "## Identification (library partners, 10 % action noise)",
+            "## Identification ("
+            + ("the test members' partner groups" if held_out else "library partners")
+            + ", 10 % action noise)",
             "",
             "| T | CEM accuracy | filter accuracy | CEM follows within T/2 | median frames to follow |",
             "| --- | --- | --- | --- | --- |",
@@ -173,10 +184,14 @@ def write_results(
             confusion = ([k, *row] for k, row in zip(keys, r["confusion"], strict=True))
             _csv(out / f"confusion_T{window}.csv", ["true \\ estimated", *keys], confusion)
             follow = r["follow"]
+            followed = (
+                f"{follow['within_half_window']:.2f} ({follow['followed']}/{follow['switches']} followed)"
+                if follow["switches"]
+                else "- (no switching partners)"
+            )
             lines.append(
-                f"| {window} | {r['accuracy']:.3f} | {r['bayes_accuracy']:.3f} | "
-                f"{follow['within_half_window']:.2f} ({follow['followed']}/{follow['switches']} followed) | "
-                f"{follow['median_frames']} |"
+                f"| {window} | {r['accuracy']:.3f} | {r['bayes_accuracy']:.3f} | {followed} | "
+                f"{follow['median_frames'] if follow['switches'] else '-'} |"
             )
         lines.append("")
     if games:

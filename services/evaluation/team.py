@@ -172,7 +172,11 @@ def known_partner(
     return np.array([grid[choice[u]][u] for u in units])
 
 
-def compare(games: list[TeamGame], group_of: Callable[[str], str] = group_of) -> dict:
+def compare(
+    games: list[TeamGame],
+    group_of: Callable[[str], str] = group_of,
+    subsets: dict[str, Callable[[str], bool]] | None = None,
+) -> dict:
     """Each agent's mean and standard error over the population, and each adaptive variant against
     the best static policy (chosen on this same data, which favours the static side): a one-sided
     paired t-test and a Wilcoxon signed-rank test over (partner, seed) pairs (with Holm's
@@ -184,7 +188,8 @@ def compare(games: list[TeamGame], group_of: Callable[[str], str] = group_of) ->
     share of it each variant realises. Per variant also how many partners it serves better, as well
     or worse than the best static policy (a partner's mean beyond MARGIN either way), and the share
     of its gain that the top tenth of partners carry. `group_of` names a partner's group (the
-    population's groups by default)."""
+    population's groups by default); `subsets` (name -> which partners) gives each variant's
+    effect on a part of the population too (`by_subset`, Holm-corrected over variants and parts)."""
     from scipy import stats
 
     units = sorted({(g.partner, g.seed) for g in games})
@@ -265,10 +270,32 @@ def compare(games: list[TeamGame], group_of: Callable[[str], str] = group_of) ->
     for t in tests.values():
         room = overall["mean_difference"]
         t["headroom_realised"] = t["mean_difference"] / room if room > 0 else None
+    by_subset: dict[str, dict[str, dict]] = {}
+    for name, chosen in (subsets or {}).items():
+        where = np.array([chosen(u[0]) for u in units])
+        mine = np.array([chosen(p) for p in partners])
+        by_subset[name] = {}
+        for a in tests:
+            diff = values[a][where] - values[best][where]
+            by_partner = (partner_means(a) - partner_means(best))[mine]
+            by_subset[name][a] = paired_tests(diff) | {
+                "percent": float(100 * diff.mean() / values[best][where].mean()),
+                "partners": int(mine.sum()),
+                "per_partner": {
+                    "better": int((by_partner > MARGIN).sum()),
+                    "equal": int((abs(by_partner) <= MARGIN).sum()),
+                    "worse": int((by_partner < -MARGIN).sum()),
+                },
+                "known_partner_percent": headroom(where)["percent"],
+            }
+    subset_p = holm({(n, a): t["p_superior"] for n, by in by_subset.items() for a, t in by.items()})
+    for (n, a), p in subset_p.items():
+        by_subset[n][a]["p_holm"] = p
     return {
         "units": len(units),
         "partners": len(partners),
         "group_of": {p: group_of(p) for p in partners},
+        "by_subset": by_subset,
         "best_static": best,
         "agents": agents,
         "tests": tests,

@@ -7,10 +7,13 @@ publishes), so that each policy reads them in its own observation view.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from functools import cache
 
 import numpy as np
 
+from services.agent import networks
+from services.agent.policy import RuleStack, rule_stack_key
 from services.sim.engine import Game
 from services.sim.observation import as_observation, world_values
 from services.sim.play import play
@@ -33,9 +36,35 @@ def observed_log_probs(
     policies: Sequence[Policy], observed: Mapping[str, np.ndarray], actions: Sequence[int] | np.ndarray
 ) -> np.ndarray:
     """`log_probs` of n states already observed in each policy's view (`observed[view]`: (n, 64),
-    as the batched engine observes them, bit-identical to as_observation of the world values)."""
+    as the batched engine observes them, bit-identical to as_observation of the world values).
+    Learned policies that stack (networks.Stack: a population's members of one family) are
+    evaluated as one."""
     rows = np.arange(len(actions))
-    return np.log(np.stack([batch_probs(p, observed[p.view])[rows, actions] for p in policies], axis=1))
+    out = np.empty((len(actions), len(policies)))
+    for columns, view, probs in _plan(tuple(policies)):
+        out[:, columns] = probs(observed[view])[:, rows, actions].T
+    return np.log(out)
+
+
+@cache
+def _plan(policies: tuple[Policy, ...]) -> list[tuple[list[int], str, Callable[[np.ndarray], np.ndarray]]]:
+    """The policies' evaluation: each stack of learned policies (networks.stack_key) and of rules
+    (policy.rule_stack_key) as one, every other policy alone; (columns, view, observations ->
+    (len(columns), n, 12)). Made once per tuple of policies (a scorer's)."""
+    stacks = {"network": networks.Stack, "rule": RuleStack}
+    groups: dict[tuple, list[int]] = {}
+    for i, policy in enumerate(policies):
+        learned, rule = networks.stack_key(policy), rule_stack_key(policy)
+        kind = ("network", learned) if learned else ("rule", rule) if rule else ("alone", i)
+        groups.setdefault(kind, []).append(i)
+    plan = []
+    for (kind, _), columns in groups.items():
+        members = [policies[i] for i in columns]
+        if kind in stacks:
+            plan.append((columns, members[0].view, stacks[kind](members)))
+        else:
+            plan.append((columns, members[0].view, lambda obs, p=members[0]: batch_probs(p, obs)[None]))
+    return plan
 
 
 def rollout(

@@ -113,7 +113,7 @@ class Network:
     def __init__(self, arrays: dict[str, np.ndarray], activation: str) -> None:
         n = len([k for k in arrays if k.startswith("w")])
         self.layers = [(arrays[f"w{i}"].astype(float), arrays[f"b{i}"].astype(float)) for i in range(n)]
-        self.activation = self.ACTIVATIONS[activation]
+        self.activation_name, self.activation = activation, self.ACTIVATIONS[activation]
 
     @classmethod
     def load(cls, path: Path) -> tuple[Network, dict]:
@@ -162,6 +162,10 @@ class LearnedPolicy:
     def learned_heads(self, obs: np.ndarray) -> list[np.ndarray]:
         """Distributions of the learned heads for a batch of observations (rows)."""
         out = self.network(obs[..., self.features].astype(np.float64))
+        return self.heads_of(out)
+
+    def heads_of(self, out: np.ndarray) -> list[np.ndarray]:
+        """The learned heads' distributions from the network's outputs (..., outputs)."""
         if self.recipe.algorithm == "DQN":  # one head; Q values -> Boltzmann distribution
             return [self._floor(softmax(out / self.recipe.temperature))]
         heads, start = [], 0
@@ -193,17 +197,60 @@ class LearnedPolicy:
         return factored_probs(*(heads[name] for name in HEADS))
 
     def probs_batch(self, observations: np.ndarray) -> np.ndarray:
-        """probs() of every row of an (n, 64) array, with one network pass for all rows."""
-        heads = dict(zip(self.recipe.learned, self.learned_heads(observations), strict=True))
-        for name, choices in rule_heads_batch(self.recipe, observations, self.config).items():
-            heads[name] = rule_head_probs(choices, HEAD_SIZES[name], RulePolicy.EPSILON)
-        probs = factored_probs_batch(*(heads[name] for name in HEADS))
-        return end_stalled_rounds(observations, self.view, probs, RulePolicy.EPSILON)
+        """probs() of every row of an (n, 64) array, with one network pass for all rows: a stack
+        of one (`Stack`)."""
+        return Stack([self])(observations)[0]
 
     def act(self, obs: np.ndarray) -> int:
         heads = self.head_probs(obs)
         turn, thrust, fire = (draw(self.rng, heads[name]) for name in HEADS)
         return join_action(turn, thrust, fire)
+
+
+class Stack:
+    """Learned policies that differ only in their weights and how they were trained (`stack_key`:
+    the same recipe shape, view, rule heads and network shape), evaluated as one: every network's
+    layers as one batched product, the rule heads and the stalled rounds once for all. A library
+    policy alone is a stack of one; a scorer of many members of one family (the partner
+    population's PPO members) stacks them, and pays one pass where it paid one per policy."""
+
+    def __init__(self, policies: list[LearnedPolicy]) -> None:
+        if len({stack_key(p) for p in policies}) != 1 or stack_key(policies[0]) is None:
+            raise ValueError(f"policies {[p.key for p in policies]} do not stack")
+        self.first = policies[0]
+        layers = zip(*(p.network.layers for p in policies), strict=True)
+        self.layers = [
+            (np.stack([w for w, _ in layer]), np.stack([b for _, b in layer])[:, None]) for layer in layers
+        ]
+
+    def __call__(self, observations: np.ndarray) -> np.ndarray:
+        """(policies, rows, 12): each policy's probs() of every row of an (n, 64) array."""
+        first = self.first
+        h = observations[:, first.features].astype(np.float64)[None]
+        for i, (w, b) in enumerate(self.layers):
+            h = np.matmul(h, w.transpose(0, 2, 1)) + b
+            if i < len(self.layers) - 1:
+                h = first.network.activation(h)
+        heads = dict(zip(first.recipe.learned, first.heads_of(h), strict=True))
+        stacked, rows = len(self.layers[0][0]), len(observations)
+        for name, choices in rule_heads_batch(first.recipe, observations, first.config).items():
+            one = rule_head_probs(choices, HEAD_SIZES[name], RulePolicy.EPSILON)
+            heads[name] = np.broadcast_to(one, (stacked, *one.shape))
+        flat = [heads[name].reshape(stacked * rows, -1) for name in HEADS]
+        probs = factored_probs_batch(*flat).reshape(stacked, rows, -1)
+        return end_stalled_rounds(observations, first.view, probs, RulePolicy.EPSILON)
+
+
+def stack_key(policy: object) -> tuple | None:
+    """What learned policies must share to be evaluated as one `Stack`; None for any other policy
+    (a rule, a policy from outside)."""
+    if type(policy) is not LearnedPolicy:
+        return None
+    r, net = policy.recipe, policy.network
+    boltzmann = r.temperature if r.algorithm == "DQN" else None  # a DQN's one head
+    shapes = tuple(w.shape for w, _ in net.layers)
+    return (r.role, r.view, r.learned, r.features, r.speed_cap, r.thrust_rule, boltzmann, policy.config,
+            net.activation_name, shapes)  # fmt: skip
 
 
 def draw(rng: random.Random, p: np.ndarray) -> int:

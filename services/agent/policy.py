@@ -73,11 +73,7 @@ class RulePolicy:
 
     def rule_batch(self, observations: np.ndarray) -> np.ndarray:
         """rule() of every row, (rows, 3)."""
-        choices = self.choose_batch(observations)
-        if self.ends_stalled_rounds:
-            mask, ending = end_round_batch(observations, self.view)
-            choices[mask] = ending[mask]
-        return choices
+        return RuleStack([self]).rules(observations)[0]
 
     def act(self, obs: np.ndarray) -> int:
         turn, thrust, fire = self.rule(obs)
@@ -98,8 +94,41 @@ class RulePolicy:
         return np.array([self.choose(obs) for obs in observations], np.int64).reshape(-1, 3)
 
     def probs_batch(self, observations: np.ndarray) -> np.ndarray:
-        """probs() of every row of an (n, 64) array."""
-        return rule_probs(self.rule_batch(observations), self.epsilon)
+        """probs() of every row of an (n, 64) array: a stack of one (`RuleStack`)."""
+        return RuleStack([self])(observations)[0]
+
+
+class RuleStack:
+    """Rules of one kind that differ only in their settings (`rule_stack_key`), evaluated as one:
+    each rule's choices, then the stalled rounds and the heads' distributions once for all. A rule
+    alone is a stack of one; a scorer of a rule grid's members (the partner population's) stacks
+    them."""
+
+    def __init__(self, policies: list[RulePolicy]) -> None:
+        if len({rule_stack_key(p) for p in policies}) != 1 or rule_stack_key(policies[0]) is None:
+            raise ValueError(f"policies {[p.key for p in policies]} do not stack")
+        self.policies = policies
+
+    def rules(self, observations: np.ndarray) -> np.ndarray:
+        """(policies, rows, 3): each rule() of every row."""
+        first = self.policies[0]
+        choices = np.stack([p.choose_batch(observations) for p in self.policies])
+        if first.ends_stalled_rounds:
+            mask, ending = end_round_batch(observations, first.view)
+            choices[:, mask] = ending[mask]
+        return choices
+
+    def __call__(self, observations: np.ndarray) -> np.ndarray:
+        """(policies, rows, 12): each probs() of every row."""
+        choices = self.rules(observations)
+        return rule_probs(choices.reshape(-1, 3), self.policies[0].epsilon).reshape(*choices.shape[:2], -1)
+
+
+def rule_stack_key(policy: object) -> tuple | None:
+    """What rules must share to be evaluated as one `RuleStack`; None for any other policy."""
+    if not isinstance(policy, RulePolicy):
+        return None
+    return (type(policy), policy.role, policy.view, policy.epsilon, policy.ends_stalled_rounds)
 
 
 class UniformPolicy:
@@ -238,11 +267,12 @@ def end_round_batch(observations: np.ndarray, view: str) -> tuple[np.ndarray, np
 
 
 def end_stalled_rounds(observations: np.ndarray, view: str, probs: np.ndarray, epsilon: float) -> np.ndarray:
-    """`probs` (rows, 12) with every stalled row replaced by the end-round rule's distribution."""
+    """`probs` (rows, 12), or (policies, rows, 12) of policies that read the same rows, with every
+    stalled row replaced by the end-round rule's distribution."""
     mask, choices = end_round_batch(observations, view)
     if mask.any():
         probs = probs.copy()
-        probs[mask] = rule_probs(choices[mask], epsilon)
+        probs[..., mask, :] = rule_probs(choices[mask], epsilon)
     return probs
 
 

@@ -11,11 +11,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 from PIL import Image
 
-from services.adapter.core import initial_policy
+from services.adapter.core import initial_policy, payoff_of
 from services.population.adaptive import STRATEGIES, AdapterConfig
 from services.report import figures
 from services.report.analysis import reference_partner
@@ -155,15 +156,21 @@ def test_the_pages_name_the_shipped_tables_best_responses(table: Table) -> None:
     best_shooter = {b: table.best_shooter(b) for b in table.baits}
     best_bait = {s: table.best_bait(s) for s in table.shooters}
     start = initial_policy(shooter)
+    grown = payoff_of("shooter", "groups")  # the compose match's adaptive shooter, and its bait B5's group
+    b5 = grown.types[grown.group[grown.partners.index("B5")]]
+    answers = np.argmax(grown.trust(AdapterConfig().window) @ grown.type_values, axis=1)
+    b5_choice = grown.ours[answers[grown.types.index(b5)]]
+    default = AdapterConfig(partners="groups")
+    grown_start = grown.initial(default)
     claims = {
         "README.md": [
             f"starts as {start} (the best average in the table)",
             f"switches to {best_shooter['B5']}, the table's best response",
             f"shooter {best_shooter['B5']} partner like B5",
             f"the table's best shooter for it is {best_shooter['B3']}, not {start}",
-            f"a shooter agent that starts with `{start}` (the adapter's best-average choice)",
-            f"(`{best_shooter['B5']}` for `B5`)",
-            f"(`{AdapterConfig().strategy}`, the default strategy",
+            f"a shooter agent that starts with `{grown_start}` (the grown library's member best on average)",
+            f"(`B5` is in group {b5}, whose best is `{b5_choice}` itself)",
+            f"`{default.strategy}`, window {default.window}, identifying the bait's partner group",
         ],
         "docs/adapter.md": [
             f"{start} for the shooter seat, {initial_policy(bait)} for the bait seat with the shipped table",

@@ -191,7 +191,6 @@ def test_batched_adaptive_games_decide_as_the_scalar_engine_replays_them() -> No
     best = p.ours[p.best_response(p.partners.index("B3"))]  # the table's answer to B3
     assert sum(o.switches for o in played) > 4 and played[0].timeline[0][1:] == ("B3", best)
     assert [o.switches for o in played[5:7]] == [1, 2]  # under the guard's doubling dwell
-    groups = setup("shooter", "groups").payoff
     assert played[7].timeline[0][1:] == ("G4", "GS2")  # the one group whose best member is not GS1
 
 

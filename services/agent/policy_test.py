@@ -92,3 +92,40 @@ def test_idle_stays_idle_in_a_stalled_round():
     obs = np.stack(observations("world"))
     mask, _ = end_round_batch(obs, "world")
     assert (Idle("shooter").rule_batch(obs[mask]) == 0).all()
+
+
+def _states(seeds: range = range(2), frames: int = 300) -> dict[str, np.ndarray]:
+    """Observations of both views from games of B5 and S5, stalled rounds among them."""
+    rows = {"role": [], "world": []}
+    for seed in seeds:
+        game = Game(seed=seed)
+        b5, s5 = networks.load("B5"), networks.load("S5")
+        for _ in range(frames):
+            for view in rows:
+                rows[view].append(observe(game, "bait", view))
+            game.step(b5.act(observe(game, "bait", b5.view)), s5.act(observe(game, "shooter", s5.view)))
+    return {view: np.array(r, np.float32) for view, r in rows.items()}
+
+
+def test_stacked_policies_give_each_policys_own_distributions():
+    """A stack (many learned policies of one shape as one batched pass; many rules of one kind as
+    one) gives every member exactly the distribution its own scalar probs() gives, row by row."""
+    from services.agent.policy import RuleStack, rule_stack_key
+    from services.agent.seats import policy_for
+
+    observed = _states()
+    members = [policy_for(k, "bait") for k in ("PB01a", "PB01b", "PB02c", "PB06a")]
+    rules = [CircleBait(radius=r, speed=s) for r, s in ((80, 1.5), (140, 2.5), (170, 3.5))]
+    assert len({networks.stack_key(p) for p in members}) == 1 and len({rule_stack_key(p) for p in rules}) == 1
+    assert networks.stack_key(rules[0]) is None and rule_stack_key(members[0]) is None
+    for stack, policies in ((networks.Stack(members), members), (RuleStack(rules), rules)):
+        obs = observed[policies[0].view]
+        stacked = stack(obs)
+        assert stacked.shape == (len(policies), len(obs), N_ACTIONS)
+        for policy, probs in zip(policies, stacked, strict=True):
+            alone = np.array([policy.probs(o) for o in obs])  # the scalar path, a row at a time
+            np.testing.assert_allclose(probs, alone, rtol=1e-12, atol=1e-15)
+            np.testing.assert_allclose(probs.sum(axis=1), 1.0)
+        assert len({probs.tobytes() for probs in stacked}) == len(policies)  # not one policy's, copied
+    with pytest.raises(ValueError, match="do not stack"):
+        networks.Stack([members[0], networks.load("B5")])

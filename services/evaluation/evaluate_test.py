@@ -224,3 +224,16 @@ def test_holm_and_non_inferiority() -> None:
     much_worse = rng.normal(-0.3, 0.1, 400)
     assert paired_tests(slightly_worse)["noninferior"] and not paired_tests(much_worse)["noninferior"]
     assert paired_tests(slightly_worse)["p_superior"] > 0.5
+
+
+def test_a_member_left_out_leaves_its_group_and_the_others_as_they_were() -> None:
+    from services.evaluation.identification import _without
+
+    payoff = setup("shooter", "groups").payoff
+    k = payoff.partners.index("B4")
+    left = _without(payoff, k)
+    assert "B4" not in left.partners and len(left.partners) == len(payoff.partners) - 1
+    assert left.types == payoff.types and (left.type_values == payoff.type_values).all()
+    assert left.membership.sum(axis=0).tolist() == [
+        n - (j == payoff.group[k]) for j, n in enumerate(payoff.membership.sum(axis=0).tolist())
+    ]

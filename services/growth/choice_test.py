@@ -1,7 +1,19 @@
 import numpy as np
 import pytest
 
-from services.growth.choice import Grid, best_single, groups, headroom, kmeans, oracle, regret, select, shape
+from services.growth.choice import (
+    Grid,
+    best_single,
+    groups,
+    headroom,
+    kmeans,
+    oracle,
+    partner_groups,
+    place,
+    regret,
+    select,
+    shape,
+)
 
 
 def grid(kills: list[list[list[float]]], candidates: str = "abc") -> Grid:
@@ -57,3 +69,19 @@ def test_regret_and_shape():
 def test_kmeans_is_seeded():
     rows = np.random.default_rng(1).normal(size=(30, 3))
     assert (kmeans(rows, 3, seed=5) == kmeans(rows, 3, seed=5)).all()
+
+
+def test_partner_groups_place_new_partners_by_what_works_and_average_the_validation_rows():
+    # training: p0 and p1 want a, p2 and p3 want b; validation: v0 wants a (at a low level), v1
+    # wants b, and a stand-in of v1 too; teammates a and b (c was a candidate the library left)
+    train = grid([[[8] * 2, [1] * 2, [2] * 2], [[4] * 2, [0.5] * 2, [1] * 2],
+                  [[1] * 2, [6] * 2, [1] * 2], [[0.1] * 2, [3] * 2, [0.1] * 2]])  # fmt: skip
+    label = np.array([0, 0, 1, 1])
+    kills = [[[2, 2], [0, 0], [1, 1]], [[1, 1], [5, 3], [0, 0]], [[0, 0], [2, 2], [0, 0]]]
+    validation = Grid(("v0", "v1", "human(v1)"), ("a", "b", "c"), np.array(kills, float))
+    assert place(validation, train, label).tolist() == [0, 1, 1]
+    groups = partner_groups(train, label, validation, ["v0", "v1"], ["a", "b"])
+    assert [g["name"] for g in groups] == ["G1", "G2"]
+    assert groups[0]["members"] == ["p0", "p1", "v0"] and groups[1]["members"] == ["p2", "p3", "v1"]
+    assert groups[0]["values"] == [2.0, 0.0] and groups[0]["partners"] == 1
+    assert groups[1]["values"] == [0.5, 3.0] and groups[1]["partners"] == 2  # v1 and its stand-in

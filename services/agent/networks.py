@@ -155,6 +155,7 @@ class LearnedPolicy:
         self.config = config or GameConfig()
         self.features = np.array(FEATURES[recipe.features])
         self.rng = random.Random(0)
+        self.alone: Stack | None = None  # this policy as a stack of one, for probs_batch
 
     def reset(self, seed: int | None = None) -> None:
         self.rng = random.Random(seed)
@@ -199,7 +200,9 @@ class LearnedPolicy:
     def probs_batch(self, observations: np.ndarray) -> np.ndarray:
         """probs() of every row of an (n, 64) array, with one network pass for all rows: a stack
         of one (`Stack`)."""
-        return Stack([self])(observations)[0]
+        if self.alone is None:  # made once: a stack's layers are copies of the network's
+            self.alone = Stack([self])
+        return self.alone(observations)[0]
 
     def act(self, obs: np.ndarray) -> int:
         heads = self.head_probs(obs)

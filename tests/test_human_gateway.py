@@ -176,7 +176,8 @@ def test_tsf_play_prints_the_link_and_plays_with_the_adaptive_agent(tmp_path):
             tsf.kill()
     recording = load(tmp_path / "play.tsflog")
     assert recording.summary.kills == end["kills"] and recording.summary.frame == 90
-    assert recording.start.policies == {"bait": "adaptive-T30-bayes-dwell-ood-guard", "shooter": "human"}
+    grown = "adaptive-T30-bayes-dwell-ood-guard_partners-groups"  # `tsf play`'s default: the grown library's
+    assert recording.start.policies == {"bait": grown, "shooter": "human"}
     assert recording.adapter and all(status.role == "bait" for status in recording.adapter)
     assert {a.action for _, a in recording.actions if a.role == "shooter"} == {10}  # right + thrust
 

@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from services.agent.library import keys as library_keys
+from services.agent.seats import beside_keys
 from services.population.adaptive import AdapterConfig
 from services.runtime.launch import MatchPlan
 from services.study.core import Admission, Study, StudyConfig, Variant, assigned_role, variant_order
@@ -31,13 +32,15 @@ def config(**changes: object) -> StudyConfig:
 def test_the_shipped_studies_load_and_name_library_policies(name: str) -> None:
     study = StudyConfig.load(CONFIGS / f"{name}.toml")
     assert study.name == name and len(study.variants) == 5 and study.trials == 3 and study.frames == 1800
+    keys = {role: [*library_keys(role), *beside_keys(role)] for role in ("bait", "shooter")}
     for variant in study.variants:
         if not variant.adapter:
-            assert str(variant.bait) in library_keys("bait") and str(variant.shooter) in library_keys(
-                "shooter"
-            )
-    adaptive = [v.adaptive("shooter", 0).window for v in study.variants if v.adapter]
-    assert adaptive == ([] if name == "static" else [150, 400, 900])
+            assert str(variant.bait) in keys["bait"] and str(variant.shooter) in keys["shooter"]
+    adaptive = [
+        (v.adaptive("shooter", 0).window, v.adaptive("bait", 0).partners) for v in study.variants if v.adapter
+    ]
+    # the grown library's agent at two windows and the study library's, each in both seats
+    assert adaptive == ([] if name == "static" else [(400, "groups"), (150, "groups"), (400, "library")])
 
 
 @pytest.mark.parametrize(

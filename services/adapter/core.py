@@ -59,7 +59,7 @@ from services.population.seat import SeatSpec
 from services.sim import observation as ob
 from services.table.table import DEFAULT_TABLE, Table
 from shared.errors import UsageError
-from shared.game import N_ACTIONS, Policy
+from shared.game import N_ACTIONS, OBS_SIZE, Policy
 
 GROUPS = library.NAMED["grown"] / "groups.json"  # the grown library's partner groups (tsf library grow)
 
@@ -174,8 +174,13 @@ def payoff_of(role: str, partners: str = "library", table: Path = DEFAULT_TABLE)
 
 
 def scorer_of(payoff: Payoff, partner_role: str) -> Scorer:
-    """The payoff's partner types as scored policies (library keys, population members, rules)."""
-    return Scorer([build_partner(SeatSpec.parse(k), partner_role) for k in payoff.partners])
+    """The payoff's partner types as scored policies (library keys, population members, rules),
+    each evaluated once here: a compiled rule compiles on its first call (about 0.6 s for the
+    rule grid's circles), which must not fall on a match's first frames, when the adapter would
+    lag the sim and lose them."""
+    scorer = Scorer([build_partner(SeatSpec.parse(k), partner_role) for k in payoff.partners])
+    scorer.observed({v: np.zeros((1, OBS_SIZE), np.float32) for v in scorer.views}, np.zeros(1, np.int64))
+    return scorer
 
 
 class Window:

@@ -34,6 +34,10 @@ root needed). Both hosts share this machine's CPUs: the figure shows the slots a
 protocol's cost, not a second machine's CPU.
 
     nice .venv/bin/python bench/study.py [--counts 1 4 8 12] [--trial-seconds 10] [--trials 1] [--adaptive]
+
+As an ordinary user runs it (the sim cannot raise its priority, nor enter the real-time class), from
+root: `setpriv --bounding-set=-sys_nice --inh-caps=-sys_nice .venv/bin/python bench/study.py ...`
+(CAP_SYS_NICE dropped for it and its children).
     nice .venv/bin/python bench/study.py --arrivals 20 --over 120 --trial-seconds 5 --max-matches 4
     nice .venv/bin/python bench/study.py --arrivals 16 --over 60 --trial-seconds 5 --max-matches 2 \
         --second-host netns

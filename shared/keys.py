@@ -30,6 +30,7 @@ tsf/pool/<pool>/alive/<service>     liveliness token of each of a pool's service
 
 from __future__ import annotations
 
+import functools
 import re
 from typing import NamedTuple
 
@@ -201,8 +202,14 @@ _SEAT = ("action", "policy")  # tsf/<match>/<kind>/<role>
 
 
 def parse(key: object) -> Key:
-    """The inverse of the builders above: the parts of any concrete key they make; else ValueError."""
-    chunks = str(key).split("/")
+    """The inverse of the builders above: the parts of any concrete key they make; else ValueError.
+    The last 4096 keys read are remembered: a service reads its matches' few keys on every message."""
+    return _parse(str(key))
+
+
+@functools.lru_cache(maxsize=4096)
+def _parse(key: str) -> Key:
+    chunks = key.split("/")
     if len(chunks) >= 4 and chunks[:2] == [PREFIX, "sweep"]:
         _, _, sweep, kind, *rest = chunks
         if kind in ("coordinator", "result") and not rest:

@@ -94,7 +94,7 @@ def test_idle_stays_idle_in_a_stalled_round():
     assert (Idle("shooter").rule_batch(obs[mask]) == 0).all()
 
 
-def _states(seeds: range = range(2), frames: int = 300) -> dict[str, np.ndarray]:
+def _states(seeds: range = range(1), frames: int = 240) -> dict[str, np.ndarray]:
     """Observations of both views from games of B5 and S5, stalled rounds among them."""
     rows = {"role": [], "world": []}
     for seed in seeds:

@@ -166,8 +166,9 @@ def test_the_pages_name_the_shipped_tables_best_responses(table: Table) -> None:
         "README.md": [
             f"starts as {start} (the best average in the table)",
             f"switches to {best_shooter['B5']}, the table's best response",
-            f"shooter {best_shooter['B5']} partner like B5",
-            f"the table's best shooter for it is {best_shooter['B3']}, not {start}",
+            f"`partner like {b5}`: it has placed its partner in bait group {b5}, "
+            f"whose best member is {b5_choice}",
+            f"the table's best shooter for it, {best_shooter['B3']}, not {start}",
             f"a shooter agent that starts with `{grown_start}` (the grown library's member best on average)",
             f"(`B5` is in group {b5}, whose best is `{b5_choice}` itself)",
             f"`{default.strategy}`, window {default.window}, identifying the bait's partner group",

@@ -19,8 +19,10 @@ the thresholds 2 (`--seeds 2`). Needs the
 4. sweep:     `tsf sweep --out WORKDIR/mylib/table.json`: the table with MYBAIT's row
 5. calibrate: `tsf calibrate-adapter --out WORKDIR/mylib/calibration.json`: the thresholds for the
               default strategy's out-of-library test
-6. match:     `tsf match --bait MYBAIT --adaptive shooter`: the adapter names MYBAIT and plays
-              the best shooter for it from the new table
+6. match:     `tsf match --bait MYBAIT --adaptive shooter --partners library`: the study
+              library's adaptive agent, which knows the libraries in use through their table,
+              names MYBAIT and plays the best shooter for it from the new table (the default
+              agent, `--partners groups`, knows the grown library's partner groups instead)
 """
 
 from __future__ import annotations
@@ -103,7 +105,18 @@ def main() -> int:
     )
 
     for strategy in ("cem", "bayes-dwell-ood-guard"):  # the study's, then the default (with -ood)
-        match = ["match", "--lockstep", "--duration", "5", "--bait", KEY, "--adaptive", "shooter"]
+        match = [
+            "match",
+            "--lockstep",
+            "--duration",
+            "5",
+            "--bait",
+            KEY,
+            "--adaptive",
+            "shooter",
+            "--partners",
+            "library",
+        ]
         refused = tsf(
             *match, "--strategy", strategy, "--out", str(work / "recordings"), library=mylib, check=False
         )
@@ -127,7 +140,8 @@ def main() -> int:
 
     recordings = work / "recordings"
     tsf("match", "--lockstep", "--duration", str(args.duration), "--seed", "1", "--bait", KEY, "--adaptive",
-        "shooter", "--match", "byo", "--out", str(recordings), "--overwrite", library=mylib)  # fmt: skip
+        "shooter", "--partners", "library", "--match", "byo", "--out", str(recordings), "--overwrite",
+        library=mylib)  # fmt: skip
     return report(mylib / "table.json", recordings / "byo.tsflog")
 
 

@@ -8,7 +8,6 @@ publishes), so that each policy reads them in its own observation view.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from functools import cache
 
 import numpy as np
 
@@ -20,37 +19,45 @@ from services.sim.play import play
 from services.sim.sampling import batch_probs
 from shared.game import ROLES, GameConfig, Policy, bait_first
 
+Evaluation = list[tuple[list[int], str, Callable[[np.ndarray], np.ndarray]]]  # `evaluation`'s plan
+
 
 def log_probs(
-    policies: Sequence[Policy], states: Sequence[Sequence[float]], actions: Sequence[int]
+    policies: Sequence[Policy],
+    states: Sequence[Sequence[float]],
+    actions: Sequence[int],
+    plan: Evaluation | None = None,
 ) -> np.ndarray:
     """The similarity score, (n, K): log pi_k(a_t | s_t) of a player's n (world-view state values,
     action) pairs under each of K policies. Every policy reads the states in its own view, and its
-    probabilities come from one batched evaluation (sampling.batch_probs) over all n states."""
+    probabilities come from one batched evaluation (sampling.batch_probs) over all n states; `plan`
+    is the policies' `evaluation`, where the caller keeps one (a scorer's)."""
     views = {p.view for p in policies}
     observed = {v: np.stack([as_observation(s, v) for s in states]) for v in sorted(views)}
-    return observed_log_probs(policies, observed, actions)
+    return observed_log_probs(policies, observed, actions, plan)
 
 
 def observed_log_probs(
-    policies: Sequence[Policy], observed: Mapping[str, np.ndarray], actions: Sequence[int] | np.ndarray
+    policies: Sequence[Policy],
+    observed: Mapping[str, np.ndarray],
+    actions: Sequence[int] | np.ndarray,
+    plan: Evaluation | None = None,
 ) -> np.ndarray:
     """`log_probs` of n states already observed in each policy's view (`observed[view]`: (n, 64),
-    as the batched engine observes them, bit-identical to as_observation of the world values).
-    Learned policies that stack (networks.Stack: a population's members of one family) are
-    evaluated as one."""
+    as the batched engine observes them, bit-identical to as_observation of the world values),
+    by the policies' `evaluation` (`plan`, or made here for this call)."""
     rows = np.arange(len(actions))
     out = np.empty((len(actions), len(policies)))
-    for columns, view, probs in _plan(tuple(policies)):
+    for columns, view, probs in plan or evaluation(policies):
         out[:, columns] = probs(observed[view])[:, rows, actions].T
     return np.log(out)
 
 
-@cache
-def _plan(policies: tuple[Policy, ...]) -> list[tuple[list[int], str, Callable[[np.ndarray], np.ndarray]]]:
-    """The policies' evaluation: each stack of learned policies (networks.stack_key) and of rules
-    (policy.rule_stack_key) as one, every other policy alone; (columns, view, observations ->
-    (len(columns), n, 12)). Made once per tuple of policies (a scorer's)."""
+def evaluation(policies: Sequence[Policy]) -> Evaluation:
+    """How the policies are evaluated: each stack of learned policies (networks.stack_key: a
+    population's members of one family) and of rules (policy.rule_stack_key: a rule grid) as one,
+    every other policy alone; (columns, view, observations -> (len(columns), n, 12)). A stack copies
+    its networks' layers, so a caller that scores the same policies often (a scorer) keeps it."""
     stacks = {"network": networks.Stack, "rule": RuleStack}
     groups: dict[tuple, list[int]] = {}
     for i, policy in enumerate(policies):

@@ -45,10 +45,11 @@ import math
 import random
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 
-from services.adapter.cem import log_probs, observed_log_probs
+from services.adapter.cem import evaluation, log_probs, observed_log_probs
 from services.adapter.guard import Guard
 from services.adapter.skill import CONFIDENT, EVERY, LEVELS, Keys, SkillModel, skill_path
 from services.agent import library
@@ -61,6 +62,7 @@ from services.table.table import DEFAULT_TABLE, Table
 from shared.errors import UsageError
 from shared.game import N_ACTIONS, OBS_SIZE, Policy
 
+T = TypeVar("T")
 GROUPS = library.NAMED["grown"] / "groups.json"  # the grown library's partner groups (tsf library grow)
 
 
@@ -140,7 +142,7 @@ class Payoff:
         nearest `window`; `tsf calibrate-adapter --partners groups`); None without one."""
         if not self.confusion:
             return None
-        counts = self.confusion[min(self.confusion, key=lambda t: abs(int(t) - window))].T
+        counts = nearest_window(self.confusion, window).T
         seen = counts.sum(axis=1, keepdims=True)
         return np.where(seen > 0, counts / np.where(seen > 0, seen, 1.0), np.eye(len(counts)))
 
@@ -158,6 +160,11 @@ class Payoff:
         if config.initial == "random":
             return random.Random(config.seed).choice(self.ours)
         return self.ours[self.best_average()]
+
+
+def nearest_window(by_window: dict[str, T], window: int) -> T:
+    """What a calibration measured at the window nearest `window` (its keys: windows in frames)."""
+    return by_window[min(by_window, key=lambda t: abs(int(t) - window))]
 
 
 def groups_path() -> Path:
@@ -213,14 +220,15 @@ class Scorer:
     def __init__(self, policies: list[Policy]) -> None:
         self.policies = policies
         self.keys = tuple(p.key for p in policies)
+        self.plan = evaluation(policies)  # made once: the stacks of its many members
 
     def __call__(self, values: list[float] | np.ndarray, action: int) -> np.ndarray:
         """(K,) scores of one frame (a batch of one evaluates exactly as a single observation)."""
-        return log_probs(self.policies, [values], [action])[0]
+        return log_probs(self.policies, [values], [action], self.plan)[0]
 
     def batch(self, values: np.ndarray, actions: np.ndarray) -> np.ndarray:
         """(n, K) scores of n frames."""
-        return log_probs(self.policies, values, actions)
+        return log_probs(self.policies, values, actions, self.plan)
 
     @property
     def views(self) -> set[str]:
@@ -229,7 +237,7 @@ class Scorer:
     def observed(self, observed: dict[str, np.ndarray], actions: np.ndarray) -> np.ndarray:
         """(n, K) scores of n frames already observed in every view of `views` (the batched
         engine's observations: the same values as `__call__` reads from world values)."""
-        return observed_log_probs(self.policies, observed, actions)
+        return observed_log_probs(self.policies, observed, actions, self.plan)
 
 
 def ood_threshold(partner_role: str, window: int, path: Path | None = None) -> float:
@@ -246,8 +254,7 @@ def ood_threshold(partner_role: str, window: int, path: Path | None = None) -> f
             f"{now}: {remedy}"
         )
     thresholds = record["thresholds"][partner_role]
-    nearest = min(thresholds, key=lambda t: abs(int(t) - window))
-    return float(thresholds[nearest])
+    return float(nearest_window(thresholds, window))
 
 
 class StaleCalibration(ValueError):
@@ -554,7 +561,7 @@ def threshold(config: AdapterConfig, payoff: Payoff | None = None) -> float | No
         if not thresholds:
             remedy = f"measure them with `tsf calibrate-adapter --partners groups --out {groups_path()}`"
             raise UsageError("--strategy", config.strategy, f"no out-of-group thresholds: {remedy}")
-        return thresholds[min(thresholds, key=lambda t: abs(int(t) - config.window))]
+        return nearest_window(thresholds, config.window)
     try:
         return ood_threshold(config.partner_role, config.window)
     except StaleCalibration as error:

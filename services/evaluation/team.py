@@ -224,11 +224,7 @@ def compare(
             "p_t_partners": float(stats.ttest_1samp(by_partner, 0.0, alternative="greater").pvalue),
             "partners_better": int((by_partner > 0).sum()),
             "partners": len(partners),
-            "per_partner": {
-                "better": int((by_partner > MARGIN).sum()),
-                "equal": int((abs(by_partner) <= MARGIN).sum()),
-                "worse": int((by_partner < -MARGIN).sum()),
-            },
+            "per_partner": _counts(by_partner),
             "top_tenth_share": _top_share(by_partner),
         }
     holm_p = holm({a: t["p_t"] for a, t in tests.items()})
@@ -281,11 +277,7 @@ def compare(
             by_subset[name][a] = paired_tests(diff) | {
                 "percent": float(100 * diff.mean() / values[best][where].mean()),
                 "partners": int(mine.sum()),
-                "per_partner": {
-                    "better": int((by_partner > MARGIN).sum()),
-                    "equal": int((abs(by_partner) <= MARGIN).sum()),
-                    "worse": int((by_partner < -MARGIN).sum()),
-                },
+                "per_partner": _counts(by_partner),
                 "known_partner_percent": headroom(where)["percent"],
             }
     subset_p = holm({(n, a): t["p_superior"] for n, by in by_subset.items() for a, t in by.items()})
@@ -308,6 +300,16 @@ def compare(
             "all": overall,
             **{g: headroom(group_of_unit == g) for g in sorted(set(group_of_unit))},
         },
+    }
+
+
+def _counts(by_partner: np.ndarray) -> dict[str, int]:
+    """How many partners a variant serves better, as well or worse than the best static policy:
+    their mean differences beyond MARGIN either way, or within it."""
+    return {
+        "better": int((by_partner > MARGIN).sum()),
+        "equal": int((abs(by_partner) <= MARGIN).sum()),
+        "worse": int((by_partner < -MARGIN).sum()),
     }
 
 

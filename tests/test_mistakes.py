@@ -777,3 +777,15 @@ def test_an_unreachable_ray_address_is_one_line_within_seconds(tmp_path: Path) -
         "tsf sweep: --ray 127.0.0.1:1: no Ray cluster reached"
     )
     assert took < REACH + 30  # the wait itself is REACH; the rest, importing Ray on a loaded machine
+
+
+def test_calibrating_groups_into_a_file_that_is_no_groups_file_stops_before_it_starts(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    """`--partners groups` writes the thresholds into a groups file: any other --out (a library's
+    calibration.json) is one line before a game is played, and is left as it was."""
+    out = tmp_path / "calibration.json"
+    out.write_text('{"thresholds": {}}')
+    status, lines = tsf(["calibrate-adapter", "--partners", "groups", "--out", str(out)], capsys)
+    assert status == 2 and len(lines) == 1 and "not a groups file" in lines[0]
+    assert out.read_text() == '{"thresholds": {}}' and not (tmp_path / "calibration.json.journal").exists()

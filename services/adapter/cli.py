@@ -3,6 +3,7 @@ calibrate-adapter."""
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 from typing import Annotated
@@ -220,6 +221,15 @@ def calibrate_adapter(
     from services.evaluation.thresholds import KINDS, calibrate, write_calibration
     from services.jobs.engine import on_workers, open_engine
 
+    if partners == "groups" and out.exists():  # the groups' figures go into a groups file, nothing else
+        try:
+            seats = json.loads(out.read_text())["seats"]
+        except (OSError, ValueError, KeyError, TypeError):
+            seats = None
+        if not isinstance(seats, dict):
+            raise UsageError(
+                "--out", out, "not a groups file (groups.json): --partners groups writes into one"
+            )
     journal = out.with_name(out.name + ".journal")
     with (
         open_engine(bus, sweep_id, journal, KINDS, workers, ray, stop_on_signals()) as engine,

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import logging
+import random
 import re
 import signal
 import socket
@@ -18,6 +19,7 @@ from collections import Counter, OrderedDict
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Protocol, TypeVar
 
 import zenoh
@@ -96,11 +98,36 @@ class BusConfig:
         return [*args, "--low-latency"] if self.low_latency else args
 
 
+_ports = random.Random()  # its own generator: a test that seeds the global one must not pick our ports
+
+
 def free_endpoint(host: str = "127.0.0.1") -> str:
-    """A TCP endpoint on a port that is free now (for the sim a local match connects to)."""
+    """A TCP endpoint on a port that is free now (for the sim a local match connects to).
+
+    The port is drawn below the kernel's ephemeral range where there is one: between this check and
+    the listener's bind, an outgoing connection (which takes its port from that range) or another
+    bind to port 0 could take a port from inside it, and the listener then fails with "Address
+    already in use". Elsewhere, the kernel picks."""
+    low = ephemeral_low()
+    for _ in range(64 if low > 11024 else 0):
+        port = _ports.randrange(10000, low)
+        with socket.socket() as sock:
+            try:
+                sock.bind((host, port))
+            except OSError:
+                continue
+            return f"tcp/{host}:{port}"
     with socket.socket() as sock:
         sock.bind((host, 0))
         return f"tcp/{host}:{sock.getsockname()[1]}"
+
+
+def ephemeral_low() -> int:
+    """The first port of the kernel's ephemeral range, or 0 where it can't be read (not Linux)."""
+    try:
+        return int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return 0
 
 
 def why(error: zenoh.ZError) -> str:

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import socket
 import subprocess
 import sys
 import weakref
 from pathlib import Path
 
-from shared.bus import weakly
+from shared.bus import ephemeral_low, free_endpoint, weakly
 
 ROOT = Path(__file__).parent.parent
 
@@ -55,3 +56,13 @@ def test_a_pool_service_remembers_the_last_orders_it_saw_and_forgets_the_oldest(
     seen = Seen(2)
     assert [seen.add(m) for m in ("a", "b", "a", "c")] == [True, True, False, True]
     assert seen.add("a") and not seen.add("c"), "a, the oldest, was forgotten; c is still known"
+
+
+def test_a_free_endpoint_lies_below_the_ephemeral_range_where_no_outgoing_connection_takes_it() -> None:
+    low = ephemeral_low()
+    for _ in range(20):
+        endpoint = free_endpoint()
+        host, port = endpoint.removeprefix("tcp/").rsplit(":", 1)
+        with socket.socket() as sock:
+            sock.bind((host, int(port)))  # still free
+        assert int(port) < low or low <= 11024, endpoint

@@ -479,7 +479,8 @@ class MatchOffer(MatchMessage):
     """A study server asks a match host to run a match: its seats (a policy key, `human` for a seat
     the server plays over the router, "" for the adaptive seat), the adaptive agent's name if any,
     how long the sim waits for the players and how long the whole match may take. `library` and
-    `config` are the hashes the host's own copies must have (as a sweep job's)."""
+    `config` are the hashes the host's own copies must have: of all it may play and adapt by
+    (library.play_hash), and of the rules."""
 
     TYPE: ClassVar[str] = "match_offer"
     CHECKS: ClassVar[dict[str, Check]] = {

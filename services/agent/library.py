@@ -203,6 +203,22 @@ def manifest_hash(root: Path | None = None) -> str:
     return h.hexdigest()[:16]
 
 
+PLAYED = ("registry.toml", "manifest.json", "table.json", "calibration.json", "groups.json")
+
+
+def play_hash() -> str:
+    """Hash of everything a match may play from: the libraries in use and those shipped beside them
+    (NAMED), each with the files an adaptive agent reads there (its table, calibration and partner
+    groups). Two checkouts that agree on it play and adapt alike: a study's match hosts must."""
+    h = hashlib.sha256()
+    for root in dict.fromkeys([*roots(), *NAMED.values()]):
+        for name in PLAYED:
+            path = root / name
+            h.update(f"{root.name}/{name}\0".encode())
+            h.update(path.read_bytes() if path.exists() else b"")
+    return h.hexdigest()[:16]
+
+
 def provenance_hashes(table: Path | str | None = None) -> dict[str, str]:
     """The library's manifest hash ("unknown" where it cannot be read) and the table's file hash
     (default: the library's table; a string is taken as the table's name as it is), as

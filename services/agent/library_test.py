@@ -205,6 +205,18 @@ def test_manifest_hash_changes_with_the_manifest(tmp_path, role):
     assert library.manifest_hash(root) != before
 
 
+def test_the_play_hash_covers_what_an_adaptive_agent_reads_in_a_library_in_use(tmp_path, monkeypatch):
+    """A study's hosts must agree on it: another groups file (or table) in use changes it, where the
+    manifest's hash does not."""
+    root = copy_library(tmp_path)
+    monkeypatch.setenv("TSF_LIBRARY", str(root))
+    before, manifest = library.play_hash(), library.manifest_hash()
+    (root / "groups.json").write_text(json.dumps({"version": 1, "seats": {}}))
+    assert library.play_hash() != before and library.manifest_hash() == manifest
+    monkeypatch.delenv("TSF_LIBRARY")
+    assert library.play_hash() != before  # the libraries in use are part of it
+
+
 def test_the_grown_library_is_named_and_plays_with_its_own_table(tmp_path, monkeypatch):
     """TSF_LIBRARY=grown is the library shipped beside the study's (a directory of that name here
     would be taken instead); its members play and its table is bound to it."""

@@ -58,7 +58,7 @@ def offer_of(plan: MatchPlan, sender: str) -> MatchOffer:
     return MatchOffer(
         match=plan.match, frame=0, sender=sender, seed=plan.seed, frames=plan.frames, **seats,
         adapter=adapter.name if adapter else "", wait_players=plan.wait_players,
-        timeout=plan.timeout, library=library.manifest_hash(), config=GameConfig().hash(),
+        timeout=plan.timeout, library=library.play_hash(), config=GameConfig().hash(),
     )  # fmt: skip
 
 
@@ -98,7 +98,7 @@ class Host:
         self.running: dict[str, tuple[threading.Event, threading.Thread]] = {}
         self.finished: dict[str, Path] = {}  # match -> its recording, served in chunks
         self.lock = threading.RLock()
-        self.hashes = (library.manifest_hash(), GameConfig().hash())
+        self.hashes = (library.play_hash(), GameConfig().hash())
 
     def status(self) -> HostStatus:
         with self.lock:

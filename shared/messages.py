@@ -117,7 +117,8 @@ def _named(value: Check) -> Check:
 _ROLE = _one_of(ROLES)
 _ROLE_OR_NONE = _one_of(("", *ROLES))
 # A policy's name in messages: a key, an adaptive agent's name, a plug-in's (services/agent/outside.py).
-POLICY_NAME = r"[A-Za-z0-9_.:-]{1,64}"
+NAME_MOST = 64  # characters of a policy's or an adaptive agent's name that a message carries
+POLICY_NAME = rf"[A-Za-z0-9_.:-]{{1,{NAME_MOST}}}"
 _KEY = _text(POLICY_NAME)
 _KEY_OR_NONE = _text(f"(?:{POLICY_NAME})?")
 _ACTION = _int(0, N_ACTIONS - 1)
@@ -488,7 +489,7 @@ class MatchOffer(MatchMessage):
         "frames": _int(FRAMES.low, FRAMES.high),
         "bait": _KEY_OR_NONE,
         "shooter": _KEY_OR_NONE,
-        "adapter": _text(r"[A-Za-z0-9_.:-]{0,64}"),
+        "adapter": _text(f"(?:{POLICY_NAME})?"),
         "wait_players": _WAIT,
         "timeout": _WAIT,
         "library": _HASH,
@@ -552,7 +553,7 @@ class MatchOrder(MatchMessage):
         "bait": _KEY_OR_NONE,
         "shooter": _KEY_OR_NONE,
         "names": _map(ROLES, _KEY),
-        "adapter": _text(r"[A-Za-z0-9_.:-]{0,64}"),
+        "adapter": _text(f"(?:{POLICY_NAME})?"),
         "adaptive": _ROLE_OR_NONE,
         "wait_players": _WAIT,
         "wait_services": _WAIT,

@@ -35,6 +35,7 @@ from shared.game import ROLES, SEEDS, GameConfig, Range
 
 commands = typer.Typer()
 STEPS = Range(1, 10**9)  # environment steps of one training
+STEPS_OR_DEFAULT = Range(0, 10**9)
 SCORED = Range(0, GAMES.high)  # games a trained or added policy is scored over (0: not scored)
 View = enum.Enum("View", {v: v for v in VIEWS}, type=str)
 
@@ -214,6 +215,41 @@ def library_grow(
     by what works with them, a PPO best response per group, and the members that leave an adaptive
     teammate the most room (held-out oracle headroom on the validation population); then the grown
     library's table, calibration and the test population's figures (docs/library.md)."""
+    summary = _grow(population, out, workers, ray, bus, "tsf library grow").run()
+    console.print((out / "summary.md").read_text())
+    console.print(
+        f"the grown library: TSF_LIBRARY={(out / 'library').resolve()} ({len(summary['members'])} members)"
+    )
+
+
+@library_commands.command("condition")
+@bus_options
+def library_condition(
+    out: Path = typer.Argument(..., help="The directory of a finished `tsf library grow` run."),
+    seat: Role = typer.Option(..., help="Our seat: the conditioned teammate plays it."),
+    steps: int = number(
+        0, STEPS_OR_DEFAULT, "PPO steps (0: the spec's response steps times the partner groups)."
+    ),
+    population: Path = typer.Option(SPEC, "--population", help="The run's partner population spec."),
+    workers: int = number(os.cpu_count() or 1, WORKERS, "Worker processes to start here."),
+    ray: str | None = RAY,
+    *,
+    bus: BusConfig,
+) -> None:
+    """Try the conditioned teammate: one PPO network told its partner's group, trained with every
+    group at once, against switching among the grown library's members (and the groups' best
+    responses), the partner's group given to both, on the run's validation and test partners. Writes
+    OUT/conditioned-SEAT/ (the network told each group, as a library) and OUT/conditioned-SEAT.json."""
+    from services.growth.conditioned import markdown, run_conditioned
+
+    if not (out / "library" / "groups.json").exists():
+        raise UsageError("OUT", out, "is no finished `tsf library grow` run (no library/groups.json)")
+    grow = _grow(population, out, workers, ray, bus, "tsf library condition")
+    console.print(markdown(run_conditioned(grow, str(seat), steps or None)))
+
+
+def _grow(population: Path, out: Path, workers: int, ray: str | None, bus: BusConfig, command: str):  # noqa: ANN202
+    """A Grow over `out` whose stages' jobs run on the job engine (workers here, on the bus, or Ray)."""
     from contextlib import contextmanager
     from importlib.util import find_spec
 
@@ -223,7 +259,7 @@ def library_grow(
 
     spec = read(population)
     if find_spec("stable_baselines3") is None:
-        raise UsageError("tsf library grow", "train", "needs the train extra: pip install -e '.[train]'")
+        raise UsageError(command, "train", "needs the train extra: pip install -e '.[train]'")
     stop = stop_on_signals()
 
     @contextmanager
@@ -234,11 +270,7 @@ def library_grow(
         ) as opened:
             yield on_workers(opened)
 
-    summary = Grow(spec, out, engine, console.print, max(workers, 1)).run()
-    console.print((out / "summary.md").read_text())
-    console.print(
-        f"the grown library: TSF_LIBRARY={(out / 'library').resolve()} ({len(summary['members'])} members)"
-    )
+    return Grow(spec, out, engine, console.print, max(workers, 1))
 
 
 @commands.command("keys")

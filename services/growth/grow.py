@@ -218,10 +218,6 @@ class Grow:
         for role, record in groups.items():
             ours = other(role)
             for j, members in enumerate(record["groups"]):
-                stand_ins = [
-                    self.spec.stand_ins(m)[i % len(self.spec.skills)]
-                    for i, m in enumerate(members[: len(self.spec.skills)])
-                ]
                 recipe = dict(self.spec.seats[ours].response)
                 recipe |= {
                     "role": ours,
@@ -230,7 +226,7 @@ class Grow:
                     "with their stand-ins",
                     "algorithm": "PPO",
                     "seed": self.spec.seed + 1000 + 10 * ROLES.index(ours) + j,
-                    "partners": [*members, *stand_ins],
+                    "partners": self.response_partners(members),
                 }
                 if ours == "shooter":
                     recipe["frame"] = "world"
@@ -245,6 +241,13 @@ class Grow:
         self.say(f"responses: training {len(jobs)} best responses")
         self._jobs("responses", jobs, roots=[self.population_dir])
         self._adopt(self.staging, self.responses_dir, list(recipes))
+
+    def response_partners(self, members: list[str]) -> list[str]:
+        """What a best response to a group trains with: its members, and a stand-in of each of the
+        first few (one per skill level, in turn)."""
+        skills = self.spec.skills
+        stand_ins = [self.spec.stand_ins(m)[i % len(skills)] for i, m in enumerate(members[: len(skills)])]
+        return [*members, *stand_ins]
 
     def selection(self, held_out: dict[str, Grid]) -> dict[str, list[dict]]:
         """Per seat of ours, the greedy selection's steps on the validation population."""

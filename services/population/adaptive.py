@@ -131,9 +131,9 @@ class AdapterConfig:
         adaptive-T<window>-<strategy>, then _<setting><value> for each of NAMED that is not the
         default (_initial-random, _warmup150, _dwell20, _hazard0.01, _noise0.1). The seat and the
         seed are where it plays, not what it is, so the name leaves them out."""
-        default = AdapterConfig()
+        default = {f.name: f.default for f in fields(self)}
         extra = "".join(
-            f"_{s}{setting_text(getattr(self, s))}" for s in NAMED if getattr(self, s) != getattr(default, s)
+            f"_{s}{setting_text(getattr(self, s))}" for s in NAMED if getattr(self, s) != default[s]
         )
         return f"{ADAPTIVE}T{self.window}-{self.strategy}{extra}"
 

@@ -4,12 +4,14 @@ the warm start by imitation of a scripted demonstrator, and the export to the li
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import torch as th
 from sb3_contrib import TRPO
 from stable_baselines3 import A2C, DQN, PPO
+from stable_baselines3.common.vec_env import VecEnv
 
 from services.agent.library import LIBRARY, Recipe
 from services.agent.networks import HEADS
@@ -88,10 +90,13 @@ def make_model(
     hyperparameters: dict | None = None,
     config: GameConfig | None = None,
     root: Path = LIBRARY,
+    wrap: Callable[[VecEnv], VecEnv] | None = None,
 ):  # noqa: ANN201 - an SB3 model
-    """The recipe's algorithm on its env, with the algorithm's settings (or `hyperparameters`)."""
+    """The recipe's algorithm on its env (as `wrap` makes it, given), with the algorithm's settings
+    (or `hyperparameters`)."""
     settings = dict(HYPERPARAMETERS[recipe.algorithm] if hyperparameters is None else hyperparameters)
     env = RecipeVecEnv(recipe, settings.pop("n_envs"), config, root)
+    env = env if wrap is None else wrap(env)
     kwargs = {"policy_kwargs": {"net_arch": NET}, **settings}
     return ALGORITHMS[recipe.algorithm]("MlpPolicy", env, seed=seed, device="cpu", verbose=0, **kwargs)
 

@@ -1,0 +1,251 @@
+"""The conditioned teammate (TALENTS, PECAN): one network of our seat told its partner's group,
+tried against switching among members, on a grown run's held-out partners.
+
+It trains as a best response does (the spec's `response` recipe, PPO), against every training
+member of the other seat and their stand-ins at once, with each game's partner group appended to
+the observation as a one-hot (`Told`); by default for as many steps as all the group's best
+responses together, so that neither side had more experience. Told the group, the network is a plain
+network of the recipe: the one-hot's first-layer weights add to the bias (`told`). So each group's
+conditioned teammate is an ordinary library policy (CB1.., CS1..), and the adapter's switch to the
+identified group's teammate is exactly the conditioned teammate told the adapter's estimate.
+
+The comparison gives both sides the partner's true group (oracle identification), on the validation
+partners (where the library was selected) and on the test partners, members and stand-ins, over the
+held-out cross-play's seeds: the conditioned teammate told the group; the grown library's teammate
+that groups.json names best for the group (what the adaptive agent switches to); and the group's own
+best response (`responses/`). The winner on validation is what the adaptive agent should play.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+from gymnasium import spaces
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
+
+from services.agent import library
+from services.growth import choice
+from services.growth.choice import Grid
+from services.growth.crossplay import pair_jobs
+from shared.game import ROLES, other
+
+if TYPE_CHECKING:
+    from services.growth.grow import Grow
+
+PREFIX = {"bait": "CB", "shooter": "CS"}  # the keys of the conditioned teammate told each group
+
+
+class Told(VecEnvWrapper):
+    """A recipe's env (training/env.py) whose observation ends with the one-hot of each game's
+    partner group: `group_of[i]` is the group of the env's partner `i`."""
+
+    def __init__(self, venv: VecEnv, group_of: np.ndarray) -> None:
+        self.group_of = np.asarray(group_of, np.int64)
+        self.groups = int(self.group_of.max()) + 1
+        inner = venv.observation_space
+        low = np.concatenate([inner.low, np.zeros(self.groups, np.float32)])
+        high = np.concatenate([inner.high, np.ones(self.groups, np.float32)])
+        super().__init__(venv, observation_space=spaces.Box(low, high, dtype=np.float32))
+
+    def current(self) -> np.ndarray:
+        """Each lane's partner group now."""
+        return self.group_of[self.venv.env.partner_of]
+
+    def with_group(self, obs: np.ndarray, group: np.ndarray) -> np.ndarray:
+        return np.concatenate([obs, np.eye(self.groups, dtype=np.float32)[group]], axis=-1)
+
+    def reset(self) -> np.ndarray:
+        return self.with_group(self.venv.reset(), self.current())
+
+    def step_wait(self) -> tuple:
+        before = self.current()  # a finished game's last observation belongs to its partner
+        obs, rewards, done, infos = self.venv.step_wait()
+        for lane in np.flatnonzero(done):
+            last = infos[lane]["terminal_observation"]
+            infos[lane]["terminal_observation"] = self.with_group(last, before[lane])
+        return self.with_group(obs, self.current()), rewards, done, infos
+
+
+def told(arrays: dict[str, np.ndarray], belief: np.ndarray) -> dict[str, np.ndarray]:
+    """A conditioned network's arrays told `belief` (a one-hot, or probabilities over the groups):
+    a plain network over the recipe's features, the belief's part of the first layer in its bias."""
+    groups = len(belief)
+    w0 = arrays["w0"]
+    out = dict(arrays)
+    out["w0"] = np.ascontiguousarray(w0[:, :-groups])
+    out["b0"] = (arrays["b0"] + w0[:, -groups:] @ np.asarray(belief, w0.dtype)).astype(arrays["b0"].dtype)
+    return out
+
+
+def train_conditioned(
+    recipe: library.Recipe, root: Path, group_of: np.ndarray, steps: int, seed: int
+) -> dict[str, np.ndarray]:
+    """The conditioned network's arrays (training/algorithms.export), trained for `steps`: the
+    recipe of the library at `root` with the group of each of its partners appended."""
+    from services.training.algorithms import export, make_model
+    from services.training.loop import whole_rollouts
+
+    model = make_model(recipe, seed, root=root, wrap=lambda env: Told(env, group_of))
+    model.learn(whole_rollouts(model, steps), progress_bar=False)
+    return export(model, recipe)
+
+
+def compare(
+    kills: Callable[[str], np.ndarray],
+    placed: np.ndarray,
+    parts: dict[str, np.ndarray],
+    sides: dict[str, list],
+) -> dict:
+    """Per part of the partners (validation/test, members/stand-ins): the mean kills/min of each
+    side, given each partner's group, and the paired difference of the conditioned teammate with
+    switching. `kills(name)` is a teammate's (partners, seeds) kills/min; `sides[side]` each group's
+    teammate of that side."""
+    per_side = {
+        side: np.array([kills(names[g])[i].mean() for i, g in enumerate(placed)])
+        for side, names in sides.items()
+    }
+    out = {}
+    for part, rows in parts.items():
+        if not rows.any():
+            continue
+        diff = per_side["conditioned"][rows] - per_side["switching"][rows]
+        out[part] = {"partners": int(rows.sum())}
+        out[part] |= {side: round(float(v[rows].mean()), 4) for side, v in per_side.items()}
+        out[part]["difference"] = round(float(diff.mean()), 4)
+        out[part]["difference se"] = (
+            round(float(diff.std(ddof=1) / np.sqrt(rows.sum())), 4) if rows.sum() > 1 else None
+        )
+    return out
+
+
+def run_conditioned(grow: Grow, ours: str, steps: int | None = None) -> dict:
+    """The experiment for seat `ours` on the finished run `grow`: the conditioned teammate trained
+    (once: `conditioned-OURS/`, a library of its members told each group), its games with every
+    held-out partner (once: `conditioned-OURS.json`'s cross-play), and the comparison, written to
+    `conditioned-OURS.json` and returned."""
+    from services.growth.grow import GROUPS, RESPONSE, _is_library, _labels, _toml, _write
+
+    grow._bind()  # a run of another spec is refused
+    out, spec, partner_role = grow.out, grow.spec, other(ours)
+    groups = json.loads((out / "groups.json").read_text())[partner_role]["groups"]
+    root, key = out / f"conditioned-{ours}", PREFIX[ours]
+    teammates = [f"{key}{j + 1}" for j in range(len(groups))]
+    if not (root / "manifest.json").exists():
+        partners = [grow.response_partners(members) for members in groups]
+        steps = steps or int(spec.seats[ours].response["steps"]) * len(groups)
+        recipe = dict(spec.seats[ours].response) | {
+            "role": ours,
+            "family": "conditioned",
+            "description": f"PPO told its partner's group ({len(groups)} {partner_role} groups)",
+            "algorithm": "PPO",
+            "seed": spec.seed + 2000 + ROLES.index(ours),
+            "steps": steps,
+            "partners": [p for names in partners for p in names],
+        }
+        recipe |= {"frame": "world"} if ours == "shooter" else {}
+        staging = out / f"conditioned-{ours}-recipe"  # in no library in use, as grow's staging
+        staging.mkdir(exist_ok=True)
+        (staging / "registry.toml").write_text(_toml(key, recipe))
+        library._registry.cache_clear()
+        group_of = np.array([j for j, names in enumerate(partners) for _ in names])
+        with grow._roots([grow.population_dir]):
+            arrays = train_conditioned(
+                library.registry(staging)[key], staging, group_of, steps, recipe["seed"]
+            )
+        told_recipes, manifest = {}, {}
+        for j, name in enumerate(teammates):
+            path = root / "weights" / f"{name}.npz"
+            path.parent.mkdir(parents=True, exist_ok=True)
+            np.savez(path, **told(arrays, np.eye(len(groups))[j]))
+            told_recipes[name] = recipe | {
+                "description": f"PPO told its partner's group: {partner_role} group {j + 1}"
+            }
+            manifest[name] = {
+                "file": str(path.relative_to(root)),
+                "sha256": library.file_hash(path),
+                "algorithm": "PPO",
+                "steps": steps,
+                "seed": recipe["seed"],
+                "command": f"tsf library condition --seat {ours} --steps {steps}",
+            }
+        (root / "registry.toml").write_text("".join(_toml(k, r) for k, r in told_recipes.items()))
+        _write(root / "manifest.json", manifest)
+    held = json.loads((out / "held-out.json").read_text())[partner_role]
+    held = Grid(tuple(held["partners"]), tuple(held["candidates"]), np.array(held["kills"]))
+    done = out / f"conditioned-{ours}.json"
+    record = json.loads(done.read_text()) if done.exists() else {}
+    if "kills" not in record:
+        seeds = list(range(spec.games))
+        teams = [(p, c) if partner_role == "bait" else (c, p) for p in held.partners for c in teammates]
+        roots = [grow.population_dir, grow.responses_dir, root]
+        values = grow._jobs(
+            f"conditioned-{ours}", pair_jobs(f"conditioned-{ours}", teams, seeds), roots=roots
+        )
+        flat = [v for job in values for v in job]
+        record["kills"] = np.reshape(flat, (len(held.partners), len(teammates), len(seeds))).round(4).tolist()
+    played = Grid(held.partners, tuple(teammates), np.array(record["kills"]))
+    grouping = json.loads((out / "grouping.json").read_text())[partner_role]
+    grouping = Grid(tuple(grouping["partners"]), tuple(grouping["candidates"]), np.array(grouping["kills"]))
+    placed = choice.place(held, grouping, _labels(grouping, groups))
+    grown = json.loads((grow.library_dir / GROUPS).read_text())["seats"][ours]
+    switching = [grown["names"][int(np.argmax(g["values"]))] for g in grown["groups"]]
+    responses = [f"{RESPONSE[ours]}{j + 1}" for j in range(len(groups))]
+    sides = grow._sides()
+    side = np.array([sides[p] for p in held.partners])
+    person = np.array([p.startswith("human(") for p in held.partners])
+    parts = {}
+    for split in ("validation", "test"):
+        parts |= {split: side == split, f"{split}, members": (side == split) & ~person}
+        parts[f"{split}, stand-ins"] = (side == split) & person
+
+    def kills(name: str) -> np.ndarray:
+        return (played if name in teammates else held).columns([name])[:, 0]
+
+    trained = _is_library(grow.responses_dir) and all(
+        r in library.registry(grow.responses_dir) for r in responses
+    )
+    record |= {
+        "seat": ours,
+        "steps": library.manifest(root)[teammates[0]]["steps"],
+        "switching": switching,
+        "figures": compare(
+            kills,
+            placed,
+            parts,
+            {"conditioned": teammates, "switching": switching}
+            | ({"responses": responses} if trained else {}),
+        ),
+    }
+    validation = record["figures"]["validation"]  # the newcomer must win, one-sided at 5 %
+    wins = validation["difference"] > 1.645 * (validation["difference se"] or np.inf)
+    record["kept"] = "conditioned" if wins else "switching"
+    _write(done, record)
+    return record
+
+
+def markdown(record: dict) -> str:
+    """The comparison as a table: each side's mean kills/min given the partner's group, and the
+    conditioned teammate's paired difference with switching."""
+    sides = [
+        s for s in ("conditioned", "switching", "responses") if s in next(iter(record["figures"].values()))
+    ]
+    lines = [
+        f"# The conditioned teammate, {record['seat']} seat ({record['steps']:,} PPO steps)",
+        "",
+        "Every partner is simulated; both sides are told the partner's group. Switching plays, per group: "
+        + ", ".join(f"G{j + 1} {name}" for j, name in enumerate(record["switching"]))
+        + ".",
+        "",
+        "| partners | n | " + " | ".join(sides) + " | conditioned - switching |",
+        "| --- | --- | " + " | ".join("---" for _ in sides) + " | --- |",
+    ]
+    for part, f in record["figures"].items():
+        se = f" ± {f['difference se']:.2f}" if f["difference se"] is not None else ""
+        cells = " | ".join(f"{f[s]:.2f}" for s in sides)
+        lines.append(f"| {part} | {f['partners']} | {cells} | {f['difference']:+.2f}{se} |")
+    lines += ["", f"Kept on validation: **{record['kept']}**.", ""]
+    return "\n".join(lines)

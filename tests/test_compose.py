@@ -183,7 +183,7 @@ def _inspect(container: str, template: str) -> str:
 def test_compose_up_plays_a_full_adaptive_match(inputs: dict[str, float], tmp_path: Path) -> None:
     took = dict(inputs)
     match = f"compose-{uuid.uuid4().hex[:8]}"
-    env = _compose_env(TSF_MATCH=match)
+    env = _compose_env(TSF_MATCH=match, TSF_BAIT="GB1")  # a slow circle: the agent must switch (below)
     try:
         log = _step("up", ["docker-compose", "up", "--no-color"], 900, tmp_path, took, **env)
         containers = _containers(env)
@@ -217,12 +217,12 @@ def test_compose_up_plays_a_full_adaptive_match(inputs: dict[str, float], tmp_pa
     assert recording.adapter, "no AdapterStatus in the recording: the adapter did not run"
     assert {(s.role, s.window) for s in recording.adapter} == {("shooter", 400)}
     assert recording.adapter[-1].filled == 400
-    # The adaptive loop through the containers: B5's best response (S5) is not the initial policy
-    # (the table's best on average, S4), so the adapter switched the shooter, and the shooter agent
-    # plays what the adapter chose last.
+    # The adaptive loop through the containers: GB1's partner group (G4) plays best with GS2, not
+    # the initial policy (the best on average, GS1), so the adapter switched the shooter, and the
+    # shooter agent plays what the adapter chose last.
     assert recording.switches and {s.sender for s in recording.switches} == {"adapter"}
     shooter = [a for _, a in recording.actions if a.role == "shooter"]
-    initial = initial_policy(AdapterConfig("shooter", 400))
+    initial = initial_policy(AdapterConfig("shooter", 400, partners="groups"))
     assert shooter[0].policy == initial and shooter[-1].policy == recording.adapter[-1].policy
     assert recording.switches[-1].policy == recording.adapter[-1].policy
 

@@ -83,6 +83,12 @@ MISTAKES = [
         2,
         "tsf library: --out {tmp}/grown-other: was grown from another population spec (0123456789abcdef)",
     ),
+    (
+        "library condition {tmp} --seat bait",
+        2,
+        "tsf library: OUT {tmp}: is no finished `tsf library grow` run (no library/groups.json)",
+    ),
+    ("library condition {tmp} --seat ours", 2, "Invalid value for '--seat'"),
     ("train --steps 0", 2, "Invalid value for '--steps'"),
     ("train", 2, "tsf train: KEYS (none): give library keys or --all, not both"),
     ("train B1 --all", 2, "tsf train: KEYS B1: give library keys or --all, not both"),

@@ -228,7 +228,12 @@ def library_condition(
     out: Path = typer.Argument(..., help="The directory of a finished `tsf library grow` run."),
     seat: Role = typer.Option(..., help="Our seat: the conditioned teammate plays it."),
     steps: int = number(
-        0, STEPS_OR_DEFAULT, "PPO steps (0: the spec's response steps times the partner groups)."
+        0,
+        STEPS_OR_DEFAULT,
+        "PPO steps (0: the spec's response steps, times the partner groups for the conditioned network).",
+    ),
+    separate: bool = typer.Option(
+        False, "--separate", help="Each group's best response trained on to --steps instead, compared alike."
     ),
     population: Path = typer.Option(SPEC, "--population", help="The run's partner population spec."),
     workers: int = number(os.cpu_count() or 1, WORKERS, "Worker processes to start here."),
@@ -239,13 +244,14 @@ def library_condition(
     """Try the conditioned teammate: one PPO network told its partner's group, trained with every
     group at once, against switching among the grown library's members (and the groups' best
     responses), the partner's group given to both, on the run's validation and test partners. Writes
-    OUT/conditioned-SEAT/ (the network told each group, as a library) and OUT/conditioned-SEAT.json."""
+    OUT/conditioned-SEAT-STEPS/ (the network told each group, as a library) and its .json; with
+    --separate, OUT/responses-SEAT-STEPS/ and its .json."""
     from services.growth.conditioned import markdown, run_conditioned
 
     if not (out / "library" / "groups.json").exists():
         raise UsageError("OUT", out, "is no finished `tsf library grow` run (no library/groups.json)")
     grow = _grow(population, out, workers, ray, bus, "tsf library condition")
-    console.print(markdown(run_conditioned(grow, str(seat), steps or None)))
+    console.print(markdown(run_conditioned(grow, str(seat), steps or None, separate)))
 
 
 def _grow(population: Path, out: Path, workers: int, ray: str | None, bus: BusConfig, command: str):  # noqa: ANN202

@@ -19,6 +19,7 @@ best response (`responses/`). The winner on validation is what the adaptive agen
 from __future__ import annotations
 
 import json
+import shutil
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -100,8 +101,8 @@ def compare(
     parts: dict[str, np.ndarray],
     sides: dict[str, list],
 ) -> dict:
-    """Per part of the partners (validation/test, members/stand-ins): the mean kills/min of each
-    side, given each partner's group, and the paired difference of the conditioned teammate with
+    """Per part of the partners (validation/test, members/stand-ins, each group): the mean kills/min of each
+    side, given each partner's group, and the paired difference of the new teammates (`new`) with
     switching. `kills(name)` is a teammate's (partners, seeds) kills/min; `sides[side]` each group's
     teammate of that side."""
     per_side = {
@@ -112,7 +113,7 @@ def compare(
     for part, rows in parts.items():
         if not rows.any():
             continue
-        diff = per_side["conditioned"][rows] - per_side["switching"][rows]
+        diff = per_side["new"][rows] - per_side["switching"][rows]
         out[part] = {"partners": int(rows.sum())}
         out[part] |= {side: round(float(v[rows].mean()), 4) for side, v in per_side.items()}
         out[part]["difference"] = round(float(diff.mean()), 4)
@@ -122,69 +123,37 @@ def compare(
     return out
 
 
-def run_conditioned(grow: Grow, ours: str, steps: int | None = None) -> dict:
-    """The experiment for seat `ours` on the finished run `grow`: the conditioned teammate trained
-    (once: `conditioned-OURS/`, a library of its members told each group), its games with every
-    held-out partner (once: `conditioned-OURS.json`'s cross-play), and the comparison, written to
-    `conditioned-OURS.json` and returned."""
-    from services.growth.grow import GROUPS, RESPONSE, _is_library, _labels, _toml, _write
+def run_conditioned(grow: Grow, ours: str, steps: int | None = None, separate: bool = False) -> dict:
+    """The experiment for seat `ours` on the finished run `grow`: the teammates trained (once, into
+    a library of their own: `conditioned-OURS-STEPS/`, the conditioned network told each group;
+    with `separate`, `responses-OURS-STEPS/`, each group's best response trained on to `steps`), their
+    games with every held-out partner and the comparison (once: that directory's name + `.json`)."""
+    from services.growth.grow import GROUPS, RESPONSE, _labels, _write
 
     grow._bind()  # a run of another spec is refused
-    out, spec, partner_role = grow.out, grow.spec, other(ours)
+    out, partner_role = grow.out, other(ours)
     groups = json.loads((out / "groups.json").read_text())[partner_role]["groups"]
-    root, key = out / f"conditioned-{ours}", PREFIX[ours]
-    teammates = [f"{key}{j + 1}" for j in range(len(groups))]
+    responses = [f"{RESPONSE[ours]}{j + 1}" for j in range(len(groups))]
+    steps = steps or int(grow.spec.seats[ours].response["steps"]) * (1 if separate else len(groups))
+    if separate:
+        root = out / f"responses-{ours}-{steps}"
+        teammates = [f"{r}-{steps}" for r in responses]
+        make = _separate_library
+    else:
+        root = out / f"conditioned-{ours}-{steps}"
+        teammates = [f"{PREFIX[ours]}{j + 1}" for j in range(len(groups))]
+        make = _conditioned_library
     if not (root / "manifest.json").exists():
-        partners = [grow.response_partners(members) for members in groups]
-        steps = steps or int(spec.seats[ours].response["steps"]) * len(groups)
-        recipe = dict(spec.seats[ours].response) | {
-            "role": ours,
-            "family": "conditioned",
-            "description": f"PPO told its partner's group ({len(groups)} {partner_role} groups)",
-            "algorithm": "PPO",
-            "seed": spec.seed + 2000 + ROLES.index(ours),
-            "steps": steps,
-            "partners": [p for names in partners for p in names],
-        }
-        recipe |= {"frame": "world"} if ours == "shooter" else {}
-        staging = out / f"conditioned-{ours}-recipe"  # in no library in use, as grow's staging
-        staging.mkdir(exist_ok=True)
-        (staging / "registry.toml").write_text(_toml(key, recipe))
-        library._registry.cache_clear()
-        group_of = np.array([j for j, names in enumerate(partners) for _ in names])
-        with grow._roots([grow.population_dir]):
-            arrays = train_conditioned(
-                library.registry(staging)[key], staging, group_of, steps, recipe["seed"]
-            )
-        told_recipes, manifest = {}, {}
-        for j, name in enumerate(teammates):
-            path = root / "weights" / f"{name}.npz"
-            path.parent.mkdir(parents=True, exist_ok=True)
-            np.savez(path, **told(arrays, np.eye(len(groups))[j]))
-            told_recipes[name] = recipe | {
-                "description": f"PPO told its partner's group: {partner_role} group {j + 1}"
-            }
-            manifest[name] = {
-                "file": str(path.relative_to(root)),
-                "sha256": library.file_hash(path),
-                "algorithm": "PPO",
-                "steps": steps,
-                "seed": recipe["seed"],
-                "command": f"tsf library condition --seat {ours} --steps {steps}",
-            }
-        (root / "registry.toml").write_text("".join(_toml(k, r) for k, r in told_recipes.items()))
-        _write(root / "manifest.json", manifest)
+        make(grow, ours, groups, steps, root, teammates)
     held = json.loads((out / "held-out.json").read_text())[partner_role]
     held = Grid(tuple(held["partners"]), tuple(held["candidates"]), np.array(held["kills"]))
-    done = out / f"conditioned-{ours}.json"
+    done = out / f"{root.name}.json"
     record = json.loads(done.read_text()) if done.exists() else {}
     if "kills" not in record:
-        seeds = list(range(spec.games))
+        seeds = list(range(grow.spec.games))
         teams = [(p, c) if partner_role == "bait" else (c, p) for p in held.partners for c in teammates]
-        roots = [grow.population_dir, grow.responses_dir, root]
-        values = grow._jobs(
-            f"conditioned-{ours}", pair_jobs(f"conditioned-{ours}", teams, seeds), roots=roots
-        )
+        jobs = pair_jobs(root.name, teams, seeds)
+        values = grow._jobs(root.name, jobs, roots=[grow.population_dir, root])
         flat = [v for job in values for v in job]
         record["kills"] = np.reshape(flat, (len(held.partners), len(teammates), len(seeds))).round(4).tolist()
     played = Grid(held.partners, tuple(teammates), np.array(record["kills"]))
@@ -193,7 +162,6 @@ def run_conditioned(grow: Grow, ours: str, steps: int | None = None) -> dict:
     placed = choice.place(held, grouping, _labels(grouping, groups))
     grown = json.loads((grow.library_dir / GROUPS).read_text())["seats"][ours]
     switching = [grown["names"][int(np.argmax(g["values"]))] for g in grown["groups"]]
-    responses = [f"{RESPONSE[ours]}{j + 1}" for j in range(len(groups))]
     sides = grow._sides()
     side = np.array([sides[p] for p in held.partners])
     person = np.array([p.startswith("human(") for p in held.partners])
@@ -201,46 +169,113 @@ def run_conditioned(grow: Grow, ours: str, steps: int | None = None) -> dict:
     for split in ("validation", "test"):
         parts |= {split: side == split, f"{split}, members": (side == split) & ~person}
         parts[f"{split}, stand-ins"] = (side == split) & person
+    parts |= {f"both, group G{j + 1}": placed == j for j in range(len(groups))}
 
     def kills(name: str) -> np.ndarray:
         return (played if name in teammates else held).columns([name])[:, 0]
 
-    trained = _is_library(grow.responses_dir) and all(
-        r in library.registry(grow.responses_dir) for r in responses
-    )
+    trained = all(r in held.candidates for r in responses)  # the run's own, as the selection saw them
     record |= {
         "seat": ours,
-        "steps": library.manifest(root)[teammates[0]]["steps"],
+        "teammates": "separate" if separate else "conditioned",
+        "steps": steps,
         "switching": switching,
         "figures": compare(
             kills,
             placed,
             parts,
-            {"conditioned": teammates, "switching": switching}
-            | ({"responses": responses} if trained else {}),
+            {"new": teammates, "switching": switching} | ({"responses": responses} if trained else {}),
         ),
     }
     validation = record["figures"]["validation"]  # the newcomer must win, one-sided at 5 %
     wins = validation["difference"] > 1.645 * (validation["difference se"] or np.inf)
-    record["kept"] = "conditioned" if wins else "switching"
+    record["kept"] = record["teammates"] if wins else "switching"
     _write(done, record)
     return record
 
 
+def _conditioned_library(
+    grow: Grow, ours: str, groups: list[list[str]], steps: int, root: Path, teammates: list[str]
+) -> None:
+    """The conditioned network, trained with every group's partners at once, told each group."""
+    from services.growth.grow import _toml, _write
+
+    partners = [grow.response_partners(members) for members in groups]
+    recipe = dict(grow.spec.seats[ours].response) | {
+        "role": ours,
+        "family": "conditioned",
+        "description": f"PPO told its partner's group ({len(groups)} {other(ours)} groups)",
+        "algorithm": "PPO",
+        "seed": grow.spec.seed + 2000 + ROLES.index(ours),
+        "steps": steps,
+        "partners": [p for names in partners for p in names],
+    }
+    recipe |= {"frame": "world"} if ours == "shooter" else {}
+    staging = grow.out / f"{root.name}-recipe"  # in no library in use, as grow's staging
+    staging.mkdir(exist_ok=True)
+    (staging / "registry.toml").write_text(_toml(PREFIX[ours], recipe))
+    library._registry.cache_clear()
+    group_of = np.array([j for j, names in enumerate(partners) for _ in names])
+    with grow._roots([grow.population_dir]):
+        trained = library.registry(staging)[PREFIX[ours]]
+        arrays = train_conditioned(trained, staging, group_of, steps, recipe["seed"])
+    recipes, manifest = {}, {}
+    for j, name in enumerate(teammates):
+        path = root / "weights" / f"{name}.npz"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(path, **told(arrays, np.eye(len(groups))[j]))
+        recipes[name] = recipe | {"description": f"PPO told its partner's group: {other(ours)} group {j + 1}"}
+        manifest[name] = {
+            "file": str(path.relative_to(root)),
+            "sha256": library.file_hash(path),
+            "algorithm": "PPO",
+            "steps": steps,
+            "seed": recipe["seed"],
+            "command": f"tsf library condition --seat {ours} --steps {steps}",
+        }
+    (root / "registry.toml").write_text("".join(_toml(k, r) for k, r in recipes.items()))
+    _write(root / "manifest.json", manifest)
+
+
+def _separate_library(
+    grow: Grow, ours: str, groups: list[list[str]], steps: int, root: Path, teammates: list[str]
+) -> None:
+    """Each group's best response (the run's own recipe, in its staging) trained on to `steps`
+    from its checkpoint, under the key `teammates` gives it."""
+    from services.growth.grow import RESPONSE, _recipe_fields, _toml, _write
+    from services.growth.training import train_levels
+
+    recipes, manifest = {}, {}
+    for j, name in enumerate(teammates):
+        key = f"{RESPONSE[ours]}{j + 1}"
+        with grow._roots([grow.population_dir]):
+            train_levels(key, grow.staging, {key: steps}, grow.runs)
+        entry = library.manifest(grow.staging)[key]
+        path = root / "weights" / f"{name}.npz"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(grow.staging / entry["file"], path)
+        recipe = library.registry(grow.staging)[key]
+        recipes[name] = _recipe_fields(recipe) | {"steps": steps, "description": recipe.description}
+        manifest[name] = entry | {"file": str(path.relative_to(root)), "sha256": library.file_hash(path)}
+    (root / "registry.toml").write_text("".join(_toml(k, r) for k, r in recipes.items()))
+    _write(root / "manifest.json", manifest)
+
+
 def markdown(record: dict) -> str:
     """The comparison as a table: each side's mean kills/min given the partner's group, and the
-    conditioned teammate's paired difference with switching."""
-    sides = [
-        s for s in ("conditioned", "switching", "responses") if s in next(iter(record["figures"].values()))
-    ]
+    new teammates' paired difference with switching."""
+    sides = [s for s in ("new", "switching", "responses") if s in next(iter(record["figures"].values()))]
+    separate = record["teammates"] == "separate"
+    what = "each group's best response, trained apart" if separate else "the conditioned teammate"
     lines = [
-        f"# The conditioned teammate, {record['seat']} seat ({record['steps']:,} PPO steps)",
+        f"# New teammates of the {record['seat']} seat: {what} ({record['steps']:,} PPO steps)",
         "",
-        "Every partner is simulated; both sides are told the partner's group. Switching plays, per group: "
+        f"Every partner is simulated; both sides are told the partner's group. New: {what}. "
+        "Switching plays, per group: "
         + ", ".join(f"G{j + 1} {name}" for j, name in enumerate(record["switching"]))
         + ".",
         "",
-        "| partners | n | " + " | ".join(sides) + " | conditioned - switching |",
+        "| partners | n | " + " | ".join(sides) + " | new - switching |",
         "| --- | --- | " + " | ".join("---" for _ in sides) + " | --- |",
     ]
     for part, f in record["figures"].items():

@@ -95,6 +95,8 @@ def test_a_person_plays_the_bait_from_the_browser(browser, match, tmp_path):
     assert any(max(abs(a - b) for a, b in zip(c, BAIT_COLOUR, strict=True)) < 30 for _, c in colours)
 
 
+@pytest.mark.slow
+@pytest.mark.long  # 13 s alone: kept out of the default run
 def test_the_page_says_why_the_ship_died_and_when_it_comes_back(browser, match):
     """A person's bait that thrusts ahead dies (its cause shown); the agent shooter then ends the
     stalled round on purpose, which the page announces, and the count-down to the respawn runs."""

@@ -81,6 +81,8 @@ def test_live_replay_reaches_a_watcher(matches, bus, tap, background, wait_until
     assert seconds == pytest.approx(FRAMES / 30 / SPEED, rel=0.25)  # the game's pace, sped up
 
 
+@pytest.mark.slow
+@pytest.mark.long  # 11 s alone: kept out of the default run
 def test_report_from_bus_recordings(matches: dict[str, tuple[Summary, Path]], tmp_path: Path) -> None:
     paths = [path for _, path in matches.values()]
     truncated = tmp_path / "cut.tsflog"

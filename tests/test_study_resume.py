@@ -68,6 +68,8 @@ def test_a_finished_participant_is_refused_or_shown_their_end_again(tmp_path, st
     assert stranger.refused == f"{TAKEN} If this is wrong, please contact {CONTACT}."
 
 
+@pytest.mark.slow
+@pytest.mark.long  # 13 s alone: kept out of the default run
 def test_signed_links_resume_and_never_refuses_every_return(tmp_path, study_server) -> None:
     secret = b"a-link-secret-of-the-lab-0123"
     serving = Serving(test_token=STAND_IN_TOKEN, link_secret=secret)

@@ -22,7 +22,6 @@ import json
 import shutil
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 from gymnasium import spaces
@@ -32,10 +31,11 @@ from services.agent import library
 from services.growth import choice
 from services.growth.choice import Grid
 from services.growth.crossplay import pair_jobs
+from services.growth.grow import GROUPS, RESPONSE, Grow, _labels, _recipe_fields, _toml, _write
+from services.growth.training import train_levels
+from services.training.algorithms import export, make_model
+from services.training.loop import whole_rollouts
 from shared.game import ROLES, other
-
-if TYPE_CHECKING:
-    from services.growth.grow import Grow
 
 PREFIX = {"bait": "CB", "shooter": "CS"}  # the keys of the conditioned teammate told each group
 
@@ -87,8 +87,6 @@ def train_conditioned(
 ) -> dict[str, np.ndarray]:
     """The conditioned network's arrays (training/algorithms.export), trained for `steps`: the
     recipe of the library at `root` with the group of each of its partners appended."""
-    from services.training.algorithms import export, make_model
-    from services.training.loop import whole_rollouts
 
     model = make_model(recipe, seed, root=root, wrap=lambda env: Told(env, group_of))
     model.learn(whole_rollouts(model, steps), progress_bar=False)
@@ -128,7 +126,6 @@ def run_conditioned(grow: Grow, ours: str, steps: int | None = None, separate: b
     a library of their own: `conditioned-OURS-STEPS/`, the conditioned network told each group;
     with `separate`, `responses-OURS-STEPS/`, each group's best response trained on to `steps`), their
     games with every held-out partner and the comparison (once: that directory's name + `.json`)."""
-    from services.growth.grow import GROUPS, RESPONSE, _labels, _write
 
     grow._bind()  # a run of another spec is refused
     out, partner_role = grow.out, other(ours)
@@ -198,7 +195,6 @@ def _conditioned_library(
     grow: Grow, ours: str, groups: list[list[str]], steps: int, root: Path, teammates: list[str]
 ) -> None:
     """The conditioned network, trained with every group's partners at once, told each group."""
-    from services.growth.grow import _toml, _write
 
     partners = [grow.response_partners(members) for members in groups]
     recipe = dict(grow.spec.seats[ours].response) | {
@@ -242,8 +238,6 @@ def _separate_library(
 ) -> None:
     """Each group's best response (the run's own recipe, in its staging) trained on to `steps`
     from its checkpoint, under the key `teammates` gives it."""
-    from services.growth.grow import RESPONSE, _recipe_fields, _toml, _write
-    from services.growth.training import train_levels
 
     recipes, manifest = {}, {}
     for j, name in enumerate(teammates):

@@ -31,6 +31,8 @@ def test_smoke_training_exports_a_loadable_policy(tmp_path, key):
     assert p.min() > 0 and p.sum() == pytest.approx(1.0)
 
 
+@pytest.mark.slow
+@pytest.mark.long  # 11 s alone: kept out of the default run
 def test_a_stopped_run_resumes_from_its_checkpoint(tmp_path):
     root, runs = tmp_path / "library", tmp_path / "runs"
     prepare(root)

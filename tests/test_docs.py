@@ -17,6 +17,7 @@ import pytest
 from PIL import Image
 
 from services.adapter.core import initial_policy, payoff_of
+from services.agent.library import NAMED
 from services.population.adaptive import STRATEGIES, AdapterConfig
 from services.report import figures
 from services.report.analysis import reference_partner
@@ -162,10 +163,14 @@ def test_the_pages_name_the_shipped_tables_best_responses(table: Table) -> None:
     b5_choice = grown.ours[answers[grown.types.index(b5)]]
     default = AdapterConfig(partners="groups")
     grown_start = grown.initial(default)
+    circle = json.loads((NAMED["grown"] / "members.json").read_text())["GB1"]  # the picture's bait
+    gb1 = grown.types[grown.group[grown.partners.index(circle)]]
+    gb1_choice = grown.ours[answers[grown.types.index(gb1)]]
     claims = {
         "README.md": [
-            f"starts as {start} (the best average in the table)",
-            f"switches to {best_shooter['B5']}, the table's best response",
+            f"which starts as {grown_start} (the best on average)",
+            f"takes its partner for group {gb1} after about six seconds and switches to {gb1_choice}, "
+            "that group's best teammate",
             f"`partner like {b5}`: it has placed its partner in bait group {b5}, "
             f"whose best member is {b5_choice}",
             f"the table's best shooter for it, {best_shooter['B3']}, not {start}",

@@ -3,7 +3,7 @@ tried against switching among members, on a grown run's held-out partners.
 
 It trains as a best response does (the spec's `response` recipe, PPO), against every training
 member of the other seat and their stand-ins at once, with each game's partner group appended to
-the observation as a one-hot (`Told`); by default for as many steps as all the group's best
+the observation as a one-hot (`Told`); by default for as many steps as all the groups' best
 responses together, so that neither side had more experience. Told the group, the network is a plain
 network of the recipe: the one-hot's first-layer weights add to the bias (`told`). So each group's
 conditioned teammate is an ordinary library policy (CB1.., CS1..), and the adapter's switch to the
@@ -14,6 +14,8 @@ partners (where the library was selected) and on the test partners, members and 
 held-out cross-play's seeds: the conditioned teammate told the group; the grown library's teammate
 that groups.json names best for the group (what the adaptive agent switches to); and the group's own
 best response (`responses/`). The winner on validation is what the adaptive agent should play.
+With `separate`, the new teammates are instead the groups' own best responses trained on to more
+steps (from the run's checkpoints), compared alike: would responses at the study's scale do?
 """
 
 from __future__ import annotations

@@ -32,6 +32,11 @@ class Grid:
     def columns(self, names: list[str]) -> np.ndarray:
         return self.kills[:, [self.candidates.index(n) for n in names]]
 
+    @classmethod
+    def of(cls, record: dict) -> Grid:
+        """A grid as a cross-play file holds it (`partners`, `candidates`, `kills` as lists)."""
+        return cls(tuple(record["partners"]), tuple(record["candidates"]), np.array(record["kills"]))
+
 
 def oracle(kills: np.ndarray) -> float:
     """Mean kills/min when each partner plays with the column best on its other half of seeds

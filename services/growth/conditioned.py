@@ -89,7 +89,6 @@ def train_conditioned(
 ) -> dict[str, np.ndarray]:
     """The conditioned network's arrays (training/algorithms.export), trained for `steps`: the
     recipe of the library at `root` with the group of each of its partners appended."""
-
     model = make_model(recipe, seed, root=root, wrap=lambda env: Told(env, group_of))
     model.learn(whole_rollouts(model, steps), progress_bar=False)
     return export(model, recipe)
@@ -145,7 +144,7 @@ def run_conditioned(grow: Grow, ours: str, steps: int | None = None, separate: b
     if not (root / "manifest.json").exists():
         make(grow, ours, groups, steps, root, teammates)
     held = json.loads((out / "held-out.json").read_text())[partner_role]
-    held = Grid(tuple(held["partners"]), tuple(held["candidates"]), np.array(held["kills"]))
+    held = Grid.of(held)
     done = out / f"{root.name}.json"
     record = json.loads(done.read_text()) if done.exists() else {}
     if "kills" not in record:
@@ -157,7 +156,7 @@ def run_conditioned(grow: Grow, ours: str, steps: int | None = None, separate: b
         record["kills"] = np.reshape(flat, (len(held.partners), len(teammates), len(seeds))).round(4).tolist()
     played = Grid(held.partners, tuple(teammates), np.array(record["kills"]))
     grouping = json.loads((out / "grouping.json").read_text())[partner_role]
-    grouping = Grid(tuple(grouping["partners"]), tuple(grouping["candidates"]), np.array(grouping["kills"]))
+    grouping = Grid.of(grouping)
     placed = choice.place(held, grouping, _labels(grouping, groups))
     grown = json.loads((grow.library_dir / GROUPS).read_text())["seats"][ours]
     switching = [grown["names"][int(np.argmax(g["values"]))] for g in grown["groups"]]

@@ -187,10 +187,7 @@ class Grow:
                 }
             _write(done, record)
         record = json.loads(done.read_text())
-        return {
-            r: Grid(tuple(g["partners"]), tuple(g["candidates"]), np.array(g["kills"]))
-            for r, g in record.items()
-        }
+        return {r: Grid.of(g) for r, g in record.items()}
 
     def groups(self, grouping: dict[str, Grid]) -> dict[str, dict]:
         """Each seat's training members grouped by what works with them (choice.groups)."""

@@ -12,14 +12,14 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 
 from services.agent import networks
-from services.agent.policy import RuleStack, rule_stack_key
+from services.agent.policy import Ending, RuleStack, end_round_batch, rule_stack_key
 from services.sim.engine import Game
 from services.sim.observation import as_observation, world_values
 from services.sim.play import play
 from services.sim.sampling import batch_probs
 from shared.game import ROLES, GameConfig, Policy, bait_first
 
-Evaluation = list[tuple[list[int], str, Callable[[np.ndarray], np.ndarray]]]  # `evaluation`'s plan
+Evaluation = list[tuple[np.ndarray, str, Callable[[np.ndarray, Ending], np.ndarray]]]  # `evaluation`'s plan
 
 
 def log_probs(
@@ -47,17 +47,21 @@ def observed_log_probs(
     as the batched engine observes them, bit-identical to as_observation of the world values),
     by the policies' `evaluation` (`plan`, or made here for this call)."""
     rows = np.arange(len(actions))
-    out = np.empty((len(actions), len(policies)))
+    out = np.empty((len(policies), len(actions)))
+    endings: dict[str, Ending] = {}  # the stalled rounds of each view's rows, found once for every stack
     for columns, view, probs in plan or evaluation(policies):
-        out[:, columns] = probs(observed[view])[:, rows, actions].T
-    return np.log(out)
+        if view not in endings:
+            endings[view] = end_round_batch(observed[view], view)
+        out[columns] = probs(observed[view], endings[view])[:, rows, actions]
+    return np.log(out).T
 
 
 def evaluation(policies: Sequence[Policy]) -> Evaluation:
     """How the policies are evaluated: each stack of learned policies (networks.stack_key: a
-    population's members of one family) and of rules (policy.rule_stack_key: a rule grid) as one,
-    every other policy alone; (columns, view, observations -> (len(columns), n, 12)). A stack copies
-    its networks' layers, so a caller that scores the same policies often (a scorer) keeps it."""
+        population's members of one family) and of rules (policy.rule_stack_key: a rule grid) as one,
+        every other policy alone; (columns, view, (observations, their end_round_batch) -> (len(columns),
+    n, 12)). A stack copies
+        its networks' layers, so a caller that scores the same policies often (a scorer) keeps it."""
     stacks = {"network": networks.Stack, "rule": RuleStack}
     groups: dict[tuple, list[int]] = {}
     for i, policy in enumerate(policies):
@@ -66,11 +70,11 @@ def evaluation(policies: Sequence[Policy]) -> Evaluation:
         groups.setdefault(kind, []).append(i)
     plan = []
     for (kind, _), columns in groups.items():
-        members = [policies[i] for i in columns]
+        members, at = [policies[i] for i in columns], np.array(columns)
         if kind in stacks:
-            plan.append((columns, members[0].view, stacks[kind](members)))
+            plan.append((at, members[0].view, stacks[kind](members)))
         else:
-            plan.append((columns, members[0].view, lambda obs, p=members[0]: batch_probs(p, obs)[None]))
+            plan.append((at, members[0].view, lambda obs, _, p=members[0]: batch_probs(p, obs)[None]))
     return plan
 
 

@@ -30,6 +30,7 @@ from services.agent.library import (
     registry,
 )
 from services.agent.policy import (
+    Ending,
     RulePolicy,
     end_round_choice,
     end_stalled_rounds,
@@ -222,26 +223,24 @@ class Stack:
             raise ValueError(f"policies {[p.key for p in policies]} do not stack")
         self.first = policies[0]
         layers = zip(*(p.network.layers for p in policies), strict=True)
-        self.layers = [
-            (np.stack([w for w, _ in layer]), np.stack([b for _, b in layer])[:, None]) for layer in layers
+        self.layers = [  # (policies, in, out) weights, contiguous as the products read them
+            (np.stack([w.T for w, _ in layer]), np.stack([b for _, b in layer])[:, None]) for layer in layers
         ]
 
-    def __call__(self, observations: np.ndarray) -> np.ndarray:
-        """(policies, rows, 12): each policy's probs() of every row of an (n, 64) array."""
+    def __call__(self, observations: np.ndarray, ending: Ending | None = None) -> np.ndarray:
+        """(policies, rows, 12): each policy's probs() of every row of an (n, 64) array (`ending`:
+        end_round_batch of these rows, where the caller has it)."""
         first = self.first
         h = observations[:, first.features].astype(np.float64)[None]
         for i, (w, b) in enumerate(self.layers):
-            h = np.matmul(h, w.transpose(0, 2, 1)) + b
+            h = np.matmul(h, w) + b
             if i < len(self.layers) - 1:
                 h = first.network.activation(h)
-        heads = dict(zip(first.recipe.learned, first.heads_of(h), strict=True))
-        stacked, rows = len(self.layers[0][0]), len(observations)
+        heads = dict(zip(first.recipe.learned, first.heads_of(h), strict=True))  # (policies, rows, n)
         for name, choices in rule_heads_batch(first.recipe, observations, first.config).items():
-            one = rule_head_probs(choices, HEAD_SIZES[name], RulePolicy.EPSILON)
-            heads[name] = np.broadcast_to(one, (stacked, *one.shape))
-        flat = [heads[name].reshape(stacked * rows, -1) for name in HEADS]
-        probs = factored_probs_batch(*flat).reshape(stacked, rows, -1)
-        return end_stalled_rounds(observations, first.view, probs, RulePolicy.EPSILON)
+            heads[name] = rule_head_probs(choices, HEAD_SIZES[name], RulePolicy.EPSILON)[None]  # (1, rows, n)
+        probs = factored_probs_batch(*(heads[name] for name in HEADS))
+        return end_stalled_rounds(observations, first.view, probs, RulePolicy.EPSILON, ending)
 
 
 def stack_key(policy: object) -> tuple | None:

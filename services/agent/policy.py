@@ -23,8 +23,11 @@ def factored_probs(turn: np.ndarray, thrust: np.ndarray, fire: np.ndarray) -> np
 
 
 def factored_probs_batch(turn: np.ndarray, thrust: np.ndarray, fire: np.ndarray) -> np.ndarray:
-    """factored_probs() of every row of the three heads' (rows, n) distributions, the same products."""
-    return (turn[:, :, None, None] * thrust[:, None, :, None] * fire[:, None, None, :]).reshape(-1, N_ACTIONS)
+    """factored_probs() of every row of the three heads' (..., n) distributions, the same products:
+    (..., 12), the leading dimensions broadcast (a stack's learned heads are (policies, rows, n), its
+    rule heads (1, rows, n), the same for every policy)."""
+    joint = turn[..., :, None, None] * thrust[..., None, :, None] * fire[..., None, None, :]
+    return joint.reshape(*joint.shape[:-3], N_ACTIONS)
 
 
 def rule_head_probs(choices: np.ndarray, n: int, epsilon: float) -> np.ndarray:
@@ -109,18 +112,19 @@ class RuleStack:
             raise ValueError(f"policies {[p.key for p in policies]} do not stack")
         self.policies = policies
 
-    def rules(self, observations: np.ndarray) -> np.ndarray:
-        """(policies, rows, 3): each rule() of every row."""
+    def rules(self, observations: np.ndarray, ending: Ending | None = None) -> np.ndarray:
+        """(policies, rows, 3): each rule() of every row (`ending`: end_round_batch of these rows, where
+        the caller has it)."""
         first = self.policies[0]
         choices = np.stack([p.choose_batch(observations) for p in self.policies])
         if first.ends_stalled_rounds:
-            mask, ending = end_round_batch(observations, first.view)
-            choices[:, mask] = ending[mask]
+            mask, end = ending or end_round_batch(observations, first.view)
+            choices[:, mask] = end[mask]
         return choices
 
-    def __call__(self, observations: np.ndarray) -> np.ndarray:
+    def __call__(self, observations: np.ndarray, ending: Ending | None = None) -> np.ndarray:
         """(policies, rows, 12): each probs() of every row."""
-        choices = self.rules(observations)
+        choices = self.rules(observations, ending)
         return rule_probs(choices.reshape(-1, 3), self.policies[0].epsilon).reshape(*choices.shape[:2], -1)
 
 
@@ -243,7 +247,10 @@ def end_round_choice(obs: np.ndarray, world: bool) -> tuple[int, int, int]:
     return (turn, thrust, 0) if needed else (0, 1, 0)
 
 
-def end_round_batch(observations: np.ndarray, view: str) -> tuple[np.ndarray, np.ndarray]:
+Ending = tuple[np.ndarray, np.ndarray]  # end_round_batch's (rows,) mask and (rows, 3) choices
+
+
+def end_round_batch(observations: np.ndarray, view: str) -> Ending:
     """stalled() and end_round_choice() of every row of one view: a (rows,) mask and (rows, 3)
     choices (rows that are not stalled hold zeros)."""
     mask = np.zeros(len(observations), np.bool_)
@@ -266,10 +273,13 @@ def end_round_batch(observations: np.ndarray, view: str) -> tuple[np.ndarray, np
     return mask, choices
 
 
-def end_stalled_rounds(observations: np.ndarray, view: str, probs: np.ndarray, epsilon: float) -> np.ndarray:
+def end_stalled_rounds(
+    observations: np.ndarray, view: str, probs: np.ndarray, epsilon: float, ending: Ending | None = None
+) -> np.ndarray:
     """`probs` (rows, 12), or (policies, rows, 12) of policies that read the same rows, with every
-    stalled row replaced by the end-round rule's distribution."""
-    mask, choices = end_round_batch(observations, view)
+    stalled row replaced by the end-round rule's distribution (`ending`: end_round_batch of these
+    rows in this view, where the caller has it: a scorer's stacks read the same rows)."""
+    mask, choices = ending or end_round_batch(observations, view)
     if mask.any():
         probs = probs.copy()
         probs[..., mask, :] = rule_probs(choices[mask], epsilon)

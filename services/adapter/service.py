@@ -32,7 +32,7 @@ from shared.messages import Action, AdapterStatus, MatchOrder, MessageError, Pol
 log = logging.getLogger("tsf.adapter")
 SENDER = "adapter"
 RESEND_FRAMES = 30  # ask again if the agent still plays another policy this many frames later
-SCORE_HZ = FPS  # how often the paired frames are scored, in one batch
+SCORE_HZ = 5  # how often the paired frames are scored, in one batch (docs/adapter.md, "Benchmark")
 
 
 def seat_of(role: str, table: Path = DEFAULT_TABLE, partners: str = "library") -> tuple[Payoff, Scorer]:
@@ -192,9 +192,10 @@ def score_paired(shells: list[AdapterShell]) -> None:
 
 
 def adapting(status_hz: float) -> Callable[[list[AdapterShell]], None]:
-    """The adapter's one loop, called SCORE_HZ times a second: score what was paired since (so a
-    switch is at most a frame later than with a score per frame), and at `status_hz` report each
-    core that saw frames since its last status."""
+    """The adapter's one loop, called SCORE_HZ times a second: score what was paired since (a
+    switch is then at most 1 / SCORE_HZ s later than with a score per frame; a batch of six frames
+    costs about what one does), and at `status_hz` report each core that saw frames since its last
+    status."""
     calls, every = itertools.count(), max(1, round(SCORE_HZ / status_hz))
 
     def tick(shells: list[AdapterShell]) -> None:

@@ -26,7 +26,7 @@ from services.population.seat import SeatSpec
 from services.table.table import DEFAULT_TABLE
 from shared import keys
 from shared.bus import BusConfig, Drops, on_match_end, serve_orders, session, subscribe
-from shared.game import FPS, other
+from shared.game import other
 from shared.messages import Action, AdapterStatus, MatchOrder, MessageError, PolicySwitch, State, seat_actions
 
 log = logging.getLogger("tsf.adapter")

@@ -58,10 +58,10 @@ def observed_log_probs(
 
 def evaluation(policies: Sequence[Policy]) -> Evaluation:
     """How the policies are evaluated: each stack of learned policies (networks.stack_key: a
-        population's members of one family) and of rules (policy.rule_stack_key: a rule grid) as one,
-        every other policy alone; (columns, view, (observations, their end_round_batch) -> (len(columns),
-    n, 12)). A stack copies
-        its networks' layers, so a caller that scores the same policies often (a scorer) keeps it."""
+    population's members of one family) and of rules (policy.rule_stack_key: a rule grid) as one,
+    every other policy alone; (columns, view, (observations, their end_round_batch) ->
+    (len(columns), n, 12)). A stack copies its networks' layers, so a caller that scores the same
+    policies often (a scorer) keeps it."""
     stacks = {"network": networks.Stack, "rule": RuleStack}
     groups: dict[tuple, list[int]] = {}
     for i, policy in enumerate(policies):

@@ -143,8 +143,7 @@ def run_conditioned(grow: Grow, ours: str, steps: int | None = None, separate: b
         make = _conditioned_library
     if not (root / "manifest.json").exists():
         make(grow, ours, groups, steps, root, teammates)
-    held = json.loads((out / "held-out.json").read_text())[partner_role]
-    held = Grid.of(held)
+    held = Grid.of(json.loads((out / "held-out.json").read_text())[partner_role])
     done = out / f"{root.name}.json"
     record = json.loads(done.read_text()) if done.exists() else {}
     if "kills" not in record:
@@ -155,8 +154,7 @@ def run_conditioned(grow: Grow, ours: str, steps: int | None = None, separate: b
         flat = [v for job in values for v in job]
         record["kills"] = np.reshape(flat, (len(held.partners), len(teammates), len(seeds))).round(4).tolist()
     played = Grid(held.partners, tuple(teammates), np.array(record["kills"]))
-    grouping = json.loads((out / "grouping.json").read_text())[partner_role]
-    grouping = Grid.of(grouping)
+    grouping = Grid.of(json.loads((out / "grouping.json").read_text())[partner_role])
     placed = choice.place(held, grouping, _labels(grouping, groups))
     grown = json.loads((grow.library_dir / GROUPS).read_text())["seats"][ours]
     switching = [grown["names"][int(np.argmax(g["values"]))] for g in grown["groups"]]
@@ -228,7 +226,7 @@ def _conditioned_library(
             "algorithm": "PPO",
             "steps": steps,
             "seed": recipe["seed"],
-            "command": f"tsf library condition --seat {ours} --steps {steps}",
+            "command": f"tsf library condition {grow.out} --seat {ours} --steps {steps}",
         }
     (root / "registry.toml").write_text("".join(_toml(k, r) for k, r in recipes.items()))
     _write(root / "manifest.json", manifest)

@@ -5,16 +5,19 @@ itself when it is stopped (SIGINT, SIGTERM or SIGHUP): `Processes` on exit, a po
 A launcher that cannot clean up (SIGKILL, the out-of-memory killer, a crashed interpreter) is
 covered by the kernel: each child asks Linux for SIGTERM when its parent dies (prctl
 PR_SET_PDEATHSIG) as its first act, and ends at once if the parent is already gone. The signal
-comes when the thread that started the child ends, so launchers start children from a thread that
-outlives them (run_match waits for its children).
+comes when the thread that started the child ends, so every child is started by one thread of the
+launcher that lives as long as the launcher does (the spawner).
 
 Workers of a `concurrent.futures.ProcessPoolExecutor` (the study's judge) are started by
 multiprocessing, not here: they call `end_with_parent` first, so that they, and with them
 multiprocessing's resource tracker, end when their launcher does.
 
-Priorities are relative to the launcher's own: a child is started `nice` steps below it (and the
-sim raises itself some steps above, services/sim/service.py), so a launcher run under `nice`
-keeps the order of its processes, shifted.
+Priorities are relative to the launcher's own, the spawner's (it starts at the priority of the
+first thread that starts a child): a child is started `nice` steps below it (and the sim raises
+itself some steps above, services/sim/service.py), so a launcher run under `nice` keeps the order
+of its processes, shifted. Where the sim may not raise itself (`may_raise`; an ordinary user), a
+launcher steps its own threads below the spawner instead (`step_down`): the spawner keeps the
+launcher's first priority, so a sim started later, again or for another pool, still starts above.
 
 A child's output comes back through the launcher, line by line, written to the launcher's own
 stdout and stderr as they are then: inside a live display (`tsf match`'s scoreboard, a progress bar)
@@ -23,6 +26,7 @@ rich puts each line above it, instead of the child's line running onto the displ
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import multiprocessing
 import os
@@ -30,9 +34,20 @@ import signal
 import subprocess
 import sys
 import threading
+from concurrent.futures import ThreadPoolExecutor
 from typing import IO
 
 PARENT = "TSF_PARENT"  # environment: the pid of the launcher a `tsf` child must not outlive
+_SPAWNER = ThreadPoolExecutor(1, thread_name_prefix="spawner")  # its thread: at the first start
+
+
+def _new_spawner() -> None:
+    """In a forked child: a spawner of its own (the parent's thread is not there)."""
+    global _SPAWNER
+    _SPAWNER = ThreadPoolExecutor(1, thread_name_prefix="spawner")
+
+
+os.register_at_fork(after_in_child=_new_spawner)
 _PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
 
 
@@ -73,6 +88,55 @@ def adopt() -> None:
         die_with_parent(int(parent))
 
 
+def threads() -> list[int]:
+    """The ids of this process's threads (Linux keeps a nice value per thread); this one alone
+    where there is no /proc."""
+    try:
+        return [int(task) for task in os.listdir("/proc/self/task")]
+    except OSError:
+        return [0]
+
+
+def may_raise() -> bool:
+    """Whether this process may raise a thread's priority (CAP_SYS_NICE: root's, unless a container
+    takes it away; or a nice limit that allows it): tried on this thread and undone."""
+    now = os.getpriority(os.PRIO_PROCESS, 0)
+    try:
+        os.setpriority(os.PRIO_PROCESS, 0, max(-20, now - 1))
+    except PermissionError:
+        return False
+    os.setpriority(os.PRIO_PROCESS, 0, now)
+    return True
+
+
+def step_down(steps: int, above: int) -> None:
+    """Put every thread of this process but `above` (a native thread id) at least `steps` nice steps
+    below it (at most 19): what an ordinary user may do where raising is not permitted. Threads they
+    start later inherit it; a second call with the same steps changes nothing."""
+    level = min(19, os.getpriority(os.PRIO_PROCESS, above) + steps)
+    for thread in threads():
+        with contextlib.suppress(ProcessLookupError):  # a thread that has just ended
+            if thread != above and os.getpriority(os.PRIO_PROCESS, thread) < level:
+                os.setpriority(os.PRIO_PROCESS, thread, level)
+
+
+def spawner() -> int:
+    """The native id of the thread that starts this process's children (started by the first call
+    here or to Processes.start, at that thread's priority)."""
+    return _SPAWNER.submit(threading.get_native_id).result()
+
+
+def _spawn(command: list[str], nice: int) -> subprocess.Popen:
+    """On the spawner: start a child `nice` steps below the spawner's priority."""
+    child = subprocess.Popen(
+        command, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        env={**os.environ, PARENT: str(os.getpid())},
+    )  # fmt: skip
+    if nice:  # set from here: a preexec_fn is unsafe in a process with threads (the study server)
+        os.setpriority(os.PRIO_PROCESS, child.pid, min(19, os.getpriority(os.PRIO_PROCESS, 0) + nice))
+    return child
+
+
 class Processes:
     """Child `tsf` processes; all are ended (SIGTERM, then SIGKILL) on exit, and each dies with
     this process if it is killed first (adopt)."""
@@ -83,18 +147,13 @@ class Processes:
         self.relays: list[threading.Thread] = []
 
     def start(self, name: str, command: list[str], nice: int = 0) -> subprocess.Popen:
-        """Start a child; `nice` > 0 steps below this thread's priority (for work off the latency
-        path; its threads inherit it)."""
-        child = self.children[name] = subprocess.Popen(
-            command, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-            env={**os.environ, PARENT: str(os.getpid())},
-        )  # fmt: skip
+        """Start a child, from the spawner; `nice` > 0 steps below the spawner's priority (for work
+        off the latency path; its threads inherit it)."""
+        child = self.children[name] = _SPAWNER.submit(_spawn, command, nice).result()
         for pipe, stream in ((child.stdout, "stdout"), (child.stderr, "stderr")):
             relay = threading.Thread(target=_relay, args=(pipe, stream), name=f"{name}-{stream}", daemon=True)
             relay.start()
             self.relays.append(relay)
-        if nice:  # set from here: a preexec_fn is unsafe in a process with threads (the study server)
-            os.setpriority(os.PRIO_PROCESS, child.pid, min(19, os.getpriority(os.PRIO_PROCESS, 0) + nice))
         return child
 
     def wait(self, name: str, timeout: float) -> int | None:

@@ -18,6 +18,7 @@ import pytest
 from services.recorder.log import read_log
 from services.recorder.recording import load, replay
 from services.runtime.launch import RECORDER_NICE, SIM_RAISE
+from services.sim.pool import BUS_BELOW
 
 SHORT = ("--lockstep", "--duration", "0.3")  # 9 frames
 
@@ -169,6 +170,59 @@ def test_a_sim_not_permitted_to_raise_its_priority_keeps_it_and_says_so_once():
     done = subprocess.run([*drop, sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0 and int(done.stdout) == os.getpriority(os.PRIO_PROCESS, 0)
     assert done.stderr.count("not permitted to raise the priority") == 1, done.stderr
+
+
+def as_ordinary_user() -> list[str]:
+    """The command prefix that runs a process as an ordinary user runs it (CAP_SYS_NICE dropped by
+    setpriv where this suite has it); None where that cannot be done here."""
+    if not may_raise_priority():
+        return []
+    return (
+        ["setpriv", "--inh-caps=-sys_nice", "--bounding-set=-sys_nice"] if shutil.which("setpriv") else None
+    )
+
+
+POOL_LAUNCHER = """
+import os, sys, tempfile, time
+from pathlib import Path
+from services.runtime.pool import Pool
+from shared.processes import spawner
+with Pool("niced", Path(tempfile.mkdtemp()), adaptive=False) as pool:
+    pids = {name: child.pid for name, child in pool.processes.children.items()}
+    print(spawner(), pids["sim"], pids["agent"], pids["recorder"], flush=True)
+    sys.stdin.read()
+"""
+
+
+@pytest.mark.skipif(as_ordinary_user() is None, reason="needs setpriv to drop CAP_SYS_NICE")
+def test_where_the_sim_may_not_raise_itself_everything_else_of_a_pool_steps_below_it(wait_until):
+    """As an ordinary user (the sim cannot leave its launcher's priority): the launcher (a study
+    server, a match host) and the pool's agent step SIM_RAISE below the sim, its recorder
+    RECORDER_NICE further, and the sim's own bus threads BUS_BELOW below its clock; the spawner,
+    which starts a sim again or for another pool, keeps the launcher's first priority."""
+    base = os.getpriority(os.PRIO_PROCESS, 0)
+    launcher = subprocess.Popen(
+        [*as_ordinary_user(), sys.executable, "-c", POOL_LAUNCHER],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        spawner, sim, agent, recorder = map(int, launcher.stdout.readline().split())
+
+        def niced(pid: int) -> dict[int, int]:
+            return {
+                int(task.name): nice(pid, int(task.name))
+                for task in (Path("/proc") / str(pid) / "task").iterdir()
+            }
+
+        below = {**{t: base + SIM_RAISE for t in niced(launcher.pid)}, spawner: base}
+        assert wait_until(lambda: niced(launcher.pid) == below, timeout=10), niced(launcher.pid)
+        bus = {**{t: base + BUS_BELOW for t in niced(sim)}, sim: base}  # the clock: the sim's main thread
+        assert wait_until(lambda: niced(sim) == bus, timeout=10), niced(sim)
+        assert set(niced(agent).values()) == {base + SIM_RAISE}
+        assert set(niced(recorder).values()) == {min(19, base + SIM_RAISE + RECORDER_NICE)}
+    finally:
+        launcher.stdin.close()
+        assert launcher.wait(60) == 0
 
 
 SIGNALS = [signal.SIGTERM, signal.SIGHUP, signal.SIGINT, signal.SIGKILL]

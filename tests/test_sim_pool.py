@@ -14,7 +14,7 @@ import zenoh
 from test_match_processes import may_raise_priority, nice
 from test_sim_contract import Hands, act
 
-from services.sim.pool import run_pool
+from services.sim.pool import BUS_BELOW, run_pool
 from services.sim.service import MatchSim
 from shared import keys
 from shared.bus import BusConfig
@@ -128,14 +128,22 @@ def test_a_bad_order_is_dropped_and_counted(pool, tap, wait_until):
 
 
 def test_sigterm_ends_the_running_matches_and_exits_0(endpoint, bus, spawn, tap, wait_until):
-    """Also: the pool raises every thread's priority at once (where permitted), before any match."""
+    """Also: the pool raises every thread's priority at once (where permitted), before any match;
+    where not, its bus's threads step below its clock (the main thread)."""
     router = BusConfig("router", (endpoint,))
     process = spawn("sim", router, "--pool", POOL, "--priority", "3")
     z = bus.open()  # a peer that connects to the pool's router
     assert pool_ready(z, wait_until)
-    raised = nice(os.getpid()) - 3 if may_raise_priority() else nice(os.getpid())
-    threads = [int(task.name) for task in (Path("/proc") / str(process.pid) / "task").iterdir()]
-    assert {nice(process.pid, thread) for thread in threads} == {raised}
+    base = nice(os.getpid())
+
+    def niced() -> dict[int, int]:
+        tasks = (Path("/proc") / str(process.pid) / "task").iterdir()
+        return {int(task.name): nice(process.pid, int(task.name)) for task in tasks}
+
+    if may_raise_priority():
+        assert set(niced().values()) == {base - 3}
+    else:
+        assert wait_until(lambda: niced() == {**{t: base + BUS_BELOW for t in niced()}, process.pid: base})
     recorded = tap(z, "long")
     put(z, keys.pool_order(POOL), order("long", 900).encode())
     assert wait_until(lambda: len(recorded.of(State)) > 3)

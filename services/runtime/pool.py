@@ -2,8 +2,9 @@
 host (docs/architecture.md, "Pools").
 
 A pool is one process per service: a sim (the pool's zenoh router, on a loopback port of its own,
-its priority raised above everything else on the machine), an agent, a recorder and, for a pool
-that may play adaptive matches, an adapter. A match is an order (MatchOrder on
+its priority raised above everything else on the machine, or, where raising is refused to an
+ordinary user, the launcher and the pool's other services stepped as far below it), an agent, a
+recorder and, for a pool that may play adaptive matches, an adapter. A match is an order (MatchOrder on
 tsf/pool/<pool>/order) that each service plays its part of under the match's own keys, exactly as a
 match's own processes do (services/runtime/launch.run_match), so a pooled match's traffic, seat
 bridging and recording are those of any match. Starting one costs a message instead of four
@@ -42,7 +43,7 @@ from shared import keys
 from shared.bus import free_endpoint, subscribe
 from shared.errors import Failure, UsageError
 from shared.messages import MatchStop, Summary
-from shared.processes import Processes
+from shared.processes import Processes, may_raise, spawner, step_down
 
 log = logging.getLogger("tsf.pool")
 READY = 60.0  # seconds a new pool's services may take to come up (a busy machine, a cold cache)
@@ -80,6 +81,9 @@ class Pool:
         self.closing = threading.Event()
         self.z: zenoh.Session | None = None
         self.supervisor = threading.Thread(target=self._supervise, name=f"pool-{name}", daemon=True)
+        # Where the sim may not raise itself SIM_RAISE steps (an ordinary user), everything else of the
+        # pool's and its launcher's steps as far below it: the same order as root's, without a privilege.
+        self.below = 0 if may_raise() else SIM_RAISE
 
     def _start(self, service: str) -> None:
         pool = ("--pool", self.name)
@@ -89,10 +93,15 @@ class Pool:
             command = service_command("recorder", self.client_bus, *pool, "--out", str(self.directory))
         else:
             command = service_command(service, self.client_bus, *pool)
-        self.processes.start(service, command, nice=RECORDER_NICE if service == "recorder" else 0)
+        nice = 0 if service == "sim" else self.below + (RECORDER_NICE if service == "recorder" else 0)
+        self.processes.start(service, command, nice=nice)
 
     def __enter__(self) -> Pool:
-        """Start the services and wait until each is up (Failure if one is not within READY s)."""
+        """Start the services and wait until each is up (Failure if one is not within READY s). Where
+        the sim may not raise itself, every thread of this process but the spawner (which starts a
+        sim, again or for another pool, at the launcher's first priority: shared/processes.py) then
+        steps `below` it (24 participants at once as an ordinary user: docs/architecture.md,
+        "Capacity as an ordinary user")."""
         self.directory.mkdir(parents=True, exist_ok=True)
         try:
             for service in self.services:
@@ -105,6 +114,12 @@ class Pool:
             self.__exit__()
             raise
         self.supervisor.start()
+        if self.below:
+            step_down(self.below, above=spawner())
+            log.info(
+                "pool %s: the sim may not raise its priority (needs CAP_SYS_NICE): this process and the"
+                " pool's other services step %d below it instead", self.name, self.below,
+            )  # fmt: skip
         log.info("pool %s: %s up on %s", self.name, ", ".join(self.services), self.endpoint)
         return self
 

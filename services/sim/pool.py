@@ -16,9 +16,11 @@ from shared import keys
 from shared.bus import BusConfig, Drops, Seen, session, subscribe
 from shared.game import GameConfig
 from shared.messages import MatchOrder, MatchStop
+from shared.processes import step_down
 
 log = logging.getLogger("tsf.sim")
-PHASES = 4  # of the period, in which the pool's matches tick (clock.py: measured against 1 and 12)
+PHASES = 8  # of the period, in which the pool's matches tick (clock.py: measured against 1, 4 and 12)
+BUS_BELOW = 3  # nice steps the bus's threads take below the clock where the real-time class is refused
 SWITCH_INTERVAL = 0.001  # seconds a thread holds the GIL before it must offer it (Python's: 0.005)
 
 
@@ -62,16 +64,21 @@ def run_pool(bus: BusConfig, pool: str, stop: threading.Event, priority: int = 0
     """Play the pool's matches until `stop` is set, then end those running (their summaries are
     published) and return. Raises the priority by `priority` nice steps at once (every thread of
     the process, the session's included) and, if it raises it at all, puts them in the real-time
-    class (service.real_time); offers the GIL more often so that the bus's callbacks delay the
-    clock less. The pool's name is checked where it enters (options.in_pool)."""
+    class (service.real_time). Where that is refused (an ordinary user), every thread but the
+    clock's steps BUS_BELOW below it instead (the session's, the callbacks' and those they start),
+    so that a due tick is not held up by the bus's work between ticks (24 at once as an ordinary
+    user: docs/architecture.md, "Capacity as an ordinary user"). Offers the GIL more often so that
+    the bus's callbacks delay the clock less. The pool's name is checked where it enters
+    (options.in_pool)."""
     with session(bus) as z, contextlib.ExitStack() as stack:
         clock = Clock(PHASES)
         sim = PoolSim(z, pool, clock)
         _raise_priority(priority)
-        if priority > 0:
-            real_time()
+        below = priority > 0 and not real_time()
         sys.setswitchinterval(SWITCH_INTERVAL)
         sim.declare(stack)
+        if below:  # once the orders' subscriber is declared: the threads it starts are the bus's
+            step_down(BUS_BELOW, above=threading.get_native_id())
         log.info("pool %s: the sim is ready for orders", pool)
         clock.run(stop)
         return sim

@@ -29,6 +29,7 @@ from shared.bus import BusConfig, Drops, session, subscribe, weakly
 from shared.errors import UsageError
 from shared.game import ROLES, GameConfig
 from shared.messages import Action, Summary, seat_actions
+from shared.processes import threads
 
 log = logging.getLogger("tsf.sim")
 MODES = ("realtime", "lockstep")
@@ -254,11 +255,7 @@ def _raise_priority(steps: int) -> None:
         return
     nice = max(-20, os.getpriority(os.PRIO_PROCESS, 0) - steps)
     try:
-        threads = [int(task) for task in os.listdir("/proc/self/task")]
-    except OSError:  # no /proc: this thread alone
-        threads = [0]
-    try:
-        for thread in threads:
+        for thread in threads():
             with contextlib.suppress(ProcessLookupError):  # a thread that has just ended
                 os.setpriority(os.PRIO_PROCESS, thread, nice)
     except PermissionError:
@@ -276,9 +273,9 @@ def real_time() -> bool:
     processes in any case. False where it is not permitted (CAP_SYS_NICE; a container may not):
     the threads stay, and it says so in one line."""
     try:
-        for thread in os.listdir("/proc/self/task"):
+        for thread in threads():
             with contextlib.suppress(ProcessLookupError):  # a thread that has just ended
-                os.sched_setscheduler(int(thread), os.SCHED_FIFO, os.sched_param(1))
+                os.sched_setscheduler(thread, os.SCHED_FIFO, os.sched_param(1))
     except (PermissionError, AttributeError, OSError):  # not permitted, or not Linux
         log.info("not permitted to run the clock in the real-time class (needs CAP_SYS_NICE): it stays")
         return False

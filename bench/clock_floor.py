@@ -29,6 +29,9 @@ import statistics
 import struct
 import time
 
+from services.sim.service import _timing
+from shared.game import ROLES
+
 PERIOD = 1 / 30
 _SCHED_ATTR = struct.Struct("IIQiIQQQII")  # struct sched_attr (include/uapi/linux/sched/types.h)
 _SETATTR = {"x86_64": 314, "aarch64": 274}
@@ -93,8 +96,8 @@ def clock(matches: int, phases: int, tick_us: float, seconds: float, slice_us: i
 
 
 def p99(ticks: list[float]) -> float:
-    deviations = [abs(b - a - PERIOD) * 1e3 for a, b in zip(ticks, ticks[1:], strict=False)]
-    return statistics.quantiles(deviations, n=100)[98]
+    """A match's tick-jitter p99 (ms), as the sim computes it for its summary."""
+    return _timing({role: [] for role in ROLES}, ticks, PERIOD)["tick_jitter_ms_p99"]
 
 
 def main() -> None:
@@ -139,7 +142,9 @@ def main() -> None:
             args=(args.matches, args.phases, args.tick_us, args.seconds, args.clock_slice_us, out),
         )
         ticker.start()
-        ticks, cpu, _ = out.get()
+        ticks, cpu, sliced = out.get()
+        if args.clock_slice_us and not sliced:
+            raise SystemExit(f"--clock-slice-us {args.clock_slice_us}: Linux refused the time slice")
         ticker.join()
         for worker in workers:
             worker.join()

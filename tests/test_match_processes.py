@@ -131,6 +131,13 @@ def nice(pid: int, task: int | None = None) -> int:
     return int(stat.read_text().rsplit(")", 1)[1].split()[16])
 
 
+def niced(pid: int) -> dict[int, int]:
+    """Each thread of a process and its nice value."""
+    return {
+        int(task.name): nice(pid, int(task.name)) for task in (Path("/proc") / str(pid) / "task").iterdir()
+    }
+
+
 def may_raise_priority() -> bool:
     """Whether this process has CAP_SYS_NICE (root's, unless a container takes it away)."""
     status = Path("/proc/self/status").read_text()
@@ -172,7 +179,7 @@ def test_a_sim_not_permitted_to_raise_its_priority_keeps_it_and_says_so_once():
     assert done.stderr.count("not permitted to raise the priority") == 1, done.stderr
 
 
-def as_ordinary_user() -> list[str]:
+def as_ordinary_user() -> list[str] | None:
     """The command prefix that runs a process as an ordinary user runs it (CAP_SYS_NICE dropped by
     setpriv where this suite has it); None where that cannot be done here."""
     if not may_raise_priority():
@@ -207,13 +214,6 @@ def test_where_the_sim_may_not_raise_itself_everything_else_of_a_pool_steps_belo
     )  # fmt: skip
     try:
         spawner, sim, agent, recorder = map(int, launcher.stdout.readline().split())
-
-        def niced(pid: int) -> dict[int, int]:
-            return {
-                int(task.name): nice(pid, int(task.name))
-                for task in (Path("/proc") / str(pid) / "task").iterdir()
-            }
-
         below = {**{t: base + SIM_RAISE for t in niced(launcher.pid)}, spawner: base}
         assert wait_until(lambda: niced(launcher.pid) == below, timeout=10), niced(launcher.pid)
         bus = {**{t: base + BUS_BELOW for t in niced(sim)}, sim: base}  # the clock: the sim's main thread

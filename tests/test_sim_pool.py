@@ -6,12 +6,11 @@ from __future__ import annotations
 import gc
 import os
 import signal
-from pathlib import Path
 
 import msgpack
 import pytest
 import zenoh
-from test_match_processes import may_raise_priority, nice
+from test_match_processes import may_raise_priority, nice, niced
 from test_sim_contract import Hands, act
 
 from services.sim.pool import BUS_BELOW, run_pool
@@ -134,16 +133,11 @@ def test_sigterm_ends_the_running_matches_and_exits_0(endpoint, bus, spawn, tap,
     process = spawn("sim", router, "--pool", POOL, "--priority", "3")
     z = bus.open()  # a peer that connects to the pool's router
     assert pool_ready(z, wait_until)
-    base = nice(os.getpid())
-
-    def niced() -> dict[int, int]:
-        tasks = (Path("/proc") / str(process.pid) / "task").iterdir()
-        return {int(task.name): nice(process.pid, int(task.name)) for task in tasks}
-
+    base, pid = nice(os.getpid()), process.pid
     if may_raise_priority():
-        assert set(niced().values()) == {base - 3}
+        assert set(niced(pid).values()) == {base - 3}
     else:
-        assert wait_until(lambda: niced() == {**{t: base + BUS_BELOW for t in niced()}, process.pid: base})
+        assert wait_until(lambda: niced(pid) == {**{t: base + BUS_BELOW for t in niced(pid)}, pid: base})
     recorded = tap(z, "long")
     put(z, keys.pool_order(POOL), order("long", 900).encode())
     assert wait_until(lambda: len(recorded.of(State)) > 3)

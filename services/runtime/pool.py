@@ -117,8 +117,9 @@ class Pool:
         if self.below:
             step_down(self.below, above=spawner())
             log.info(
-                "pool %s: the sim may not raise its priority (needs CAP_SYS_NICE): this process and the"
-                " pool's other services step %d below it instead", self.name, self.below,
+                "pool %s: the sim may not raise its priority (needs CAP_SYS_NICE or a nice limit,"
+                " docs/human.md): this process and the pool's other services step %d below it instead",
+                self.name, self.below,
             )  # fmt: skip
         log.info("pool %s: %s up on %s", self.name, ", ".join(self.services), self.endpoint)
         return self

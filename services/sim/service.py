@@ -249,8 +249,9 @@ class MatchSim:
 
 def _raise_priority(steps: int) -> None:
     """Take `steps` nice steps above this thread's priority, in every thread of this process (Linux
-    keeps a nice value per thread). False where it is not permitted (it needs CAP_SYS_NICE: root
-    can, a container may not): the threads keep their priority, and it says so in one log line."""
+    keeps a nice value per thread). False where it is not permitted (it needs CAP_SYS_NICE, which
+    root has and a container may not, or a nice limit that allows it, RLIMIT_NICE): the threads
+    keep their priority, and it says so in one log line."""
     if steps <= 0:
         return
     nice = max(-20, os.getpriority(os.PRIO_PROCESS, 0) - steps)
@@ -259,7 +260,10 @@ def _raise_priority(steps: int) -> None:
             with contextlib.suppress(ProcessLookupError):  # a thread that has just ended
                 os.setpriority(os.PRIO_PROCESS, thread, nice)
     except PermissionError:
-        log.info("not permitted to raise the priority to nice %d (needs CAP_SYS_NICE): it stays", nice)
+        log.info(
+            "not permitted to raise the priority to nice %d (needs CAP_SYS_NICE or RLIMIT_NICE): it stays",
+            nice,
+        )
 
 
 def real_time() -> bool:
@@ -270,14 +274,18 @@ def real_time() -> bool:
     jitter p99 of 7.8 ms with the clock's thread alone real-time (the others held it up), 4.9 ms
     with all (bench/sim_pool.py), 20-30 ms at nice -5 beside other work. A pool's sim sleeps
     between ticks and uses a few % of a core, and Linux keeps 5 % of each second for ordinary
-    processes in any case. False where it is not permitted (CAP_SYS_NICE; a container may not):
-    the threads stay, and it says so in one line."""
+    processes in any case. False where it is not permitted (CAP_SYS_NICE, or a real-time limit of
+    at least 1, RLIMIT_RTPRIO; a container may have neither): the threads stay, and it says so in
+    one line."""
     try:
         for thread in threads():
             with contextlib.suppress(ProcessLookupError):  # a thread that has just ended
                 os.sched_setscheduler(thread, os.SCHED_FIFO, os.sched_param(1))
     except (PermissionError, AttributeError, OSError):  # not permitted, or not Linux
-        log.info("not permitted to run the clock in the real-time class (needs CAP_SYS_NICE): it stays")
+        log.info(
+            "not permitted to run the clock in the real-time class (needs CAP_SYS_NICE or RLIMIT_RTPRIO):"
+            " it stays"
+        )
         return False
     return True
 

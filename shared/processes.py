@@ -97,12 +97,13 @@ def threads() -> list[int]:
         return [0]
 
 
-def may_raise() -> bool:
-    """Whether this process may raise a thread's priority (CAP_SYS_NICE: root's, unless a container
-    takes it away; or a nice limit that allows it): tried on this thread and undone."""
+def may_raise(steps: int) -> bool:
+    """Whether a child started here may raise itself `steps` nice steps above the spawner's priority
+    (CAP_SYS_NICE: root's, unless a container takes it away; or a nice limit, RLIMIT_NICE, that
+    reaches that level: one that allows fewer steps is a refusal): tried on this thread and undone."""
     now = os.getpriority(os.PRIO_PROCESS, 0)
     try:
-        os.setpriority(os.PRIO_PROCESS, 0, max(-20, now - 1))
+        os.setpriority(os.PRIO_PROCESS, 0, max(-20, os.getpriority(os.PRIO_PROCESS, spawner()) - steps))
     except PermissionError:
         return False
     os.setpriority(os.PRIO_PROCESS, 0, now)

@@ -83,7 +83,7 @@ class Pool:
         self.supervisor = threading.Thread(target=self._supervise, name=f"pool-{name}", daemon=True)
         # Where the sim may not raise itself SIM_RAISE steps (an ordinary user), everything else of the
         # pool's and its launcher's steps as far below it: the same order as root's, without a privilege.
-        self.below = 0 if may_raise() else SIM_RAISE
+        self.below = 0 if may_raise(SIM_RAISE) else SIM_RAISE
 
     def _start(self, service: str) -> None:
         pool = ("--pool", self.name)

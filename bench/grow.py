@@ -24,7 +24,7 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--population", type=Path)
     args = parser.parse_args()
-    command = [sys.executable, "-m", "services.cli", "library", "grow", "--out", str(args.out)]
+    command = [sys.executable, "-m", "services.commands", "library", "grow", "--out", str(args.out)]
     command += ["--workers", str(args.workers)]
     command += ["--population", str(args.population)] if args.population else []
     subprocess.run(command, check=True, stdout=subprocess.DEVNULL)

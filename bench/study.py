@@ -132,7 +132,7 @@ class Children:
 def _service(words: list[bytes]) -> str:
     """What a child of the server runs: a pool service (`tsf sim --pool`...), or the judge (its
     worker process, services/study/judge.py; multiprocessing's resource tracker counted with it)."""
-    return words[words.index(b"services.cli") + 1].decode() if b"services.cli" in words else JUDGE
+    return words[words.index(b"services.commands") + 1].decode() if b"services.commands" in words else JUDGE
 
 
 def serve(
@@ -263,7 +263,16 @@ def second_host(how: str, slots: int, out: Path) -> Iterator[BusConfig]:
     secret = out / "host-secret"
     secret.parent.mkdir(parents=True, exist_ok=True)
     secret.write_bytes(HOST_SECRET)
-    command = [sys.executable, "-m", "services.cli", "match-host", "--mode", "client", "--slots", str(slots)]
+    command = [
+        sys.executable,
+        "-m",
+        "services.commands",
+        "match-host",
+        "--mode",
+        "client",
+        "--slots",
+        str(slots),
+    ]
     command += ["--id", f"{how}-host", "--out", str(out), "--host-secret", str(secret), "-q"]
     with contextlib.ExitStack() as undo:
         if how == "netns":

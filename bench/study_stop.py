@@ -36,7 +36,7 @@ def stopped_after(delay: float, directory: Path) -> tuple[float, int | None]:
     command = [
         sys.executable,
         "-m",
-        "services.cli",
+        "services.commands",
         "study",
         str(config),
         "--out",

@@ -1,5 +1,5 @@
 """The two ways a command ends badly, raised by the cores and turned into one line at the command
-line's entry (services/entry.py): never a traceback for either, unless asked for with --debug."""
+line's entry (services/commands/entry.py): never a traceback for either, unless asked for with --debug."""
 
 from __future__ import annotations
 

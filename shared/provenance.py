@@ -31,7 +31,7 @@ from shared.game import GameConfig
 
 ROOT = Path(__file__).resolve().parent.parent
 FIELDS = ("date", "version", "commit", "library", "table", "config", "command")
-_command: list[str] = []  # the `tsf` command line being run (services/entry.py), else sys.argv
+_command: list[str] = []  # the `tsf` command line being run (services/commands/entry.py), else sys.argv
 COMMAND = "TSF_COMMAND"  # "<pid> <command line>" of the `tsf` command that started this process tree
 
 

@@ -156,7 +156,7 @@ def background() -> Iterator[Callable[..., Future]]:
 
 @pytest.fixture
 def spawn(tmp_path) -> Iterator[Callable[..., subprocess.Popen]]:  # noqa: ANN001 - pytest's tmp_path
-    """Starts `tsf <service> <bus options> <args>` as a process (`python -m services.cli`, output to
+    """Starts `tsf <service> <bus options> <args>` as a process (`python -m services.commands`, output to
     pytest's capture); every process still running at teardown is killed."""
     children: list[subprocess.Popen] = []
 

@@ -79,7 +79,16 @@ def test_the_healthcheck_probe_finds_only_a_live_token(bus, wait_until) -> None:
     token = bus.open().liveliness().declare_token(keys.alive("probe", "agent", "bait"))
 
     def probe(role: str, endpoint: str = bus.endpoint) -> int:
-        command = [sys.executable, "-m", "services.cli", "alive", "--match", "probe", "--service", "agent"]
+        command = [
+            sys.executable,
+            "-m",
+            "services.commands",
+            "alive",
+            "--match",
+            "probe",
+            "--service",
+            "agent",
+        ]
         return _run([*command, "--role", role, "--connect", endpoint], 60).returncode
 
     assert probe("bait") == 0
@@ -240,7 +249,7 @@ def test_compose_run_starts_sweep_workers_for_a_coordinator_on_the_host(inputs: 
             started = _run(["docker-compose", "run", "-d", "worker"], 900, env)
             assert started.returncode == 0, _tail(started.stdout + started.stderr)
         table = tmp_path / "table.json"
-        sweep = [sys.executable, "-m", "services.cli", "sweep", "--sweep", "compose", "--workers", "0"]
+        sweep = [sys.executable, "-m", "services.commands", "sweep", "--sweep", "compose", "--workers", "0"]
         sweep += ["--games", "4", "--chunk", "1", "--bait", "B5", "--shooter", "S5", "--out", str(table)]
         swept = _run([*sweep, "--connect", f"tcp/127.0.0.1:{port}"], 300)
         assert swept.returncode == 0, _tail(swept.stdout + swept.stderr)
@@ -271,7 +280,7 @@ def test_workers_started_through_the_sdk_compute_the_table_and_down_removes_them
     endpoint, sweep, tsf = (
         free_endpoint(),
         f"sdk{uuid.uuid4().hex[:6]}",
-        [sys.executable, "-m", "services.cli"],
+        [sys.executable, "-m", "services.commands"],
     )
     router = subprocess.Popen([*tsf, "router", "--listen", endpoint])
     table, listed = tmp_path / "table.json", ""

@@ -163,7 +163,16 @@ async def play_through(link: str, **held: bool) -> dict:
 
 def test_tsf_play_prints_the_link_and_plays_with_the_adaptive_agent(tmp_path):
     """`tsf play --role shooter --partner adaptive`, as a person runs it, with a scripted client."""
-    command = [sys.executable, "-m", "services.cli", "play", "--role", "shooter", "--partner", "adaptive"]
+    command = [
+        sys.executable,
+        "-m",
+        "services.commands",
+        "play",
+        "--role",
+        "shooter",
+        "--partner",
+        "adaptive",
+    ]
     command += ["--window", "30", "--duration", "3", "--port", "0", "--out", str(tmp_path), "--match", "play"]
     with subprocess.Popen(command, stdout=subprocess.PIPE, stdin=subprocess.DEVNULL, text=True) as tsf:
         try:

@@ -78,7 +78,7 @@ def lab(tmp_path_factory) -> str:  # noqa: ANN001 - pytest's factory
 
 
 def tsf_eval(partner: str, lab: str, out: str) -> tuple[subprocess.CompletedProcess, float]:
-    command = [sys.executable, "-m", "services.cli", "eval", "-q", "--partner", partner, "--seeds", "2"]
+    command = [sys.executable, "-m", "services.commands", "eval", "-q", "--partner", partner, "--seeds", "2"]
     command += ["--workers", "1", "--no-identify", "--strategy", "cem", "--window", "150", "--out", out]
     command += ["--sweep", f"f{uuid.uuid4().hex[:8]}"]
     env = os.environ | {"PYTHONPATH": lab}

@@ -133,7 +133,7 @@ def test_a_killed_coordinator_resumes_and_counts_each_job_once(tmp_path, wait_un
     from services.table.table import Table, assemble, jobs, run_job
 
     out = tmp_path / "table.json"
-    command = [sys.executable, "-m", "services.cli", "sweep", "--sweep", f"c{uuid.uuid4().hex[:8]}"]
+    command = [sys.executable, "-m", "services.commands", "sweep", "--sweep", f"c{uuid.uuid4().hex[:8]}"]
     command += ["--workers", "1", "--games", "3", "--chunk", "1", "--lanes", "1", "--out", str(out)]
     command += ["--bait", "B4", "--bait", "B7", "--shooter", "S4", "--shooter", "S5"]
     journal = tmp_path / "table.json.journal"
@@ -173,7 +173,7 @@ def test_tsf_eval_across_a_router_equals_a_local_run(spawn, tmp_path):
     tsf = [
         sys.executable,
         "-m",
-        "services.cli",
+        "services.commands",
         "eval",
         "--role",
         "shooter",
@@ -188,7 +188,7 @@ def test_tsf_eval_across_a_router_equals_a_local_run(spawn, tmp_path):
     )
     assert local.returncode == 0, local.stderr[-2000:]
     endpoint = free_endpoint()
-    router = subprocess.Popen([sys.executable, "-m", "services.cli", "router", "--listen", endpoint])
+    router = subprocess.Popen([sys.executable, "-m", "services.commands", "router", "--listen", endpoint])
     try:
         spawn("worker", BusConfig("client", (), (endpoint,)), "--sweep", "far-eval", "--id", "far")
         remote = [*tsf, "--workers", "0", "--sweep", "far-eval", "--mode", "client", "--connect", endpoint]

@@ -130,7 +130,7 @@ def test_every_file_is_on_a_layer():
 
 
 def test_each_layer_is_folders_not_files():
-    """A row names folders (`services/adapter/*`) or a family of files (`services/*/cli.py`), never
+    """A row names folders (`services/adapter/*`) or a family of files (`services/*.py`), never
     one file: a file placed on another layer than its folder's is a folder that is not one layer."""
     single = [
         pattern for _, patterns in TABLE for pattern in patterns if not any(c in pattern for c in "*?[")
@@ -184,6 +184,36 @@ def test_no_modules_import_each_other_in_a_circle():
     assert circles(edges()) == []
 
 
+def folder(path: str) -> str:
+    """A file's folder as the layer table names it: `services/adapter`, `shared`, `services`."""
+    return path.rsplit("/", 1)[0]
+
+
+def folder_edges() -> dict[str, set[str]]:
+    """The import graph folder by folder: an arrow from one folder to another where a file of the
+    first imports a file of the second."""
+    out: dict[str, set[str]] = {}
+    for source, targets in edges().items():
+        out.setdefault(folder(source), set()).update(
+            folder(t) for t in targets if folder(t) != folder(source)
+        )
+    return out
+
+
+def test_folders_import_only_downward_and_never_each_other():
+    """The house drawn folder by folder: each folder is on one layer, no arrow runs back up, no two
+    folders import each other, and there is no circle of folders however long."""
+    graph = folder_edges()
+    spread = {f: {layer_of(p) for p in edges() if folder(p) == f} for f in graph}
+    assert {f: layers for f, layers in spread.items() if len(layers) != 1} == {}
+    rank = {f: LAYERS.index(layers.pop()) for f, layers in spread.items()}
+    upward = [f"{a} -> {b}" for a, targets in graph.items() for b in sorted(targets) if rank[b] < rank[a]]
+    mutual = sorted(
+        {tuple(sorted((a, b))) for a, targets in graph.items() for b in targets if a in graph.get(b, ())}
+    )
+    assert (upward, mutual, circles(graph)) == ([], [], [])
+
+
 def test_imports_inside_functions_have_a_reason():
     unexplained = []
     for path in files():
@@ -216,6 +246,6 @@ def test_the_checks_see_imports_inside_functions_and_circles(tmp_path):
     assert imports(sample) == [("services.agent.library", True), ("numba", True)]
     assert circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
     assert (
-        layer_of("services/adapter/cli.py") == COMMAND_LINE
+        layer_of("services/commands/adapter.py") == COMMAND_LINE
         and layer_of("services/adapter/core.py") == "adapter"
     )

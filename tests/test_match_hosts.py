@@ -66,7 +66,7 @@ def match_host(tmp_path):  # noqa: ANN201
 
     def start(name: str, endpoint: str, slots: int = 1) -> subprocess.Popen:
         command = [
-            sys.executable, "-m", "services.cli", "match-host", "--connect", endpoint,
+            sys.executable, "-m", "services.commands", "match-host", "--connect", endpoint,
             "--slots", str(slots), "--id", name, "--out", str(tmp_path / name), "--host-secret", str(secret),
         ]  # fmt: skip
         started.append(subprocess.Popen(command, start_new_session=True))

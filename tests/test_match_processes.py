@@ -68,7 +68,7 @@ def tsf(tmp_path: Path) -> Iterator[Callable[..., subprocess.Popen]]:
 
     def start(*args: str) -> subprocess.Popen:
         n = len(started)
-        command = [sys.executable, "-m", "services.cli", *args]
+        command = [sys.executable, "-m", "services.commands", *args]
         with (tmp_path / f"out{n}").open("w") as out, (tmp_path / f"err{n}").open("w") as err:
             started.append(subprocess.Popen(command, stdout=out, stderr=err, start_new_session=True))
         started[-1].err = tmp_path / f"err{n}"  # type: ignore[attr-defined]

@@ -1,4 +1,4 @@
-"""A user's mistakes across the commands, run in-process as `tsf` runs them (services/entry.py): each
+"""A user's mistakes across the commands, run in-process as `tsf` runs them (services/commands/entry.py): each
 ends in one line that names the option, the value and what is accepted, exit status 2 (usage) or 1
 (failure), and never a traceback."""
 
@@ -22,8 +22,8 @@ import typer
 
 from services.agent import library
 from services.agent.library_test import empty_library
-from services.cli import app
-from services.entry import run
+from services.commands.app import app
+from services.commands.entry import run
 from services.recorder.recording_test import M, record_match
 from shared.errors import UsageError, install_line
 
@@ -395,7 +395,7 @@ MISTAKES = [
         1,
         "tsf match-host: cannot reach the router at tcp/127.0.0.1:1: Unable to connect",
     ),
-    # Values outside their limits (shared/game.py, shared/messages.py, services/options.py,
+    # Values outside their limits (shared/game.py, shared/messages.py, services/commands/options.py,
     # AdapterConfig): refused before anything starts, naming the accepted range.
     ("game --seed -1", 2, f"tsf game: Invalid value for '--seed': -1 is outside the range {SEED_RANGE}"),
     ("game --frames 1000000000", 2, "'--frames': 1000000000 is outside the range 1 to 108000"),
@@ -648,7 +648,7 @@ def test_no_command_shows_the_help(capsys: pytest.CaptureFixture) -> None:
 
 
 def test_the_installed_command_is_the_entry(tmp_path: Path) -> None:
-    """`tsf` on PATH (pyproject's script) goes through services.entry too."""
+    """`tsf` on PATH (pyproject's script) goes through services.commands.entry too."""
     tsf_path = shutil.which("tsf", path=str(Path(sys.executable).parent))
     assert tsf_path is not None
     done = subprocess.run([tsf_path, "game", "--bait", "B99"], capture_output=True, text=True, timeout=60)
@@ -768,7 +768,7 @@ def test_an_unreachable_ray_address_is_one_line_within_seconds(tmp_path: Path) -
     command = [
         sys.executable,
         "-m",
-        "services.cli",
+        "services.commands",
         "sweep",
         "--ray",
         "127.0.0.1:1",

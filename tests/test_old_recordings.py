@@ -11,8 +11,8 @@ from pathlib import Path
 import msgpack
 import pytest
 
-from services.cli import app
-from services.entry import run
+from services.commands.app import app
+from services.commands.entry import run
 from services.recorder.export import export, read
 from services.recorder.log import LogWriter, read_log
 from services.recorder.recording import load, replay

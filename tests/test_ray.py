@@ -49,7 +49,7 @@ def cluster(tmp_path, monkeypatch):  # noqa: ANN201 - a ray Cluster
 
 def tsf(*args: str, **kwargs: object) -> subprocess.Popen:
     return subprocess.Popen(
-        [sys.executable, "-m", "services.cli", *args],
+        [sys.executable, "-m", "services.commands", *args],
         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, **kwargs,
     )  # fmt: skip
 

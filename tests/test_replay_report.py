@@ -53,7 +53,11 @@ def tsf(*args: str) -> subprocess.CompletedProcess:
     """Run the CLI; wide columns, so that rich does not wrap what the test reads."""
     env = {**os.environ, "COLUMNS": "400"}
     return subprocess.run(
-        [sys.executable, "-m", "services.cli", *args], capture_output=True, text=True, timeout=120, env=env
+        [sys.executable, "-m", "services.commands", *args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env=env,
     )
 
 

@@ -159,8 +159,8 @@ def study_command(
     process group is killed at the end. Started again, it resumes the study."""
     config = study_file(tmp_path, name, trials, seconds)
     server = subprocess.Popen(
-        [sys.executable, "-m", "services.cli", "study", str(config), "--out", str(tmp_path), "--port", "0",
-         "--test-token", TEST],
+        [sys.executable, "-m", "services.commands", "study", str(config), "--out", str(tmp_path),
+         "--port", "0", "--test-token", TEST],
         stdout=subprocess.PIPE, text=True, start_new_session=True,
     )  # fmt: skip
     try:
@@ -200,7 +200,7 @@ def test_a_study_server_that_fails_at_its_start_leaves_no_process_behind(tmp_pat
         taken.bind(("127.0.0.1", 0))
         taken.listen()
         server = subprocess.Popen(
-            [sys.executable, "-m", "services.cli", "study", str(study_file(tmp_path, "start")),
+            [sys.executable, "-m", "services.commands", "study", str(study_file(tmp_path, "start")),
              "--out", str(tmp_path),
              "--port", str(taken.getsockname()[1])],
             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True,
@@ -218,7 +218,7 @@ def test_a_second_server_on_the_same_study_is_refused_naming_the_first(tmp_path)
     """Both ran, handed out the same participant ids and overwrote each other's records."""
     with study_command(tmp_path, "twice") as (server, _):
         second = subprocess.run(
-            [sys.executable, "-m", "services.cli", "study", str(tmp_path / "twice.toml"),
+            [sys.executable, "-m", "services.commands", "study", str(tmp_path / "twice.toml"),
              "--out", str(tmp_path), "--port", "0"],
             capture_output=True, text=True, timeout=60,
         )  # fmt: skip

@@ -139,7 +139,9 @@ def namespace():
 def test_worker_in_another_namespace_through_a_router(namespace, background, tmp_path, reference):
     name, host = namespace
     router_endpoint = free_endpoint(host)
-    router = subprocess.Popen([sys.executable, "-m", "services.cli", "router", "--listen", router_endpoint])
+    router = subprocess.Popen(
+        [sys.executable, "-m", "services.commands", "router", "--listen", router_endpoint]
+    )
     worker_bus = BusConfig("client", (), (router_endpoint,))
     worker = subprocess.Popen(
         ["ip", "netns", "exec", name, *service_command("worker", worker_bus, "--sweep", "far", "--id", "far")]

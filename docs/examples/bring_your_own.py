@@ -45,7 +45,7 @@ def tsf(*args: str, library: Path | None, check: bool = True) -> subprocess.Comp
     shown = (f"TSF_LIBRARY={library} " if library else "") + "tsf " + " ".join(args)
     print(f"\n$ {shown}", flush=True)
     done = subprocess.run(
-        [sys.executable, "-m", "services.cli", *args],
+        [sys.executable, "-m", "services.commands", *args],
         env=env,
         text=True,
         capture_output=True,

@@ -70,7 +70,7 @@ def test_no_service_imports_gymnasium():
         "import sys, services.sim.service, services.agent.service, services.adapter.service, "
         "services.recorder.service, services.study.runner\n"
         "assert not {'gymnasium', 'numba'} & set(sys.modules), 'gymnasium or numba imported'\n"
-        "import services.cli, services.evaluation.evaluation\n"
+        "import services.commands.app, services.evaluation.evaluation\n"
         "assert 'gymnasium' not in sys.modules, 'gymnasium imported'\n"
         "from services.agent import envs\n"
         "import gymnasium\n"

@@ -19,8 +19,8 @@ from services.agent import library, outside
 from services.agent.networks import FLOOR
 from services.agent.player import Player
 from services.agent.seats import policy_for
-from services.cli import app
-from services.entry import run
+from services.commands.app import app
+from services.commands.entry import run
 from services.sim.engine import Game
 from services.sim.match import state_message
 from services.sim.observation import observe

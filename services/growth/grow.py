@@ -366,7 +366,14 @@ class Grow:
             heatmap(Table.load(self.library_dir / "table.json"), self.out / "table.png")
         # The adapter's calibration, by the command that makes it, in an interpreter of its own:
         # this one's table and payoff were read before the grown library was in use.
-        command = [sys.executable, "-m", "services.cli", "calibrate-adapter", "--workers", str(self.workers)]
+        command = [
+            sys.executable,
+            "-m",
+            "services.commands",
+            "calibrate-adapter",
+            "--workers",
+            str(self.workers),
+        ]
         command += ["--out", str(self.library_dir / "calibration.json")]
         env = os.environ | {"TSF_LIBRARY": str(self.library_dir.resolve())}
         subprocess.run(command, env=env, check=True, stdout=subprocess.DEVNULL)
@@ -397,7 +404,7 @@ class Grow:
                 "groups": choice.partner_groups(train, label, validation, members, teammates),
             }
         _write(self.library_dir / GROUPS, {"version": 1, "population": self.spec.text_hash, "seats": seats})
-        command = [sys.executable, "-m", "services.cli", "calibrate-adapter", "--partners", "groups"]
+        command = [sys.executable, "-m", "services.commands", "calibrate-adapter", "--partners", "groups"]
         command += ["--workers", str(self.workers), "--out", str(self.library_dir / GROUPS)]
         env = os.environ | {"TSF_LIBRARY": str(self.library_dir.resolve())}  # its groups, its members
         subprocess.run(command, env=env, check=True, stdout=subprocess.DEVNULL)

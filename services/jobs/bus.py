@@ -189,7 +189,7 @@ def local_workers(sweep: str, endpoints: tuple[str, ...], n: int) -> Iterator[li
     """`n` worker processes on this machine, connected to a coordinator (or router) at `endpoints`;
     ended on exit."""
     bus = BusConfig("peer", ("tcp/127.0.0.1:0",), endpoints)
-    command = [sys.executable, "-m", "services.cli", "worker", *bus.to_args(), "--sweep", sweep]
+    command = [sys.executable, "-m", "services.commands", "worker", *bus.to_args(), "--sweep", sweep]
     with Processes() as processes:
         yield [processes.start(f"worker{i}", [*command, "--id", f"{sweep}-local{i}"]) for i in range(n)]
 

@@ -5,7 +5,7 @@ runner may play them together, as the table's plays cells as lanes of one batch,
 depends on its pair and seed only). The job system names none of its clients: each client names
 its kinds and their runners (`Kinds`: the table's `table.KINDS`, the evaluation's
 `evaluation.KINDS`), and whoever runs jobs is handed them (a worker process by its command,
-services/jobs/cli.py). Runners are imported when first asked for, so a coordinator that only
+services/commands/jobs.py). Runners are imported when first asked for, so a coordinator that only
 hands out jobs never loads the engine.
 """
 

@@ -57,7 +57,7 @@ def setting_text(value: object) -> str:
 
 def _option(default: object, help: str, command_line: object = None) -> Any:
     """A config field with its command-line help and, where it differs, its command-line default
-    (services/options.py builds the options from these)."""
+    (services/commands/options.py builds the options from these)."""
     return field(
         default=default, metadata={"help": help, "default": default if command_line is None else command_line}
     )

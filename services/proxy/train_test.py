@@ -16,8 +16,8 @@ import torch as th  # noqa: E402
 from services.agent import add, library, networks  # noqa: E402
 from services.agent.networks import ProxyPolicy, inputs  # noqa: E402
 from services.agent.seats import policy_for  # noqa: E402
-from services.cli import app  # noqa: E402
-from services.entry import run  # noqa: E402
+from services.commands.app import app  # noqa: E402
+from services.commands.entry import run  # noqa: E402
 from services.population.partners import make_partner  # noqa: E402
 from services.proxy import train  # noqa: E402
 from services.proxy.data import extract  # noqa: E402

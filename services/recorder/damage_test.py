@@ -10,8 +10,8 @@ from pathlib import Path
 import msgpack
 import pytest
 
-from services.cli import app
-from services.entry import run
+from services.commands.app import app
+from services.commands.entry import run
 from services.recorder.log import HEADER, MAGIC, Damage, LogWriter
 from services.recorder.recording import load, replay
 from services.recorder.recording_test import Script, record_match

@@ -11,8 +11,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from services.cli import app
-from services.entry import run
+from services.commands.app import app
+from services.commands.entry import run
 from services.recorder.export import SCHEMAS, TABLES, TIME
 from services.recorder.recording import load
 from services.recorder.recording_test import Script, record_match

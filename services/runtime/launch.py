@@ -143,7 +143,7 @@ def watcher_bus(endpoint: str, low_latency: bool) -> BusConfig:
 
 def service_command(name: str, bus: BusConfig, *args: str) -> list[str]:
     """The command line that starts one service of the `tsf` CLI in a new Python process."""
-    return [sys.executable, "-m", "services.cli", name, *bus.to_args(), *args]
+    return [sys.executable, "-m", "services.commands", name, *bus.to_args(), *args]
 
 
 def run_match(

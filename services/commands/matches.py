@@ -10,7 +10,7 @@ from pathlib import Path
 import typer
 from rich.live import Live
 
-from services.options import (
+from services.commands.options import (
     PORTS,
     SECONDS,
     SLOTS,

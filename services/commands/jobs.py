@@ -9,7 +9,7 @@ import sys
 
 import typer
 
-from services.options import bus_options, number
+from services.commands.options import bus_options, number
 from shared.bus import BusConfig, stop_on_signals
 from shared.game import Range
 
@@ -43,7 +43,7 @@ def worker(
         done = run_worker(bus, sweep_id, name, runners, stop)
         logging.getLogger("tsf.worker").info("worker %s did %d jobs", name, done)
         return
-    command = [sys.executable, "-m", "services.cli", "worker", *bus.to_args(), "--sweep", sweep_id]
+    command = [sys.executable, "-m", "services.commands", "worker", *bus.to_args(), "--sweep", sweep_id]
     with Processes() as processes:
         for i in range(slots):
             processes.start(f"slot{i}", [*command, "--id", f"{name}-{i}"])
@@ -85,8 +85,8 @@ def workers_up(
     pull: bool = typer.Option(False, help="Pull the image where an engine lacks it (default: refuse)."),
 ) -> None:
     """Start worker containers from the project's image, labelled with their sweep."""
+    from services.commands.options import console
     from services.jobs import deploy
-    from services.options import console
 
     started = deploy.up(count, connect, sweep_id, host or ["local"], image, slots, pull)
     for w in started:
@@ -99,8 +99,8 @@ def workers_down(
     sweep_id: str | None = ONE_SWEEP,
 ) -> None:
     """Stop and remove worker containers."""
+    from services.commands.options import console
     from services.jobs import deploy
-    from services.options import console
 
     gone = deploy.down(host or ["local"], sweep_id)
     console.print(f"removed {len(gone)} worker container(s)")
@@ -112,8 +112,8 @@ def workers_ls(
     sweep_id: str | None = ONE_SWEEP,
 ) -> None:
     """List worker containers: engine, name, sweep, status."""
+    from services.commands.options import console
     from services.jobs import deploy
-    from services.options import console
 
     for w in deploy.ls(host or ["local"], sweep_id):
         console.print(f"{w.host}\t{w.name}\t{w.sweep}\t{w.status}")

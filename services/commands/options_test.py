@@ -10,9 +10,9 @@ import pytest
 import typer
 
 from services.agent.seats import seat_keys
-from services.cli import app
-from services.entry import run
-from services.options import setup_logging
+from services.commands.app import app
+from services.commands.entry import run
+from services.commands.options import setup_logging
 
 CHOICES = ("role", "adaptive", "partner_role", "zmode", "mode", "strategy", "service")
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from services.options import GAMES, Role, console, number, output, progress_bars
+from services.commands.options import GAMES, Role, console, number, output, progress_bars
 from shared.errors import Failure, UsageError
 
 commands = typer.Typer()

@@ -12,7 +12,7 @@ import typer
 from rich.table import Table
 
 from services.agent.seats import policy_for
-from services.options import (
+from services.commands.options import (
     GAMES,
     PEOPLE_RECORDINGS,
     RAY,

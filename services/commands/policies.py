@@ -12,7 +12,7 @@ from rich.table import Table
 
 from services.agent.calibration import calibrate
 from services.agent.seats import policy_for
-from services.options import (
+from services.commands.options import (
     GAMES,
     RAY,
     WORKERS,

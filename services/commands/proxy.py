@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from services.options import PEOPLE_RECORDINGS, Role, console, number, output
+from services.commands.options import PEOPLE_RECORDINGS, Role, console, number, output
 from services.proxy import trainer
 from services.proxy.data import HISTORY
 from shared.game import SEEDS, Range

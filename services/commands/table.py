@@ -7,7 +7,17 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from services.options import GAMES, RAY, WORKERS, Role, bus_options, console, number, output, progress_bars
+from services.commands.options import (
+    GAMES,
+    RAY,
+    WORKERS,
+    Role,
+    bus_options,
+    console,
+    number,
+    output,
+    progress_bars,
+)
 from services.table.table import LANES
 from shared.bus import BusConfig, stop_on_signals
 from shared.errors import Failure, UsageError

@@ -6,7 +6,7 @@ import re
 import subprocess
 import sys
 
-from services.cli import PANEL, PANELS, app, name_of
+from services.commands.app import PANEL, PANELS, app, name_of
 from shared import provenance
 
 
@@ -21,7 +21,7 @@ def test_every_command_and_group_sits_in_one_panel_of_the_help_in_the_panels_ord
 
 def test_the_help_shows_the_panels_in_order():
     run = subprocess.run(
-        [sys.executable, "-m", "services.cli", "--help"], capture_output=True, text=True, timeout=120,
+        [sys.executable, "-m", "services.commands", "--help"], capture_output=True, text=True, timeout=120,
         env={"COLUMNS": "100", "PATH": "/usr/bin:/bin", "PYTHONPATH": str(provenance.ROOT)},
     )  # fmt: skip
     assert run.returncode == 0, run.stderr
@@ -31,7 +31,7 @@ def test_the_help_shows_the_panels_in_order():
 
 def test_the_version_names_the_version_the_commit_and_the_contract():
     run = subprocess.run(
-        [sys.executable, "-m", "services.cli", "--version"], capture_output=True, text=True, timeout=120
+        [sys.executable, "-m", "services.commands", "--version"], capture_output=True, text=True, timeout=120
     )
     assert run.returncode == 0, run.stderr
     commit = provenance.commit()

@@ -1,19 +1,13 @@
-"""The `tsf` command line: one entry point. Each area's commands live beside what they run (a
-`cli.py` in its package, or beside launch.py for services and matches); this joins them, and groups
-them by task in `tsf --help` (PANELS), the everyday ones first."""
+"""The `tsf` command line: one entry point. Each area's commands are a module of this package
+(services/commands/, the top layer: it imports the packages it commands, none of them imports it);
+this joins them, and groups them by task in `tsf --help` (PANELS), the everyday ones first."""
 
 from __future__ import annotations
 
 import typer
 
-from services import matches_cli, services_cli
-from services.adapter import cli as adapter_cli
-from services.agent import cli as agent_cli
-from services.jobs import cli as jobs_cli
-from services.options import log_options
-from services.proxy import cli as proxy_cli
-from services.report import cli as report_cli
-from services.table import cli as table_cli
+from services.commands import adapter, jobs, matches, policies, proxy, report, service, table
+from services.commands.options import log_options
 from shared import provenance
 from shared.messages import SCHEMA_VERSION
 
@@ -63,7 +57,7 @@ def _main(
     """Team Space Fortress: matches, studies, evaluations and training of adaptive teammates."""
 
 
-for group in (agent_cli, table_cli, jobs_cli, services_cli, matches_cli, adapter_cli, report_cli, proxy_cli):
+for group in (policies, table, jobs, service, matches, adapter, report, proxy):
     app.registered_commands += group.commands.registered_commands
     app.registered_groups += group.commands.registered_groups
 for command in app.registered_commands:
@@ -85,12 +79,8 @@ for group in app.registered_groups:
 
 
 def main() -> None:
-    """The `tsf` command (services/entry.py: one line, not a traceback, when it ends badly)."""
-    from services.entry import run, start
+    """The `tsf` command (services/commands/entry.py: one line, not a traceback, when it ends badly)."""
+    from services.commands.entry import run, start
 
     start()
     raise SystemExit(run(app))
-
-
-if __name__ == "__main__":
-    main()

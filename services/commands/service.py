@@ -10,7 +10,7 @@ from typing import Annotated
 import typer
 
 from services.adapter import core
-from services.options import (
+from services.commands.options import (
     PRIORITY,
     SECONDS,
     AdapterFactory,

@@ -76,7 +76,7 @@ MISTAKES = [
     (
         "library grow --population {tmp}/empty.toml --out {tmp}/grown",
         2,
-        "tsf library: --population {tmp}/empty.toml: lacks 'bait'",
+        "tsf library: --population {tmp}/empty.toml: split: missing (a required setting)",
     ),
     (
         "library grow --out {tmp}/grown-other",
@@ -657,15 +657,20 @@ def test_the_installed_command_is_the_entry(tmp_path: Path) -> None:
 
 def test_a_bad_library_path_is_one_line_even_before_the_command_starts(tmp_path: Path) -> None:
     """The options' help lists the library's keys when the command line is built; a TSF_LIBRARY
-    that cannot be read is said by the command that reads it, not as a traceback at start-up."""
+    that names no library (misspelt, or a directory without a registry) is one line as any command
+    starts, not a traceback, nor a later complaint about thresholds in a directory that is none."""
     tsf_path = shutil.which("tsf", path=str(Path(sys.executable).parent))
     assert tsf_path is not None
-    env = {**os.environ, "TSF_LIBRARY": str(tmp_path / "missing")}
-    done = subprocess.run([tsf_path, "keys"], capture_output=True, text=True, timeout=60, env=env)
-    assert done.returncode == 2 and not done.stdout
-    assert done.stderr.splitlines() == [
-        f"tsf keys: TSF_LIBRARY {tmp_path / 'missing'}: is not a policy library (no registry.toml)"
-    ]
+    (tmp_path / "empty").mkdir()
+    for value, said in [
+        (tmp_path / "missing", "no such library; valid: grown, population, a directory with a registry.toml"),
+        ("grwon", "no such library; valid: grown, population, a directory with a registry.toml"),
+        (tmp_path / "empty", "is not a policy library (no registry.toml in it)"),
+    ]:
+        env = {**os.environ, "TSF_LIBRARY": str(value)}
+        done = subprocess.run([tsf_path, "keys"], capture_output=True, text=True, timeout=60, env=env)
+        assert done.returncode == 2 and not done.stdout
+        assert done.stderr.splitlines() == [f"tsf keys: TSF_LIBRARY {value}: {said}"]
 
 
 def test_an_adaptive_match_or_study_without_thresholds_for_the_library_stops_before_it_starts(

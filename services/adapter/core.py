@@ -40,7 +40,6 @@ the adapter's seed, as in the study).
 
 from __future__ import annotations
 
-import json
 import math
 import random
 from dataclasses import dataclass, field
@@ -59,8 +58,9 @@ from services.population.partners import build as build_partner
 from services.population.seat import SeatSpec
 from services.sim import observation as ob
 from services.table.table import DEFAULT_TABLE, Table
+from shared.config import read as read_config
 from shared.errors import UsageError
-from shared.game import N_ACTIONS, OBS_SIZE, Policy
+from shared.game import N_ACTIONS, OBS_SIZE, ROLES, Policy
 
 T = TypeVar("T")
 GROUPS = library.NAMED["grown"] / "groups.json"  # the grown library's partner groups (tsf library grow)
@@ -101,22 +101,19 @@ class Payoff:
         library grow` writes): every member of every group a partner type with its group's row,
         our policies the grown library's members of our seat (by the names they play under)."""
         path = path or groups_path()
-        try:
-            seat = json.loads(path.read_text())["seats"][role]
-        except (OSError, ValueError, KeyError) as error:
-            raise UsageError(
-                "--partners", "groups", f"no partner groups for the {role} seat ({error})"
-            ) from None
-        members = [(m, j) for j, g in enumerate(seat["groups"]) for m in g["members"]]
-        values = np.array([seat["groups"][j]["values"] for _, j in members], float)
+        seats = read_config(GroupsFile, path, "groups").seats if path.exists() else {}
+        if role not in seats:
+            raise UsageError("--partners", "groups", f"no partner groups for the {role} seat in {path}")
+        seat = seats[role]
+        members = [(m, j) for j, g in enumerate(seat.groups) for m in g.members]
         return cls(
             tuple(m for m, _ in members),
-            tuple(seat["teammates"]),
-            values,
-            tuple(g["name"] for g in seat["groups"]),
+            seat.teammates,
+            np.array([seat.groups[j].values for _, j in members], float),
+            tuple(g.name for g in seat.groups),
             tuple(j for _, j in members),
-            {str(t): float(v) for t, v in seat.get("thresholds", {}).items()},
-            {str(t): np.array(c, float) for t, c in seat.get("confusion", {}).items()},
+            dict(seat.thresholds),
+            {t: np.array(c, float) for t, c in seat.confusion.items()},
         )
 
     @property
@@ -165,6 +162,54 @@ class Payoff:
 def nearest_window(by_window: dict[str, T], window: int) -> T:
     """What a calibration measured at the window nearest `window` (its keys: windows in frames)."""
     return by_window[min(by_window, key=lambda t: abs(int(t) - window))]
+
+
+@dataclass(frozen=True)
+class Group:
+    """One partner group of a groups file: its members and what each of our teammates scores with them."""
+
+    name: str
+    members: tuple[str, ...]
+    values: tuple[float, ...]
+    partners: int = 0
+
+    def __post_init__(self) -> None:
+        if not self.members:
+            raise ValueError(f"group {self.name}: members = []: at least one member")
+
+
+@dataclass(frozen=True)
+class GroupSeat:
+    """The partner groups our seat adapts over: at least one group, a value for every teammate."""
+
+    teammates: tuple[str, ...]
+    groups: tuple[Group, ...]
+    names: tuple[str, ...] = ()
+    thresholds: dict[str, float] = field(default_factory=dict)
+    confusion: dict[str, tuple[tuple[float, ...], ...]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not self.groups or not self.teammates:
+            raise ValueError("groups and teammates: at least one of each")
+        for group in self.groups:
+            if len(group.values) != len(self.teammates):
+                raise ValueError(
+                    f"group {group.name}: {len(group.values)} values for {len(self.teammates)} teammates"
+                )
+
+
+@dataclass(frozen=True)
+class GroupsFile:
+    """A grown library's groups.json (`tsf library grow` writes it), by our seat."""
+
+    seats: dict[str, GroupSeat]
+    version: int = 1
+    population: str = ""
+
+    def __post_init__(self) -> None:
+        for role in self.seats:
+            if role not in ROLES:
+                raise ValueError(f"seats.{role}: no such seat; valid: {', '.join(ROLES)}")
 
 
 def groups_path() -> Path:
@@ -247,14 +292,36 @@ def ood_threshold(partner_role: str, window: int, path: Path | None = None) -> f
     remedy = f"measure it with `tsf calibrate-adapter --out {path}`, or choose a strategy without -ood"
     if not path.exists():
         raise StaleCalibration(f"no out-of-library thresholds at {path}: {remedy}")
-    record, now = json.loads(path.read_text()), library.manifest_hash()
-    if record.get("library") != now:
+    record, now = read_config(Calibration, path, "calibration"), library.manifest_hash()
+    if record.library != now:
         raise StaleCalibration(
-            f"{path} was measured with library {record.get('library')}, but the library is now "
-            f"{now}: {remedy}"
+            f"{path} was measured with library {record.library}, but the library is now {now}: {remedy}"
         )
-    thresholds = record["thresholds"][partner_role]
-    return float(nearest_window(thresholds, window))
+    if not record.thresholds.get(partner_role):
+        raise StaleCalibration(f"{path} has no thresholds for a {partner_role} partner: {remedy}")
+    return float(nearest_window(record.thresholds[partner_role], window))
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """A library's calibration.json (`tsf calibrate-adapter` writes it): the out-of-library
+    thresholds by partner seat and window, and what they were measured with."""
+
+    library: str
+    thresholds: dict[str, dict[str, float]]
+    quantile: float = 0.01
+    margin: float = 0.0
+    seeds: tuple[int, ...] = ()
+    partners: str = "library"
+    self_quantiles: dict[str, dict[str, dict[str, float]]] = field(default_factory=dict)
+    confusion: dict[str, dict[str, tuple[tuple[float, ...], ...]]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for role, by_window in self.thresholds.items():
+            if role not in ROLES or not all(window.isdigit() for window in by_window):
+                raise ValueError(
+                    f"thresholds.{role}: a table of windows (frames) for a seat of {', '.join(ROLES)}"
+                )
 
 
 class StaleCalibration(ValueError):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import re
@@ -321,9 +322,40 @@ def test_groups_are_identified_by_their_members_and_choose_by_their_rows(tmp_pat
 def test_groups_missing_or_uncalibrated_are_one_line(tmp_path) -> None:
     with pytest.raises(UsageError, match="no partner groups for the bait seat"):
         Payoff.from_groups("bait", tmp_path / "none.json")
-    (tmp_path / "groups.json").write_text(json.dumps(GROUPED).replace('"thresholds"', '"was"'))
+    uncalibrated = copy.deepcopy(GROUPED)
+    del uncalibrated["seats"]["shooter"]["thresholds"]
+    (tmp_path / "groups.json").write_text(json.dumps(uncalibrated))
     payoff = Payoff.from_groups("shooter", tmp_path / "groups.json")
     with pytest.raises(UsageError, match="no out-of-group thresholds"):
         threshold(AdapterConfig(partners="groups"), payoff)
     with pytest.raises(UsageError, match="skill model knows the library's policies"):
         AdapterConfig(strategy="bayes-dwell-ood-guard-skill", partners="groups")
+
+
+def _groups(**change: object) -> dict:
+    """GROUPED with the shooter seat's Q group (or, with `groups`, its group list) changed."""
+    record = copy.deepcopy(GROUPED)
+    seat = record["seats"]["shooter"]
+    if "groups" in change:
+        seat["groups"] = change.pop("groups")
+    seat["groups"][1:2] = [seat["groups"][1] | change] if seat["groups"] else []
+    return record
+
+
+@pytest.mark.parametrize(
+    ("record", "says"),
+    [
+        # no groups: once loaded, and a log of zero after the match had started
+        (_groups(groups=[]), "seats.shooter: groups and teammates: at least one of each"),
+        (_groups(members=[]), "groups[1]: group Q: members = []: at least one member"),
+        (_groups(values=[0.0, 4.0]), "group Q: 2 values for 3 teammates"),
+        (_groups(values=[0.0, "4", 3.0]), 'groups[1].values[1] = "4": a number expected'),
+        (_groups(member=["y"]), "groups[1].member: no such setting"),
+    ],
+)
+def test_a_wrong_groups_file_is_refused_before_play(tmp_path, record, says) -> None:
+    path = tmp_path / "groups.json"
+    path.write_text(json.dumps(record))
+    with pytest.raises(UsageError, match=f"^groups {path}: seats.shooter") as error:
+        Payoff.from_groups("shooter", path)
+    assert says in str(error.value) and "\n" not in str(error.value)

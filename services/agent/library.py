@@ -19,14 +19,13 @@ import json
 import os
 import re
 import shutil
-import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from dataclasses import fields as dataclass_fields
 from functools import cache
 from pathlib import Path
 
 from services.sim import observation as ob
-from shared import provenance
+from shared import config, provenance
 from shared.errors import UsageError
 from shared.game import OBS_SIZE, ROLES
 
@@ -88,6 +87,17 @@ class Recipe:
     demonstrator: dict[str, float] = field(default_factory=dict)  # a bait's warm start (train.py)
     root: Path = field(default=LIBRARY, compare=False)  # the library directory it is listed in
 
+    def __post_init__(self) -> None:
+        if self.role not in ROLES:
+            raise ValueError(f"{self.key}.role = {self.role!r}: one of {', '.join(ROLES)}")
+        if self.algorithm and self.features not in FEATURES:
+            raise ValueError(f"{self.key}.features = {self.features!r}: one of {', '.join(FEATURES)}")
+        if self.thrust_rule not in ("", *THRUST_RULES.values()):
+            rules = ", ".join(sorted(THRUST_RULES.values()))
+            raise ValueError(f"{self.key}.thrust_rule = {self.thrust_rule!r}: one of {rules}, or none")
+        if min(self.steps, self.temperature, self.speed_cap) < 0:
+            raise ValueError(f"{self.key}: steps, temperature and speed_cap are 0 or more")
+
 
 def roots() -> list[Path]:
     """The library directories: the shipped one, then those listed in TSF_LIBRARY: a directory, or
@@ -100,6 +110,20 @@ def roots() -> list[Path]:
 def _named(entry: str) -> Path:
     path = Path(entry)
     return NAMED[entry] if entry in NAMED and not path.is_dir() else path
+
+
+def check_roots() -> None:
+    """A UsageError for an entry of TSF_LIBRARY that names no library: checked as a command starts,
+    since every later message (a missing calibration, a table of other libraries) would point into
+    a directory that is not one."""
+    for entry in filter(None, os.environ.get("TSF_LIBRARY", "").split(os.pathsep)):
+        path = _named(entry)
+        if not path.is_dir():
+            raise UsageError(
+                "TSF_LIBRARY", entry, "no such library", [*NAMED, "a directory with a registry.toml"]
+            )
+        if not (path / "registry.toml").is_file():
+            raise UsageError("TSF_LIBRARY", entry, "is not a policy library (no registry.toml in it)")
 
 
 def table_path() -> Path:
@@ -158,23 +182,20 @@ def _registry(root: Path) -> dict[str, Recipe]:
 
 
 def _read(path: Path, root: Path) -> dict[str, Recipe]:
-    with open(path, "rb") as f:
-        raw = tomllib.load(f)
-    recipes = {}
-    for key, entry in raw.items():
-        entry = {k: tuple(v) if isinstance(v, list) else v for k, v in entry.items()}
-        if "frame" in entry:  # the registry's name for the view; renaming it would unbind the table
-            entry["view"] = entry.pop("frame")
-        recipe = Recipe(key=key, root=root, **entry)
-        if recipe.role not in ROLES:
-            raise ValueError(f"registry entry {key}: unknown role {recipe.role!r}")
-        if recipe.algorithm and recipe.features not in FEATURES:
-            raise ValueError(f"registry entry {key}: unknown feature set {recipe.features!r}")
-        if recipe.thrust_rule not in ("", *THRUST_RULES.values()):
-            rule, expected = recipe.thrust_rule, sorted(THRUST_RULES.values())
-            raise ValueError(f"registry entry {key}: unknown thrust_rule {rule!r}; expected {expected}")
-        recipes[key] = recipe
-    return recipes
+    """A registry file, checked whole (every entry's keys, kinds and values) before any is used."""
+    raw = config.load(path, "registry")
+    try:
+        return {key: _recipe(key, dict(entry), root) for key, entry in raw.items()}
+    except ValueError as error:
+        raise UsageError("registry", path, str(error)) from None
+
+
+def _recipe(key: str, entry: dict, root: Path) -> Recipe:
+    if "frame" in entry:  # the registry's name for the view; renaming it would unbind the table
+        entry["view"] = entry.pop("frame")
+    for name in ("key", "root") & entry.keys():
+        raise ValueError(f"{key}.{name}: no such setting (the section's name is the key)")
+    return replace(config.build(Recipe, entry | {"key": key}, f"{key}."), root=root)
 
 
 def keys(role: str | None = None) -> list[str]:

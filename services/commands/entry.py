@@ -14,6 +14,7 @@ from collections.abc import Sequence
 
 import typer
 
+from services.agent import library
 from shared import provenance
 from shared.errors import Failure, UsageError, missing_extra
 from shared.processes import adopt
@@ -49,6 +50,7 @@ def run(app: typer.Typer, args: Sequence[str] | None = None) -> int:
     provenance.set_command(args)
     where = f"tsf {args[0]}" if args and not args[0].startswith("-") else "tsf"  # the command, for the line
     try:
+        library.check_roots()
         status = typer.main.get_command(app).main(args or ["--help"], prog_name="tsf", standalone_mode=False)
     except typer.TyperException as error:  # click's exceptions, as typer ships them: usage errors exit 2
         context = getattr(error, "ctx", None)

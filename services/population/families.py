@@ -20,15 +20,18 @@ training or selection.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import itertools
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from services.agent.library import FEATURES
+from services.agent.networks import HEADS
 from services.population.human_like import parse_skill
+from shared import config
 from shared.errors import UsageError
 from shared.game import ROLES
 
@@ -164,77 +167,182 @@ def _number(value: float) -> str:
 
 
 def read(path: Path = SPEC) -> Spec:
-    """The spec at `path`, checked: a UsageError naming the first wrong key or value (`--population`)."""
-    try:
-        text = Path(path).read_bytes()
-        raw = tomllib.loads(text.decode())
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as error:
-        raise UsageError("--population", path, f"cannot be read as TOML ({error})") from None
-    top = {"seed", "games", "skills", "split", "groups", "selection", *ROLES}
-    _known(raw, top, path, "")
-    try:
-        seats = {role: _seat(role, raw[role], path) for role in ROLES}
-        spec = Spec(
-            seed=int(raw.get("seed", 0)),
-            games=int(raw.get("games", 4)),
-            skills=tuple(raw.get("skills", ())),
-            split={s: float(raw["split"][s]) for s in SPLITS},
-            groups={"most": int(raw["groups"]["most"]), "regret": float(raw["groups"]["regret"])},
-            selection={"most": int(raw["selection"]["most"]), "gain": float(raw["selection"]["gain"])},
-            seats=seats,
-            text_hash=hashlib.sha256(text).hexdigest()[:16],
-        )
-    except KeyError as missing:
-        raise UsageError("--population", path, f"lacks {missing.args[0]!r}") from None
-    except (TypeError, ValueError) as error:
-        raise UsageError("--population", path, str(error)) from None
-    if spec.games < 2 or spec.games % 2:
-        raise UsageError(
-            "--population", path, f"games = {spec.games}: an even number of at least 2 (two halves)"
-        )
-    if abs(sum(spec.split.values()) - 1.0) > 1e-9 or min(spec.split.values()) <= 0:
-        raise UsageError("--population", path, f"split = {spec.split}: positive fractions that add up to 1")
-    for skill in spec.skills:
-        try:
-            parse_skill(skill)
-        except ValueError as error:
-            raise UsageError("--population", path, str(error)) from None
+    """The spec at `path`, checked whole before anything is grown (every key at every depth, each
+    value's kind and range, no grid setting without values): a UsageError naming the file and the key path
+    (`--population`)."""
+    raw = config.read(SpecFile, path, "--population")
+    spec = Spec(
+        seed=raw.seed,
+        games=raw.games,
+        skills=raw.skills,
+        split=dataclasses.asdict(raw.split),
+        groups=dataclasses.asdict(raw.groups),
+        selection=dataclasses.asdict(raw.selection),
+        seats={role: getattr(raw, role).seat(role) for role in ROLES},
+        text_hash=hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16],
+    )
     return spec
 
 
-def _known(raw: dict, keys: set[str], path: Path, where: str) -> None:
-    for key in raw:
-        if key not in keys:
-            raise UsageError("--population", path, f"unknown key {where}{key}", sorted(keys))
+# The spec file's shape, read by shared.config: each table a dataclass that checks its own values.
 
 
-def _seat(role: str, raw: dict, path: Path) -> Seat:
-    _known(raw, {"library", "rule", "events", "response"}, path, f"{role}.")
-    rule, events, response = raw["rule"], raw["events"], raw["response"]
-    if rule["family"] != RULE_FAMILIES[role]:
-        raise ValueError(
-            f"{role}.rule.family = {rule['family']!r}: the {role}'s rule is {RULE_FAMILIES[role]!r}"
+@dataclass(frozen=True)
+class RuleGrid:
+    """A seat's `rule`: its scripted rule and the grid of its settings (each combination a member)."""
+
+    family: str
+    grid: dict[str, tuple[float, ...]]
+
+    def __post_init__(self) -> None:
+        for name, values in self.grid.items():
+            if not values or len(set(values)) != len(values):
+                raise ValueError(f"grid.{name} = {list(values)}: a list of distinct numbers, at least one")
+
+
+@dataclass(frozen=True)
+class EventsTable:
+    """A seat's `events`: how many events-trained partners, how long, kept at which levels."""
+
+    runs: int
+    steps: int
+    levels: tuple[float, ...]
+    learned: tuple[str, ...]
+    features: str
+    partners: tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        levels = list(self.levels)
+        if (
+            not levels
+            or len(levels) > len(LEVELS)
+            or levels != sorted(levels)
+            or not 0 < levels[0] <= levels[-1] <= 1
+        ):
+            raise ValueError(f"levels = {levels}: increasing fractions in (0, 1], at most {len(LEVELS)}")
+        if self.runs < 0 or self.steps < 1:
+            raise ValueError(f"runs = {self.runs}, steps = {self.steps}: 0 or more runs of at least 1 step")
+        _heads(self.learned)
+        _features(self.features)
+        if self.runs and not self.partners:
+            raise ValueError("partners = []: at least one partner to train with")
+
+
+@dataclass(frozen=True, kw_only=True)
+class ResponseTable:
+    """A seat's `response`: the recipe every group's best response is trained as (growth adds the
+    key, role, algorithm, seed and partners)."""
+
+    learned: tuple[str, ...]
+    features: str
+    reward: str
+    weights: dict[str, float] = dataclasses.field(default_factory=dict)
+    steps: int
+
+    def __post_init__(self) -> None:
+        _heads(self.learned)
+        _features(self.features)
+        if self.steps < 1 or not self.reward:
+            raise ValueError(f"steps = {self.steps}, reward = {self.reward!r}: at least 1 step, a reward")
+
+    def recipe(self) -> dict:
+        """The table as registry values (lists, no empty weights), as the file gave it."""
+        values = {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()}
+        return {k: v for k, v in values.items() if v or k != "weights"}
+
+
+@dataclass(frozen=True)
+class SeatTable:
+    """One partner seat's table: its three families and its best response."""
+
+    library: tuple[str, ...]
+    rule: RuleGrid
+    events: EventsTable
+    response: ResponseTable
+
+    def seat(self, role: str) -> Seat:
+        if self.rule.family != RULE_FAMILIES[role]:
+            raise UsageError(
+                "--population",
+                f"{role}.rule.family = {self.rule.family!r}",
+                f"the {role}'s rule is {RULE_FAMILIES[role]!r}",
+            )
+        events = self.events
+        return Seat(
+            role=role,
+            library=self.library,
+            grid=self.rule.grid,
+            runs=events.runs,
+            steps=events.steps,
+            levels=events.levels,
+            learned=events.learned,
+            features=events.features,
+            partners=events.partners,
+            response=self.response.recipe(),
         )
-    _known(events, {"runs", "steps", "levels", "learned", "features", "partners"}, path, f"{role}.events.")
-    levels = tuple(float(x) for x in events["levels"])
-    if (
-        not levels
-        or len(levels) > len(LEVELS)
-        or list(levels) != sorted(levels)
-        or not 0 < levels[0] <= levels[-1] <= 1
-    ):
-        raise ValueError(
-            f"{role}.events.levels = {list(levels)}: increasing fractions in (0, 1], at most {len(LEVELS)}"
-        )
-    return Seat(
-        role=role,
-        library=tuple(raw["library"]),
-        grid={name: tuple(float(v) for v in values) for name, values in rule["grid"].items()},
-        runs=int(events["runs"]),
-        steps=int(events["steps"]),
-        levels=levels,
-        learned=tuple(events["learned"]),
-        features=str(events["features"]),
-        partners=tuple(events["partners"]),
-        response=dict(response),
-    )
+
+
+@dataclass(frozen=True)
+class Split:
+    train: float
+    validation: float
+    test: float
+
+    def __post_init__(self) -> None:
+        shares = dataclasses.astuple(self)
+        if abs(sum(shares) - 1.0) > 1e-9 or min(shares) <= 0:
+            raise ValueError(f"{dataclasses.asdict(self)}: positive fractions that add up to 1")
+
+
+@dataclass(frozen=True)
+class Groups:
+    most: int
+    regret: float
+
+    def __post_init__(self) -> None:
+        if self.most < 1 or self.regret < 0:
+            raise ValueError(
+                f"most = {self.most}, regret = {self.regret}: at least 1 group, a regret of 0 or more"
+            )
+
+
+@dataclass(frozen=True)
+class Selection:
+    most: int
+    gain: float
+
+    def __post_init__(self) -> None:
+        if self.most < 1 or self.gain < 0:
+            raise ValueError(
+                f"most = {self.most}, gain = {self.gain}: at least 1 member, a gain of 0 or more"
+            )
+
+
+@dataclass(frozen=True)
+class SpecFile:
+    """A population spec as its file holds it."""
+
+    split: Split
+    groups: Groups
+    selection: Selection
+    bait: SeatTable
+    shooter: SeatTable
+    seed: int = 0
+    games: int = 4
+    skills: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.games < 2 or self.games % 2:
+            raise ValueError(f"games = {self.games}: an even number of at least 2 (two halves)")
+        for skill in self.skills:
+            parse_skill(skill)
+
+
+def _heads(learned: tuple[str, ...]) -> None:
+    if not learned or not set(learned) <= set(HEADS):
+        raise ValueError(f"learned = {list(learned)}: one or more of {', '.join(HEADS)}")
+
+
+def _features(features: str) -> None:
+    if features not in FEATURES:
+        raise ValueError(f"features = {features!r}: one of {', '.join(FEATURES)}")

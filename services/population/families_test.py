@@ -45,7 +45,15 @@ def test_stand_ins_at_each_skill():
 @pytest.mark.parametrize(
     ("change", "says"),
     [
-        (("seed = 2026", "sead = 2026"), "unknown key sead"),
+        (("seed = 2026", "sead = 2026"), "sead: no such setting"),
+        # every depth, kind and range (issue 59): a nested key, a negative count, a grid as text,
+        # repeated grid values, a seat with no members
+        (('reward = "drawing-fire"', 'reword = "drawing-fire"'), "bait.response.reword: no such setting"),
+        (("runs = 10, steps = 150000", "runs = 10, steps = -5"), "bait.events: runs = 10, steps = -5"),
+        (("speed = [1.5, 2.5, 3.5]", 'speed = "1.5"'), 'bait.rule.grid.speed = "1.5": a list'),
+        (("speed = [1.5, 2.5, 3.5]", "speed = [1.5, 1.5]"), "grid.speed = [1.5, 1.5]: a list of distinct"),
+        (('features = "shooter", partners', 'features = "shoter", partners'), "features = 'shoter'"),
+        (("split = { train = 0.5,", "split = { train = 0.6,"), "positive fractions that add up to 1"),
         (("games = 4 ", "games = 3 "), "games = 3"),
         (('skills = ["novice"', 'skills = ["newbie"'), "skill=newbie"),
         (("levels = [0.25, 0.5, 1.0]", "levels = [0.5, 0.25, 1.0]"), "increasing fractions"),
@@ -59,3 +67,14 @@ def test_a_wrong_spec_is_one_line(tmp_path, change, says):
     with pytest.raises(UsageError, match="--population") as error:
         read(path)
     assert says in str(error.value) and "\n" not in str(error.value)
+
+
+def test_a_seat_cannot_end_without_members(tmp_path):
+    """No library, no events runs, and a grid setting with no values (once: no rule members)."""
+    text = SPEC.read_text().replace('library = ["S1", "S2", "S3", "S4", "S5", "S6", "S7"]', "library = []")
+    text = text.replace("aim_tolerance = [3.0, 8.0] }", "aim_tolerance = [] }")
+    text = text.replace("runs = 10, steps = 150000", "runs = 0, steps = 150000")
+    path = tmp_path / "population.toml"
+    path.write_text(text)
+    with pytest.raises(UsageError, match="aim_tolerance = \\[\\]: a list of distinct numbers, at least one"):
+        read(path)

@@ -60,11 +60,9 @@ def build_report(
     partners = partners[partners["frames"] > 0].reset_index(drop=True)
     config = _common_config(matches)
     roles = sorted(set(partners["partner_role"]))
-    told, references = step("reference games of the library's seats"), {}
-    for done, role in enumerate(roles):
-        told(done, len(roles))
-        references[role] = analysis.reference_vectors(role, table, reference_games, config)
-    told(len(roles), len(roles))
+    references = _references(
+        roles, table, reference_games, config, step("reference games of the library's seats")
+    )
     points, variance = analysis.policy_space(partners, references)
     similarity = analysis.similarity_to_optimal(partners, table)
     correlations = analysis.correlations(similarity)
@@ -82,19 +80,7 @@ def build_report(
     )
     report.provenance = provenance(**library.provenance_hashes(table_path), config=config)
     report.data = {
-        "table": pd.DataFrame(
-            [
-                {
-                    "bait": b,
-                    "shooter": s,
-                    "mean": table.mean(b, s),
-                    "stderr": table.stderr(b, s),
-                    "best_shooter": table.best_shooter(b) == s,
-                }
-                for b in table.baits
-                for s in table.shooters
-            ]
-        ),  # fmt: skip
+        "table": _table_frame(table),
         "partners": partners,
         "references": pd.concat(
             [ref.rename_axis("policy").reset_index().assign(role=role) for role, ref in references.items()]
@@ -118,17 +104,56 @@ def build_report(
         frame.to_csv(out / "data" / f"{name}.csv", index=False)
         frame.to_parquet(out / "data" / f"{name}.parquet", index=False)
 
-    fig = out / "figures"
-    report.figures["table"] = heatmap(table, fig / "table.png")
-    report.figures["policy_space"] = figures.policy_space(points, variance, fig / "policy_space.png")
-    report.figures["similarity"] = figures.similarity(similarity, correlations, fig / "similarity.png")
-    if seat:
-        report.figures["logprob_curves"] = figures.curves(curves, trial_match.config.fps, fig / "logprob.png")
-    report.figures["variants"] = figures.variants(summary, tests, fig / "variants.png")
-    if not timeline.empty:
-        report.figures["adapter"] = figures.adapter(timeline, fig / "adapter.png")
+    _draw(report, table, out / "figures", trial_match.config.fps if seat else 0)
     write_html(report.html, "Team Space Fortress: study report", _intro(report), _sections(report, seat))
     return report
+
+
+def _references(
+    roles: list[str], table: Table, games: int, config: GameConfig, told: Callable[[int, int], None]
+) -> dict[str, pd.DataFrame]:
+    """The library's seats' own behaviour vectors, by partner role (the policy space's landmarks)."""
+    references = {}
+    for done, role in enumerate(roles):
+        told(done, len(roles))
+        references[role] = analysis.reference_vectors(role, table, games, config)
+    told(len(roles), len(roles))
+    return references
+
+
+def _table_frame(table: Table) -> pd.DataFrame:
+    return pd.DataFrame(
+        [
+            {
+                "bait": b,
+                "shooter": s,
+                "mean": table.mean(b, s),
+                "stderr": table.stderr(b, s),
+                "best_shooter": table.best_shooter(b) == s,
+            }
+            for b in table.baits
+            for s in table.shooters
+        ]
+    )
+
+
+def _draw(report: Report, table: Table, fig: Path, fps: int) -> None:
+    """The report's figures from its data (a trial's curves where `fps`: a trial was chosen)."""
+    data = report.data
+    report.figures["table"] = heatmap(table, fig / "table.png")
+    report.figures["policy_space"] = figures.policy_space(
+        data["policy_space"], data["policy_space_variance"], fig / "policy_space.png"
+    )
+    report.figures["similarity"] = figures.similarity(
+        data["similarity"], data["correlations"], fig / "similarity.png"
+    )
+    if fps:
+        report.figures["logprob_curves"] = figures.curves(data["logprob_curves"], fps, fig / "logprob.png")
+    report.figures["variants"] = figures.variants(
+        data["variants"], data["adaptive_tests"], fig / "variants.png"
+    )
+    if not data["adapter"].empty:
+        report.figures["adapter"] = figures.adapter(data["adapter"], fig / "adapter.png")
 
 
 def _common_config(matches: list[Match]) -> GameConfig:

@@ -27,8 +27,8 @@ from pathlib import Path
 
 from services.population.adaptive import AdapterConfig
 from services.population.seat import AdaptiveSeat, SeatSpec
-from services.study import settings
 from services.study.crowd import FAILS, Crowd
+from shared import config
 from shared.errors import UsageError
 from shared.game import DURATION, FPS, ROLES, SEEDS, other
 from shared.secret import same_secret
@@ -195,7 +195,7 @@ class StudyConfig:
         """Read a study's TOML file (services/study/configs/ has the original two experiments); a
         file that is not a study's is a UsageError that says why."""
         try:
-            return settings.build(cls, tomllib.loads(Path(path).read_text()))
+            return config.build(cls, tomllib.loads(Path(path).read_text()))
         except UnicodeDecodeError:
             raise UsageError("CONFIG", path, "not a study: not text (UTF-8)") from None
         except ValueError as error:  # TOML syntax, unknown or missing settings, bad kinds or values

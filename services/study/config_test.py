@@ -6,7 +6,7 @@ import pytest
 
 from services.study.core import StudyConfig
 from services.study.crowd import Bonus, Crowd
-from services.study.settings import build
+from shared.config import build
 
 VARIANT = {"name": "a", "bait": "B1", "shooter": "S1"}
 
@@ -32,7 +32,7 @@ def test_a_study_is_built_with_its_nested_tables() -> None:
             {"name": "s", "variants": [VARIANT], "trial_secnds": 5},
             "trial_secnds: no such setting; valid: name,",
         ),
-        ({"variants": [VARIANT]}, "name: missing (every study needs it)"),
+        ({"variants": [VARIANT]}, "name: missing (a required setting)"),
         ({"name": "s", "variants": [{"bait": "B1"}]}, "variants[0].name: missing"),
         (
             {"name": "s", "variants": [{**VARIANT, "colour": 1}]},
@@ -52,7 +52,7 @@ def test_a_study_is_built_with_its_nested_tables() -> None:
         ),
         (
             {"name": "s", "variants": [VARIANT], "crowd": {"attention_checks": ["1"]}},
-            "a list [...] of whole numbers",
+            'crowd.attention_checks[0] = "1": a whole number expected',
         ),
         (
             {"name": "s", "variants": [VARIANT], "instructions": {"pilot": "fly"}},

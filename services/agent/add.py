@@ -56,9 +56,7 @@ def add(
         "features": "all",
         "description": description,
     }
-    with open(directory / "registry.toml", "a") as f:  # JSON strings are TOML basic strings
-        f.write(f"\n[{key}]\n" + "".join(f"{name} = {json.dumps(value)}\n" for name, value in fields.items()))
-    library._registry.cache_clear()
+    library.record(directory, {key: fields})
     entry = {
         "file": str(path.relative_to(directory)),
         "sha256": library.file_hash(path),

@@ -27,6 +27,7 @@ from pathlib import Path
 from services.sim import observation as ob
 from shared import config, provenance
 from shared.errors import UsageError
+from shared.files import write_json
 from shared.game import OBS_SIZE, ROLES
 
 LIBRARY = Path(__file__).parent / "library"
@@ -170,7 +171,7 @@ def adopt(root: Path, keys: list[str]) -> None:
             sections[list(sections)[-1]].append(line)
     with open(root / "registry.toml", "a") as f:
         f.write("".join("\n" + "\n".join(sections[k]).strip() + "\n" for k in missing))
-    _registry.cache_clear()
+    forget()
 
 
 @cache
@@ -289,6 +290,71 @@ def learned(chosen: list[str]) -> list[str]:
         if key not in trainable:
             raise UsageError("KEYS", key, "not a learned policy of the library", trainable)
     return chosen or trainable
+
+
+# --- writing a library: every registry and manifest is written here --------------------------------
+
+
+def forget() -> None:
+    """Read the registries again when next asked: what a writer here does after writing one."""
+    _registry.cache_clear()
+
+
+def record(root: Path, recipes: dict[str, dict]) -> None:
+    """Add the recipes (key -> fields) that the library at `root` lacks to the end of its registry,
+    the directory made if need be; an entry it has is left as it is."""
+    root.mkdir(parents=True, exist_ok=True)
+    have = registry(root) if (root / "registry.toml").exists() else {}
+    with open(root / "registry.toml", "a") as f:
+        f.write("".join(_entry(key, fields) for key, fields in recipes.items() if key not in have))
+    forget()
+
+
+def write_registry(root: Path, recipes: dict[str, dict]) -> None:
+    """The registry of the library at `root`, written over with exactly `recipes` (key -> fields)."""
+    root.mkdir(parents=True, exist_ok=True)
+    (root / "registry.toml").write_text("".join(_entry(key, fields) for key, fields in recipes.items()))
+    forget()
+
+
+def write_manifest(root: Path, entries: dict[str, dict]) -> None:
+    """The manifest of the library at `root`, written whole (shared/files.py) with exactly `entries`."""
+    write_json(root / "manifest.json", entries)
+
+
+def copy_member(source: Path, entry: dict, target: Path, key: str) -> dict:
+    """A trained policy's weights (its manifest `entry` in the library at `source`) copied into the
+    library at `target` as `key`; its manifest entry there, naming the new file and its hash."""
+    path = target / "weights" / f"{key}.npz"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(source / entry["file"], path)
+    return entry | {"file": str(path.relative_to(target)), "sha256": file_hash(path)}
+
+
+def adopt_members(source: Path, target: Path, keys: list[str]) -> None:
+    """The trained `keys` of the library at `source` copied into the library at `target` (weights and
+    manifest entries; its registry lists them already)."""
+    entries, have = manifest(source), manifest(target)
+    write_manifest(target, have | {key: copy_member(source, entries[key], target, key) for key in keys})
+
+
+def _entry(key: str, fields: dict) -> str:
+    """One registry entry as TOML (strings, numbers, booleans, lists, tables of numbers)."""
+
+    def value(v: object) -> str:
+        if isinstance(v, str):
+            return json.dumps(v)  # a JSON string is a TOML basic string
+        if isinstance(v, bool):
+            return str(v).lower()
+        if isinstance(v, int | float):
+            return repr(v)
+        if isinstance(v, list | tuple):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        if isinstance(v, dict):
+            return "{ " + ", ".join(f"{k} = {value(x)}" for k, x in v.items()) + " }"
+        raise TypeError(f"{key}: cannot write {v!r} to a registry")
+
+    return f"\n[{key}]\n" + "".join(f"{name} = {value(v)}\n" for name, v in fields.items())
 
 
 def record_entry(out: Path, key: str, entry: dict) -> None:

@@ -232,3 +232,24 @@ def test_the_grown_library_is_named_and_plays_with_its_own_table(tmp_path, monke
         assert policy.probs(np.zeros(64, np.float32)).sum() == pytest.approx(1.0)
     (tmp_path / "grown").mkdir()
     assert library.roots()[-1] == Path("grown")
+
+
+def test_the_writer_records_what_a_library_lacks_and_copies_members_with_their_hashes(tmp_path):
+    mine, other = tmp_path / "mine", tmp_path / "other"
+    rule = {"role": "bait", "family": "circle", "description": 'a "circle"', "rule": {"radius": 150.0}}
+    learned = {"role": "shooter", "family": "events", "description": "x", "algorithm": "PPO"}
+    learned |= {"learned": ["turn"], "features": "shooter", "weights": {"kill": 1.0}, "steps": 2048}
+    library.record(mine, {"MB1": rule})
+    library.record(mine, {"MB1": rule | {"description": "changed"}, "MS1": learned})  # MB1 is kept
+    recorded = library.registry(mine)
+    assert list(recorded) == ["MB1", "MS1"] and recorded["MB1"].description == 'a "circle"'
+    assert recorded["MS1"].weights == {"kill": 1.0} and recorded["MS1"].learned == ("turn",)
+    library.write_registry(other, {"MS1": learned})
+    (other / "weights").mkdir()
+    (other / "weights" / "MS1.npz").write_bytes(b"weights")
+    library.write_manifest(other, {"MS1": {"file": "weights/MS1.npz", "sha256": "stale", "steps": 2048}})
+    library.adopt_members(other, mine, ["MS1"])
+    entry = library.manifest(mine)["MS1"]
+    assert (mine / entry["file"]).read_bytes() == b"weights" and entry["steps"] == 2048
+    assert entry["sha256"] == library.file_hash(mine / "weights" / "MS1.npz")  # the copy's own hash
+    assert list(library.registry(other)) == ["MS1"]

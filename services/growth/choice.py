@@ -32,6 +32,11 @@ class Grid:
     def columns(self, names: list[str]) -> np.ndarray:
         return self.kills[:, [self.candidates.index(n) for n in names]]
 
+    def only(self, partners: list[str]) -> Grid:
+        """The grid of `partners` alone (rows in that order)."""
+        index = [self.partners.index(p) for p in partners]
+        return Grid(tuple(partners), self.candidates, self.kills[index])
+
     @classmethod
     def of(cls, record: dict) -> Grid:
         """A grid as a cross-play file holds it (`partners`, `candidates`, `kills` as lists)."""

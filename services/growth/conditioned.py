@@ -21,7 +21,6 @@ steps (from the run's checkpoints), compared alike: would responses at the study
 from __future__ import annotations
 
 import json
-import shutil
 from collections.abc import Callable
 from pathlib import Path
 
@@ -32,11 +31,15 @@ from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 from services.agent import library
 from services.growth import choice
 from services.growth.choice import Grid
-from services.growth.crossplay import pair_jobs
-from services.growth.grow import GROUPS, RESPONSE, Grow, _labels, _recipe_fields, _toml, _write
+from services.growth.crossplay import kills_of, pair_jobs
+from services.growth.groups import labels
+from services.growth.library import GROUPS, recipe_fields
+from services.growth.responses import RESPONSE, response_partners
 from services.growth.training import train_levels
+from services.growth.workspace import Workspace
 from services.training.algorithms import export, make_model
 from services.training.loop import whole_rollouts
+from shared.files import write_json
 from shared.game import ROLES, other
 
 PREFIX = {"bait": "CB", "shooter": "CS"}  # the keys of the conditioned teammate told each group
@@ -122,13 +125,13 @@ def compare(
     return out
 
 
-def run_conditioned(grow: Grow, ours: str, steps: int | None = None, separate: bool = False) -> dict:
+def run_conditioned(grow: Workspace, ours: str, steps: int | None = None, separate: bool = False) -> dict:
     """The experiment for seat `ours` on the finished run `grow`: the teammates trained (once, into
     a library of their own: `conditioned-OURS-STEPS/`, the conditioned network told each group;
     with `separate`, `responses-OURS-STEPS/`, each group's best response trained on to `steps`), their
     games with every held-out partner and the comparison (once: that directory's name + `.json`)."""
 
-    grow._bind()  # a run of another spec is refused
+    grow.bind()  # a run of another spec is refused
     out, partner_role = grow.out, other(ours)
     groups = json.loads((out / "groups.json").read_text())[partner_role]["groups"]
     responses = [f"{RESPONSE[ours]}{j + 1}" for j in range(len(groups))]
@@ -150,15 +153,14 @@ def run_conditioned(grow: Grow, ours: str, steps: int | None = None, separate: b
         seeds = list(range(grow.spec.games))
         teams = [(p, c) if partner_role == "bait" else (c, p) for p in held.partners for c in teammates]
         jobs = pair_jobs(root.name, teams, seeds)
-        values = grow._jobs(root.name, jobs, roots=[grow.population_dir, root])
-        flat = [v for job in values for v in job]
-        record["kills"] = np.reshape(flat, (len(held.partners), len(teammates), len(seeds))).round(4).tolist()
+        values = grow.jobs(root.name, jobs, roots=[grow.population_dir, root])
+        record["kills"] = kills_of(values, len(held.partners), len(teammates), len(seeds))
     played = Grid(held.partners, tuple(teammates), np.array(record["kills"]))
     grouping = Grid.of(json.loads((out / "grouping.json").read_text())[partner_role])
-    placed = choice.place(held, grouping, _labels(grouping, groups))
+    placed = choice.place(held, grouping, labels(grouping, groups))
     grown = json.loads((grow.library_dir / GROUPS).read_text())["seats"][ours]
     switching = [grown["names"][int(np.argmax(g["values"]))] for g in grown["groups"]]
-    sides = grow._sides()
+    sides = grow.sides()
     side = np.array([sides[p] for p in held.partners])
     person = np.array([p.startswith("human(") for p in held.partners])
     parts = {}
@@ -186,16 +188,16 @@ def run_conditioned(grow: Grow, ours: str, steps: int | None = None, separate: b
     validation = record["figures"]["validation"]  # the newcomer must win, one-sided at 5 %
     wins = validation["difference"] > 1.645 * (validation["difference se"] or np.inf)
     record["kept"] = record["teammates"] if wins else "switching"
-    _write(done, record)
+    write_json(done, record)
     return record
 
 
 def _conditioned_library(
-    grow: Grow, ours: str, groups: list[list[str]], steps: int, root: Path, teammates: list[str]
+    grow: Workspace, ours: str, groups: list[list[str]], steps: int, root: Path, teammates: list[str]
 ) -> None:
     """The conditioned network, trained with every group's partners at once, told each group."""
 
-    partners = [grow.response_partners(members) for members in groups]
+    partners = [response_partners(grow.spec, members) for members in groups]
     recipe = dict(grow.spec.seats[ours].response) | {
         "role": ours,
         "family": "conditioned",
@@ -207,11 +209,9 @@ def _conditioned_library(
     }
     recipe |= {"frame": "world"} if ours == "shooter" else {}
     staging = grow.out / f"{root.name}-recipe"  # in no library in use, as grow's staging
-    staging.mkdir(exist_ok=True)
-    (staging / "registry.toml").write_text(_toml(PREFIX[ours], recipe))
-    library._registry.cache_clear()
+    library.write_registry(staging, {PREFIX[ours]: recipe})
     group_of = np.array([j for j, names in enumerate(partners) for _ in names])
-    with grow._roots([grow.population_dir]):
+    with grow.playing([grow.population_dir]):
         trained = library.registry(staging)[PREFIX[ours]]
         arrays = train_conditioned(trained, staging, group_of, steps, recipe["seed"])
     recipes, manifest = {}, {}
@@ -228,12 +228,12 @@ def _conditioned_library(
             "seed": recipe["seed"],
             "command": f"tsf library condition {grow.out} --seat {ours} --steps {steps}",
         }
-    (root / "registry.toml").write_text("".join(_toml(k, r) for k, r in recipes.items()))
-    _write(root / "manifest.json", manifest)
+    library.write_registry(root, recipes)
+    library.write_manifest(root, manifest)
 
 
 def _separate_library(
-    grow: Grow, ours: str, groups: list[list[str]], steps: int, root: Path, teammates: list[str]
+    grow: Workspace, ours: str, groups: list[list[str]], steps: int, root: Path, teammates: list[str]
 ) -> None:
     """Each group's best response (the run's own recipe, in its staging) trained on to `steps`
     from its checkpoint, under the key `teammates` gives it."""
@@ -241,17 +241,13 @@ def _separate_library(
     recipes, manifest = {}, {}
     for j, name in enumerate(teammates):
         key = f"{RESPONSE[ours]}{j + 1}"
-        with grow._roots([grow.population_dir]):
+        with grow.playing([grow.population_dir]):
             train_levels(key, grow.staging, {key: steps}, grow.runs)
-        entry = library.manifest(grow.staging)[key]
-        path = root / "weights" / f"{name}.npz"
-        path.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(grow.staging / entry["file"], path)
+        manifest[name] = library.copy_member(grow.staging, library.manifest(grow.staging)[key], root, name)
         recipe = library.registry(grow.staging)[key]
-        recipes[name] = _recipe_fields(recipe) | {"steps": steps, "description": recipe.description}
-        manifest[name] = entry | {"file": str(path.relative_to(root)), "sha256": library.file_hash(path)}
-    (root / "registry.toml").write_text("".join(_toml(k, r) for k, r in recipes.items()))
-    _write(root / "manifest.json", manifest)
+        recipes[name] = recipe_fields(recipe) | {"steps": steps, "description": recipe.description}
+    library.write_registry(root, recipes)
+    library.write_manifest(root, manifest)
 
 
 def markdown(record: dict) -> str:

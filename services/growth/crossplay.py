@@ -1,16 +1,77 @@
-"""Cross-play games as jobs of the job system (kind `pairs`): teams of a bait and a shooter, each
-named in the partner grammar, over seeds; a worker plays every job it is handed as the lanes of one
-batch (evaluate.play_teams), so a value depends on its team and seed only."""
+"""Stages 2 and 5, cross-play: partners of each seat with every candidate teammate of the other
+seat, over the spec's seeds (`grouping`: the training members with the study's policies and the
+rule grid; `held-out`: the validation and test members, with their stand-ins, with the best
+responses too).
+
+The games are jobs of the job system (kind `pairs`): teams of a bait and a shooter, each named in
+the partner grammar, over seeds; a worker plays every job it is handed as the lanes of one batch
+(evaluate.play_teams), so a value depends on its team and seed only."""
 
 from __future__ import annotations
 
 import itertools
+import json
 
+import numpy as np
+
+from services.agent import library
 from services.evaluation.evaluate import play_teams
+from services.growth.choice import Grid
+from services.growth.workspace import Workspace, is_library
 from services.jobs.core import Spec, spec
 from services.population.seat import seats_of
+from shared.files import write_json
+from shared.game import ROLES, other
 
 PAIRS = 128  # teams of one job (x seeds games): a batch of a few hundred lanes
+
+
+def crossplay(ws: Workspace, stage: str, partners: dict[str, list[str]]) -> dict[str, Grid]:
+    """Every partner of each seat with every candidate teammate of the other seat, over the
+    spec's seeds; written to STAGE.json."""
+    done = ws.out / f"{stage}.json"
+    if not done.exists():
+        seeds = list(range(ws.spec.games))
+        plan, jobs = {}, []
+        for role in ROLES:
+            candidates = candidates_of(ws, other(role), responses=stage != "grouping")
+            teams = [(p, c) if role == "bait" else (c, p) for p in partners[role] for c in candidates]
+            mine = pair_jobs(f"{stage}-{role}", teams, seeds)
+            plan[role] = (partners[role], candidates, slice(len(jobs), len(jobs) + len(mine)))
+            jobs += mine
+        games = sum(job.size for job in jobs)
+        ws.say(f"{stage}: {games:,} games of cross-play")
+        values = ws.jobs(stage, jobs, roots=[ws.population_dir, ws.responses_dir])
+        record = {}
+        for role, (rows, columns, theirs) in plan.items():
+            kills = kills_of(values[theirs], len(rows), len(columns), len(seeds))
+            record[role] = {"partners": rows, "candidates": columns, "kills": kills}
+        write_json(done, record)
+    record = json.loads(done.read_text())
+    return {r: Grid.of(g) for r, g in record.items()}
+
+
+def kills_of(values: list[list], partners: int, teammates: int, seeds: int) -> list:
+    """The values of pair jobs over (partner, teammate) teams, as a cross-play file holds them:
+    (partners, teammates, seeds) kills/min, rounded."""
+    flat = [v for job in values for v in job]
+    return np.reshape(flat, (partners, teammates, seeds)).round(4).tolist()
+
+
+def candidates_of(ws: Workspace, role: str, responses: bool) -> list[str]:
+    """The teammates of `role` a library may be chosen from: the study's policies, the rule
+    grid's training members (so that no test partner is also a candidate), and (once trained)
+    the best responses."""
+    sides = ws.sides()
+    chosen = [
+        m.name
+        for m in ws.spec.members(role)
+        if m.family == "library" or (m.family == "rule" and sides[m.name] == "train")
+    ]
+    if not responses:
+        return chosen
+    trained = library.registry(ws.responses_dir) if is_library(ws.responses_dir) else {}
+    return chosen + [k for k, r in trained.items() if r.role == role]
 
 
 def pair_jobs(label: str, teams: list[tuple[str, str]], seeds: list[int]) -> list[Spec]:

@@ -8,11 +8,9 @@ the level's weights and manifest entry are copied under the level's key (`PB03` 
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 from services.agent import library
-from services.agent.library import record_entry
 from services.training.loop import train
 
 
@@ -26,9 +24,5 @@ def train_levels(key: str, root: Path, levels: dict[str, int], runs: Path) -> fl
     for name, steps in levels.items():
         entry = train(key, root, steps=steps, run_dir=runs, progress=False, every=max(steps // 4, 50_000))
         if name != key:
-            path = root / "weights" / f"{name}.npz"
-            shutil.copyfile(root / entry["file"], path)
-            record_entry(
-                root, name, entry | {"file": str(path.relative_to(root)), "sha256": library.file_hash(path)}
-            )
+            library.record_entry(root, name, library.copy_member(root, entry, root, name))
     return float(entry.get("score", {}).get("kills_per_minute", 0.0))

@@ -116,7 +116,7 @@ def test_a_proxy_joins_a_library_as_a_users_model_does(proxy, tmp_path, monkeypa
     args = ["library", "add", "MYPROXY", str(out), "--role", "bait", "--library", str(mine), "--games", "1"]
     assert run(app, args) == 0
     monkeypatch.setenv("TSF_LIBRARY", str(mine))
-    library._registry.cache_clear()
+    library.forget()
     joined, direct = networks.load("MYPROXY"), policy_for(f"proxy:{out}", "bait")
     assert isinstance(joined, ProxyPolicy) and library.registry()["MYPROXY"].family == "proxy"
     obs = np.random.default_rng(0).normal(size=(20, 64)).astype(np.float32)

@@ -190,8 +190,8 @@ def test_a_recipe_trains_with_any_policy_the_grammar_names(tmp_path):
     env = RecipeVecEnv(replace(recipe, partners=partners), 2, root=root)
     rule = env.env.partners[0]
     assert rule.key == "mirror(placed_distance=30,max_speed=4)" and rule.placed_distance == 30.0
-    with open(root / "registry.toml", "a") as f:
-        f.write('\n[GB9]\nrole = "bait"\nfamily = "circle"\ndescription = "x"\nrule = { radius = 150.0 }\n')
-    library._registry.cache_clear()
+    library.record(
+        root, {"GB9": {"role": "bait", "family": "circle", "description": "x", "rule": {"radius": 150.0}}}
+    )
     circle = networks.load("GB9", root=root)
     assert isinstance(circle, CircleBait) and circle.radius == 150.0 and circle.key == "GB9"

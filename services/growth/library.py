@@ -1,0 +1,167 @@
+"""Stage 7, the library: the selected members under keys of their own (GB1.., GS1..), a library
+that plays without the study's; its self-play table P with a heatmap, the adapter's calibration,
+and the partner groups the adaptive agent identifies (`groups.json`: each group's members and what
+each member of ours scores with it, with their out-of-library thresholds). Built once: a run
+resumed after it reads it back. The figures on the test population are summary.py's.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+from services.agent import library
+from services.growth import choice
+from services.growth.choice import Grid
+from services.growth.groups import labels
+from services.growth.workspace import Workspace, is_library
+from services.table.plot import heatmap
+from services.table.sweep import cell_spec
+from services.table.table import CHUNK, Table, assemble, jobs
+from shared.files import write_json
+from shared.game import other
+
+PREFIX = {"bait": "GB", "shooter": "GS"}  # the grown library's keys
+GROUPS = "groups.json"  # the partner groups the adaptive agent identifies, in the grown library
+MEMBERS = "members.json"  # the grown library's keys -> the names of the members they stand for
+# A recipe's fields that a grown library's entry keeps, where they are set.
+FIELDS = (
+    "role",
+    "family",
+    "algorithm",
+    "learned",
+    "features",
+    "reward",
+    "weights",
+    "speed_cap",
+    "thrust_rule",
+    "temperature",
+    "steps",
+    "seed",
+    "partners",
+    "rule",
+)
+
+
+def build(
+    ws: Workspace, selection: dict, held_out: dict[str, Grid], groups: dict, grouping: dict[str, Grid]
+) -> None:
+    """The grown library with its tables, and its partner groups, each made once."""
+    if not (ws.library_dir / "calibration.json").exists():
+        members(ws, selection)
+        tables(ws)
+    if not (ws.library_dir / GROUPS).exists():
+        partner_groups(ws, selection, held_out, groups, grouping)
+
+
+def members(ws: Workspace, selection: dict) -> dict[str, str]:
+    """The selected members under the grown library's keys, each with its recipe (and weights):
+    a self-contained library (the study's library is not needed to play it)."""
+    entries, manifest, names = {}, {}, {}
+    study = library.registry(library.LIBRARY)
+    responses = library.registry(ws.responses_dir) if is_library(ws.responses_dir) else {}
+    if ws.library_dir.exists():
+        shutil.rmtree(ws.library_dir)
+    for ours, steps in selection.items():
+        for i, name in enumerate(steps[-1]["library"]):
+            key = f"{PREFIX[ours]}{i + 1}"
+            names[key] = name
+            source = study.get(name) or responses.get(name)
+            if source is None:  # a rule with its settings
+                entries[key] = {
+                    "role": ours,
+                    "family": name.split("(")[0],
+                    "description": f"the rule {name}",
+                    "rule": rule_settings(name),
+                }
+                continue
+            entries[key] = recipe_fields(source) | {"description": f"{name}: {source.description}"}
+            if source.algorithm:
+                entry = library.manifest(source.root)[name]
+                manifest[key] = library.copy_member(source.root, entry, ws.library_dir, key) | {
+                    "source": name
+                }
+    library.write_registry(ws.library_dir, entries)
+    library.write_manifest(ws.library_dir, manifest)
+    write_json(ws.library_dir / MEMBERS, names)
+    return names
+
+
+def tables(ws: Workspace) -> None:
+    """The grown library's self-play table P and the adapter's calibration, measured with the
+    grown library alone in use (what a table is bound to), and P's heatmap."""
+    with ws.playing([ws.library_dir]):
+        baits = [k for k in library.keys("bait") if k.startswith(PREFIX["bait"])]
+        shooters = [k for k in library.keys("shooter") if k.startswith(PREFIX["shooter"])]
+        games = 16
+        todo = jobs(baits, shooters, games, CHUNK)
+        values = ws.jobs("table", [cell_spec(job) for job in todo], roots=[ws.library_dir])
+        results = {job.id: v for job, v in zip(todo, values, strict=True)}
+        table = assemble(baits, shooters, games, results, CHUNK)
+        table.save(ws.library_dir / "table.json")
+        heatmap(Table.load(ws.library_dir / "table.json"), ws.out / "table.png")
+    _calibrate(ws, "calibration.json", [])
+
+
+def partner_groups(
+    ws: Workspace, selection: dict, held_out: dict[str, Grid], groups: dict, grouping: dict[str, Grid]
+) -> None:
+    """groups.json: per seat of ours, the partner groups the adaptive agent identifies (their
+    training and validation members) and the mean kills/min of each group with each member of
+    ours (services/adapter/core.py reads it as a Payoff), then their out-of-library thresholds
+    (`tsf calibrate-adapter --partners groups`)."""
+    sides, names = ws.sides(), json.loads((ws.library_dir / MEMBERS).read_text())
+    seats = {}
+    for ours, steps in selection.items():
+        partner_role = other(ours)
+        train = grouping[partner_role]
+        label = labels(train, groups[partner_role]["groups"])
+        held = held_out[partner_role]
+        validation = held.only([p for p in held.partners if sides[p] == "validation"])
+        played = [p for p in validation.partners if not p.startswith("human(")]
+        teammates = steps[-1]["library"]
+        seats[ours] = {
+            "teammates": [key_of(names, t, ours) for t in teammates],
+            "names": teammates,
+            "groups": choice.partner_groups(train, label, validation, played, teammates),
+        }
+    write_json(ws.library_dir / GROUPS, {"version": 1, "population": ws.spec.text_hash, "seats": seats})
+    _calibrate(ws, GROUPS, ["--partners", "groups"])
+
+
+def _calibrate(ws: Workspace, name: str, options: list[str]) -> None:
+    """`tsf calibrate-adapter OPTIONS --out library/NAME` with the grown library alone in use (its
+    members, its groups), in an interpreter of its own: this one's table and payoff were read
+    before the grown library was in use. Its journal goes once it is done: not the library's."""
+    path = ws.library_dir / name
+    command = [sys.executable, "-m", "services.commands", "calibrate-adapter", *options]
+    command += ["--workers", str(ws.workers), "--out", str(path)]
+    env = os.environ | {"TSF_LIBRARY": str(ws.library_dir.resolve())}
+    subprocess.run(command, env=env, check=True, stdout=subprocess.DEVNULL)
+    path.with_name(f"{name}.journal").unlink(missing_ok=True)
+
+
+def key_of(names: dict[str, str], name: str, role: str) -> str:
+    """The grown library's key of a selected member of `role`'s seat (members.json: key -> name)."""
+    return next(k for k, n in names.items() if n == name and k.startswith(PREFIX[role]))
+
+
+def recipe_fields(recipe: library.Recipe) -> dict:
+    """A recipe's registry fields that are set (its view as `frame` where it is not the role's)."""
+    fields = {}
+    for name in FIELDS:
+        value = getattr(recipe, name)
+        if value not in (None, "", 0, 0.0, (), {}):
+            fields[name] = list(value) if isinstance(value, tuple) else value
+    if recipe.view != "role":
+        fields["frame"] = recipe.view
+    return fields
+
+
+def rule_settings(name: str) -> dict[str, float]:
+    """A rule's settings from its name in the partner grammar: `circle(radius=150)` -> radius 150."""
+    inside = name[name.index("(") + 1 : -1]
+    return {k: float(v) for k, v in (part.split("=") for part in inside.split(","))}

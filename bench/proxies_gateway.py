@@ -21,7 +21,8 @@ from pathlib import Path
 from services.human.gateway import Web
 from services.proxy.train import Settings, train
 from services.study.core import StudyConfig, Variant
-from services.study.runner import Serving, run_study
+from services.study.runner import run_study
+from services.study.serving import Serving
 from services.study.standin import stand_in
 
 TOKEN = "bench"

@@ -65,7 +65,8 @@ from pathlib import Path
 from services.human.gateway import Web
 from services.recorder.recording import load
 from services.study.core import StudyConfig, Variant
-from services.study.runner import Serving, run_study
+from services.study.runner import run_study
+from services.study.serving import Serving
 from services.study.standin import StandInReport, stand_in
 from shared.bus import BusConfig, free_endpoint
 from shared.game import other

@@ -13,8 +13,6 @@ import dataclasses
 import functools
 import hashlib
 import hmac
-import math
-import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, TypeVar
@@ -22,6 +20,19 @@ from typing import Any, ClassVar, TypeVar
 import msgpack
 
 from shared import keys
+from shared.checks import (
+    Check,
+    boolean,
+    keyed,
+    matching,
+    named,
+    number,
+    one_of,
+    plain,
+    rows,
+    vector,
+    whole,
+)
 from shared.game import (
     DEATH_CAUSES,
     EVENT_KINDS,
@@ -50,80 +61,22 @@ class MessageError(ValueError):
         self.reason = reason
 
 
-Check = Callable[[Any], bool]
-
-
 def printable(text: str, most: int) -> str:
     """`text` as a message's free-text field takes it: printable ASCII (others become ?), at most
     `most` characters; for reasons and errors that may hold anything a user's code raised."""
     return "".join(c if " " <= c <= "~" else "?" for c in text)[:most]
 
 
-def _int(lo: int, hi: int) -> Check:
-    return lambda v: isinstance(v, int) and not isinstance(v, bool) and lo <= v <= hi
-
-
-def _number(lo: float = -math.inf, hi: float = math.inf) -> Check:
-    return lambda v: (
-        isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and lo <= v <= hi
-    )
-
-
-def _text(pattern: str = r"[A-Za-z0-9_.:/-]{0,64}") -> Check:
-    regex = re.compile(pattern)
-    return lambda v: isinstance(v, str) and regex.fullmatch(v) is not None
-
-
-def _bool(v: Any) -> bool:
-    return isinstance(v, bool)
-
-
-_NUMBERS = frozenset((float, int))
-
-
-def _vector(n: int, lo: float = -1e6, hi: float = 1e6) -> Check:
-    """A list of n finite numbers in [lo, hi]; C-speed builtins, since states carry hundreds."""
-
-    def check(v: Any) -> bool:
-        if not isinstance(v, list) or len(v) != n or not set(map(type, v)) <= _NUMBERS:
-            return False
-        try:  # NaN or an infinity anywhere makes the sum so (and a sum past the floats, overflowing,
-            finite = math.isfinite(sum(v))  # is past [lo, hi] anyway); an int too big for a float raises
-        except OverflowError:
-            return False
-        return finite and (n == 0 or (lo <= min(v) and max(v) <= hi))
-
-    return check
-
-
-def _rows(width: int, most: int) -> Check:
-    row = _vector(width)
-    return lambda v: isinstance(v, list) and len(v) <= most and all(row(r) for r in v)
-
-
-def _one_of(options: tuple[str, ...]) -> Check:
-    return lambda v: v in options
-
-
-def _map(names: tuple[str, ...], value: Check) -> Check:
-    return lambda v: isinstance(v, dict) and set(v) == set(names) and all(value(v[k]) for k in names)
-
-
-def _named(value: Check) -> Check:
-    """A map from any string names to values that pass `value`."""
-    return lambda v: isinstance(v, dict) and all(isinstance(k, str) and value(x) for k, x in v.items())
-
-
-_ROLE = _one_of(ROLES)
-_ROLE_OR_NONE = _one_of(("", *ROLES))
+_ROLE = one_of(ROLES)
+_ROLE_OR_NONE = one_of(("", *ROLES))
 # A policy's name in messages: a key, an adaptive agent's name, a plug-in's (services/agent/outside.py).
 NAME_MOST = 64  # characters of a policy's or an adaptive agent's name that a message carries
 POLICY_NAME = rf"[A-Za-z0-9_.:-]{{1,{NAME_MOST}}}"
-_KEY = _text(POLICY_NAME)
-_KEY_OR_NONE = _text(f"(?:{POLICY_NAME})?")
-_ACTION = _int(0, N_ACTIONS - 1)
-_SENDER = _text(r"[A-Za-z0-9_.:/-]{1,64}")
-_ID = _text(r"[A-Za-z0-9_-]{1,64}")  # a match, sweep or host id: one key chunk (keys.check_match)
+_KEY = matching(POLICY_NAME)
+_KEY_OR_NONE = matching(f"(?:{POLICY_NAME})?")
+_ACTION = whole(0, N_ACTIONS - 1)
+_SENDER = matching(r"[A-Za-z0-9_.:/-]{1,64}")
+_ID = matching(r"[A-Za-z0-9_-]{1,64}")  # a match, sweep or host id: one key chunk (keys.check_match)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -178,17 +131,17 @@ class State(MatchMessage):
 
     TYPE: ClassVar[str] = "state"
     CHECKS: ClassVar[dict[str, Check]] = {
-        "obs": _map(ROLES, _vector(OBS_SIZE)),
-        "ships": _rows(6, 2),
-        "fortress": _vector(5),
-        "missiles": _rows(5, 64),
-        "shells": _rows(4, 256),
-        "kills": _int(0, MAX_FRAME),
-        "points": _int(-(10**9), 10**9),
-        "frames": _int(1, MAX_FRAME),
-        "hash": _text(r"[0-9a-f]{16}"),
+        "obs": keyed(ROLES, vector(OBS_SIZE)),
+        "ships": rows(6, 2),
+        "fortress": vector(5),
+        "missiles": rows(5, 64),
+        "shells": rows(4, 256),
+        "kills": whole(0, MAX_FRAME),
+        "points": whole(-(10**9), 10**9),
+        "frames": whole(1, MAX_FRAME),
+        "hash": matching(r"[0-9a-f]{16}"),
         "applied": lambda v: isinstance(v, list) and len(v) == 2 and all(_ACTION(a) for a in v),
-        "sent_ns": _int(0, 2**63),
+        "sent_ns": whole(0, 2**63),
     }
 
     obs: dict[str, list[float]] = field(default_factory=dict)
@@ -221,8 +174,8 @@ class Action(MatchMessage):
         "role": _ROLE,
         "action": _ACTION,
         "policy": _KEY_OR_NONE,
-        "failures": _int(0, MAX_FRAME),
-        "failure": _text(r"[ -~]{0,200}"),
+        "failures": whole(0, MAX_FRAME),
+        "failure": matching(r"[ -~]{0,200}"),
     }
     ADDED: ClassVar[frozenset[str]] = frozenset(("failures", "failure"))  # with policy failures
 
@@ -238,7 +191,7 @@ class PolicySwitch(MatchMessage):
     """Tells the agent of `role` to play library policy `policy` from the next frame on."""
 
     TYPE: ClassVar[str] = "policy"
-    CHECKS: ClassVar[dict[str, Check]] = {"role": _ROLE, "policy": _KEY, "reason": _text(r"[ -~]{0,200}")}
+    CHECKS: ClassVar[dict[str, Check]] = {"role": _ROLE, "policy": _KEY, "reason": matching(r"[ -~]{0,200}")}
 
     role: str = "bait"
     policy: str = "circle"
@@ -251,9 +204,9 @@ class GameEvent(MatchMessage):
 
     TYPE: ClassVar[str] = "event"
     CHECKS: ClassVar[dict[str, Check]] = {
-        "kind": _one_of(EVENT_KINDS),
+        "kind": one_of(EVENT_KINDS),
         "role": _ROLE_OR_NONE,
-        "detail": _text(r"[ -~]{0,200}"),
+        "detail": matching(r"[ -~]{0,200}"),
     }
 
     kind: str = "kill"
@@ -261,8 +214,8 @@ class GameEvent(MatchMessage):
     detail: str = ""
 
 
-_COUNT = _int(0, MAX_FRAME)
-_SEED = _int(SEEDS.low, SEEDS.high)
+_COUNT = whole(0, MAX_FRAME)
+_SEED = whole(SEEDS.low, SEEDS.high)
 
 
 def _counters(v: Any) -> bool:
@@ -272,7 +225,7 @@ def _counters(v: Any) -> bool:
         isinstance(v, dict)
         and set(v) == {*plain, "deaths"}
         and all(_COUNT(v[k]) for k in plain)
-        and _map(DEATH_CAUSES, _COUNT)(v["deaths"])
+        and keyed(DEATH_CAUSES, _COUNT)(v["deaths"])
     )
 
 
@@ -291,9 +244,9 @@ class Start(MatchMessage):
     TYPE: ClassVar[str] = "start"
     CHECKS: ClassVar[dict[str, Check]] = {
         "seed": _SEED,
-        "mode": _one_of(("realtime", "lockstep")),
+        "mode": one_of(("realtime", "lockstep")),
         "config": _config,
-        "policies": _map(ROLES, _KEY_OR_NONE),
+        "policies": keyed(ROLES, _KEY_OR_NONE),
     }
 
     seed: int = 0
@@ -308,12 +261,12 @@ class Summary(MatchMessage):
 
     TYPE: ClassVar[str] = "summary"
     CHECKS: ClassVar[dict[str, Check]] = {
-        "kills": _int(0, MAX_FRAME),
-        "kills_per_minute": _number(0.0),
-        "points": _int(-(10**9), 10**9),
-        "counters": _map(ROLES, _counters),
-        "timing": _named(_number()),
-        "drops": _named(_int(0, 2**63)),
+        "kills": whole(0, MAX_FRAME),
+        "kills_per_minute": number(0.0),
+        "points": whole(-(10**9), 10**9),
+        "counters": keyed(ROLES, _counters),
+        "timing": named(number()),
+        "drops": named(whole(0, 2**63)),
         "failures": lambda v: isinstance(v, dict) and set(v) <= set(ROLES) and all(map(_COUNT, v.values())),
     }
     ADDED: ClassVar[frozenset[str]] = frozenset(("failures",))  # with policy failures
@@ -339,14 +292,14 @@ class AdapterStatus(MatchMessage):
     TYPE: ClassVar[str] = "adapter"
     CHECKS: ClassVar[dict[str, Check]] = {
         "role": _ROLE,
-        "strategy": _text(r"[a-z_-]{1,32}"),
-        "window": _int(1, 100_000),
-        "filled": _int(0, 100_000),
+        "strategy": matching(r"[a-z_-]{1,32}"),
+        "window": whole(1, 100_000),
+        "filled": whole(0, 100_000),
         "partner": _KEY_OR_NONE,
         "policy": _KEY,
-        "scores": _named(_number(-1e6, 0.0)),
-        "belief": _named(_number(0.0, 1.0)),
-        "out_of_library": _bool,
+        "scores": named(number(-1e6, 0.0)),
+        "belief": named(number(0.0, 1.0)),
+        "out_of_library": boolean,
     }
 
     role: str
@@ -360,7 +313,7 @@ class AdapterStatus(MatchMessage):
     out_of_library: bool = False
 
 
-_HASH = _text(r"[0-9a-f]{16}")
+_HASH = matching(r"[0-9a-f]{16}")
 
 
 JOB_KINDS = (
@@ -372,26 +325,8 @@ JOB_KINDS = (
     "pairs",
     "train",
 )  # what a job computes (services/jobs/kinds.py)
-_JOB_ID = _text(r"[A-Za-z0-9_.-]{1,64}")
-_PLUGIN = _text(r"[A-Za-z_][A-Za-z0-9_.]{0,100}:[A-Za-z_][A-Za-z0-9_.]{0,60}")
-
-
-def _plain(depth: int = 4) -> Check:
-    """Plain data (text, finite numbers, booleans, lists, maps with text keys), nested at most
-    `depth` deep: a job's arguments and results, which its kind checks further."""
-
-    def check(v: Any, left: int = depth) -> bool:
-        if isinstance(v, (str, bool)) or v is None:
-            return True
-        if isinstance(v, (int, float)):
-            return math.isfinite(v)
-        if left == 0:
-            return False
-        if isinstance(v, list):
-            return all(check(x, left - 1) for x in v)
-        return isinstance(v, dict) and all(isinstance(k, str) and check(x, left - 1) for k, x in v.items())
-
-    return check
+_JOB_ID = matching(r"[A-Za-z0-9_.-]{1,64}")
+_PLUGIN = matching(r"[A-Za-z_][A-Za-z0-9_.]{0,100}:[A-Za-z_][A-Za-z0-9_.]{0,60}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -406,9 +341,9 @@ class JobOrder(JobMessage):
     TYPE: ClassVar[str] = "sweep_job"
     CHECKS: ClassVar[dict[str, Check]] = {
         "job": _JOB_ID,
-        "kind": _one_of(JOB_KINDS),
-        "batch": _int(1, 100_000),
-        "args": lambda v: isinstance(v, dict) and _plain()(v),
+        "kind": one_of(JOB_KINDS),
+        "batch": whole(1, 100_000),
+        "args": lambda v: isinstance(v, dict) and plain()(v),
         "plugins": lambda v: isinstance(v, list) and len(v) <= 16 and all(_PLUGIN(x) for x in v),
         "library": _HASH,
         "config": _HASH,
@@ -437,10 +372,10 @@ class JobResult(JobMessage):
     TYPE: ClassVar[str] = "sweep_result"
     CHECKS: ClassVar[dict[str, Check]] = {
         "job": _JOB_ID,
-        "values": lambda v: isinstance(v, list) and len(v) <= JOB_VALUES and _plain()(v),
-        "error": _text(r"[ -~]{0,300}"),
-        "fault": _one_of(FAULTS),
-        "seconds": _number(0.0),
+        "values": lambda v: isinstance(v, list) and len(v) <= JOB_VALUES and plain()(v),
+        "error": matching(r"[ -~]{0,300}"),
+        "fault": one_of(FAULTS),
+        "seconds": number(0.0),
         "library": _HASH,
         "config": _HASH,
     }
@@ -455,9 +390,9 @@ class JobResult(JobMessage):
 
 
 CHUNK = 48 * 1024  # bytes of a recording in one RecordingChunk (a message stays under MAX_BYTES)
-_WAIT = _number(0.0, 24 * 3600.0)
-_SHA256 = _text(r"[0-9a-f]{64}")
-_AUTH = _text(r"(?:[0-9a-f]{64})?")  # a host message's HMAC (sealed), "" before it is sealed
+_WAIT = number(0.0, 24 * 3600.0)
+_SHA256 = matching(r"[0-9a-f]{64}")
+_AUTH = matching(r"(?:[0-9a-f]{64})?")  # a host message's HMAC (sealed), "" before it is sealed
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -467,7 +402,7 @@ class HostStatus(Message):
 
     TYPE: ClassVar[str] = "host_status"
     ID: ClassVar[str] = "host"
-    CHECKS: ClassVar[dict[str, Check]] = {"slots": _int(0, 1024), "free": _int(0, 1024), "auth": _AUTH}
+    CHECKS: ClassVar[dict[str, Check]] = {"slots": whole(0, 1024), "free": whole(0, 1024), "auth": _AUTH}
 
     host: str
     slots: int = 1
@@ -486,10 +421,10 @@ class MatchOffer(MatchMessage):
     TYPE: ClassVar[str] = "match_offer"
     CHECKS: ClassVar[dict[str, Check]] = {
         "seed": _SEED,
-        "frames": _int(FRAMES.low, FRAMES.high),
+        "frames": whole(FRAMES.low, FRAMES.high),
         "bait": _KEY_OR_NONE,
         "shooter": _KEY_OR_NONE,
-        "adapter": _text(f"(?:{POLICY_NAME})?"),
+        "adapter": matching(f"(?:{POLICY_NAME})?"),
         "wait_players": _WAIT,
         "timeout": _WAIT,
         "library": _HASH,
@@ -515,8 +450,8 @@ class MatchAnswer(MatchMessage):
 
     TYPE: ClassVar[str] = "match_answer"
     CHECKS: ClassVar[dict[str, Check]] = {
-        "accepted": _bool,
-        "reason": _text(r"[ -~]{0,300}"),
+        "accepted": boolean,
+        "reason": matching(r"[ -~]{0,300}"),
         "auth": _AUTH,
     }
 
@@ -548,16 +483,16 @@ class MatchOrder(MatchMessage):
     TYPE: ClassVar[str] = "match_order"
     CHECKS: ClassVar[dict[str, Check]] = {
         "seed": _SEED,
-        "frames": _int(FRAMES.low, FRAMES.high),
-        "mode": _one_of(("realtime", "lockstep")),
+        "frames": whole(FRAMES.low, FRAMES.high),
+        "mode": one_of(("realtime", "lockstep")),
         "bait": _KEY_OR_NONE,
         "shooter": _KEY_OR_NONE,
-        "names": _map(ROLES, _KEY),
-        "adapter": _text(f"(?:{POLICY_NAME})?"),
+        "names": keyed(ROLES, _KEY),
+        "adapter": matching(f"(?:{POLICY_NAME})?"),
         "adaptive": _ROLE_OR_NONE,
         "wait_players": _WAIT,
         "wait_services": _WAIT,
-        "folder": _text(r"[A-Za-z0-9_-]{0,64}"),
+        "folder": matching(r"[A-Za-z0-9_-]{0,64}"),
     }
 
     seed: int = 0
@@ -585,8 +520,8 @@ class MatchDone(MatchMessage):
 
     TYPE: ClassVar[str] = "match_done"
     CHECKS: ClassVar[dict[str, Check]] = {
-        "error": _text(r"[ -~]{0,300}"),
-        "size": _int(0, 2**40),
+        "error": matching(r"[ -~]{0,300}"),
+        "size": whole(0, 2**40),
         "sha256": lambda v: v == "" or _SHA256(v),
         "auth": _AUTH,
     }
@@ -603,8 +538,8 @@ class RecordingChunk(MatchMessage):
 
     TYPE: ClassVar[str] = "recording_chunk"
     CHECKS: ClassVar[dict[str, Check]] = {
-        "offset": _int(0, 2**40),
-        "size": _int(0, 2**40),
+        "offset": whole(0, 2**40),
+        "size": whole(0, 2**40),
         "data": lambda v: isinstance(v, bytes) and len(v) <= CHUNK,
         "auth": _AUTH,
     }
@@ -657,7 +592,7 @@ TYPES: dict[str, type[Message]] = {
 # (`version`): it would refuse this version's answers, and a sealed message's seal covers its
 # version.
 RECORDED = frozenset((Start, State, Action, PolicySwitch, GameEvent, Summary, AdapterStatus))
-_ENVELOPE: dict[str, Check] = {"frame": _int(0, MAX_FRAME), "sender": _SENDER}
+_ENVELOPE: dict[str, Check] = {"frame": whole(0, MAX_FRAME), "sender": _SENDER}
 M = TypeVar("M", bound=Message)
 
 

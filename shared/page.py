@@ -17,11 +17,12 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, TypeVar
+from typing import ClassVar, TypeVar
 
+from shared import checks
+from shared.checks import boolean, list_of, named, number, or_none, text, whole
 from shared.game import EVENT_KINDS, ROLES
 
 MAX_MESSAGE = 1024  # bytes: the largest message a browser has reason to send (a hello with its link)
@@ -32,8 +33,6 @@ GEOMETRY = (
     "ship_radius", "missile_radius", "shell_radius", "rear_arc",
 )  # fmt: skip  # the numbers the page draws with (GameConfig's)
 
-Valid = Callable[[Any], bool]  # a field's check
-
 
 class PageError(ValueError):
     """A message that does not meet the page's contract; `reason` is a short code for counting."""
@@ -43,39 +42,11 @@ class PageError(ValueError):
         self.reason = reason
 
 
-def _bool(v: object) -> bool:
-    return isinstance(v, bool)
-
-
-def _int(lo: float = -math.inf, hi: float = math.inf) -> Valid:
-    return lambda v: isinstance(v, int) and not isinstance(v, bool) and lo <= v <= hi
-
-
-def _number(v: object) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-
-
-def _text(most: int, least: int = 0) -> Valid:
-    return lambda v: isinstance(v, str) and least <= len(v) <= most
-
-
-def _or_none(check: Valid) -> Valid:
-    return lambda v: v is None or check(v)
-
-
-def _list(check: Valid, most: int = 10_000) -> Valid:
-    return lambda v: isinstance(v, list) and len(v) <= most and all(map(check, v))
-
-
-def _map(check: Valid) -> Valid:
-    return lambda v: isinstance(v, dict) and all(isinstance(k, str) and check(x) for k, x in v.items())
-
-
-_SHORT = _text(64, 1)  # an id, a token, a key, a link's value
+_SHORT = text(64, 1)  # an id, a token, a key, a link's value
 _ROLE = lambda v: v in ROLES  # noqa: E731 - a check like the others
-_NUMBERS = _list(_number, 64)
-_ROWS = _list(_list(_number, 8), 512)
-_POINTS = _or_none(_map(_int()))
+_NUMBERS = list_of(number(), 64)
+_ROWS = list_of(list_of(number(), 8), 512)
+_POINTS = or_none(named(whole()))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -85,7 +56,7 @@ class PageMessage:
 
     TYPE: ClassVar[str] = ""
     UP: ClassVar[bool] = False
-    CHECKS: ClassVar[dict[str, Valid]] = {}
+    CHECKS: ClassVar[dict[str, checks.Check]] = {}
     OPTIONAL: ClassVar[frozenset[str]] = frozenset()
 
     def encode(self) -> str:
@@ -95,12 +66,20 @@ class PageMessage:
         return json.dumps({"type": self.TYPE, **shown}, separators=(",", ":"))
 
 
-def _message(kind: str, up: bool, checks: dict[str, Valid], optional: tuple[str, ...] = ()) -> Callable:
-    """Give a PageMessage class its TYPE, direction and checks."""
+_ALL: list[type[PageMessage]] = []  # every type, in the order defined: each registered by _message
+
+
+def _message(
+    kind: str, up: bool, fields: dict[str, checks.Check], optional: tuple[str, ...] = ()
+) -> Callable:
+    """Give a PageMessage class its TYPE, direction and checks, and register it (UP and DOWN,
+    the page's CONTRACT, are built from every type so registered)."""
 
     def decorate(cls: type) -> type:
-        cls.TYPE, cls.UP, cls.CHECKS, cls.OPTIONAL = kind, up, checks, frozenset(optional)
-        return dataclass(frozen=True, kw_only=True)(cls)
+        cls.TYPE, cls.UP, cls.CHECKS, cls.OPTIONAL = kind, up, fields, frozenset(optional)
+        message = dataclass(frozen=True, kw_only=True)(cls)
+        _ALL.append(message)
+        return message
 
     return decorate
 
@@ -108,7 +87,7 @@ def _message(kind: str, up: bool, checks: dict[str, Valid], optional: tuple[str,
 # Up: page -> gateway, study server, dashboard.
 
 
-@_message("join", True, {"role": _ROLE, "token": _SHORT, "obs": _bool}, ("obs",))
+@_message("join", True, {"role": _ROLE, "token": _SHORT, "obs": boolean}, ("obs",))
 class Join(PageMessage):
     """The first message of a seat's link (`tsf play`): the seat and its token; `obs` asks for the
     seat's observation values too (a scripted player's)."""
@@ -139,7 +118,7 @@ class Ready(PageMessage):
     """The instructions are read: play."""
 
 
-@_message("keys", True, dict.fromkeys(KEYS, _bool))
+@_message("keys", True, dict.fromkeys(KEYS, boolean))
 class Keys(PageMessage):
     """The held keys, sent on every change."""
 
@@ -159,7 +138,7 @@ HELLO = ("participant", "key", "obs", "worker", "sig", "test", "link")
 
 @_message(
     "hello", True,
-    {"participant": _SHORT, "key": _SHORT, "obs": _bool, "worker": _SHORT, "sig": _SHORT, "test": _SHORT,
+    {"participant": _SHORT, "key": _SHORT, "obs": boolean, "worker": _SHORT, "sig": _SHORT, "test": _SHORT,
      "link": _link},
     HELLO,
 )  # fmt: skip
@@ -195,10 +174,10 @@ class Answer(PageMessage):
 
 # Down: gateway -> page.
 
-_GEOMETRY = {name: _number for name in GEOMETRY}
+_GEOMETRY = {name: number() for name in GEOMETRY}
 
 
-@_message("welcome", False, {"match": _SHORT, "role": _or_none(_ROLE), **_GEOMETRY, "points": _POINTS})
+@_message("welcome", False, {"match": _SHORT, "role": or_none(_ROLE), **_GEOMETRY, "points": _POINTS})
 class Welcome(PageMessage):
     """A seat taken (or, role None, a spectator): the match, the arena's geometry, how points
     count (None: not shown)."""
@@ -219,7 +198,7 @@ class Welcome(PageMessage):
     points: dict[str, int] | None = None
 
 
-@_message("refused", False, {"reason": _text(400)})
+@_message("refused", False, {"reason": text(400)})
 class Refused(PageMessage):
     """Why the page cannot go on (and, in a study, whom to contact); the socket closes."""
 
@@ -245,9 +224,9 @@ class Setup(PageMessage):
 
 @_message(
     "state", False,
-    {"frame": _int(0), "frames": _int(1), "ships": _ROWS, "fortress": _NUMBERS, "missiles": _ROWS,
-     "shells": _ROWS, "kills": _int(0), "points": _int(), "applied": _list(_int(0, 11), 2),
-     "respawn": _or_none(_int(0)), "ending": _bool, "obs": _or_none(_NUMBERS)},
+    {"frame": whole(0), "frames": whole(1), "ships": _ROWS, "fortress": _NUMBERS, "missiles": _ROWS,
+     "shells": _ROWS, "kills": whole(0), "points": whole(), "applied": list_of(whole(0, 11), 2),
+     "respawn": or_none(whole(0)), "ending": boolean, "obs": or_none(_NUMBERS)},
     ("obs",),
 )  # fmt: skip
 class StateView(PageMessage):
@@ -273,8 +252,8 @@ class StateView(PageMessage):
 
 @_message(
     "event", False,
-    {"frame": _int(0), "kind": lambda v: v in EVENT_KINDS, "role": lambda v: v in ("", *ROLES),
-     "detail": _text(200)},
+    {"frame": whole(0), "kind": lambda v: v in EVENT_KINDS, "role": lambda v: v in ("", *ROLES),
+     "detail": text(200)},
 )  # fmt: skip
 class EventView(PageMessage):
     """A kill, death (its cause in `detail`), shield hit or respawn, as it happens."""
@@ -287,7 +266,8 @@ class EventView(PageMessage):
 
 @_message(
     "end", False,
-    {"kills": _int(0), "kills_per_minute": _number, "points": _int(), "frame": _int(0), "frames": _int(1)},
+    {"kills": whole(0), "kills_per_minute": number(), "points": whole(), "frame": whole(0),
+     "frames": whole(1)},
 )  # fmt: skip
 class End(PageMessage):
     """The match's result; `frame` short of `frames`: it was stopped early (never "Time is up")."""
@@ -299,9 +279,9 @@ class End(PageMessage):
     frames: int
 
 
-# Down: study server -> page (services/study/runner.py).
+# Down: study server -> page (services/study/admission.py, visit.py, trial.py).
 
-_TEXT = _text(4000)
+_TEXT = text(4000)
 
 
 @_message("consent", False, {"text": _TEXT})
@@ -326,7 +306,7 @@ class ParticipantId(PageMessage):
     key: str
 
 
-@_message("check", False, {"text": _TEXT, "options": _list(_SHORT, 8)})
+@_message("check", False, {"text": _TEXT, "options": list_of(_SHORT, 8)})
 class Check(PageMessage):
     """An attention check: its question and one button per option."""
 
@@ -334,7 +314,7 @@ class Check(PageMessage):
     options: list[str]
 
 
-@_message("wait", False, {"reason": _TEXT, "seconds": _int(0)})
+@_message("wait", False, {"reason": _TEXT, "seconds": whole(0)})
 class Wait(PageMessage):
     """A game is being set up: why the page waits, and about how long."""
 
@@ -344,8 +324,8 @@ class Wait(PageMessage):
 
 @_message(
     "trial", False,
-    {"role": _ROLE, "agent": _text(64), "last": _or_none(_int(0)), "session": _int(1), "sessions": _int(1),
-     "trial": _int(1), "trials": _int(1), "again": _bool, "practice": _bool, "instructions": _TEXT,
+    {"role": _ROLE, "agent": text(64), "last": or_none(whole(0)), "session": whole(1), "sessions": whole(1),
+     "trial": whole(1), "trials": whole(1), "again": boolean, "practice": boolean, "instructions": _TEXT,
      "points": _POINTS},
 )  # fmt: skip
 class Trial(PageMessage):
@@ -366,7 +346,7 @@ class Trial(PageMessage):
     points: dict[str, int] | None
 
 
-@_message("queue", False, {"place": _int(1), "wait": _int(0)})
+@_message("queue", False, {"place": whole(1), "wait": whole(0)})
 class Queue(PageMessage):
     """Every game place is taken: the place in the queue and about how many seconds it waits."""
 
@@ -374,7 +354,7 @@ class Queue(PageMessage):
     wait: int
 
 
-@_message("done", False, {"text": _TEXT, "code": _text(64), "redirect": _text(2000)})
+@_message("done", False, {"text": _TEXT, "code": text(64), "redirect": text(2000)})
 class Done(PageMessage):
     """The study is over for the participant: the end text, the completion code, the platform's
     address to go back to ("" for none)."""
@@ -384,7 +364,7 @@ class Done(PageMessage):
     redirect: str
 
 
-@_message("screened", False, {"text": _TEXT, "redirect": _text(2000)})
+@_message("screened", False, {"text": _TEXT, "redirect": text(2000)})
 class Screened(PageMessage):
     """Screened out by the attention checks: why, and the platform's address."""
 
@@ -409,7 +389,7 @@ class Stopped(PageMessage):
 # Down: the dashboard (services/study/dashboard.py).
 
 
-@_message("watching", False, {"match": _SHORT, "variant": _text(64), "person": lambda v: v in ("", *ROLES)})
+@_message("watching", False, {"match": _SHORT, "variant": text(64), "person": lambda v: v in ("", *ROLES)})
 class Watching(PageMessage):
     """The spectator's match: its variant and the person's seat."""
 
@@ -418,7 +398,7 @@ class Watching(PageMessage):
     person: str
 
 
-_ROWS_OF_MAPS = _list(lambda v: isinstance(v, dict), 100_000)
+_ROWS_OF_MAPS = list_of(lambda v: isinstance(v, dict), 100_000)
 
 
 @_message(
@@ -437,11 +417,6 @@ class Overview(PageMessage):
     hosts: list[dict] = field(default_factory=list)
 
 
-_ALL = (
-    Join, Watch, DashboardHello, Ready, Keys, Hello, Consent, Decline, Answer, Welcome, Refused, Setup,
-    StateView, EventView, End, ConsentText, Declined, ParticipantId, Check, Wait, Trial, Queue, Done,
-    Screened, Problem, Stopped, Watching, Overview,
-)  # fmt: skip
 UP: dict[str, type[PageMessage]] = {t.TYPE: t for t in _ALL if t.UP}
 DOWN: dict[str, type[PageMessage]] = {t.TYPE: t for t in _ALL if not t.UP}
 # What the page reads: each type's fields by direction, as services/human/static/contract.js holds it.

@@ -180,7 +180,8 @@ def study_server() -> Iterator[Callable[..., tuple[threading.Event, str, Future]
     future of the Study). Served on a free port, with STAND_IN_TOKEN as the test token by default;
     every server is stopped at teardown."""
     from services.human.gateway import Web
-    from services.study.runner import Serving, run_study
+    from services.study.runner import run_study
+    from services.study.serving import Serving
 
     stops: list[threading.Event] = []
     with ThreadPoolExecutor(4) as pool:

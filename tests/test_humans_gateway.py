@@ -12,7 +12,7 @@ from conftest import STAND_IN_TOKEN
 
 from services.proxy.humans import fit, human_with
 from services.study.core import StudyConfig, Variant
-from services.study.runner import Serving
+from services.study.serving import Serving
 from services.study.standin import stand_in
 
 RECOVERY = 0.25  # the skill's error this test allows (docs/humans.md: the figures it gives)

@@ -32,8 +32,9 @@ from services.sim.engine import Counters
 from services.study.core import StudyConfig, Variant
 from services.study.host import Host, offer_of, sha256
 from services.study.remote import Remote
-from services.study.runner import Serving, run_trial
+from services.study.serving import Serving
 from services.study.standin import stand_in
+from services.study.trial import run_trial
 from shared import keys
 from shared.bus import BusConfig, free_endpoint, session
 from shared.errors import Failure

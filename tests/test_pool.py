@@ -18,7 +18,7 @@ from services.recorder.recording import load
 from services.runtime.launch import MatchPlan
 from services.runtime.pool import Pool, Tokens
 from services.sim.engine import Counters
-from services.study.runner import run_trial
+from services.study.trial import run_trial
 from shared import keys
 from shared.errors import Failure, UsageError
 from shared.game import ROLES

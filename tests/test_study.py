@@ -21,8 +21,10 @@ from test_match_processes import in_session
 
 from services.recorder.recording import load
 from services.study.core import StudyConfig, Variant
-from services.study.runner import PROBLEM, RETRIES, Serving
+from services.study.serving import Serving
 from services.study.standin import stand_in
+from services.study.trial import PROBLEM
+from services.study.visit import RETRIES
 from shared.game import HUMAN, other
 
 TEST = STAND_IN_TOKEN
@@ -267,7 +269,7 @@ def test_attempts_an_earlier_server_left_are_settled_by_their_recordings(tmp_pat
     again; each gets its sidecar."""
     from services.recorder.recording_test import Script, record_match
     from services.study.core import Study
-    from services.study.runner import reconcile
+    from services.study.trial import reconcile
 
     study = Study(StudyConfig("settle", VARIANTS, trials=2), tmp_path)
     people = [study.arrive() for _ in range(3)]
@@ -445,7 +447,7 @@ def test_a_signed_study_takes_only_a_link_signed_for_its_worker_id(tmp_path, stu
     refused with the page's line; the link signed for its worker id gets the consent text."""
     import websockets
 
-    from services.study.runner import UNSIGNED
+    from services.study.admission import UNSIGNED
     from shared.secret import signature
 
     secret = b"the-study-secret-0123"
@@ -579,7 +581,7 @@ def test_a_participant_who_declines_is_told_so_and_nothing_is_recorded(tmp_path,
     socket closes: no id, no journal line, no match."""
     import websockets
 
-    from services.study.runner import DECLINED
+    from services.study.admission import DECLINED
 
     config = StudyConfig("decline", VARIANTS[:1], trials=2, trial_seconds=1.5, pay="GBP 1 via Prolific")
     stop, url, server = study_server(config, tmp_path)

@@ -17,8 +17,9 @@ import websockets
 from conftest import CHROMIUM
 
 from services.human.gateway import Web
+from services.study.admission import DECLINED, TAKEN
 from services.study.core import StudyConfig, Variant
-from services.study.runner import DECLINED, TAKEN, Serving
+from services.study.serving import Serving
 
 pytestmark = pytest.mark.skipif(
     CHROMIUM is None or shutil.which("openssl") is None,

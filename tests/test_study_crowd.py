@@ -15,8 +15,8 @@ from conftest import CHROMIUM, STAND_IN_TOKEN, wait_in_page
 from services.recorder.recording import load
 from services.study.core import StudyConfig, Variant
 from services.study.crowd import BONUSES, Bonus, Crowd
-from services.study.runner import SCREENED
 from services.study.standin import stand_in
+from services.study.visit import SCREENED
 
 DONE = "https://app.prolific.com/submissions/complete?cc={code}"
 OUT = "https://app.prolific.com/submissions/complete?cc=SCREENED"

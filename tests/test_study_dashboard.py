@@ -18,7 +18,7 @@ from services.human.gateway import Web
 from services.recorder.recording import load
 from services.study.core import StudyConfig, Variant
 from services.study.dashboard import NOT_RUNNING, WRONG
-from services.study.runner import Serving
+from services.study.serving import Serving
 from services.study.standin import stand_in
 from shared.bus import free_endpoint
 

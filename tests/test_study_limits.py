@@ -13,9 +13,10 @@ import websockets
 from conftest import STAND_IN_TOKEN
 
 from services.human.gateway import Web
+from services.study.admission import BUSY, RECONNECTS
 from services.study.core import StudyConfig, Variant
 from services.study.dashboard import TOO_MANY, WRONG
-from services.study.runner import BUSY, RECONNECTS, Serving
+from services.study.serving import Serving
 from shared.bus import free_endpoint
 
 CONFIG = StudyConfig("limits", (Variant.read("s", "B5", "S5"),), trials=1, trial_seconds=1.5, seed=1)

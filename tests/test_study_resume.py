@@ -12,10 +12,11 @@ import logging
 import pytest
 from conftest import STAND_IN_TOKEN
 
+from services.study.admission import CONTACT, NOT_YOURS, TAKEN
 from services.study.core import Admission, Study, StudyConfig, Variant
 from services.study.crowd import Crowd
 from services.study.dashboard import overview
-from services.study.runner import CONTACT, NOT_YOURS, TAKEN, Serving
+from services.study.serving import Serving
 from services.study.standin import stand_in
 from shared.secret import signature
 

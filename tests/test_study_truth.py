@@ -17,9 +17,9 @@ import pytest
 from conftest import CHROMIUM, STAND_IN_TOKEN
 
 from services.human.core import end
+from services.study.admission import STOPPED
 from services.study.core import CHECKS_TEXT, PRACTICE_TEXT, StudyConfig, Variant
 from services.study.crowd import Crowd
-from services.study.runner import STOPPED
 from services.study.standin import stand_in
 from shared.messages import Summary
 from shared.page import End

@@ -293,7 +293,8 @@ def study(
     from services.study.crowd import BONUSES
     from services.study.dashboard import read_token
     from services.study.preflight import load_checked
-    from services.study.runner import Serving, run_study
+    from services.study.runner import run_study
+    from services.study.serving import Serving
     from shared.secret import read_secret
 
     if check:

@@ -65,6 +65,96 @@ class StandInReport:
     set_ups: int = 0  # `wait` messages: a game being set up, said before each trial
 
 
+class _Visit:
+    """What a stand-in holds between the server's messages: its report, the partner playing its
+    role, the keys it holds, and its clocks. `on(message)` answers one message; True once the
+    study is over for the stand-in (done, screened out, stopped, refused)."""
+
+    def __init__(self, ws: object, policies: dict[str, str], seed: int, leave_after: int, attentive: bool):
+        self.ws, self.policies, self.seed, self.leave_after, self.attentive = (
+            ws, policies, seed, leave_after, attentive
+        )  # fmt: skip
+        self.report = StandInReport()
+        self.policy, self.held, self.ready, self.queued, self.since = None, None, None, 0.0, time.monotonic()
+
+    async def on(self, message: object) -> bool:
+        if isinstance(message, StateView):
+            return await self.frame(message)
+        if isinstance(message, (ConsentText, ParticipantId, Check, Queue, Trial)):
+            await self.before_game(message)
+            return False
+        report = self.report
+        if isinstance(message, Wait):
+            report.set_ups += 1
+        elif isinstance(message, End):
+            report.kills.append(message.kills)
+            left = message.frames - message.frame
+            report.cut += [left] if left > 0 else []
+            self.since = time.monotonic()
+        elif isinstance(message, Done):
+            report.done, report.end, report.code = True, message.text, message.code
+            report.redirect = message.redirect
+        elif isinstance(message, Screened):
+            report.screened, report.end, report.redirect = True, message.text, message.redirect
+        elif isinstance(message, Stopped):
+            report.stopped = message.text
+        elif isinstance(message, (Refused, Problem)):
+            report.refused = message.reason if isinstance(message, Refused) else message.text
+        return isinstance(message, (Done, Screened, Stopped, Refused, Problem))
+
+    async def before_game(self, message: object) -> None:
+        """Consent, the participant's id, an attention check, the queue, a trial's offer."""
+        report, ws = self.report, self.ws
+        if isinstance(message, ConsentText):
+            report.consent = message.text
+            await ws.send(Consent().encode())
+            self.since = time.monotonic()
+        elif isinstance(message, ParticipantId):
+            report.participant, report.key = message.participant, message.key
+        elif isinstance(message, Check):
+            report.checks += 1
+            word = message.text.split('"')[1]  # the button the check names
+            answer = word if self.attentive else next(o for o in message.options if o != word)
+            await ws.send(Answer(answer=answer).encode())
+        elif isinstance(message, Queue):
+            report.queued = max(report.queued, message.place)
+            self.queued = self.queued or time.monotonic()
+        elif isinstance(message, Trial):
+            await self.offered(message)
+
+    async def offered(self, message: Trial) -> None:
+        """A trial's offer: play it with the partner of the role, from Ready."""
+        report = self.report
+        report.offers.append(time.monotonic() - self.since)
+        if self.queued:
+            report.waits.append(time.monotonic() - self.queued)
+            self.queued = 0.0
+        report.again += message.again
+        report.role = message.role
+        report.agents.append(message.agent)
+        self.policy = make_partner(self.policies[report.role], report.role)
+        self.policy.reset(policy_seed(self.seed + len(report.agents) - 1, report.role))
+        await self.ws.send(Ready().encode())
+        self.ready = time.monotonic()
+
+    async def frame(self, message: StateView) -> bool:
+        """A frame: the partner's keys for it, sent when they change; True once it leaves."""
+        report = self.report
+        if self.ready is not None:
+            report.first_frames.append(time.monotonic() - self.ready)
+            self.ready = None
+        if self.policy is None or message.obs is None:
+            return False
+        report.states += 1
+        if self.leave_after and report.states >= self.leave_after:
+            return True
+        keys = action_keys(self.policy.act(as_observation(message.obs, self.policy.view)))
+        if keys != self.held:  # a person's keyboard reports changes, not frames
+            self.held = keys
+            await self.ws.send(keys.encode())
+        return False
+
+
 async def stand_in(
     url: str,
     policies: dict[str, str] | None = None,
@@ -90,79 +180,16 @@ async def stand_in(
     `attentive` False answers every attention check with a wrong button; `ssl` an SSLContext for a
     wss:// server; `address` the local address it connects from (a loopback test's other clients:
     127.0.0.2 and on)."""
-    policies = policies or {"bait": "circle", "shooter": "mirror"}
-    report = StandInReport()
     hello = Hello(
         obs=True, test=test or None, worker=worker or None, sig=sig or None, link=link or None,
         **({"participant": resume[0], "key": resume[1]} if resume else {}),
     )  # fmt: skip
-    policy, held, ready, queued, since = None, None, None, 0.0, time.monotonic()
     socket = url.replace("http", "ws", 1).rstrip("/") + "/ws"
     local = {"local_addr": (address, 0)} if address else {}
     async with websockets.connect(socket, ssl=ssl, **local) as ws:
+        visit = _Visit(ws, policies or {"bait": "circle", "shooter": "mirror"}, seed, leave_after, attentive)
         await ws.send(hello.encode())
         async for text in ws:
-            message = decode_down(text)  # the page's contract, as the page reads it
-            if isinstance(message, ConsentText):
-                report.consent = message.text
-                await ws.send(Consent().encode())
-                since = time.monotonic()
-            elif isinstance(message, ParticipantId):
-                report.participant, report.key = message.participant, message.key
-            elif isinstance(message, Check):
-                report.checks += 1
-                word = message.text.split('"')[1]  # the button the check names
-                answer = word if attentive else next(o for o in message.options if o != word)
-                await ws.send(Answer(answer=answer).encode())
-            elif isinstance(message, Queue):
-                report.queued = max(report.queued, message.place)
-                queued = queued or time.monotonic()
-            elif isinstance(message, Trial):
-                report.offers.append(time.monotonic() - since)
-                if queued:
-                    report.waits.append(time.monotonic() - queued)
-                    queued = 0.0
-                report.again += message.again
-                report.role = message.role
-                report.agents.append(message.agent)
-                policy = make_partner(policies[report.role], report.role)
-                policy.reset(policy_seed(seed + len(report.agents) - 1, report.role))
-                await ws.send(Ready().encode())
-                ready = time.monotonic()
-            elif isinstance(message, StateView):
-                if ready is not None:
-                    report.first_frames.append(time.monotonic() - ready)
-                    ready = None
-                if policy is None or message.obs is None:
-                    continue
-                report.states += 1
-                if leave_after and report.states >= leave_after:
-                    return report
-                keys = action_keys(policy.act(as_observation(message.obs, policy.view)))
-                if keys != held:  # a person's keyboard reports changes, not frames
-                    held = keys
-                    await ws.send(keys.encode())
-            elif isinstance(message, Wait):
-                report.set_ups += 1
-            elif isinstance(message, End):
-                report.kills.append(message.kills)
-                left = message.frames - message.frame
-                report.cut += [left] if left > 0 else []
-                since = time.monotonic()
-            elif isinstance(message, Done):
-                report.done, report.end, report.code = True, message.text, message.code
-                report.redirect = message.redirect
-                return report
-            elif isinstance(message, Screened):
-                report.screened, report.end, report.redirect = True, message.text, message.redirect
-                return report
-            elif isinstance(message, Stopped):
-                report.stopped = message.text
-                return report
-            elif isinstance(message, Refused):
-                report.refused = message.reason
-                return report
-            elif isinstance(message, Problem):
-                report.refused = message.text
-                return report
-    return report
+            if await visit.on(decode_down(text)):  # the page's contract, as the page reads it
+                break
+        return visit.report

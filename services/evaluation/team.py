@@ -10,6 +10,7 @@ from collections.abc import Callable
 import numpy as np
 
 from services.evaluation.evaluate import batches, play_games, play_session
+from services.evaluation.oracle import chosen_on_other_half
 from services.evaluation.results import TeamGame
 from services.jobs.core import Spec, spec
 from services.jobs.kinds import Runner, in_process
@@ -156,20 +157,18 @@ def known_partner(
     grid: dict[str, dict[tuple[str, int], float]], statics: list[str], units: list[tuple[str, int]]
 ) -> np.ndarray:
     """Each game's kills/min with the static policy best for its partner on the partner's other
-    games (its seeds alternate between two halves; each half is scored by the other's choice): what
-    choosing one static policy per partner, knowing the partner in advance, would score, without
-    the luck of choosing on the games scored. A partner with a single game is chosen on it."""
-    halves: dict[tuple[str, int], list] = {}
-    for partner in dict.fromkeys(u[0] for u in units):
-        seeds = sorted(u[1] for u in units if u[0] == partner)
-        for i, seed in enumerate(seeds):
-            halves.setdefault((partner, i % 2), []).append((partner, seed))
-    choice = {}
-    for (partner, half), own in halves.items():
-        chosen_on = halves.get((partner, 1 - half), own)
-        best = max(statics, key=lambda a: sum(grid[a][u] for u in chosen_on))
-        choice.update(dict.fromkeys(own, best))
-    return np.array([grid[choice[u]][u] for u in units])
+    games (oracle.py: its seeds alternate between two halves, each scored by the other's choice):
+    what choosing one static policy per partner, knowing the partner in advance, would score,
+    without the luck of choosing on the games scored."""
+    seeds: dict[str, list[int]] = {}
+    for partner, seed in units:
+        seeds.setdefault(partner, []).append(seed)
+    value = {}
+    for partner, mine in seeds.items():
+        mine.sort()
+        kills = np.array([[[grid[a][(partner, s)] for s in mine] for a in statics]])
+        value.update(zip(((partner, s) for s in mine), chosen_on_other_half(kills)[0].tolist(), strict=True))
+    return np.array([value[u] for u in units])
 
 
 def compare(

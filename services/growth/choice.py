@@ -2,10 +2,11 @@
 cross-play grid (partners x candidate teammates x seeds, kills/min).
 
 - `headroom`: the held-out oracle headroom. Each partner's best library member is chosen on its
-  other seeds (its seeds alternate between two halves, each scored by the other's choice, as
-  team.known_partner does for the evaluation), and compared with the best single member (chosen
-  on all the games, which favours it). What a teammate that knew its partner could gain by
-  choosing: the most an adapter over that library can gain.
+  other seeds (`oracle`, services/evaluation/oracle.py: its seeds alternate between two halves,
+  each scored by the other's choice, as the evaluation's known-partner headroom is), and
+  compared with the best single member (chosen on all the games, which favours it). What a
+  teammate that knew its partner could gain by choosing: the most an adapter over that library
+  can gain.
 - `groups`: partners grouped by what works with them (k-means over their rows, each row scaled by
   its best value: the shape of what works, not how well), with the fewest groups whose regret (a
   member's best candidate against its group's best) is within the spec's bound.
@@ -19,6 +20,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from services.evaluation.oracle import oracle  # written once, for the evaluation too
 
 
 @dataclass(frozen=True)
@@ -41,17 +44,6 @@ class Grid:
     def of(cls, record: dict) -> Grid:
         """A grid as a cross-play file holds it (`partners`, `candidates`, `kills` as lists)."""
         return cls(tuple(record["partners"]), tuple(record["candidates"]), np.array(record["kills"]))
-
-
-def oracle(kills: np.ndarray) -> float:
-    """Mean kills/min when each partner plays with the column best on its other half of seeds
-    (even seeds choose for the odd ones and the other way round); kills: (P, C, S)."""
-    halves = [kills[:, :, 0::2], kills[:, :, 1::2]]
-    total = 0.0
-    for scored, chooser in ((halves[0], halves[1]), (halves[1], halves[0])):
-        choice = chooser.mean(axis=2).argmax(axis=1)
-        total += scored[np.arange(len(kills)), choice].sum()
-    return total / (kills.shape[0] * kills.shape[2])
 
 
 def best_single(kills: np.ndarray) -> tuple[int, float]:

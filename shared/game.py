@@ -43,6 +43,11 @@ EVENT_KINDS = (
     "policy_failure",  # a seat's policy raised or answered no action; it played no-op (the sim's)
 )
 OBS_SIZE = 64  # float values per observation; the layout is services/sim/observation.py
+# The adapter scores the partner's frames in batches of SCORE_FRAMES frames of the match (never by
+# the clock: a lockstep match plays as fast as it is answered) and rules on the last frame of each
+# batch; a switch it makes plays from the frame after that one, live and in the in-process
+# evaluation alike (docs/adapter.md, "When a switch plays").
+SCORE_FRAMES = 6
 
 
 @dataclass(frozen=True)
@@ -69,6 +74,17 @@ FRAMES = Range(1, 60 * 60 * FPS)  # a game's length: at most an hour
 DURATION = Range(0.1, FRAMES.high / FPS)  # the same in seconds, where people give it (--duration)
 
 T = TypeVar("T")
+
+
+def scoring(frame: int) -> bool:
+    """Whether the adapter rules on `frame`: the last of a batch of SCORE_FRAMES (5, 11, 17, ...)."""
+    return (frame + 1) % SCORE_FRAMES == 0
+
+
+def ruled_at(frame: int) -> int:
+    """The scoring frame whose ruling covers `frame`: a choice the adapter makes on `frame` is
+    played from the frame after this one."""
+    return frame + (-(frame + 1)) % SCORE_FRAMES
 
 
 def check_role(role: str) -> str:

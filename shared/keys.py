@@ -3,6 +3,7 @@
 tsf/<match>/state                 sim -> all       one State per frame
 tsf/<match>/action/<role>         agent or human -> sim, one Action per state
 tsf/<match>/policy/<role>         adapter or operator -> agent: which library policy to play
+tsf/<match>/ruling/<role>         adapter -> agent: its Ruling on each scoring frame (shared.game.scoring)
 tsf/<match>/start                 sim -> all       the match's Start (config, seats), once, before its states
 tsf/<match>/event                 sim -> all       game events (kills, deaths, ...)
 tsf/<match>/summary               sim -> all       the match result, once, at the end
@@ -76,6 +77,10 @@ def action(match: str, role: str) -> str:
 
 def policy(match: str, role: str) -> str:
     return f"{PREFIX}/{check_match(match)}/policy/{_role(role)}"
+
+
+def ruling(match: str, role: str) -> str:
+    return f"{PREFIX}/{check_match(match)}/ruling/{_role(role)}"
 
 
 def start(match: str) -> str:
@@ -189,8 +194,8 @@ class Key(NamedTuple):
     """The parts of a key: `match` is the match id (or the sweep id), `kind` the chunk after it."""
 
     match: str
-    kind: str  # state, start, event, summary, adapter, action, policy, alive; or a sweep's kinds
-    role: str = ""  # the seat an action, policy or seat's alive key names
+    kind: str  # state, start, event, summary, adapter, action, policy, ruling, alive; or a sweep's kinds
+    role: str = ""  # the seat an action, policy, ruling or seat's alive key names
     service: str = ""  # the service an alive key names
     worker: str = ""  # the worker a sweep's worker or job key names, the match host a host key names,
     # or the pool a pool key names
@@ -198,7 +203,7 @@ class Key(NamedTuple):
 
 _PLAIN = ("state", "start", "event", "summary", "adapter")  # tsf/<match>/<kind>
 _HOST = ("alive", "status", "offer", "stop", "done")  # tsf/host/<host>/<kind>
-_SEAT = ("action", "policy")  # tsf/<match>/<kind>/<role>
+_SEAT = ("action", "policy", "ruling")  # tsf/<match>/<kind>/<role>
 
 
 def parse(key: object) -> Key:

@@ -17,6 +17,7 @@ M = "m-1_a"
         (keys.action(M, "shooter"), "tsf/m-1_a/action/shooter"),
         (keys.policy(M, "bait"), "tsf/m-1_a/policy/bait"),
         (keys.policy(M, "shooter"), "tsf/m-1_a/policy/shooter"),
+        (keys.ruling(M, "shooter"), "tsf/m-1_a/ruling/shooter"),
         (keys.start(M), "tsf/m-1_a/start"),
         (keys.event(M), "tsf/m-1_a/event"),
         (keys.summary(M), "tsf/m-1_a/summary"),
@@ -74,7 +75,7 @@ def test_invalid_match_id(bad: object) -> None:
 
 @pytest.mark.parametrize("role", ["", "*", "pilot", "Bait", "bait/x"])
 def test_unknown_role(role: str) -> None:
-    for key in (keys.action, keys.policy):
+    for key in (keys.action, keys.policy, keys.ruling):
         with pytest.raises(ValueError, match="unknown role"):
             key(M, role)
     with pytest.raises(ValueError, match="unknown role"):
@@ -94,6 +95,7 @@ def test_unknown_service(service: str) -> None:
         (keys.summary(M), keys.Key(M, "summary")),
         (keys.action(M, "bait"), keys.Key(M, "action", role="bait")),
         (keys.policy(M, "shooter"), keys.Key(M, "policy", role="shooter")),
+        (keys.ruling(M, "bait"), keys.Key(M, "ruling", role="bait")),
         (keys.alive(M, "sim"), keys.Key(M, "alive", service="sim")),
         (keys.alive(M, "human", "shooter"), keys.Key(M, "alive", role="shooter", service="human")),
         (keys.job_coordinator("s1"), keys.Key("s1", "coordinator")),

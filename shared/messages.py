@@ -199,6 +199,22 @@ class PolicySwitch(MatchMessage):
 
 
 @dataclass(frozen=True, kw_only=True)
+class Ruling(MatchMessage):
+    """The adapter's ruling on the scoring frame `frame` (shared.game.scoring): the agent of `role`
+    plays `policy` from the next frame on; `partner` is the estimate it rests on ("" while the
+    window fills). Put on every scoring frame, a switch or not: in a lockstep match the adaptive
+    seat answers the next state only once it has it (services/agent/gate.py), so a switch plays
+    from the same frame on every run, the frame the in-process evaluation gives."""
+
+    TYPE: ClassVar[str] = "ruling"
+    CHECKS: ClassVar[dict[str, Check]] = {"role": _ROLE, "policy": _KEY, "partner": _KEY_OR_NONE}
+
+    role: str = "bait"
+    policy: str = "circle"
+    partner: str = ""
+
+
+@dataclass(frozen=True, kw_only=True)
 class GameEvent(MatchMessage):
     """Something that happened in a frame (services/sim/engine.py Event), or the match's start/end."""
 
@@ -583,15 +599,15 @@ def recording_auth(key: str, offset: str, secret: bytes) -> str:
 TYPES: dict[str, type[Message]] = {
     t.TYPE: t
     for t in (
-        Start, State, Action, PolicySwitch, GameEvent, Summary, AdapterStatus, JobOrder, JobResult,
-        HostStatus, MatchOffer, MatchAnswer, MatchStop, MatchDone, RecordingChunk, MatchOrder,
+        Start, State, Action, PolicySwitch, Ruling, GameEvent, Summary, AdapterStatus, JobOrder,
+        JobResult, HostStatus, MatchOffer, MatchAnswer, MatchStop, MatchDone, RecordingChunk, MatchOrder,
     )
 }  # fmt: skip
 # Version 1 named every family's id `match`: for a match's own traffic, what a recording holds, that
 # is still its name, so old recordings load. A live job or host peer of version 1 is refused
 # (`version`): it would refuse this version's answers, and a sealed message's seal covers its
 # version.
-RECORDED = frozenset((Start, State, Action, PolicySwitch, GameEvent, Summary, AdapterStatus))
+RECORDED = frozenset((Start, State, Action, PolicySwitch, Ruling, GameEvent, Summary, AdapterStatus))
 _ENVELOPE: dict[str, Check] = {"frame": whole(0, MAX_FRAME), "sender": _SENDER}
 M = TypeVar("M", bound=Message)
 

@@ -36,6 +36,7 @@ from shared.messages import (
     MessageError,
     PolicySwitch,
     RecordingChunk,
+    Ruling,
     Start,
     State,
     Summary,
@@ -73,6 +74,7 @@ def examples() -> dict[str, Message]:
             policy="mirror",
             reason="cross-entropy 2.3 > 1.5",
         ),
+        "ruling": Ruling(match=M, frame=191, sender="adapter", role="shooter", policy="GS2", partner="G4"),
         "event": GameEvent(match=M, frame=12, sender="sim", kind="death", role="bait", detail="shell"),
         "summary": summary_message(game, M, "sim", {"range": 2, "shape": 1}, {"round_trip_ms_p50": 1.5}),
         "sweep_job": JobOrder(

@@ -4,7 +4,8 @@
 static library policy or adaptively, as the lanes of one batched engine (one game is one lane):
 the partners in their batched forms (partners.py), our seat's lanes grouped by the policy
 they play now, and every adaptive lane's update batched (`AdapterLanes`). The adaptive agent
-switches as the agent service does: from the frame after the adapter's choice. A game's draws come
+switches as the live one does: the adapter scores every frame and rules on every SCORE_FRAMES-th
+(shared.game.scoring), and its choice then plays from the next frame. A game's draws come
 from `lane_uniforms` keyed by its seed (batch_play.py), so a game is the same whichever batch it
 is played in. `play_session` plays a session's trials one after the other, an adapter carried
 from trial to trial.
@@ -32,7 +33,7 @@ from services.population.human_like import SESSION_TRIALS
 from services.population.partners import PartnerError, Partners, build
 from services.population.seat import SeatSpec
 from services.table.table import DEFAULT_TABLE
-from shared.game import OBS_SIZE, ROLES, GameConfig, Policy, bait_first, other
+from shared.game import OBS_SIZE, ROLES, GameConfig, Policy, bait_first, other, scoring
 
 LANES = 1024  # games per batch at most
 
@@ -125,17 +126,17 @@ def play_games(
     partner_seat = ROLES.index(partner_role)
 
     def each_frame(frame: int, seen_by: list, actions: list[np.ndarray]) -> None:
-        """The adaptive lanes' updates (a switch plays from the next frame) and what is recorded."""
+        """The adaptive lanes' updates (a switch plays from the frame after its scoring frame, as
+        the live adapter's ruling does: shared.game.ruled_at) and what is recorded."""
         observed, partner_actions = seen_by[partner_seat], actions[partner_seat]
         if groups:
             states = observed("world")  # what AdapterLanes.update reads: stalls, the guard's kills
         for lanes, adapter, index, scorer in groups:
             now = scorer.observed({v: observed(v)[lanes] for v in scorer.views}, partner_actions[lanes])
             for j in np.flatnonzero(adapter.update(now, states[lanes], partner_actions[lanes])).tolist():
-                seat.choice[lanes[j]] = index[adapter.policy[j]]
                 outcomes[lanes[j]].switches += 1
-                chosen = (adapter.payoff.types[adapter.partner[j]], adapter.payoff.ours[adapter.policy[j]])
-                outcomes[lanes[j]].timeline.append((frame + 1, *chosen))
+            if scoring(frame):
+                rule(frame, (lanes, adapter, index), seat.choice, outcomes)
         if scores is not None:
             scores[:, frame] = scored_by.observed({v: observed(v) for v in scored_by.views}, partner_actions)
         if pairs is not None:
@@ -160,6 +161,22 @@ def play_games(
             o.values, o.pairs = values[lane], pairs[lane]
             o.actions = o.pairs[:, ROLES.index(partner_role)]
     return outcomes
+
+
+def rule(
+    frame: int,
+    group: tuple[np.ndarray, AdapterLanes, np.ndarray],
+    choice: np.ndarray,
+    outcomes: list[Outcome],
+) -> None:
+    """The adapter's ruling on scoring frame `frame` for the lanes of one adaptive `group` (its
+    lanes, its adapters, its policies' indices in our seat's `choice`): each lane plays its
+    adapter's choice from the next frame, and a lane whose policy changes notes it in its timeline."""
+    lanes, adapter, index = group
+    for j in np.flatnonzero(choice[lanes] != index[adapter.policy]).tolist():
+        choice[lanes[j]] = index[adapter.policy[j]]
+        chosen = (adapter.payoff.types[adapter.partner[j]], adapter.payoff.ours[adapter.policy[j]])
+        outcomes[lanes[j]].timeline.append((frame + 1, *chosen))
 
 
 def play_teams(

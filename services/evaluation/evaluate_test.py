@@ -24,7 +24,7 @@ from services.sim.observation import observe, world_values
 from services.sim.sampling import lane_uniforms, sample
 from services.table.table import DEFAULT_TABLE, Table
 from shared.errors import UsageError
-from shared.game import GameConfig
+from shared.game import GameConfig, scoring
 
 
 def seated(games: list[tuple]) -> list[tuple[SeatSpec, SeatSpec, int]]:
@@ -172,7 +172,7 @@ def test_batched_adaptive_games_decide_as_the_scalar_engine_replays_them() -> No
         s = setup("shooter", agent.partners if adaptive else "library")
         adapter = core.build(agent, s.payoff) if adaptive else None
         policy = ours(adapter.policy if adapter else agent, "shooter")
-        timeline = []
+        timeline, switches, playing = [], 0, adapter.policy if adapter else agent
         for frame, (bait, shooter) in enumerate(outcome.pairs.tolist()):
             probs = policy.probs(observe(game, "shooter", policy.view))
             assert shooter == sample(probs[None], lane_uniforms(np.array([seed]), 1, frame))[0]
@@ -180,17 +180,19 @@ def test_batched_adaptive_games_decide_as_the_scalar_engine_replays_them() -> No
             np.testing.assert_allclose(outcome.values[frame], values, rtol=1e-6, atol=1e-6)  # float32
             assert outcome.actions[frame] == bait
             np.testing.assert_allclose(outcome.scores[frame], library(values, bait), rtol=1e-12)
-            if adapter is not None and adapter.update(s.scorer(values, bait), values):
-                timeline.append((frame + 1, adapter.partner, adapter.policy))
-                policy = ours(adapter.policy, "shooter")
+            if adapter is not None:
+                switches += adapter.update(s.scorer(values, bait), values)
+                if scoring(frame) and adapter.policy != playing:  # the ruling: from the next frame
+                    timeline.append((frame + 1, adapter.partner, adapter.policy))
+                    playing, policy = adapter.policy, ours(adapter.policy, "shooter")
             game.step(bait, shooter)
-        assert outcome.timeline == timeline and outcome.switches == len(timeline)
+        assert outcome.timeline == timeline and outcome.switches == switches
         assert outcome.kills_per_minute == game.kills_per_minute()
         assert outcome.guarded == (adapter is not None and adapter.guarded)
     p = setup("shooter").payoff
     best = p.ours[p.best_response(p.partners.index("B3"))]  # the table's answer to B3
     assert sum(o.switches for o in played) > 4 and played[0].timeline[0][1:] == ("B3", best)
-    assert [o.switches for o in played[5:7]] == [1, 2]  # under the guard's doubling dwell
+    assert [o.switches for o in played[5:7]] == [3, 2]  # under the guard's doubling dwell
     assert played[7].timeline[0][1:] == ("G4", "GS2")  # the one group whose best member is not GS1
 
 

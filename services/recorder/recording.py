@@ -15,6 +15,7 @@ from shared.messages import (
     GameEvent,
     MessageError,
     PolicySwitch,
+    Ruling,
     Start,
     State,
     Summary,
@@ -33,6 +34,7 @@ class Recording:
     states: list[State] = field(default_factory=list)
     actions: list[tuple[int, Action]] = field(default_factory=list)  # (receive time ns, action)
     switches: list[PolicySwitch] = field(default_factory=list)
+    rulings: list[Ruling] = field(default_factory=list)  # the adapter's, one each scoring frame
     events: list[GameEvent] = field(default_factory=list)
     adapter: list[AdapterStatus] = field(default_factory=list)
     gaps: list[tuple[int, int]] = field(default_factory=list)
@@ -128,6 +130,8 @@ def load(path: str | Path) -> Recording:
             recording.actions.append((record.t, message))
         elif isinstance(message, PolicySwitch):
             recording.switches.append(message)
+        elif isinstance(message, Ruling):
+            recording.rulings.append(message)
         elif isinstance(message, GameEvent):
             recording.events.append(message)
         elif isinstance(message, AdapterStatus):

@@ -15,10 +15,11 @@ import numpy as np
 import pandas as pd
 import pytest
 from PIL import Image
+from ruamel.yaml import YAML
 
 from services.adapter.core import initial_policy, payoff_of
 from services.agent.library import NAMED
-from services.population.adaptive import STRATEGIES, AdapterConfig
+from services.population.adaptive import ADAPTIVE, SHIPPED, STRATEGIES, AdapterConfig
 from services.report import figures
 from services.report.analysis import reference_partner
 from services.table.table import Table
@@ -59,9 +60,7 @@ def test_the_citation_file_is_valid_cff_and_the_readme_cites_the_same_study() ->
         capture_output=True, text=True, timeout=60,
     )  # fmt: skip
     assert run.returncode == 0, run.stdout + run.stderr
-    import yaml
-
-    cff = yaml.safe_load((ROOT / "CITATION.cff").read_text())
+    cff = YAML(typ="safe").load((ROOT / "CITATION.cff").read_text())  # check-jsonschema's reader: no extra
     assert cff["cff-version"] == "1.2.0" and cff["type"] == "software"
     [study] = cff["references"]
     readme = page("README.md")
@@ -161,7 +160,7 @@ def test_the_pages_name_the_shipped_tables_best_responses(table: Table) -> None:
     b5 = grown.types[grown.group[grown.partners.index("B5")]]
     answers = np.argmax(grown.trust(AdapterConfig().window) @ grown.type_values, axis=1)
     b5_choice = grown.ours[answers[grown.types.index(b5)]]
-    default = AdapterConfig(partners="groups")
+    default = SHIPPED
     grown_start = grown.initial(default)
     circle = json.loads((NAMED["grown"] / "members.json").read_text())["GB1"]  # the picture's bait
     gb1 = grown.types[grown.group[grown.partners.index(circle)]]
@@ -211,7 +210,7 @@ def test_the_adapter_page_reports_the_shipped_evaluation() -> None:
             round(test["mean_difference"], 3),
             round(test["stderr"], 3),
         ), name
-    assert f"**{AdapterConfig().name}** (the default)" in text
+    assert f"**{AdapterConfig().name}** (the default strategy)" in text
     summary = page("docs/eval/summary.md")
     assert f"Best static policy: **{best}**" in summary
 
@@ -223,7 +222,7 @@ def test_the_adapter_page_opens_with_the_shipped_results_at_a_glance(seat: str) 
     effects, and the known-partner headroom with the share realised; and the partners are said to
     be simulated."""
     comparison = json.loads((ROOT / "docs" / "eval" / "held-out" / seat / "comparison.json").read_text())
-    default = AdapterConfig(partners="groups").name
+    default = SHIPPED.name
     test, best = comparison["tests"][default], comparison["best_static"]
     base, mean = comparison["agents"][best]["mean"], comparison["agents"][default]["mean"]
     text = (ROOT / "docs" / "adapter.md").read_text()
@@ -242,6 +241,47 @@ def test_the_adapter_page_opens_with_the_shipped_results_at_a_glance(seat: str) 
     room = comparison["known_partner"]["all"]["percent"]
     assert f"{room:+.1f} %, {100 * test['headroom_realised']:.0f} % of it" in row
     assert percent.replace("*", "") in page("docs/index.md")
+    readme = page("README.md")
+    first_screen = readme[: readme.index("## Your first ten minutes")]  # the result in one sentence
+    assert percent.replace("*", "") in first_screen and "every partner is simulated" in first_screen
+
+
+def said_help(command: str) -> str:
+    """`tsf COMMAND --help` as one line of text (the boxes' rules and the wrapping folded away)."""
+    from typer.testing import CliRunner
+
+    from services.commands.app import app
+
+    return re.sub(r"[\s│]+", " ", CliRunner().invoke(app, [command, "--help"]).output)
+
+
+def test_every_text_that_names_the_default_agent_names_the_shipped_one() -> None:
+    """The default is the agent the command line plays (SHIPPED, the grown library's), never the
+    study library's agent that was the default before it ("the default strategy" is both's); and no
+    help text says adapting a seat does not pay, which the shipped agent's results contradict."""
+    notebooks = [str(p.relative_to(ROOT)) for p in (ROOT / "docs").rglob("*.py")]
+    texts = {name: page(name) for name in [*PAGES, *notebooks]}
+    texts |= {f"tsf {c} --help": said_help(c) for c in ("match", "play", "eval", "adapter", "keys")}
+    default = re.compile(r"`?\**(adaptive-[\w.-]+)\**`?,? \(?(?:is )?the (?:shipped )?default\b(?! strategy)")
+    named = {name: default.findall(text) for name, text in texts.items()}
+    assert {name: wrong for name, names in named.items() if (wrong := set(names) - {SHIPPED.name})} == {}
+    assert "does not pay" not in texts["tsf match --help"]
+
+
+@pytest.mark.xfail(
+    reason="services/evaluation/figures.py marks AdapterConfig().name, the study library's agent, until "
+    "it marks adaptive.SHIPPED; `figures.redraw` on docs/eval/held-out/* then redraws the shipped ones"
+)
+@pytest.mark.parametrize("seat", ["shooter", "bait"])
+def test_the_held_out_figures_mark_the_shipped_agent_as_the_default(seat: str, tmp_path: Path) -> None:
+    from services.evaluation import figures
+    from shared.plots import drawn
+
+    comparison = json.loads((ROOT / "docs" / "eval" / "held-out" / seat / "comparison.json").read_text())
+    [fig] = drawn(lambda: figures.adaptive_vs_static(comparison, tmp_path / "figure.png"))
+    labels = [label.get_text() for label in fig.axes[0].get_yticklabels()]
+    marked = SHIPPED.name.removeprefix(ADAPTIVE) + " (default)"
+    assert [label for label in labels if "(default)" in label] == [marked]
 
 
 def test_no_page_names_an_issue() -> None:

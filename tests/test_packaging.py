@@ -3,6 +3,7 @@ configs): each one in the source tree is declared package data in pyproject.toml
 `pip install .` outside the checkout installs a project with no library."""
 
 import fnmatch
+import re
 import subprocess
 import tomllib
 from pathlib import Path
@@ -38,3 +39,33 @@ def test_every_data_file_of_the_packages_is_package_data():
     files = tracked_data_files()
     assert "services/agent/library/registry.toml" in files
     assert [f for f in files if not declared_for(f)] == []
+
+
+# What each extra brings that a test may import (pyproject.toml's optional dependencies, by module).
+EXTRA_MODULES = {
+    "train": ("stable_baselines3", "sb3_contrib", "torch", "tqdm"),
+    "ray": ("ray",),
+    "docs": ("mkdocs", "mkdocstrings", "jupytext", "yaml", "build", "twine"),
+}
+SKIP = re.compile(r"""importorskip\(\s*["']([\w.]+)["'](?:,\s*reason=["']([^"']*)["'])?""")
+
+
+def test_a_test_that_needs_an_extra_skips_naming_it() -> None:
+    """`scripts/test` as the README writes it installs no extra: a test that needs one skips, and its
+    reason names the extra (`the `train` extra is not installed`), which is also how .ci/run finds the
+    tests to run again once the extras are in."""
+    extra_of = {module: extra for extra, modules in EXTRA_MODULES.items() for module in modules}
+    extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    assert set(EXTRA_MODULES) <= set(extras)
+    files = [  # the test files (a glob from the root would walk .venv too)
+        *ROOT.glob("tests/test_*.py"),
+        *ROOT.glob("services/**/*_test.py"),
+        *ROOT.glob("shared/*_test.py"),
+    ]
+    wrong = {}
+    for path in files:
+        for module, reason in SKIP.findall(path.read_text()):
+            extra = extra_of.get(module.split(".")[0])
+            if extra and reason != f"the `{extra}` extra is not installed":
+                wrong[f"{path.relative_to(ROOT)}: {module}"] = reason
+    assert wrong == {}

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-ray = pytest.importorskip("ray")
+ray = pytest.importorskip("ray", reason="the `ray` extra is not installed")
 from ray.cluster_utils import Cluster  # noqa: E402
 
 from services.evaluation import team, thresholds  # noqa: E402

@@ -37,6 +37,29 @@ def beside_keys(role: str) -> dict[str, Path]:
     }
 
 
+def libraries() -> dict[str, Path]:
+    """Every library whose keys load, by the name `tsf keys` gives it: the study's (`study`: B1-B9,
+    S1-S7), those shipped beside it (library.NAMED: `grown`, the library the default agent plays;
+    `population`, the partner population's trained members) and the user's own in TSF_LIBRARY (a
+    shipped one named there keeps its name)."""
+    named = {"study": library.LIBRARY, **library.NAMED}
+    shipped = {root.resolve() for root in named.values()}
+    return named | {f"yours ({r})": r for r in library.roots()[1:] if r.resolve() not in shipped}
+
+
+def listed_keys(role: str | None = None) -> list[tuple[str, str, str, str]]:
+    """Every key that loads by itself, of `role`'s seat or both, as (key, seat, library, what): each
+    library's (libraries()), then the rules (scripted.py). What `tsf keys` prints."""
+    rows = [
+        (key, recipe.role, name, recipe.description)
+        for name, root in libraries().items()
+        for key, recipe in library.registry(root).items()
+        if role in (None, recipe.role)
+    ]
+    rules = [(key, seat, "rules", "a scripted rule") for seat in ROLES for key in scripted_keys(seat)]
+    return rows + [row for row in rules if role in (None, row[1])]
+
+
 def check_seat(key: str, role: str, option: str = "--policy") -> None:
     """Refuse (UsageError) a seat that is not one, or a library or scripted key that cannot play it:
     the line names the option, the value and every key that can."""

@@ -77,8 +77,9 @@ def match_command(
     ),
     adaptive: Role | None = typer.Option(
         None,
-        help="Make this seat the adaptive agent (in the bait seat it does not pay: the best static "
-        "bait is B6 with library shooters, B1 with people-like ones; docs/adapter.md).",
+        help="Make this seat the adaptive agent: the shipped default, the grown library's agent over "
+        "partner groups, unless the adapter options say otherwise (its results in either seat: "
+        "docs/adapter.md).",
     ),
     *,
     adapter: AdapterFactory,
@@ -147,8 +148,8 @@ def play_command(
     role: Role = typer.Option("bait", help="The seat you play."),
     partner: str = typer.Option(
         "adaptive",
-        help="Who plays the other seat: `adaptive` (the adaptive agent), a policy key (see `tsf "
-        "library`), or `human` for a person.",
+        help="Who plays the other seat: `adaptive` (the adaptive agent), a policy key (`tsf keys` lists "
+        "every key that loads), or `human` for a person.",
     ),
     seed: Seed = 0,
     duration: Duration = None,

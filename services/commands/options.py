@@ -199,15 +199,22 @@ def game_frames(duration: float | None, frames: int | None) -> int:
 
 
 def keys_help(role: str | None, what: str) -> str:
-    """An option's help that lists the policy keys of its seat (or of both), as `tsf keys` does."""
-    from services.agent.seats import seat_keys
+    """An option's help that names the policy keys of its seat (or of both) by library, first to
+    last, and points to `tsf keys`, which lists them all."""
+    from services.agent.seats import listed_keys
 
-    roles = [role] if role else list(ROLES)
     try:
-        listed = "; ".join(f"{r}: {', '.join(seat_keys(r))}" for r in roles)
+        rows = listed_keys(role)
     except UsageError:  # a bad TSF_LIBRARY: said in one line once a command reads the library
-        listed = "the keys `tsf keys` lists"
-    return f"{what} ({listed}; or a .zip, module:attr or proxy:DIR: `tsf keys`)."
+        return f"{what} (the keys `tsf keys` lists)."
+    by_library: dict[str, list[str]] = {}
+    for key, _, name, _ in rows:
+        by_library.setdefault(name, []).append(key)
+    listed = "; ".join(
+        f"{name} {keys[0]}..{keys[-1]}" if len(keys) > 3 else f"{name} {', '.join(keys)}"
+        for name, keys in by_library.items()
+    )
+    return f"{what}: a key `tsf keys` lists ({listed}), or a .zip, module:attr or proxy:DIR."
 
 
 def setup_logging(log_level: str | None = None, verbose: bool = False, quiet: bool = False) -> None:

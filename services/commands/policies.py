@@ -31,7 +31,7 @@ from services.sim.observation import VIEWS
 from services.sim.play import play, summarize
 from shared.bus import BusConfig, stop_on_signals
 from shared.errors import Failure, UsageError, missing_extra
-from shared.game import ROLES, SEEDS, GameConfig, Range
+from shared.game import SEEDS, GameConfig, Range
 
 commands = typer.Typer()
 STEPS = Range(1, 10**9)  # environment steps of one training
@@ -175,7 +175,8 @@ def library_add(
     ),
     view: View = typer.Option(View.world, help="The observation view it was trained on."),
     partner: str = typer.Option(
-        "", help="Partner it is scored with (default: S5 for a bait, B5 for a shooter)"
+        "",
+        help="Partner it is scored with, a key `tsf keys` lists (default: S5 for a bait, B5 for a shooter).",
     ),
     games: int = number(10, SCORED, "One-minute games it is scored over (0: not scored)."),
 ) -> None:
@@ -281,22 +282,17 @@ def _grow(population: Path, out: Path, workers: int, ray: str | None, bus: BusCo
 
 @commands.command("keys")
 def keys_command(role: Role | None = typer.Option(None, help="Only the keys of this seat.")) -> None:
-    """Every valid policy key with the seat it plays (the library's, yours in TSF_LIBRARY, the
-    scripted ones), and the other forms a key can take."""
-    from services.agent import library
-    from services.agent.scripted import scripted_keys
+    """Every policy key that loads, by library, with the seat it plays: the study's (B1-B9, S1-S7),
+    the grown library's (GB1.., GS1..: the default agent's), the partner population's members
+    (PB01a.., PS01a..), the scripted rules, yours in TSF_LIBRARY; and the other forms a key can take."""
+    from services.agent.seats import listed_keys
     from services.population.adaptive import STRATEGIES
 
     table = Table(title="Policy keys")
-    for column in ("key", "seat", "kind", "what"):
+    for column in ("key", "seat", "library", "what"):
         table.add_column(column)
-    for key, recipe in library.registry().items():
-        if role in (None, recipe.role):
-            kind = "library" if recipe.root == library.LIBRARY else f"yours ({recipe.root})"
-            table.add_row(key, recipe.role, kind, recipe.description)
-    for seat in [role] if role else ROLES:
-        for key in scripted_keys(seat):
-            table.add_row(key, seat, "scripted", "a scripted rule")
+    for row in listed_keys(role):
+        table.add_row(*row)
     seats = role or "either"
     table.add_row("PATH.zip", seats, "yours", "an SB3 model trained on tsf/Role-v0 (docs/library.md)")
     table.add_row("package.module:attr", "its own", "yours", "a policy object of yours (docs/library.md)")

@@ -30,7 +30,7 @@ INITIAL = ("best-average", "random")
 # the table P; `groups`, one of the grown library's partner groups, choosing among the grown
 # library's members (services/adapter/core.py, Payoff.from_groups). A name without the setting
 # reads as `library` (every name recorded before groups existed); the command line's default is
-# `groups` (COMMAND_LINE), the agent the project ships.
+# `groups` (SHIPPED), the agent the project ships.
 PARTNERS = ("library", "groups")
 WINDOWS = Range(1, FRAMES.high)  # T: a window longer than a game never fills
 ADAPTIVE = "adaptive-"  # how every adaptive agent's name begins
@@ -164,3 +164,10 @@ class AdapterConfig:
     def to_args(self) -> list[str]:
         """The same config as `tsf adapter` options: one per field, so that none is dropped."""
         return [arg for f in fields(self) for arg in (f"--{f.name}", str(getattr(self, f.name)))]
+
+
+# The agent the project ships, the command line's default: every field at its command-line default
+# (partners `groups`, the grown library's agent). A page, figure or help text that calls an agent
+# "the default" means this one (tests/test_docs.py); AdapterConfig() itself is the study library's
+# agent, which a name without settings has always meant.
+SHIPPED = AdapterConfig(**{f.name: f.metadata["default"] for f in fields(AdapterConfig)})

@@ -327,6 +327,11 @@ class Summary(MatchMessage):
     failures: dict[str, int] = field(default_factory=dict)  # frames a seat's policy failed, by seat
 
 
+# An adaptive strategy's name as the wire carries it (AdapterStatus.strategy): every strategy
+# AdapterConfig allows is checked against this at import (services/population/adaptive.py).
+STRATEGY_NAME = re.compile(r"[a-z-]{1,32}")
+
+
 @dataclass(frozen=True, kw_only=True)
 class AdapterStatus(MatchMessage):
     """The adapter's view of the partner, published a few times a second and on every switch.
@@ -339,7 +344,7 @@ class AdapterStatus(MatchMessage):
     TYPE: ClassVar[str] = "adapter"
     CHECKS: ClassVar[dict[str, Check]] = {
         "role": _ROLE,
-        "strategy": _text(r"[a-z_-]{1,32}"),
+        "strategy": _text(STRATEGY_NAME.pattern),
         "window": _int(1, 100_000),
         "filled": _int(0, 100_000),
         "partner": _KEY_OR_NONE,

@@ -238,3 +238,16 @@ def test_a_member_left_out_leaves_its_group_and_the_others_as_they_were() -> Non
     assert left.membership.sum(axis=0).tolist() == [
         n - (j == payoff.group[k]) for j, n in enumerate(payoff.membership.sum(axis=0).tolist())
     ]
+
+
+def test_a_partner_nobody_scores_with_is_a_result_and_a_zero_base_is_not_defined(tmp_path) -> None:  # noqa: ANN001
+    """Every agent scores 0 with P1: the summary says so, and each effect in % of the best static
+    policy's mean of 0 is "not defined" (no ZeroDivisionError after every game was played)."""
+    games = [
+        TeamGame("P1", a, seed, 0.0, 0, 0) for a in ("S1", "S2", "adaptive-T150-cem") for seed in range(4)
+    ]
+    comparison = compare(games)
+    assert comparison.scoreless == ["P1"] and comparison.effect("adaptive-T150-cem") is None
+    summary = write_results(tmp_path, None, games, comparison, "listed").read_text()
+    assert "No agent scores with 1 of the 1 partners (0 kills/min with every agent): P1." in summary
+    assert "| adaptive-T150-cem | not defined |" in summary

@@ -41,7 +41,8 @@ def whole_eval(plan: EvalPlan, workers: int, out: Path, partners: int) -> float:
         return seconds(plan, workers, out)
     chosen = everyone[:: -(-len(everyone) // partners)]
     ident = seconds(dataclasses.replace(plan, performance=False), workers, out / "identification")
-    team = seconds(dataclasses.replace(plan, partners=chosen, identify=False), workers, out / "team")
+    some = dataclasses.replace(plan.population, partners=chosen)
+    team = seconds(dataclasses.replace(plan, population=some, identify=False), workers, out / "team")
     print(
         f"  {workers} workers: identification and figures {ident:.0f} s; "
         f"team games of {len(chosen)} partners {team:.0f} s"
@@ -56,7 +57,7 @@ def main() -> None:
     parser.add_argument("--out", default=None, help="keep the results here (default: a temporary directory)")
     args = parser.parse_args()
     print(f"load average before: {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
-    plan = EvalPlan("shooter", seeds=8, identify_seeds=3)  # the command's options above
+    plan = EvalPlan("shooter", seeds=8, identify_seeds=3, variants=True)  # the shipped docs/eval's options
     walls = {}
     with tempfile.TemporaryDirectory() as tmp:
         for n in (int(w) for w in args.workers.split(",")):

@@ -13,6 +13,7 @@ import dataclasses
 import functools
 import hashlib
 import hmac
+import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, TypeVar
@@ -296,6 +297,11 @@ class Summary(MatchMessage):
     failures: dict[str, int] = field(default_factory=dict)  # frames a seat's policy failed, by seat
 
 
+# An adaptive strategy's name as the wire carries it (AdapterStatus.strategy): every strategy
+# AdapterConfig allows is checked against this at import (services/population/adaptive.py).
+STRATEGY_NAME = re.compile(r"[a-z-]{1,32}")
+
+
 @dataclass(frozen=True, kw_only=True)
 class AdapterStatus(MatchMessage):
     """The adapter's view of the partner, published a few times a second and on every switch.
@@ -308,7 +314,7 @@ class AdapterStatus(MatchMessage):
     TYPE: ClassVar[str] = "adapter"
     CHECKS: ClassVar[dict[str, Check]] = {
         "role": _ROLE,
-        "strategy": matching(r"[a-z_-]{1,32}"),
+        "strategy": matching(STRATEGY_NAME.pattern),
         "window": whole(1, 100_000),
         "filled": whole(0, 100_000),
         "partner": _KEY_OR_NONE,

@@ -322,6 +322,36 @@ MISTAKES = [
         2,
         "tsf eval: --no-identify with --no-performance: measures nothing",
     ),
+    # A population is chosen once: partners beside a named one, or strategies beside a test split
+    # (which measures the shipped agents), are refused before anything runs.
+    (
+        "eval --held-out --partner B5 --out {tmp}/e",
+        2,
+        "tsf eval: --partner B5: beside --held-out: give partners or a population, not both",
+    ),
+    (
+        "eval --population held-out --partners-from {tmp} --out {tmp}/e",
+        2,
+        "tsf eval: --partners-from {tmp}: beside --population held-out: give partners or a population",
+    ),
+    (
+        "eval --held-out --strategy cem --out {tmp}/e",
+        2,
+        "tsf eval: --strategy cem: beside --held-out: a test split measures the shipped agents at "
+        "--strategy-window, not the study's variants; compare those on another population; valid: default",
+    ),
+    (
+        "eval --population held-out --variants --out {tmp}/e",
+        2,
+        "tsf eval: --variants given: beside --population held-out: a test split measures the shipped agents",
+    ),
+    ("eval --held-out --population default", 2, "tsf eval: --held-out with --population default: give one"),
+    (
+        "eval --population nope --out {tmp}/e",
+        2,
+        "tsf eval: --population nope: not a population; valid: default, held-out, a grown library",
+    ),
+    ("eval --games {garbage} --population held-out", 2, "tsf eval: --population with --games {garbage}"),
     (
         "match --adaptive shooter --shooter S4",
         2,

@@ -42,12 +42,12 @@ tests[["mean_difference", "stderr", "d_z", "p_holm", "partners_better", "partner
 # ## One figure of our own
 #
 # `per_partner.csv` has every agent's mean kills per minute with each partner. The study library's
-# adaptive shooter minus the best static one (S4), partner by partner, coloured by the partner's group:
+# adaptive shooter minus the best static one (S4), partner by partner, coloured by the partner's kind:
 
 # %%
 per_partner = pd.read_csv(out / "per_partner.csv")
 wide = per_partner.pivot(index="partner", columns="agent", values="kills_per_minute")
-group = per_partner.drop_duplicates("partner").set_index("partner")["group"]
+group = per_partner.drop_duplicates("partner").set_index("partner")["kind"]
 gain = (wide["adaptive-T400-bayes-dwell-ood-guard"] - wide["S4"]).sort_values()
 
 colours = dict(zip(sorted(group.unique()), plt.cm.tab10.colors, strict=False))

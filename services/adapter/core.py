@@ -397,9 +397,9 @@ class AdapterLanes:
         threshold: float | None = None,
         skill: SkillModel | None = None,
     ) -> None:
-        if "ood" in config.strategy and threshold is None:
+        if config.strategy_kind.ood and threshold is None:
             raise ValueError(f"strategy {config.strategy} needs an out-of-library threshold")
-        if "skill" in config.strategy and skill is None:
+        if config.strategy_kind.skill and skill is None:
             raise ValueError(f"strategy {config.strategy} needs a skill model")
         self.config, self.payoff, self.threshold, self.skill = config, payoff, threshold, skill
         k = len(payoff.partners)
@@ -413,7 +413,7 @@ class AdapterLanes:
         self.out_of_library = np.zeros(lanes, bool)
         self.candidate, self.held = self.policy.copy(), np.zeros(lanes, np.int64)
         self.fallback = payoff.best_average()  # out of library, or the guard tripped
-        self.guard = Guard(self.fallback, lanes) if "guard" in config.strategy else None
+        self.guard = Guard(self.fallback, lanes) if config.strategy_kind.guard else None
         self.switches = np.zeros(lanes, np.int64)
         self.expected = np.zeros((lanes, len(payoff.ours)))  # the entries the choice maximised
         self.keys = Keys(lanes, config.window) if skill is not None else None
@@ -422,7 +422,7 @@ class AdapterLanes:
 
     @property
     def bayes(self) -> bool:
-        return self.config.strategy.startswith("bayes")
+        return self.config.strategy_kind.bayes
 
     def update(
         self, scores: np.ndarray, values: np.ndarray | None = None, actions: np.ndarray | None = None
@@ -508,7 +508,7 @@ class AdapterLanes:
     def next_trial(self) -> AdapterLanes:
         """The adapters for the next trial of sessions with the same partners: these going on
         (`-memory`), or fresh ones."""
-        if "memory" not in self.config.strategy:
+        if not self.config.strategy_kind.memory:
             return AdapterLanes(self.config, self.payoff, len(self.policy), self.threshold, self.skill)
         if self.guard is not None:
             self.guard.last = None  # a new game: no kill across the gap
@@ -621,7 +621,7 @@ def build_lanes(config: AdapterConfig, lanes: int, payoff: Payoff | None = None)
 def threshold(config: AdapterConfig, payoff: Payoff | None = None) -> float | None:
     """The out-of-library threshold, for the strategies that have one: the groups' own (measured
     with `tsf calibrate-adapter --partners groups`), or the library's calibration."""
-    if "ood" not in config.strategy:
+    if not config.strategy_kind.ood:
         return None
     if config.partners == "groups":
         thresholds = (payoff or payoff_of(config.role, "groups")).thresholds
@@ -638,7 +638,7 @@ def threshold(config: AdapterConfig, payoff: Payoff | None = None) -> float | No
 def skill_model(config: AdapterConfig, payoff: Payoff, path: Path | None = None) -> SkillModel | None:
     """The skill model, for the strategies that estimate skill: measured on the libraries in
     use, for our seat, at this window (a UsageError that names the remedy otherwise)."""
-    if "skill" not in config.strategy:
+    if not config.strategy_kind.skill:
         return None
     path = path or skill_path()
     remedy = (

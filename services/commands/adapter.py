@@ -4,9 +4,8 @@ calibrate-adapter."""
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.table import Table
@@ -14,14 +13,15 @@ from rich.table import Table
 from services.agent.seats import policy_for
 from services.commands.options import (
     GAMES,
+    LOCAL_WORKERS,
     PEOPLE_RECORDINGS,
     RAY,
-    WORKERS,
     Partners,
     Role,
     Strategies,
     bus_options,
     console,
+    given,
     number,
     output,
     progress_bars,
@@ -31,6 +31,9 @@ from services.population.adaptive import WINDOWS, AdapterConfig
 from shared.bus import BusConfig, stop_on_signals
 from shared.errors import UsageError
 from shared.game import ROLES, Range, other
+
+if TYPE_CHECKING:
+    from services.evaluation.populations import Population
 
 commands = typer.Typer()
 
@@ -71,9 +74,50 @@ def diversity(
 
 # The options of `tsf eval` that choose or play games: nothing with --games, whose games were played.
 PLAYING = (
-    "seeds", "window", "strategy", "strategy_window", "partner", "partners_from", "held_out",
-    "identify_seeds", "sessions", "workers", "job_games", "sweep_id", "ray",
+    "seeds", "window", "strategy", "strategy_window", "variants", "partner", "partners_from", "population",
+    "held_out", "identify_seeds", "sessions", "workers", "job_games", "sweep_id", "ray",
 )  # fmt: skip
+
+
+def _population(
+    context: typer.Context, role: str, name: str, partner: list[str], partners_from: Path | None, out: Path
+) -> Population:
+    """The partners' population the options name: `--population` (`--held-out` its alias), or a
+    user's list (`--partner`, `--partners-from`). Options that contradict it are one line, before
+    anything runs: partners beside a named population, strategies beside a test split."""
+    from services.evaluation import populations
+
+    named = given(context, "population") or given(context, "held_out")
+    population_option = "--held-out" if given(context, "held_out") else "--population"
+    beside = f"beside {population_option}" + ("" if given(context, "held_out") else f" {name}")
+    for option, value in (("--partner", partner[0] if partner else None), ("--partners-from", partners_from)):
+        if named and value is not None:
+            raise UsageError(option, value, f"{beside}: give partners or a population, not both")
+    if partner and partners_from is not None:
+        raise UsageError("--partners-from", partners_from, "give --partner or --partners-from, not both")
+    if partners_from is not None:
+        from services.proxy.study import partners_from as study_partners
+
+        people, excluded = study_partners(partners_from, other(role), out / "proxies")
+        for line in excluded:
+            console.print(f"excluded {line}")
+        console.print(f"partners: {', '.join(people.values())}")
+        return populations.listed(list(people.values()), other(role), f"partners from {partners_from}")
+    if partner:
+        return populations.listed(partner, other(role))
+    chosen = populations.named(name, other(role), population_option)
+    asked = {"--strategy": given(context, "strategy"), "--variants": given(context, "variants")}
+    for option in (o for o, yes in asked.items() if yes and chosen.run is not None):
+        strategies = context.params["strategy"] or ()
+        value = ",".join(s.value for s in strategies) if option == "--strategy" else "given"
+        raise UsageError(
+            option,
+            value,
+            f"{beside}: a test split measures the shipped agents at "
+            "--strategy-window, not the study's variants; compare those on another population",
+            [n for n in populations.NAMES if n != populations.HELD_OUT] + ["your --partner list"],
+        )
+    return chosen
 
 
 @commands.command("eval")
@@ -81,21 +125,16 @@ PLAYING = (
 def eval_command(
     context: typer.Context,
     role: Role = typer.Option("shooter", help="The adaptive agent's seat; the partners play the other."),
-    seeds: int = number(5, GAMES, "Seeded one-minute games per partner and agent."),
-    window: Annotated[
-        list[int] | None,
-        number(..., WINDOWS, "A window T of the study's CEM agent, repeatable (default: 150, 400, 800)."),
-    ] = None,
-    strategy: list[Strategies] | None = typer.Option(
-        None,
-        help="A strategy compared at --strategy-window, repeatable (default: all; a -skill one only "
-        "where its skill model was measured for the seat and window).",
+    population: str = typer.Option(
+        "default",
+        help="The partners, by name: default (every library policy, its noisy, delayed, sticky and "
+        "human-like stand-ins, switchers and partners outside the library), held-out (the shipped "
+        "grown library's test split: partners its growth never saw), or a grown library's directory "
+        "(its test split); docs/adapter.md.",
     ),
-    strategy_window: int = number(
-        AdapterConfig.window, WINDOWS, "The window of the strategies other than cem."
-    ),
+    held_out: bool = typer.Option(False, help="The same as --population held-out."),
     partner: list[str] | None = typer.Option(
-        None, help="A partner by name, repeatable (default: the population; see docs/adapter.md)."
+        None, help="A partner by name, repeatable: your own population (instead of --population)."
     ),
     partners_from: Path | None = typer.Option(
         None,
@@ -103,11 +142,29 @@ def eval_command(
         "OUT/proxies, or loaded from there) as the partners, reported per participant and pooled; "
         "or a directory of `tsf humans fit`: each participant's fitted stand-in.",
     ),
-    held_out: bool = typer.Option(
+    seeds: int = number(5, GAMES, "Seeded one-minute games per partner and agent."),
+    window: Annotated[
+        list[int] | None,
+        number(
+            ...,
+            WINDOWS,
+            "A window T of identification and, with --variants, of the study's CEM agent, "
+            "repeatable (default: 150, 400, 800).",
+        ),
+    ] = None,
+    variants: bool = typer.Option(
         False,
-        help="Evaluate on the partner population's test split (partners the grown library never "
-        "saw, and their stand-ins), against the static policies of both libraries, with the "
-        "grown library's and the study's adaptive agents at --strategy-window (docs/adapter.md).",
+        help="Compare the study's adaptive variants (its CEM agent at each --window, each --strategy "
+        "at --strategy-window) with the study's static policies, instead of the shipped agents (the "
+        "static policies of every shipped library, the default agent and the study's).",
+    ),
+    strategy: list[Strategies] | None = typer.Option(
+        None,
+        help="A strategy compared at --strategy-window, repeatable (means --variants; default: all; a "
+        "-skill one only where its skill model was measured for the seat and window).",
+    ),
+    strategy_window: int = number(
+        AdapterConfig.window, WINDOWS, "The window of the adaptive agents other than the CEM variants."
     ),
     identify_seeds: int = number(3, GAMES, "Games per library partner for identification."),
     identify: bool = typer.Option(True, help="Measure identification accuracy."),
@@ -115,11 +172,7 @@ def eval_command(
     sessions: bool = typer.Option(
         False, help="Play team games as sessions of three trials with the same partner (--seeds: people)."
     ),
-    workers: int = number(
-        os.cpu_count() or 1,
-        WORKERS,
-        "Worker processes to start here (0: only workers reached with --connect).",
-    ),
+    workers: int = LOCAL_WORKERS,
     out: Path = output(
         Path("tsf-eval"),
         "Directory for the numbers, figures and summary, and the journal a stopped run resumes from "
@@ -144,9 +197,11 @@ def eval_command(
     bus: BusConfig,
 ) -> None:
     """Evaluate the adaptive agent on the job system's workers (here, and any `tsf worker --sweep
-    eval` reached with --connect): identification, team performance, the test against the best
-    static policy, and the figures. Resumable; the numbers do not depend on the workers. With
-    --games, an evaluation's games are analysed again (an analysis newer than the games)."""
+    eval` reached with --connect): identification, team performance against a population of
+    partners (the one thing to choose: --population, or your own --partner), the test against the
+    best static policy, and the figures. By default the shipped agents are compared: the static
+    policies of every shipped library, the default agent and the study's. Resumable; the numbers
+    do not depend on the workers. With --games, an evaluation's games are analysed again."""
     from services.evaluation.evaluation import KINDS, EvalPlan, evaluate, reanalyse
     from services.jobs.engine import on_workers, open_engine
 
@@ -161,21 +216,13 @@ def eval_command(
         console.print(summary.read_text())
         console.print(f"written to {out}")
         return
-    partners = partner or []
-    if partners_from is not None:
-        from services.proxy.study import partners_from as study_partners
-
-        if partner:
-            raise UsageError("--partners-from", partners_from, "give --partner or --partners-from, not both")
-        people, excluded = study_partners(partners_from, other(role), out / "proxies")
-        for line in excluded:
-            console.print(f"excluded {line}")
-        console.print(f"partners: {', '.join(people.values())}")
-        partners = list(people.values())
+    if held_out and given(context, "population") and population != "held-out":
+        raise UsageError("--held-out", f"with --population {population}", "give one population")
+    name = "held-out" if held_out else population
+    partners = _population(context, role, name, partner or [], partners_from, out)
     plan = EvalPlan(
-        role, tuple(partners), seeds, tuple(window or EvalPlan.windows),
-        tuple(s.value for s in strategy or ()), strategy_window, identify_seeds, identify,
-        performance, sessions, job_games, held_out,
+        role, partners, seeds, tuple(window or EvalPlan.windows), tuple(s.value for s in strategy or ()),
+        strategy_window, identify_seeds, identify, performance, sessions, job_games, variants,
     )  # fmt: skip
     with (
         open_engine(bus, sweep_id, out / "eval.journal", KINDS, workers, ray, stop_on_signals()) as engine,
@@ -190,11 +237,7 @@ def eval_command(
 @commands.command("calibrate-adapter")
 @bus_options
 def calibrate_adapter(
-    workers: int = number(
-        os.cpu_count() or 1,
-        WORKERS,
-        "Worker processes to start here (0: only workers reached with --connect).",
-    ),
+    workers: int = LOCAL_WORKERS,
     out: Path = output(
         Path("tsf-calibration.json"),
         "Where the thresholds go (the adapter reads calibration.json beside the table, in the library "

@@ -340,6 +340,11 @@ BUS_OPTIONS = {  # parameter name: (annotation, default)
 }
 
 
+# A job command's local workers (tsf eval, calibrate-adapter, library grow): one per core.
+LOCAL_WORKERS = number(
+    os.cpu_count() or 1, WORKERS, "Worker processes to start here (0: only workers reached with --connect)."
+)
+
 RAY = typer.Option(
     None,
     "--ray",

@@ -14,6 +14,7 @@ from services.agent.calibration import calibrate
 from services.agent.seats import policy_for
 from services.commands.options import (
     GAMES,
+    LOCAL_WORKERS,
     RAY,
     WORKERS,
     Duration,
@@ -203,11 +204,7 @@ def library_grow(
         "library (OUT/library) and summary.md; run the same command again to resume.",
         directory=True,
     ),
-    workers: int = number(
-        os.cpu_count() or 1,
-        WORKERS,
-        "Worker processes to start here (0: only workers reached with --connect).",
-    ),
+    workers: int = LOCAL_WORKERS,
     ray: str | None = RAY,
     *,
     bus: BusConfig,

@@ -76,6 +76,34 @@ class Outcome:
     scores: np.ndarray | None = None  # (frames, K) the partner's scores under the library, when scored
 
 
+def _our_lanes(
+    games: list[tuple[SeatSpec, SeatSpec, int]], role: str, adapters: dict[AdapterConfig, AdapterLanes] | None
+) -> tuple[dict[str, int], list[tuple], list[int]]:
+    """Our seat in a batch of `play_games`: every policy it plays, by name (its index), the
+    adaptive agents' lanes (lanes, the adapter, its payoff's policies' indices, its scorer), and
+    each lane's first policy (an adaptive lane's initial one, or where a session's adapter left off)."""
+    configs = [agent.adaptive(role) for _, agent, _ in games]
+    adaptive: dict[AdapterConfig, list[int]] = {}
+    for lane, config in enumerate(configs):
+        if config is not None:
+            adaptive.setdefault(config, []).append(lane)
+    played: dict[str, int] = {}  # every policy our seat plays in the batch, by name: its index
+    for (_, agent, _), config in zip(games, configs, strict=True):
+        names = setup(role, config.partners).payoff.ours if config else (str(agent),)
+        for name in names:
+            played.setdefault(name, len(played))
+    groups = []  # (lanes, the adapter, its payoff's policies' indices among `played`, its scorer)
+    for agent, lanes in adaptive.items():
+        s = setup(role, agent.partners)
+        adapter = (adapters or {}).get(agent) or core.build_lanes(agent, len(lanes), s.payoff)
+        groups.append((np.array(lanes), adapter, np.array([played[n] for n in s.payoff.ours]), s.scorer))
+    ours = [-1 if c else played[str(a)] for (_, a, _), c in zip(games, configs, strict=True)]
+    for lanes, adapter, index, _ in groups:
+        for lane, chosen in zip(lanes.tolist(), index[adapter.policy].tolist(), strict=True):
+            ours[lane] = chosen
+    return played, groups, ours
+
+
 def play_games(
     games: list[tuple[SeatSpec, SeatSpec, int]],
     role: str,
@@ -97,25 +125,7 @@ def play_games(
     seeds = np.array([seed for *_, seed in games], np.int64)
     batch = BatchGame(len(games), config, seeds)
     partners = Partners([partner for partner, *_ in games], partner_role, seeds)
-    configs = [agent.adaptive(role) for _, agent, _ in games]
-    adaptive: dict[AdapterConfig, list[int]] = {}
-    for lane, config in enumerate(configs):
-        if config is not None:
-            adaptive.setdefault(config, []).append(lane)
-    played: dict[str, int] = {}  # every policy our seat plays in the batch, by name: its index
-    for (_, agent, _), config in zip(games, configs, strict=True):
-        names = setup(role, config.partners).payoff.ours if config else (str(agent),)
-        for name in names:
-            played.setdefault(name, len(played))
-    groups = []  # (lanes, the adapter, its payoff's policies' indices among `played`, its scorer)
-    for agent, lanes in adaptive.items():
-        s = setup(role, agent.partners)
-        adapter = (adapters or {}).get(agent) or core.build_lanes(agent, len(lanes), s.payoff)
-        groups.append((np.array(lanes), adapter, np.array([played[n] for n in s.payoff.ours]), s.scorer))
-    ours = [-1 if c else played[str(a)] for (_, a, _), c in zip(games, configs, strict=True)]
-    for lanes, adapter, index, _ in groups:
-        for lane, chosen in zip(lanes.tolist(), index[adapter.policy].tolist(), strict=True):
-            ours[lane] = chosen  # the initial policy, or where a session's adapter left off
+    played, groups, ours = _our_lanes(games, role, adapters)
     seat = RoleLanes(role, [policy(n, role) for n in played], ours, seeds)
     scored_by = setup(role, score).scorer if score else None
     outcomes = [Outcome(0.0) for _ in games]

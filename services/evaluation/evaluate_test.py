@@ -14,7 +14,7 @@ from services.agent import networks
 from services.evaluation.evaluate import batches, play_games, play_session, play_teams, setup
 from services.evaluation.evaluate import policy as ours
 from services.evaluation.identification import follow_lag, windowed
-from services.evaluation.results import TeamGame, read_games, write_results
+from services.evaluation.results import TeamGame, population_of, read_games, write_results
 from services.evaluation.team import compare, holm, known_partner, paired_tests, variants
 from services.population.adaptive import AdapterConfig
 from services.population.seat import AdaptiveSeat, PolicySeat, SeatSpec, seats_of
@@ -94,21 +94,22 @@ def test_compare_pairs_by_partner_and_seed() -> None:
                 rows.append(TeamGame(partner, agent, seed, base + shift, switches, 0))
                 truth.setdefault(agent, []).append(base + shift)
     result = compare(rows)
-    assert result["best_static"] == "S1" and result["units"] == 18
-    test = result["tests"]["adaptive-T150-cem"]
+    assert result.best_static == "S1" and result.units == 18
+    test = result.tests["adaptive-T150-cem"]
     expected = stats.ttest_rel(truth["adaptive-T150-cem"], truth["S1"], alternative="greater")
     assert np.isclose(test["p_t"], expected.pvalue) and test["p_t"] < 1e-6
     diff = np.array(truth["adaptive-T150-cem"]) - np.array(truth["S1"])
     assert np.isclose(test["d_z"], diff.mean() / diff.std(ddof=1))
     assert test["partners_better"] == 3
-    assert np.isclose(result["agents"]["S2"]["mean"], np.mean(truth["S2"]))
-    assert result["per_partner"]["P2"]["S1"]["n"] == 6 and set(result["per_group"]) == {"outside"}
-    assert np.isclose(result["per_partner"]["P2"]["S1"]["mean"], np.mean(truth["S1"][6:12]))
-    assert result["switches"]["adaptive-T150-cem"] == {"mean": 2.0, "max": 2, "guarded_games": 0}
-    by_group = result["tests_by_group"]["adaptive-T150-cem"]["outside"]
-    assert by_group["noninferior"] and by_group["p_superior"] == test["p_t"] == test["p_holm"]
-    known = result["known_partner"]  # S1 is every partner's best: knowing them gains nothing
-    assert known["all"]["mean_difference"] == 0 and known["outside"]["mean"] == result["agents"]["S1"]["mean"]
+    assert np.isclose(result.agents["S2"]["mean"], np.mean(truth["S2"]))
+    assert result.per_partner["P2"]["S1"]["n"] == 6 and set(result.per_part) == {"outside"}
+    assert result.parts == "kind"  # a list of partners is broken down by their kinds
+    assert np.isclose(result.per_partner["P2"]["S1"]["mean"], np.mean(truth["S1"][6:12]))
+    assert result.switches["adaptive-T150-cem"] == {"mean": 2.0, "max": 2, "guarded_games": 0}
+    by_kind = result.tests_by_part["adaptive-T150-cem"]["outside"]
+    assert by_kind["noninferior"] and by_kind["p_superior"] == test["p_t"] == test["p_holm"]
+    known = result.known_partner  # S1 is every partner's best: knowing them gains nothing
+    assert known["all"]["mean_difference"] == 0 and known["outside"]["mean"] == result.agents["S1"]["mean"]
 
 
 @pytest.mark.parametrize("trial", [None, 2])
@@ -119,8 +120,8 @@ def test_an_evaluations_games_read_back_as_written(tmp_path, trial) -> None:  # 
         TeamGame(p, a, seed, 0.5 * seed + (a == "S2"), seed % 2, 0, trial)
         for p in ("B1", "human(B5)") for a in ("S1", "S2", "adaptive-T150-cem") for seed in range(4)
     ]  # fmt: skip
-    summary = write_results(tmp_path, None, games, compare(games)).read_text()
-    assert read_games(tmp_path / "team.csv") == games
+    summary = write_results(tmp_path, None, games, compare(games), "listed").read_text()
+    assert read_games(tmp_path / "team.csv") == games and population_of(tmp_path / "team.csv") == "listed"
     assert "Knowing each partner in advance" in summary
     assert "| known partner - S2 | +0.00 ± 0.00 (+0.0 %)" in summary
 
@@ -239,3 +240,16 @@ def test_a_member_left_out_leaves_its_group_and_the_others_as_they_were() -> Non
     assert left.membership.sum(axis=0).tolist() == [
         n - (j == payoff.group[k]) for j, n in enumerate(payoff.membership.sum(axis=0).tolist())
     ]
+
+
+def test_a_partner_nobody_scores_with_is_a_result_and_a_zero_base_is_not_defined(tmp_path) -> None:  # noqa: ANN001
+    """Every agent scores 0 with P1: the summary says so, and each effect in % of the best static
+    policy's mean of 0 is "not defined" (no ZeroDivisionError after every game was played)."""
+    games = [
+        TeamGame("P1", a, seed, 0.0, 0, 0) for a in ("S1", "S2", "adaptive-T150-cem") for seed in range(4)
+    ]
+    comparison = compare(games)
+    assert comparison.scoreless == ["P1"] and comparison.effect("adaptive-T150-cem") is None
+    summary = write_results(tmp_path, None, games, comparison, "listed").read_text()
+    assert "No agent scores with 1 of the 1 partners (0 kills/min with every agent): P1." in summary
+    assert "| adaptive-T150-cem | not defined |" in summary

@@ -13,6 +13,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402 - after choosing the file-only backend
 import numpy as np  # noqa: E402
 
+from services.evaluation.results import Comparison, percent, percent_text  # noqa: E402
 from services.population.adaptive import ADAPTIVE, AdapterConfig  # noqa: E402
 from shared.game import FPS  # noqa: E402
 from shared.plots import save  # noqa: E402
@@ -34,14 +35,12 @@ def accuracy_vs_window(identification: dict, path: Path) -> Path:
     return _save(fig, path)
 
 
-def adaptive_vs_static(comparison: dict, path: Path, default: str = AdapterConfig().name) -> Path:
+def adaptive_vs_static(comparison: Comparison, path: Path, default: str = AdapterConfig().name) -> Path:
     """The headline figure: each adaptive agent's paired difference from the best static policy in
     kills/min (mean ± s.e. over the same partners and seeds), as horizontal bars from zero, with the
     difference in per cent of the best static mean; the default strategy is marked. A difference is
     drawn, not the two means, because a gain of a few per cent is invisible on an axis from zero."""
-    best = comparison["best_static"]
-    base = comparison["agents"][best]["mean"]
-    tests = comparison["tests"]
+    best, base, tests = comparison.best_static, comparison.base, comparison.tests
     names = list(tests)
     diffs = np.array([tests[a]["mean_difference"] for a in names])
     errors = np.array([tests[a]["stderr"] for a in names])
@@ -58,13 +57,13 @@ def adaptive_vs_static(comparison: dict, path: Path, default: str = AdapterConfi
     reach = float(max(np.max(diffs + errors), 0.0))
     low = float(min(np.min(diffs - errors), 0.0))
     for row, d, e in zip(rows, diffs, errors, strict=True):
-        text = f"{d:+.3f} ± {e:.3f} ({100 * d / base:+.1f} %)"
+        text = f"{d:+.3f} ± {e:.3f} ({percent_text(percent(d, base))})"
         ax.text(max(d + e, 0.0) + 0.02 * (reach - low), row, text, va="center", fontsize=7)
     ax.set_xlim(low - 0.05 * (reach - low), reach + 0.75 * (reach - low))
     ax.set_xlabel(f"kills/min minus the best static policy, {best} ({base:.2f}): paired mean ± s.e.")
     ax.set_title(
-        f"Adaptive agents against {best}: {comparison['partners']} partners, "
-        f"{comparison['units']} paired games each",
+        f"Adaptive agents against {best}: {comparison.partners} partners, "
+        f"{comparison.units} paired games each",
         fontsize=10,
     )
     return _save(fig, path)
@@ -98,7 +97,9 @@ def redraw(directory: Path) -> list[Path]:
         drawn.append(accuracy_vs_window(json.loads(ident.read_text()), directory / "identification.png"))
     if (comparison := directory / "comparison.json").exists():
         drawn.append(
-            adaptive_vs_static(json.loads(comparison.read_text()), directory / "adaptive_vs_static.png")
+            adaptive_vs_static(
+                Comparison.of(json.loads(comparison.read_text())), directory / "adaptive_vs_static.png"
+            )
         )
     return drawn
 

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from services.evaluation import figures
+from services.evaluation.results import Comparison
 from services.population.adaptive import ADAPTIVE, AdapterConfig
 from shared.plots import drawn, legibility
 
@@ -27,11 +28,11 @@ def shipped(tmp_path: Path) -> Path:
 
 
 def test_the_headline_figure_draws_differences_from_the_best_static_policy(shipped: Path) -> None:
-    comparison = json.loads((shipped / "comparison.json").read_text())
+    comparison = Comparison.of(json.loads((shipped / "comparison.json").read_text()))
     [fig] = drawn(lambda: figures.adaptive_vs_static(comparison, shipped / "adaptive_vs_static.png"))
     try:
         [ax] = fig.axes
-        tests = comparison["tests"]
+        tests = comparison.tests
         widths = [bar.get_width() for bar in ax.patches]
         assert widths == pytest.approx([t["mean_difference"] for t in tests.values()])
         assert ax.get_xlim()[0] < 0 < min(widths)  # the bars start at zero, the difference itself
@@ -41,10 +42,10 @@ def test_the_headline_figure_draws_differences_from_the_best_static_policy(shipp
         assert marked == [default.removeprefix(ADAPTIVE) + " (default)"]
         bold = [t.get_text() for t in ax.get_yticklabels() if t.get_fontweight() == "bold"]
         assert bold == marked
-        best = comparison["best_static"]
+        best = comparison.best_static
         assert best in ax.get_xlabel() and "s.e." in ax.get_xlabel()
         for name, test in tests.items():  # each bar's label: the difference, its s.e. and the per cent
-            share = 100 * test["mean_difference"] / comparison["agents"][best]["mean"]
+            share = 100 * test["mean_difference"] / comparison.base
             text = f"{test['mean_difference']:+.3f} ± {test['stderr']:.3f} ({share:+.1f} %)"
             assert text in [t.get_text() for t in ax.texts], name
     finally:

@@ -1,7 +1,7 @@
 """The partner population's test split, as the shipped grown library's run left it: the partners
 that training, grouping and selection never saw (members and their human-like stand-ins), each
-with the partner group its results place it in. `tsf eval --held-out` measures the adaptive
-teammate on them.
+with the partner group its results place it in. `tsf eval --population held-out`
+measures the adaptive teammate on them (populations.py).
 
 The grown library keeps its run's records (services/agent/grown/run-*.json, written by `tsf library
 grow`): the members' split sides (run-population.json) and, per seat of ours, every held-out
@@ -21,7 +21,7 @@ from shared.game import other
 
 RUN = library.NAMED["grown"]  # the shipped grown library, with its run's records
 STAND_IN = "human("  # how a member played through a stand-in is named (families.Spec.stand_ins)
-KINDS = {  # the parts of the test population each result is also given for
+PARTS = {  # the parts of the test population each result is also given for
     "members": lambda partner: not partner.startswith(STAND_IN),
     "stand-ins": lambda partner: partner.startswith(STAND_IN),
 }
@@ -44,7 +44,7 @@ def test_partners(partner_role: str, run: Path = RUN) -> dict[str, str]:
 
 def members(partner_role: str, run: Path = RUN) -> dict[str, str]:
     """The test partners that are members (no stand-ins), with their groups."""
-    return {p: g for p, g in test_partners(partner_role, run).items() if KINDS["members"](p)}
+    return {p: g for p, g in test_partners(partner_role, run).items() if PARTS["members"](p)}
 
 
 def statics(role: str, run: Path = RUN) -> list[str]:
@@ -55,8 +55,3 @@ def statics(role: str, run: Path = RUN) -> list[str]:
     grown = json.loads((run / "members.json").read_text())
     prefix = {"bait": "GB", "shooter": "GS"}[role]
     return study + [key for key, name in grown.items() if key.startswith(prefix) and name not in study]
-
-
-def group_of(role: str) -> dict[str, str]:
-    """Every test partner's group, for the comparison of the adaptive teammate in seat `role`."""
-    return test_partners(other(role))

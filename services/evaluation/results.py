@@ -5,11 +5,10 @@ from __future__ import annotations
 import csv
 import json
 from collections.abc import Iterable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 from services.agent import library
-from services.population.partners import group_of
 from services.population.seat import AdaptiveSeat, SeatSpec
 from shared.errors import UsageError
 from shared.provenance import lines as provenance_lines
@@ -32,6 +31,69 @@ class TeamGame:
         """The game as team.csv writes it: the trial only for sessions."""
         row = asdict(self)
         return row if self.trial is not None else {k: v for k, v in row.items() if k != "trial"}
+
+
+NOT_DEFINED = "not defined"  # a ratio whose base is zero (the best static policy scores 0)
+
+
+def percent(part: float, base: float) -> float | None:
+    """`part` in per cent of `base`; None ("not defined") where the base is zero."""
+    return 100 * part / base if base else None
+
+
+def percent_text(value: float | None, digits: int = 1) -> str:
+    """A per cent as the summary writes it, or that it is not defined."""
+    return NOT_DEFINED if value is None else f"{value:+.{digits}f} %"
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """What `team.compare` measured (comparison.json): every agent's mean, each adaptive variant
+    against the best static policy (`tests`), broken down by the population's parts (`parts`:
+    its partner groups, G1.., or its partners' kinds) and subsets, and the headroom of knowing
+    each partner in advance. Written by `to_json`, read back by `of`."""
+
+    population: str  # the population's name (populations.py)
+    parts: str  # what `part_of` names: "group" (partner groups) or "kind"
+    units: int  # (partner, seed) games per agent
+    partners: int
+    part_of: dict[str, str]  # partner -> its part
+    by_subset: dict[str, dict[str, dict]]  # subset -> variant -> its tests there
+    best_static: str
+    agents: dict[str, dict]  # agent -> mean, stderr, n
+    tests: dict[str, dict]  # variant -> its tests against the best static policy
+    per_partner: dict[str, dict[str, dict]]  # partner -> agent -> mean, stderr, n
+    per_part: dict[str, dict[str, dict]]  # part -> agent -> mean, stderr, n
+    tests_by_part: dict[str, dict[str, dict]]  # variant -> part -> superiority, non-inferiority
+    switches: dict[str, dict]  # variant -> switches per game, most, games its guard fell back in
+    margin: float  # kills/min: the non-inferiority margin
+    known_partner: dict[str, dict]  # "all" and each part -> the known-partner headroom
+
+    @property
+    def base(self) -> float:
+        """The best static policy's mean kills/min: the base of every effect in per cent."""
+        return self.agents[self.best_static]["mean"]
+
+    def effect(self, agent: str) -> float | None:
+        """A variant's effect in per cent of the best static policy (None: not defined)."""
+        return percent(self.tests[agent]["mean_difference"], self.base)
+
+    @property
+    def scoreless(self) -> list[str]:
+        """The partners with whom no agent scores: a result of its own, said as such."""
+        return [p for p, by in self.per_partner.items() if all(v["mean"] == 0 for v in by.values())]
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def of(cls, data: dict) -> Comparison:
+        """A comparison.json read back: one written before parts were named reads as groups, and a
+        part an older one lacks (its population, each partner's part, its subsets) as empty."""
+        renamed = {"group_of": "part_of", "per_group": "per_part", "tests_by_group": "tests_by_part"}
+        older = {"population": "", "parts": "group", "part_of": {}, "by_subset": {}, "known_partner": {}}
+        data = older | {renamed.get(k, k): v for k, v in data.items()}
+        return cls(**{f.name: data[f.name] for f in fields(cls)})
 
 
 def read_games(path: Path) -> list[TeamGame]:
@@ -58,6 +120,14 @@ def read_games(path: Path) -> list[TeamGame]:
     return games
 
 
+def population_of(path: Path) -> str:
+    """The population a team.csv's games were played with ("" for one written before it was
+    recorded, or for no games)."""
+    with path.open(newline="") as f:
+        first = next(csv.DictReader(f), None) or {}
+    return first.get("population") or ""
+
+
 def _csv(path: Path, header: list[str], rows: Iterable[Iterable]) -> None:
     with path.open("w", newline="") as f:
         writer = csv.writer(f)
@@ -65,33 +135,29 @@ def _csv(path: Path, header: list[str], rows: Iterable[Iterable]) -> None:
         writer.writerows(rows)
 
 
-def _group_table(comparison: dict) -> list[str]:
-    groups = list(comparison["per_group"])
-    agents = sorted(comparison["agents"], key=lambda a: (isinstance(SeatSpec.parse(a), AdaptiveSeat), a))
-    rows = [
-        f"| {a} | " + " | ".join(f"{comparison['per_group'][g][a]['mean']:.2f}" for g in groups) + " |"
-        for a in agents
-    ]
-    return ["| agent | " + " | ".join(groups) + " |", "| --- |" + " --- |" * len(groups), *rows]
+def _part_table(c: Comparison) -> list[str]:
+    parts = list(c.per_part)
+    agents = sorted(c.agents, key=lambda a: (isinstance(SeatSpec.parse(a), AdaptiveSeat), a))
+    rows = [f"| {a} | " + " | ".join(f"{c.per_part[g][a]['mean']:.2f}" for g in parts) + " |" for a in agents]
+    return ["| agent | " + " | ".join(parts) + " |", "| --- |" + " --- |" * len(parts), *rows]
 
 
-def _group_tests(comparison: dict) -> list[str]:
-    """Each variant against the best static policy in every partner group: the difference, and the
-    one-sided superiority and non-inferiority (margin) p-values."""
-    by_group = comparison["tests_by_group"]
-    if not by_group:
+def _part_tests(c: Comparison) -> list[str]:
+    """Each variant against the best static policy in every part of the population: the
+    difference, and the one-sided superiority and non-inferiority (margin) p-values."""
+    if not c.tests_by_part:
         return []
-    groups = list(next(iter(by_group.values())))
+    parts = list(next(iter(c.tests_by_part.values())))
     lines = [
-        f"By partner group, against {comparison['best_static']}: difference ± s.e. (p superior; "
-        f"p non-inferior, margin {comparison['margin']} kills/min; **bold**: non-inferior at 0.05):",
+        f"By partner {c.parts}, against {c.best_static}: difference ± s.e. (p superior; "
+        f"p non-inferior, margin {c.margin} kills/min; **bold**: non-inferior at 0.05):",
         "",
-        "| adaptive | " + " | ".join(groups) + " |",
-        "| --- |" + " --- |" * len(groups),
+        "| adaptive | " + " | ".join(parts) + " |",
+        "| --- |" + " --- |" * len(parts),
     ]
-    for agent, tests in by_group.items():
+    for agent, tests in c.tests_by_part.items():
         cells = []
-        for g in groups:
+        for g in parts:
             t = tests[g]
             difference = f"{t['mean_difference']:+.2f} ± {t['stderr']:.2f}"
             cell = f"{difference} ({t['p_superior']:.2g}; {t['p_noninferior']:.2g})"
@@ -100,151 +166,166 @@ def _group_tests(comparison: dict) -> list[str]:
     return [*lines, ""]
 
 
-def _at_a_glance(comparison: dict) -> list[str]:
+def _share(value: float | None) -> str:
+    return "-" if value is None else f"{100 * value:.0f} %"
+
+
+def _at_a_glance(c: Comparison) -> list[str]:
     """The results first: each adaptive variant's effect against the best static policy, in %, its
     Holm-corrected p, how many partners it serves better, as well, worse, the share of the gain the
-    top tenth of partners carry and the share of the known-partner headroom it realises."""
-    best = comparison["best_static"]
-    base = comparison["agents"][best]["mean"]
-
-    def share(value: float | None) -> str:
-        return "-" if value is None else f"{100 * value:.0f} %"
-
+    top tenth of partners carry and the share of the known-partner headroom it realises. Partners
+    with whom nobody scores are said as such; an effect in % of a best static mean of 0 is not
+    defined, and said so."""
     lines = [
-        f"Every partner here is simulated ({comparison['partners']} partners, "
-        f"{comparison['units']} games per agent); the baseline is the best static policy, "
-        f"{best} ({base:.2f} kills/min), chosen on these same games.",
+        f"Every partner here is simulated ({c.partners} partners of the population "
+        f"{c.population or '(unnamed)'}, {c.units} games per agent); the baseline is the best static "
+        f"policy, {c.best_static} ({c.base:.2f} kills/min), chosen on these same games.",
         "",
+    ]
+    if c.scoreless:
+        lines += [
+            f"No agent scores with {len(c.scoreless)} of the {c.partners} partners (0 kills/min with "
+            f"every agent): {', '.join(c.scoreless)}.",
+            "",
+        ]
+    if not c.base:
+        lines += [f"The best static policy scores 0, so each effect in % is {NOT_DEFINED}.", ""]
+    lines += [
         "| adaptive | effect | p (Holm) | partners better / equal / worse | top tenth's share of the gain "
         "| headroom realised |",
         "| --- | --- | --- | --- | --- | --- |",
     ]
-    for agent, t in comparison["tests"].items():
-        counts = t.get("per_partner", {})
+    for agent, t in c.tests.items():
+        n = t.get("per_partner", {})
         lines.append(
-            f"| {agent} | {100 * t['mean_difference'] / base:+.1f} % | {t.get('p_holm', float('nan')):.2g} | "
-            f"{counts.get('better', '-')} / {counts.get('equal', '-')} / {counts.get('worse', '-')} | "
-            f"{share(t.get('top_tenth_share'))} | {share(t.get('headroom_realised'))} |"
+            f"| {agent} | {percent_text(c.effect(agent))} | {t.get('p_holm', float('nan')):.2g} | "
+            f"{n.get('better', '-')} / {n.get('equal', '-')} / {n.get('worse', '-')} | "
+            f"{_share(t.get('top_tenth_share'))} | {_share(t.get('headroom_realised'))} |"
         )
-    for name, by_agent in comparison.get("by_subset", {}).items():
+    for name, by_agent in c.by_subset.items():
         for agent, t in by_agent.items():
-            c, room = t["per_partner"], t["known_partner_percent"]
-            realised = t["percent"] / room if room and room > 0 else None
+            n, room, effect = t["per_partner"], t["known_partner_percent"], t["percent"]
+            realised = effect / room if room and room > 0 and effect is not None else None
             lines.append(
-                f"| {agent}, {name} ({t['partners']}) | {t['percent']:+.1f} % | {t['p_holm']:.2g} | "
-                f"{c['better']} / {c['equal']} / {c['worse']} | - | {share(realised)} |"
+                f"| {agent}, {name} ({t['partners']}) | {percent_text(effect)} | {t['p_holm']:.2g} | "
+                f"{n['better']} / {n['equal']} / {n['worse']} | - | {_share(realised)} |"
             )
     return [*lines, ""]
 
 
-def _known_partner(comparison: dict) -> list[str]:
+def _known_partner(c: Comparison) -> list[str]:
     """The headroom of choosing one static policy per partner, knowing the partner in advance."""
-    known = comparison.get("known_partner")
+    known = c.known_partner
     if not known:
         return []
 
     def cell(h: dict) -> str:
-        percent = "" if h["percent"] is None else f" ({h['percent']:+.1f} %)"
-        return f"{h['mean_difference']:+.2f} ± {h['stderr']:.2f}{percent}"
+        in_percent = "" if h["percent"] is None else f" ({h['percent']:+.1f} %)"
+        return f"{h['mean_difference']:+.2f} ± {h['stderr']:.2f}{in_percent}"
 
     return [
         f"Knowing each partner in advance, a static policy chosen per partner (its best on the "
         f"partner's other seeds) scores {known['all']['mean']:.3f}: what any rule that picks one "
-        f"of these static policies per partner can gain over {comparison['best_static']}, "
-        "overall and by group (an adapter that switches within a game is not bound by it):",
+        f"of these static policies per partner can gain over {c.best_static}, "
+        f"overall and by {c.parts} (an adapter that switches within a game is not bound by it):",
         "",
         "| | " + " | ".join(known) + " |",
         "| --- |" + " --- |" * len(known),
-        f"| known partner - {comparison['best_static']} | "
-        + " | ".join(cell(h) for h in known.values())
-        + " |",
+        f"| known partner - {c.best_static} | " + " | ".join(cell(h) for h in known.values()) + " |",
         "",
     ]
 
 
-def write_results(
-    out: Path, identification_result: dict | None, games: list[TeamGame], comparison: dict | None
-) -> Path:
-    """Every number behind the figures, as JSON and CSV, and a Markdown summary (summary.md)."""
-    out.mkdir(parents=True, exist_ok=True)
-    lines = ["# Adapter evaluation", "", *(_at_a_glance(comparison) if comparison else [])]
-    if identification_result:
-        (out / "identification.json").write_text(json.dumps(identification_result, indent=1) + "\n")
-        keys = identification_result["partners"]
-        held_out = identification_result.get("held_out")
-        lines += [
-            "## Identification ("
-            + ("the test members' partner groups" if held_out else "library partners")
-            + ", 10 % action noise)",
-            "",
-            "| T | CEM accuracy | filter accuracy | CEM follows within T/2 | median frames to follow |",
-            "| --- | --- | --- | --- | --- |",
-        ]
-        for window, r in identification_result["windows"].items():
-            confusion = ([k, *row] for k, row in zip(keys, r["confusion"], strict=True))
-            _csv(out / f"confusion_T{window}.csv", ["true \\ estimated", *keys], confusion)
-            follow = r["follow"]
-            followed = (
-                f"{follow['within_half_window']:.2f} ({follow['followed']}/{follow['switches']} followed)"
-                if follow["switches"]
-                else "- (no switching partners)"
-            )
-            lines.append(
-                f"| {window} | {r['accuracy']:.3f} | {r['bayes_accuracy']:.3f} | {followed} | "
-                f"{follow['median_frames'] if follow['switches'] else '-'} |"
-            )
-        lines.append("")
-    if games:
-        _csv(out / "team.csv", list(games[0].row()), (g.row().values() for g in games))
-    if comparison:
-        (out / "comparison.json").write_text(json.dumps(comparison, indent=1) + "\n")
-        agents = comparison["agents"]
-        _csv(
-            out / "per_partner.csv",
-            ["partner", "group", "agent", "kills_per_minute", "stderr", "games"],
-            (
-                [
-                    p,
-                    comparison.get("group_of", {}).get(p) or group_of(p),
-                    a,
-                    f"{v['mean']:.4f}",
-                    f"{v['stderr']:.4f}",
-                    v["n"],
-                ]
-                for p, by_agent in comparison["per_partner"].items()
-                for a, v in by_agent.items()
-            ),
+def _identification(out: Path, found: dict) -> list[str]:
+    """identification.json and the confusion matrices into `out`; the summary's section."""
+    (out / "identification.json").write_text(json.dumps(found, indent=1) + "\n")
+    keys = found["partners"]
+    lines = [
+        "## Identification ("
+        + ("the test members' partner groups" if found.get("held_out") else "library partners")
+        + ", 10 % action noise)",
+        "",
+        "| T | CEM accuracy | filter accuracy | CEM follows within T/2 | median frames to follow |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    for window, r in found["windows"].items():
+        confusion = ([k, *row] for k, row in zip(keys, r["confusion"], strict=True))
+        _csv(out / f"confusion_T{window}.csv", ["true \\ estimated", *keys], confusion)
+        follow = r["follow"]
+        followed = (
+            f"{follow['within_half_window']:.2f} ({follow['followed']}/{follow['switches']} followed)"
+            if follow["switches"]
+            else "- (no switching partners)"
         )
-        lines += [
-            f"## Team performance ({comparison['partners']} partners, {comparison['units']} games per agent)",
-            "",
-            "| agent | kills/min | s.e. |",
-            "| --- | --- | --- |",
-            *(f"| {a} | {v['mean']:.3f} | {v['stderr']:.3f} |" for a, v in sorted(agents.items())),
-            "",
-            "Mean kills/min by partner group (every partner: per_partner.csv):",
-            "",
-            *_group_table(comparison),
-            "",
-            f"Best static policy: **{comparison['best_static']}**.",
-            "",
-            *_known_partner(comparison),
-            "| adaptive | difference | d_z | p (paired t) | p (Holm) | p (Wilcoxon) | p (partners) | "
-            "partners better | switches/game (max) | guard fell back |",
-            "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
-            *(
-                f"| {a} | {t['mean_difference']:+.3f} ± {t['stderr']:.3f} | {t['d_z']:+.3f} | "
-                f"{t['p_t']:.3g} | {t.get('p_holm', float('nan')):.3g} | {t['p_wilcoxon']:.3g} | "
-                f"{t['p_t_partners']:.3g} | {t['partners_better']}/{t['partners']} | "
-                f"{comparison['switches'][a]['mean']:.1f} ({comparison['switches'][a]['max']}) | "
-                f"{comparison['switches'][a]['guarded_games']} games |"
-                for a, t in comparison["tests"].items()
-            ),
-            "",
-            *_group_tests(comparison),
-        ]
+        lines.append(
+            f"| {window} | {r['accuracy']:.3f} | {r['bayes_accuracy']:.3f} | {followed} | "
+            f"{follow['median_frames'] if follow['switches'] else '-'} |"
+        )
+    return [*lines, ""]
+
+
+def _team(out: Path, c: Comparison) -> list[str]:
+    """comparison.json and per_partner.csv into `out`; the summary's team performance section."""
+    (out / "comparison.json").write_text(json.dumps(c.to_json(), indent=1) + "\n")
+    _csv(
+        out / "per_partner.csv",
+        ["partner", c.parts, "agent", "kills_per_minute", "stderr", "games", "population"],
+        (
+            [p, c.part_of[p], a, f"{v['mean']:.4f}", f"{v['stderr']:.4f}", v["n"], c.population]
+            for p, by_agent in c.per_partner.items()
+            for a, v in by_agent.items()
+        ),
+    )
+    return [
+        f"## Team performance ({c.partners} partners, {c.units} games per agent)",
+        "",
+        "| agent | kills/min | s.e. |",
+        "| --- | --- | --- |",
+        *(f"| {a} | {v['mean']:.3f} | {v['stderr']:.3f} |" for a, v in sorted(c.agents.items())),
+        "",
+        f"Mean kills/min by partner {c.parts} (every partner: per_partner.csv):",
+        "",
+        *_part_table(c),
+        "",
+        f"Best static policy: **{c.best_static}**.",
+        "",
+        *_known_partner(c),
+        "| adaptive | difference | d_z | p (paired t) | p (Holm) | p (Wilcoxon) | p (partners) | "
+        "partners better | switches/game (max) | guard fell back |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        *(
+            f"| {a} | {t['mean_difference']:+.3f} ± {t['stderr']:.3f} | {t['d_z']:+.3f} | "
+            f"{t['p_t']:.3g} | {t.get('p_holm', float('nan')):.3g} | {t['p_wilcoxon']:.3g} | "
+            f"{t['p_t_partners']:.3g} | {t['partners_better']}/{t['partners']} | "
+            f"{c.switches[a]['mean']:.1f} ({c.switches[a]['max']}) | {c.switches[a]['guarded_games']} games |"
+            for a, t in c.tests.items()
+        ),
+        "",
+        *_part_tests(c),
+    ]
+
+
+def write_results(
+    out: Path,
+    identification_result: dict | None,
+    games: list[TeamGame],
+    comparison: Comparison | None,
+    population: str = "",
+) -> Path:
+    """Every number behind the figures, as JSON and CSV (each naming the `population`), and a
+    Markdown summary (summary.md)."""
+    out.mkdir(parents=True, exist_ok=True)
+    lines = ["# Adapter evaluation", "", f"Population: {population or '(unnamed)'}.", ""]
+    lines += _at_a_glance(comparison) if comparison else []
+    if identification_result:
+        lines += _identification(out, identification_result | {"population": population})
+    if games:
+        rows = [g.row() | {"population": population} for g in games]
+        _csv(out / "team.csv", list(rows[0]), (r.values() for r in rows))
+    if comparison:
+        lines += _team(out, comparison)
     made = provenance(**library.provenance_hashes())
-    (out / "provenance.json").write_text(json.dumps(made, indent=1) + "\n")
+    (out / "provenance.json").write_text(json.dumps(made | {"population": population}, indent=1) + "\n")
     lines += ["## Provenance", "", *(f"- {line}" for line in provenance_lines(made)), ""]
     path = out / "summary.md"
     path.write_text("\n".join(lines))

@@ -6,17 +6,18 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
 from services.evaluation.evaluate import batches, play_games, play_session
 from services.evaluation.oracle import chosen_on_other_half
-from services.evaluation.results import TeamGame
+from services.evaluation.populations import Population, listed
+from services.evaluation.results import Comparison, TeamGame
 from services.jobs.core import Spec, spec
 from services.jobs.kinds import Runner, in_process
 from services.population.adaptive import AdapterConfig
 from services.population.human_like import SESSION_TRIALS
-from services.population.partners import group_of
 from services.population.seat import AdaptiveSeat, SeatSpec, plugins_in
 from shared.game import check_role
 
@@ -171,135 +172,162 @@ def known_partner(
     return np.array([value[u] for u in units])
 
 
-def compare(
-    games: list[TeamGame],
-    group_of: Callable[[str], str] = group_of,
-    subsets: dict[str, Callable[[str], bool]] | None = None,
-) -> dict:
-    """Each agent's mean and standard error over the population, and each adaptive variant against
-    the best static policy (chosen on this same data, which favours the static side): a one-sided
-    paired t-test and a Wilcoxon signed-rank test over (partner, seed) pairs (with Holm's
-    correction over the variants), the same t-test over partner means (seeds averaged), the effect
-    size d_z = mean difference / sd of differences; per partner group, one-sided superiority and
-    non-inferiority (margin MARGIN) tests; each variant's switches per game; and the headroom of
-    knowing each partner in advance (`known_partner`) over the best static policy, overall and per
-    group: what any rule that picks one of these static policies per partner can gain, and the
-    share of it each variant realises. Per variant also how many partners it serves better, as well
-    or worse than the best static policy (a partner's mean beyond MARGIN either way), and the share
-    of its gain that the top tenth of partners carry. `group_of` names a partner's group (the
-    population's groups by default); `subsets` (name -> which partners) gives each variant's
-    effect on a part of the population too (`by_subset`, Holm-corrected over variants and parts)."""
+@dataclass(frozen=True)
+class _Paired:
+    """Every agent's kills/min over the same (partner, seed) units, and the best static policy."""
+
+    units: list[tuple[str, int]]
+    grid: dict[str, dict[tuple[str, int], float]]  # agent -> unit -> kills/min
+    values: dict[str, np.ndarray]  # agent -> kills/min in the order of `units`
+    statics: list[str]
+    best: str
+    partners: list[str]
+
+    @classmethod
+    def of(cls, games: list[TeamGame]) -> _Paired:
+        units = sorted({(g.partner, g.seed) for g in games})
+        grid: dict[str, dict[tuple[str, int], float]] = {}
+        for g in games:
+            grid.setdefault(g.agent, {})[(g.partner, g.seed)] = g.kills_per_minute
+        values = {a: np.array([g[u] for u in units]) for a, g in grid.items()}
+        statics = [a for a in values if not isinstance(SeatSpec.parse(a), AdaptiveSeat)]
+        best = max(statics, key=lambda a: float(values[a].mean()))
+        return cls(units, grid, values, statics, best, sorted({u[0] for u in units}))
+
+    @property
+    def adaptive(self) -> list[str]:
+        return [a for a in self.values if a not in self.statics]
+
+    def partner_means(self, agent: str) -> np.ndarray:
+        return np.array(
+            [np.mean([self.grid[agent][u] for u in self.units if u[0] == p]) for p in self.partners]
+        )
+
+    def difference(self, agent: str) -> np.ndarray:
+        return self.values[agent] - self.values[self.best]
+
+    def by_partner(self, agent: str) -> np.ndarray:
+        return self.partner_means(agent) - self.partner_means(self.best)
+
+
+def _test(paired: _Paired, a: str) -> dict:
+    """One adaptive variant against the best static policy over every (partner, seed) pair."""
     from scipy import stats
 
-    units = sorted({(g.partner, g.seed) for g in games})
-    grid: dict[str, dict[tuple[str, int], float]] = {}
-    for g in games:
-        grid.setdefault(g.agent, {})[(g.partner, g.seed)] = g.kills_per_minute
-    values = {a: np.array([g[u] for u in units]) for a, g in grid.items()}
-    agents = {a: _summary(v) for a, v in values.items()}
-    statics = [a for a in values if not isinstance(SeatSpec.parse(a), AdaptiveSeat)]
-    best = max(statics, key=lambda a: agents[a]["mean"])
-    partners = sorted({u[0] for u in units})
-
-    def partner_means(a: str) -> np.ndarray:
-        return np.array([np.mean([grid[a][u] for u in units if u[0] == p]) for p in partners])
-
-    tests = {}
-    for a in values:
-        if not isinstance(SeatSpec.parse(a), AdaptiveSeat):
-            continue
-        diff = values[a] - values[best]
-        by_partner = partner_means(a) - partner_means(best)
-        nonzero = diff[diff != 0]
-        tests[a] = {
-            "mean_difference": float(diff.mean()),
-            "stderr": _stderr(diff),
-            "d_z": float(diff.mean() / diff.std(ddof=1)) if diff.std(ddof=1) > 0 else 0.0,
-            "t": float(stats.ttest_rel(values[a], values[best]).statistic),
-            "p_t": float(stats.ttest_rel(values[a], values[best], alternative="greater").pvalue),
-            "p_wilcoxon": float(stats.wilcoxon(nonzero, alternative="greater").pvalue)
-            if len(nonzero)
-            else 1.0,
-            "p_t_partners": float(stats.ttest_1samp(by_partner, 0.0, alternative="greater").pvalue),
-            "partners_better": int((by_partner > 0).sum()),
-            "partners": len(partners),
-            "per_partner": _counts(by_partner),
-            "top_tenth_share": _top_share(by_partner),
-        }
-    holm_p = holm({a: t["p_t"] for a, t in tests.items()})
-    for a, t in tests.items():
-        t["p_holm"] = holm_p[a]
-    group_of_unit = np.array([group_of(u[0]) for u in units])
-    known = known_partner(grid, statics, units)
-
-    def headroom(where: np.ndarray) -> dict:
-        diff = known[where] - values[best][where]
-        return {
-            "mean": float(known[where].mean()),
-            "mean_difference": float(diff.mean()),
-            "stderr": _stderr(diff),
-            "percent": float(100 * diff.mean() / base) if (base := values[best][where].mean()) else None,
-        }
-
-    by_group = {
-        a: {
-            g: paired_tests(values[a][group_of_unit == g] - values[best][group_of_unit == g])
-            for g in sorted(set(group_of_unit))
-        }
-        for a in tests
+    ours, best = paired.values[a], paired.values[paired.best]
+    diff, by_partner = paired.difference(a), paired.by_partner(a)
+    nonzero = diff[diff != 0]
+    return {
+        "mean_difference": float(diff.mean()),
+        "stderr": _stderr(diff),
+        "d_z": float(diff.mean() / diff.std(ddof=1)) if diff.std(ddof=1) > 0 else 0.0,
+        "t": float(stats.ttest_rel(ours, best).statistic),
+        "p_t": float(stats.ttest_rel(ours, best, alternative="greater").pvalue),
+        "p_wilcoxon": float(stats.wilcoxon(nonzero, alternative="greater").pvalue) if len(nonzero) else 1.0,
+        "p_t_partners": float(stats.ttest_1samp(by_partner, 0.0, alternative="greater").pvalue),
+        "partners_better": int((by_partner > 0).sum()),
+        "partners": len(paired.partners),
+        "per_partner": _counts(by_partner),
+        "top_tenth_share": _top_share(by_partner),
     }
+
+
+def _headroom(paired: _Paired, known: np.ndarray, where: np.ndarray) -> dict:
+    """Knowing each partner in advance (`known`) against the best static policy, on `where`."""
+    diff = known[where] - paired.values[paired.best][where]
+    base = paired.values[paired.best][where].mean()
+    return {
+        "mean": float(known[where].mean()),
+        "mean_difference": float(diff.mean()),
+        "stderr": _stderr(diff),
+        "percent": float(100 * diff.mean() / base) if base else None,
+    }
+
+
+def _switching(games: list[TeamGame], adaptive: list[str]) -> dict[str, dict]:
+    """Each adaptive variant's switches per game (mean, most) and games its guard fell back in."""
     switching = {}
-    for a in tests:
+    for a in adaptive:
         counts = [g.switches for g in games if g.agent == a]
         switching[a] = {"mean": float(np.mean(counts)), "max": int(max(counts))}
         switching[a]["guarded_games"] = int(sum(g.guarded for g in games if g.agent == a))
-    per_partner = {
-        p: {a: _summary([grid[a][u] for u in units if u[0] == p]) for a in values} for p in partners
-    }
-    groups = {group_of(p) for p in partners}
-    per_group = {
-        g: {a: _summary([grid[a][u] for u in units if group_of(u[0]) == g]) for a in values}
-        for g in sorted(groups)
-    }
-    overall = headroom(np.ones(len(units), dtype=bool))
-    for t in tests.values():
-        room = overall["mean_difference"]
-        t["headroom_realised"] = t["mean_difference"] / room if room > 0 else None
+    return switching
+
+
+def _by_subset(
+    paired: _Paired, known: np.ndarray, adaptive: list[str], subsets: dict[str, Callable[[str], bool]]
+) -> dict[str, dict[str, dict]]:
+    """Each variant's effect on each part of the population (Holm-corrected over variants and parts)."""
     by_subset: dict[str, dict[str, dict]] = {}
-    for name, chosen in (subsets or {}).items():
-        where = np.array([chosen(u[0]) for u in units])
-        mine = np.array([chosen(p) for p in partners])
+    for name, chosen in subsets.items():
+        where = np.array([chosen(u[0]) for u in paired.units])
+        mine = np.array([chosen(p) for p in paired.partners])
         by_subset[name] = {}
-        for a in tests:
-            diff = values[a][where] - values[best][where]
-            by_partner = (partner_means(a) - partner_means(best))[mine]
+        for a in adaptive:
+            diff = paired.difference(a)[where]
+            base = paired.values[paired.best][where].mean()
             by_subset[name][a] = paired_tests(diff) | {
-                "percent": float(100 * diff.mean() / values[best][where].mean()),
+                "percent": float(100 * diff.mean() / base) if base else None,
                 "partners": int(mine.sum()),
-                "per_partner": _counts(by_partner),
-                "known_partner_percent": headroom(where)["percent"],
+                "per_partner": _counts(paired.by_partner(a)[mine]),
+                "known_partner_percent": _headroom(paired, known, where)["percent"],
             }
     subset_p = holm({(n, a): t["p_superior"] for n, by in by_subset.items() for a, t in by.items()})
     for (n, a), p in subset_p.items():
         by_subset[n][a]["p_holm"] = p
-    return {
-        "units": len(units),
-        "partners": len(partners),
-        "group_of": {p: group_of(p) for p in partners},
-        "by_subset": by_subset,
-        "best_static": best,
-        "agents": agents,
-        "tests": tests,
-        "per_partner": per_partner,
-        "per_group": per_group,
-        "tests_by_group": by_group,
-        "switches": switching,
-        "margin": MARGIN,
-        "known_partner": {
-            "all": overall,
-            **{g: headroom(group_of_unit == g) for g in sorted(set(group_of_unit))},
+    return by_subset
+
+
+def compare(games: list[TeamGame], population: Population | None = None) -> Comparison:
+    """Each agent's mean and standard error over the population, and each adaptive variant against
+    the best static policy (chosen on this same data, which favours the static side): a one-sided
+    paired t-test and a Wilcoxon signed-rank test over (partner, seed) pairs (with Holm's
+    correction over the variants), the same t-test over partner means (seeds averaged), the effect
+    size d_z = mean difference / sd of differences; per part of the population (its partner groups,
+    or its partners' kinds), one-sided superiority and non-inferiority (margin MARGIN) tests; each
+    variant's switches per game; and the headroom of knowing each partner in advance
+    (`known_partner`) over the best static policy, overall and per part: what any rule that picks
+    one of these static policies per partner can gain, and the share of it each variant realises.
+    Per variant also how many partners it serves better, as well or worse than the best static
+    policy (a partner's mean beyond MARGIN either way), and the share of its gain that the top
+    tenth of partners carry. `population` (default: a list of these games' partners, by kind)
+    names each partner's part and the subsets each variant's effect is also given for."""
+    population = population or listed(sorted({g.partner for g in games}), "")
+    paired = _Paired.of(games)
+    adaptive, best = paired.adaptive, paired.best
+    tests = {a: _test(paired, a) for a in adaptive}
+    holm_p = holm({a: t["p_t"] for a, t in tests.items()})
+    for a, t in tests.items():
+        t["p_holm"] = holm_p[a]
+    part_of = {p: population.part_of(p) for p in paired.partners}
+    label = np.array([part_of[u[0]] for u in paired.units])
+    parts = sorted(set(label))
+    known = known_partner(paired.grid, paired.statics, paired.units)
+    overall = _headroom(paired, known, np.ones(len(paired.units), dtype=bool))
+    for t in tests.values():
+        room = overall["mean_difference"]
+        t["headroom_realised"] = t["mean_difference"] / room if room > 0 else None
+    mean_of = {a: _summary(v) for a, v in paired.values.items()}
+    return Comparison(
+        population=population.name,
+        parts=population.parts,
+        units=len(paired.units),
+        partners=len(paired.partners),
+        part_of=part_of,
+        by_subset=_by_subset(paired, known, adaptive, population.subsets),
+        best_static=best,
+        agents=mean_of,
+        tests=tests,
+        per_partner={
+            p: {a: _summary([paired.grid[a][u] for u in paired.units if u[0] == p]) for a in paired.values}
+            for p in paired.partners
         },
-    }
+        per_part={g: {a: _summary(paired.values[a][label == g]) for a in paired.values} for g in parts},
+        tests_by_part={a: {g: paired_tests(paired.difference(a)[label == g]) for g in parts} for a in tests},
+        switches=_switching(games, adaptive),
+        margin=MARGIN,
+        known_partner={"all": overall, **{g: _headroom(paired, known, label == g) for g in parts}},
+    )
 
 
 def _counts(by_partner: np.ndarray) -> dict[str, int]:

@@ -14,17 +14,50 @@ from typing import Any
 
 from shared.errors import UsageError
 from shared.game import FRAMES, ROLES, SEEDS, Range, other
+from shared.messages import STRATEGY_NAME
 
-STRATEGIES = (
-    "cem",
-    "cem-dwell",
-    "cem-ood",
-    "bayes",
-    "bayes-dwell-ood",
-    "bayes-dwell-ood-guard",
-    "bayes-dwell-ood-guard-memory",
-    "bayes-dwell-ood-guard-skill",
-)
+
+@dataclass(frozen=True)
+class Strategy:
+    """What an adaptive strategy does, explicitly (its name lists the parts, in this order): how it
+    estimates the partner (`cem`: the best window mean; `bayes`: a filter over partner types) and
+    which parts it adds: `dwell` (a new choice must hold), `ood` (out of library: fall back to the
+    best average), `guard` (fall back when the choice does worse than expected), `memory` (carry on
+    across a session's trials) and `skill` (a skill model of the partner's keys)."""
+
+    name: str
+    rule: str  # "cem" or "bayes"
+    dwell: bool = False
+    ood: bool = False
+    guard: bool = False
+    memory: bool = False
+    skill: bool = False
+
+    def __post_init__(self) -> None:
+        parts = [self.rule, *(p for p in ("dwell", "ood", "guard", "memory", "skill") if getattr(self, p))]
+        if self.name != "-".join(parts) or not STRATEGY_NAME.fullmatch(self.name):
+            raise ValueError(f"strategy {self.name!r}: its name must be its parts, {STRATEGY_NAME.pattern}")
+
+    @property
+    def bayes(self) -> bool:
+        return self.rule == "bayes"
+
+
+_GUARDED = {"dwell": True, "ood": True, "guard": True}
+STRATEGY = {
+    s.name: s
+    for s in (
+        Strategy("cem", "cem"),
+        Strategy("cem-dwell", "cem", dwell=True),
+        Strategy("cem-ood", "cem", ood=True),
+        Strategy("bayes", "bayes"),
+        Strategy("bayes-dwell-ood", "bayes", dwell=True, ood=True),
+        Strategy("bayes-dwell-ood-guard", "bayes", **_GUARDED),
+        Strategy("bayes-dwell-ood-guard-memory", "bayes", **_GUARDED, memory=True),
+        Strategy("bayes-dwell-ood-guard-skill", "bayes", **_GUARDED, skill=True),
+    )
+}
+STRATEGIES = tuple(STRATEGY)
 INITIAL = ("best-average", "random")
 # What the partner is identified as: `library`, one of the study's library policies, choosing by
 # the table P; `groups`, one of the grown library's partner groups, choosing among the grown
@@ -104,7 +137,7 @@ class AdapterConfig:
         for option, value in (("--hazard", self.hazard), ("--noise", self.noise)):
             if not 0.0 <= value < 1.0:
                 raise UsageError(option, value, "a probability in [0, 1)")
-        if self.partners == "groups" and "skill" in self.strategy:
+        if self.partners == "groups" and self.strategy_kind.skill:
             raise UsageError(
                 "--strategy", self.strategy, "its skill model knows the library's policies, not groups"
             )
@@ -114,12 +147,17 @@ class AdapterConfig:
         return other(self.role)
 
     @property
+    def strategy_kind(self) -> Strategy:
+        """What the strategy does (`Strategy`), not its name read as substrings."""
+        return STRATEGY[self.strategy]
+
+    @property
     def warmup_frames(self) -> int:
         return self.warmup or min(self.window, 150)
 
     @property
     def dwell_frames(self) -> int:
-        return (self.dwell or max(15, self.window // 10)) if "dwell" in self.strategy else 0
+        return (self.dwell or max(15, self.window // 10)) if self.strategy_kind.dwell else 0
 
     @property
     def hazard_rate(self) -> float:
@@ -160,6 +198,13 @@ class AdapterConfig:
             except ValueError:
                 raise UsageError(option, name, f"{item!r}: {setting} takes a number") from None
         return cls(window=int(found[1]), strategy=found[2], **named, **context)
+
+    @classmethod
+    def shipped(cls, role: str = "shooter", window: int = 400) -> AdapterConfig:
+        """The agent the project ships (`tsf adapter`'s defaults: each field's command-line default)
+        in seat `role` at `window`."""
+        defaults = {f.name: f.metadata["default"] for f in fields(cls)}
+        return cls(**defaults | {"role": role, "window": window})
 
     def to_args(self) -> list[str]:
         """The same config as `tsf adapter` options: one per field, so that none is dropped."""

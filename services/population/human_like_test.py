@@ -8,7 +8,7 @@ import pytest
 
 from services.agent import networks
 from services.population.human_like import SESSION_TRIALS, SKILLS, HumanLike, predict
-from services.population.partners import group_of, make_partner, population
+from services.population.partners import kind_of, make_partner, population
 from services.sim.engine import Game
 from services.sim.observation import observe
 from services.sim.play import policy_seed
@@ -156,7 +156,7 @@ def test_the_forward_model_moves_the_own_ship_by_its_keys_and_foresees_the_fortr
     assert checked > 300
 
 
-def test_grammar_population_and_group():
+def test_grammar_population_and_kind():
     assert isinstance(make_partner("human(B1,B5)", "bait"), HumanLike)
     assert make_partner("human(noisy(B5))", "bait").key == "human(noisy(B5))"
     practised = make_partner("human(B1,B5, skill=practised, input_ms=40)", "bait")
@@ -165,7 +165,7 @@ def test_grammar_population_and_group():
     assert make_partner(practised.key, "bait").key == practised.key
     assert make_partner("human(B5,skill=0.3)", "bait").key == "human(B5,skill=0.3)"
     assert make_partner("human(B5,skill=typical)", "bait").key == "human(B5)"
-    assert group_of("human(B5,skill=novice)") == "human-like"
+    assert kind_of("human(B5,skill=novice)") == "human-like"
     humans = population("bait")["human-like"]
     assert {"human(B1,skill=novice)", "human(B2)", "human(B3,skill=practised)"} <= set(humans)
     assert any(h.count(",") == 2 for h in humans)  # a drifting person, with a skill

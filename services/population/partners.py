@@ -473,8 +473,10 @@ def _fitted(name: str, role: str) -> Partner:
     return partner
 
 
-def group_of(name: str) -> str:
-    """A partner's group in the population: its outer wrapper, library, a proxy, or outside."""
+def kind_of(name: str) -> str:
+    """A partner's kind in the population: its outer wrapper, library, a proxy, fitted or outside.
+    (A partner *group*, G1.., is something else: a cluster of partners by what works with them, as
+    the grown library names them.)"""
     spec = SeatSpec.parse(name)
     if isinstance(spec, PolicySeat) and spec.how == PROXY_KIND:
         return "proxy"
@@ -503,7 +505,7 @@ def _person(inner: str, i: int) -> str:
 
 
 def population(role: str) -> dict[str, list[str]]:
-    """The default evaluation population of partners of `role`, by group: every library policy,
+    """The default evaluation population of partners of `role`, by kind (`kind_of`): every library policy,
     its noisy, delayed and sticky stand-ins, switchers between library policies of different
     families, human-like partners (every library policy played by a simulated person, and people
     who drift between the switchers' styles over a session, at the skills of POPULATION_SKILLS in

@@ -22,7 +22,7 @@ from services.population.partners import (
     PolicyLanes,
     Sticky,
     Switching,
-    group_of,
+    kind_of,
     make_partner,
     population,
 )
@@ -170,11 +170,11 @@ def test_a_partner_acts_the_same_in_a_single_game_as_among_many_lanes() -> None:
     assert (np.array(many)[:, 0] != np.array(many)[:, 7]).any()  # two games of noisy(B5): two seeds
 
 
-def test_population_covers_every_group() -> None:
-    groups = population("bait")
-    assert set(groups) == {"library", "noisy", "delayed", "sticky", "switching", "human-like", "outside"}
-    assert len(groups["library"]) == 9 and len(groups["switching"]) == 9 and len(groups["outside"]) == 6
-    for names in groups.values():
+def test_population_covers_every_kind() -> None:
+    kinds = population("bait")
+    assert set(kinds) == {"library", "noisy", "delayed", "sticky", "switching", "human-like", "outside"}
+    assert len(kinds["library"]) == 9 and len(kinds["switching"]) == 9 and len(kinds["outside"]) == 6
+    for names in kinds.values():
         for name in names:
             assert make_partner(name, "bait").role == "bait"
 
@@ -183,7 +183,7 @@ def test_a_scripted_rule_with_other_settings_plays_them_under_its_own_name() -> 
     name = "circle(radius=150,speed=3)"
     partner = make_partner(name, "bait")
     assert (partner.key, partner.radius, partner.speed, partner.outside) == (name, 150.0, 3.0, 235.0)
-    assert group_of(name) == "outside"
+    assert kind_of(name) == "outside"
     for bad, problem in (
         ("circle(size=3)", "'size=3' is not SETTING=NUMBER for a setting of circle; valid: radius, speed"),
         ("circle(radius=wide)", "'radius=wide' is not SETTING=NUMBER"),

@@ -89,7 +89,7 @@ def test_old_names_read_as_before():
         "adaptive-T400-bayes-dwell-ood-guard_initial-random_dwell20_noise0.1"
     )
     for role in ROLES:
-        for name in (name for group in population(role).values() for name in group):
+        for name in (name for kind in population(role).values() for name in kind):
             assert str(SeatSpec.parse(name)) == name
             assert make_partner(name, role).key == name
     assert SeatSpec.parse(HUMAN) == PersonSeat() and SeatSpec.parse("S5").adaptive("shooter") is None

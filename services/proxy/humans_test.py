@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from services.population.partners import group_of, make_partner
+from services.population.partners import kind_of, make_partner
 from services.proxy.humans import (
     ESTIMATED,
     FROZEN,
@@ -68,7 +68,7 @@ def test_a_fitted_stand_in_plays_as_humans_dir(tmp_path: Path):
     write(tmp_path, "bait", {"ann": person, "bob": person}, "tsf humans fit ...")
     ann = make_partner(f"humans:{tmp_path}@ann", "bait")
     assert ann.key == f"humans:{tmp_path}@ann" and ann.skill == 0.4
-    assert group_of(ann.key) == "fitted"
+    assert kind_of(ann.key) == "fitted"
     for name, problem in [
         (f"humans:{tmp_path}", "name one participant"),
         (f"humans:{tmp_path}@cid", "name one participant"),

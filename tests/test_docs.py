@@ -268,17 +268,14 @@ def test_every_text_that_names_the_default_agent_names_the_shipped_one() -> None
     assert "does not pay" not in texts["tsf match --help"]
 
 
-@pytest.mark.xfail(
-    reason="services/evaluation/figures.py marks AdapterConfig().name, the study library's agent, until "
-    "it marks adaptive.SHIPPED; `figures.redraw` on docs/eval/held-out/* then redraws the shipped ones"
-)
 @pytest.mark.parametrize("seat", ["shooter", "bait"])
 def test_the_held_out_figures_mark_the_shipped_agent_as_the_default(seat: str, tmp_path: Path) -> None:
     from services.evaluation import figures
+    from services.evaluation.results import Comparison
     from shared.plots import drawn
 
-    comparison = json.loads((ROOT / "docs" / "eval" / "held-out" / seat / "comparison.json").read_text())
-    [fig] = drawn(lambda: figures.adaptive_vs_static(comparison, tmp_path / "figure.png"))
+    record = json.loads((ROOT / "docs" / "eval" / "held-out" / seat / "comparison.json").read_text())
+    [fig] = drawn(lambda: figures.adaptive_vs_static(Comparison.of(record), tmp_path / "figure.png"))
     labels = [label.get_text() for label in fig.axes[0].get_yticklabels()]
     marked = SHIPPED.name.removeprefix(ADAPTIVE) + " (default)"
     assert [label for label in labels if "(default)" in label] == [marked]

@@ -14,7 +14,7 @@ import matplotlib.pyplot as plt  # noqa: E402 - after choosing the file-only bac
 import numpy as np  # noqa: E402
 
 from services.evaluation.results import Comparison, percent, percent_text  # noqa: E402
-from services.population.adaptive import ADAPTIVE, AdapterConfig  # noqa: E402
+from services.population.adaptive import ADAPTIVE, SHIPPED  # noqa: E402
 from shared.game import FPS  # noqa: E402
 from shared.plots import save  # noqa: E402
 
@@ -35,21 +35,22 @@ def accuracy_vs_window(identification: dict, path: Path) -> Path:
     return _save(fig, path)
 
 
-def adaptive_vs_static(comparison: Comparison, path: Path, default: str = AdapterConfig().name) -> Path:
+def adaptive_vs_static(comparison: Comparison, path: Path, default: str = SHIPPED.name) -> Path:
     """The headline figure: each adaptive agent's paired difference from the best static policy in
     kills/min (mean ± s.e. over the same partners and seeds), as horizontal bars from zero, with the
-    difference in per cent of the best static mean; the default strategy is marked. A difference is
+    difference in per cent of the best static mean; the shipped default agent is marked. A difference is
     drawn, not the two means, because a gain of a few per cent is invisible on an axis from zero."""
     best, base, tests = comparison.best_static, comparison.base, comparison.tests
     names = list(tests)
     diffs = np.array([tests[a]["mean_difference"] for a in names])
     errors = np.array([tests[a]["stderr"] for a in names])
-    fig, ax = plt.subplots(figsize=(8, 1.4 + 0.42 * len(names)))
+    labels = [a.removeprefix(ADAPTIVE) + (" (default)" if a == default else "") for a in names]
+    width = 5.5 + 0.065 * max(map(len, labels))  # room for the longest label beside the bars
+    fig, ax = plt.subplots(figsize=(width, 1.4 + 0.42 * len(names)))
     colours = ["tab:green" if a == default else "tab:orange" for a in names]
     rows = np.arange(len(names))
     ax.barh(rows, diffs, xerr=errors, color=colours, capsize=3)
     ax.axvline(0, color="black", linewidth=1)
-    labels = [a.removeprefix(ADAPTIVE) + (" (default)" if a == default else "") for a in names]
     ax.set_yticks(rows, labels, fontsize=8)
     for tick, name in zip(ax.get_yticklabels(), names, strict=True):
         tick.set_fontweight("bold" if name == default else "normal")

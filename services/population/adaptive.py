@@ -215,4 +215,4 @@ class AdapterConfig:
 # (partners `groups`, the grown library's agent). A page, figure or help text that calls an agent
 # "the default" means this one (tests/test_docs.py); AdapterConfig() itself is the study library's
 # agent, which a name without settings has always meant.
-SHIPPED = AdapterConfig(**{f.name: f.metadata["default"] for f in fields(AdapterConfig)})
+SHIPPED = AdapterConfig.shipped()

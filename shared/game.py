@@ -22,6 +22,7 @@ if TYPE_CHECKING:
 
 ROLES: tuple[str, str] = ("bait", "shooter")  # also the seat order: the bait first, everywhere
 HUMAN = "human"  # a seat's policy key for a person: no agent plays it, a gateway does
+PERSON = ("", HUMAN)  # what a recording's start record names a person's seat
 FPS = 30  # frames per second of game time
 N_TURN, N_THRUST, N_FIRE = 3, 2, 2  # choices of each action head; turn 0 none, 1 left (ccw), 2 right
 N_ACTIONS = N_TURN * N_THRUST * N_FIRE

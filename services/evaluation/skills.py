@@ -27,7 +27,7 @@ from services.adapter.core import Window
 from services.adapter.skill import EVERY, FEATURES, LEVELS, Keys, SkillModel
 from services.agent import library
 from services.agent.policy import end_round_batch
-from services.evaluation.evaluate import batches, play_games, play_teams, setup
+from services.evaluation.evaluate import LANES, batches, play_games, play_teams, setup
 from services.population.adaptive import AdapterConfig
 from services.population.seat import SeatSpec, seats_of
 from services.sim import observation as ob
@@ -40,7 +40,6 @@ from shared.provenance import provenance
 VERSION = 1
 SKILLS = LEVELS[:-1]  # human_like.SKILLS, in order of practice
 MODEL_SEEDS = tuple(range(64, 76))  # 4 people x 3 trials, past the evaluation's 0-63 and the table's
-LANES = 1024  # games per batch at most
 
 
 def stand_in(style: str, skill: str) -> str:

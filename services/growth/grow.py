@@ -13,6 +13,9 @@ journal, a training from its checkpoint); workspace.py holds what the stages sha
 6. selection   selection.py: per seat, the greedy coverage selection on the validation population.
 7. library     library.py: the selected members under keys of their own (GB1.., GS1..), the table,
                the adapter's calibration, the partner groups; summary.py: the test population's figures.
+There is no search stage: a search for new candidates (beyond the study's policies, the rule grid
+and the responses) would be a module of its own, `search.py`, run between 5 and 6, adding columns
+to the held-out grids that the selection then chooses among.
 """
 
 from __future__ import annotations

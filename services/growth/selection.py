@@ -1,8 +1,5 @@
 """Stage 6, the selection: per seat of ours, the greedy coverage selection (choice.select) on the
-validation population's held-out cross-play, written to `selection.json`.
-
-(A search for new candidates, were there one, would stand between the held-out cross-play and
-this stage: it would add columns to the held-out grid that the selection then chooses among.)"""
+validation population's held-out cross-play, written to `selection.json`."""
 
 from __future__ import annotations
 

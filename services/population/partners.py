@@ -148,16 +148,28 @@ class PolicyLanes:
         return act_lanes(self.policies, self.choice, lambda view: obs, uniforms)
 
 
-class Noisy:
-    """noisy(X): a uniformly random action with probability `noise`, lane by lane."""
+class LaneWrapper:
+    """A partner in lanes around another, `inner` (as SB3's VecEnvWrapper wraps a VecEnv): it reads
+    the inner partner's view, resets it with the lanes' keys (kept as `keys`) and acts as it does; a
+    wrapper overrides only what it changes."""
 
-    def __init__(self, inner: Lanes, noise: float, streams: Iterator[int]) -> None:
-        self.inner, self.noise, self.view = inner, noise, inner.view
-        self.slip, self.pick = next(streams), next(streams)
+    def __init__(self, inner: Lanes) -> None:
+        self.inner, self.view = inner, inner.view
 
     def reset(self, keys: np.ndarray) -> None:
         self.inner.reset(keys)
         self.keys = keys
+
+    def act(self, obs: np.ndarray, frame: int) -> np.ndarray:
+        return self.inner.act(obs, frame)
+
+
+class Noisy(LaneWrapper):
+    """noisy(X): a uniformly random action with probability `noise`, lane by lane."""
+
+    def __init__(self, inner: Lanes, noise: float, streams: Iterator[int]) -> None:
+        super().__init__(inner)
+        self.noise, self.slip, self.pick = noise, next(streams), next(streams)
 
     def act(self, obs: np.ndarray, frame: int) -> np.ndarray:
         action = self.inner.act(obs, frame)
@@ -166,15 +178,16 @@ class Noisy:
         return np.where(slipped, random, action)
 
 
-class Delayed:
+class Delayed(LaneWrapper):
     """delayed(X): the inner partner acts on each lane's observation of `delay` frames ago (the
     first one until that many have been seen)."""
 
     def __init__(self, inner: Lanes, delay: int) -> None:
-        self.inner, self.delay, self.view = inner, delay, inner.view
+        super().__init__(inner)
+        self.delay = delay
 
     def reset(self, keys: np.ndarray) -> None:
-        self.inner.reset(keys)
+        super().reset(keys)
         self.seen: np.ndarray | None = None
         self.t = 0
 
@@ -188,17 +201,17 @@ class Delayed:
         return self.inner.act(self.seen[oldest % kept], frame)
 
 
-class Sticky:
+class Sticky(LaneWrapper):
     """sticky(X): each lane repeats its previous action with probability `sticky` (keys held too
     long)."""
 
     def __init__(self, inner: Lanes, sticky: float, streams: Iterator[int]) -> None:
-        self.inner, self.sticky, self.view = inner, sticky, inner.view
-        self.stream = next(streams)
+        super().__init__(inner)
+        self.sticky, self.stream = sticky, next(streams)
 
     def reset(self, keys: np.ndarray) -> None:
-        self.inner.reset(keys)
-        self.keys, self.last = keys, np.zeros(len(keys), np.int64)
+        super().reset(keys)
+        self.last = np.zeros(len(keys), np.int64)
 
     def act(self, obs: np.ndarray, frame: int) -> np.ndarray:
         action = self.inner.act(obs, frame)  # the inner partner keeps its own course either way

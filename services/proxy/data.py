@@ -30,9 +30,8 @@ import numpy as np
 from services.recorder.recording import Recording, load
 from services.sim import observation as ob
 from shared.errors import Failure, UsageError
-from shared.game import ROLES, other
+from shared.game import PERSON, ROLES, other
 
-PERSON = ("", "human")  # what a start record names a person's seat
 HELD_OUT = 0.25  # the share of participants held out
 MIN_FRAMES = 300  # frames (10 s) that each side of the split needs at least
 HISTORY = 4  # previous actions kept beside each pair

@@ -41,10 +41,9 @@ from services.population.adaptive import AdapterConfig
 from services.population.seat import AdaptiveSeat, SeatSpec
 from services.report.load import Match
 from services.table.table import Table
-from shared.game import FPS, ROLES, GameConfig, Policy, other
+from shared.game import FPS, PERSON, ROLES, GameConfig, Policy, other
 
 ROUND_ENDS = ("kill", "reset")  # the events that end a round (docs/rules.md)
-PERSON = ("", "human")  # what a start record names a person's seat
 SMOOTH = FPS  # frames in the log-probability curves' moving mean (one second)
 KINDS = ("study trial", "person", "agents only")  # the kinds of match, never compared with each other
 GROUP = ["kind", "partner_role"]  # one population: a kind of match and the partner's seat

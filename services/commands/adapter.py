@@ -120,49 +120,75 @@ def _population(
     return chosen
 
 
-@commands.command("eval")
-@bus_options
-def eval_command(
-    context: typer.Context,
-    role: Role = typer.Option("shooter", help="The adaptive agent's seat; the partners play the other."),
-    population: str = typer.Option(
-        "default",
+# `tsf eval`'s options that say the most, as types (Typer's Annotated form), so that the command
+# reads as its parameters.
+Population = Annotated[
+    str,
+    typer.Option(
         help="The partners, by name: default (every library policy, its noisy, delayed, sticky and "
         "human-like stand-ins, switchers and partners outside the library), held-out (the shipped "
         "grown library's test split: partners its growth never saw), or a grown library's directory "
         "(its test split); docs/adapter.md.",
     ),
-    held_out: bool = typer.Option(False, help="The same as --population held-out."),
-    partner: list[str] | None = typer.Option(
-        None, help="A partner by name, repeatable: your own population (instead of --population)."
-    ),
-    partners_from: Path | None = typer.Option(
-        None,
+]
+PartnerList = Annotated[
+    list[str] | None,
+    typer.Option(help="A partner by name, repeatable: your own population (instead of --population)."),
+]
+PartnersFrom = Annotated[
+    Path | None,
+    typer.Option(
         help="A study's recordings: one proxy per participant of the partners' seat (trained into "
         "OUT/proxies, or loaded from there) as the partners, reported per participant and pooled; "
         "or a directory of `tsf humans fit`: each participant's fitted stand-in.",
     ),
-    seeds: int = number(5, GAMES, "Seeded one-minute games per partner and agent."),
-    window: Annotated[
-        list[int] | None,
-        number(
-            ...,
-            WINDOWS,
-            "A window T of identification and, with --variants, of the study's CEM agent, "
-            "repeatable (default: 150, 400, 800).",
-        ),
-    ] = None,
-    variants: bool = typer.Option(
-        False,
+]
+Windows = Annotated[
+    list[int] | None,
+    number(
+        ...,
+        WINDOWS,
+        "A window T of identification and, with --variants, of the study's CEM agent, "
+        "repeatable (default: 150, 400, 800).",
+    ),
+]
+Variants = Annotated[
+    bool,
+    typer.Option(
         help="Compare the study's adaptive variants (its CEM agent at each --window, each --strategy "
         "at --strategy-window) with the study's static policies, instead of the shipped agents (the "
         "static policies of every shipped library, the default agent and the study's).",
     ),
-    strategy: list[Strategies] | None = typer.Option(
-        None,
+]
+StrategyList = Annotated[
+    list[Strategies] | None,
+    typer.Option(
         help="A strategy compared at --strategy-window, repeatable (means --variants; default: all; a "
         "-skill one only where its skill model was measured for the seat and window).",
     ),
+]
+Games = Annotated[
+    Path | None,
+    typer.Option(
+        help="Team games already played (an evaluation's team.csv): analysed again, not played; the "
+        "comparison, per_partner.csv, the figure and summary.md go to --out (no identification).",
+    ),
+]
+
+
+@commands.command("eval")
+@bus_options
+def eval_command(
+    context: typer.Context,
+    role: Role = typer.Option("shooter", help="The adaptive agent's seat; the partners play the other."),
+    population: Population = "default",
+    held_out: bool = typer.Option(False, help="The same as --population held-out."),
+    partner: PartnerList = None,
+    partners_from: PartnersFrom = None,
+    seeds: int = number(5, GAMES, "Seeded one-minute games per partner and agent."),
+    window: Windows = None,
+    variants: Variants = False,
+    strategy: StrategyList = None,
     strategy_window: int = number(
         AdapterConfig.window, WINDOWS, "The window of the adaptive agents other than the CEM variants."
     ),
@@ -187,11 +213,7 @@ def eval_command(
     sweep_id: str = typer.Option(
         "eval", "--sweep", help="Sweep id of the jobs: tsf worker --sweep ID joins."
     ),
-    games: Path | None = typer.Option(
-        None,
-        help="Team games already played (an evaluation's team.csv): analysed again, not played; the "
-        "comparison, per_partner.csv, the figure and summary.md go to --out (no identification).",
-    ),
+    games: Games = None,
     ray: str | None = RAY,
     *,
     bus: BusConfig,

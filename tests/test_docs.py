@@ -515,3 +515,18 @@ def test_the_bring_your_own_partner_is_evaluated_as_documented(tmp_path: Path) -
     assert (tmp_path / "eval" / "team.csv").exists() and (
         tmp_path / "eval" / "adaptive_vs_static.png"
     ).exists()
+
+
+def test_the_docs_site_works_from_a_file_and_serves_on_a_port_of_its_own() -> None:
+    """Opened as the file the build prints, a link lands on a page, not a directory listing; search
+    works offline; `scripts/docs serve` takes none of the ports `tsf play` and `tsf study` take and
+    shows the notebooks unexecuted (the build, and CI, execute them); a notebook links its source."""
+    from services.human.gateway import Web
+
+    config = (ROOT / "mkdocs.yml").read_text()
+    assert "\nuse_directory_urls: false\n" in config and "\n  - offline\n" in config
+    assert "execute: !ENV [TSF_DOCS_EXECUTE, true]" in config and "include_source: true" in config
+    script = (ROOT / "scripts" / "docs").read_text()
+    port = int(re.search(r"--dev-addr \"127.0.0.1:\$\{TSF_DOCS_PORT:-(\d+)\}\"", script)[1])
+    assert port != Web().port and "export TSF_DOCS_EXECUTE=false" in script
+    assert "page.nb_url" in (ROOT / "docs" / "overrides" / "main.html").read_text()

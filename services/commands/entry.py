@@ -36,7 +36,7 @@ def start() -> None:
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         signal.signal(sig, interrupt)
     adopt()
-    # Plug-ins (`my_lab.partners:alice`) are found in the working directory, as `python -m` finds
+    # Plug-ins (`my_lab.partners:Alice`) are found in the working directory, as `python -m` finds
     # them; last on the path, so a folder there never hides an installed package.
     if os.getcwd() not in sys.path:
         sys.path.append(os.getcwd())

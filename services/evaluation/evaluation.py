@@ -20,7 +20,8 @@ from services.evaluation.populations import Population
 from services.evaluation.results import Comparison, TeamGame
 from services.jobs.kinds import Progress, Runner, in_process
 from services.population.adaptive import STRATEGIES, AdapterConfig
-from services.population.partners import SWITCH_AT, check_partner
+from services.population.partners import check_partner
+from services.population.wrappers import SWITCH_AT
 from shared.errors import UsageError
 from shared.game import FPS, other
 

@@ -15,8 +15,8 @@ from services.evaluation.evaluate import Setup, batches, play_games, setup
 from services.jobs.core import spec
 from services.jobs.kinds import Runner, in_process
 from services.population.adaptive import AdapterConfig
-from services.population.partners import SWITCH_AT
 from services.population.seat import SeatSpec
+from services.population.wrappers import SWITCH_AT
 from shared.game import check_role
 
 FOLLOW_HOLD = 30  # frames the estimate must stay on the new type to count as following it

@@ -4,7 +4,7 @@ A partner is named by a small grammar, so that an evaluation's partners can be r
 any worker process:
 
     B5                 a library (or scripted) policy as it is
-    noisy(B5)          plays a uniformly random action with probability NOISE per frame
+    noisy(B5)          plays a uniformly random action with probability NOISE per frame (wrappers.py)
     delayed(B5)        acts on the state of DELAY frames ago (a reaction time of 0.2 s);
                        delayed(B5,frames=2) of 2 frames ago
     sticky(B5)         repeats its previous action with probability STICKY (keys held too long)
@@ -25,7 +25,7 @@ any worker process:
 
 Wrappers nest: `noisy(switch(B5,B7))`.
 
-Partners play in lanes, written once: each wrapper (noisy, delayed, sticky, switch) works on
+Partners play in lanes, written once: each wrapper (wrappers.py: noisy, delayed, sticky, switch) works on
 arrays of lanes, and a single game is one lane. `Partners` plays the lanes of a batch by name:
 partners of one shape (`shape`: the same wrappers with the same settings, nested the same way,
 whatever policies they wrap) share one batched form, and the project policies inside (library,
@@ -65,7 +65,6 @@ from services.population.seat import (
     HUMANS,
     KEY,
     PROXY_KIND,
-    WRAPPERS,
     AdaptiveSeat,
     FittedSeat,
     PersonSeat,
@@ -74,18 +73,15 @@ from services.population.seat import (
     SeatSpec,
     WrapperSeat,
 )
+from services.population.wrappers import WRAPPERS, Lanes
 from services.sim.engine import Game
 from services.sim.observation import as_observation, world_values
 from services.sim.play import game_seed, policy_seed
 from services.sim.sampling import act_lanes, lane_uniforms
 from shared.errors import Failure, UsageError
-from shared.game import N_ACTIONS, ROLES, checked_action
+from shared.game import ROLES, checked_action
 
-NOISE = 0.1
-DELAY = 6  # frames
-STICKY = 0.5
-SWITCH_AT = 900  # frame: the middle of a one-minute game
-LANE_WRAPPERS = tuple(w for w in WRAPPERS if w != "human")  # the hand has its own lanes (HumanLike)
+LANE_WRAPPERS = tuple(name for name, w in WRAPPERS.items() if w.lanes)  # the hand has its own (HumanLike)
 
 
 @runtime_checkable
@@ -100,16 +96,6 @@ class Partner(Protocol):
     def reset(self, seed: int | None = None) -> None: ...
 
     def act(self, obs: np.ndarray) -> int: ...
-
-
-class Lanes(Protocol):
-    """A partner in n lanes: reset with each lane's game seed, then one action per lane per frame."""
-
-    view: str
-
-    def reset(self, keys: np.ndarray) -> None: ...
-
-    def act(self, obs: np.ndarray, frame: int) -> np.ndarray: ...
 
 
 class PartnerError(Failure):
@@ -146,95 +132,6 @@ class PolicyLanes:
     def act(self, obs: np.ndarray, frame: int) -> np.ndarray:
         uniforms = lane_uniforms(self.keys, self.stream, frame)
         return act_lanes(self.policies, self.choice, lambda view: obs, uniforms)
-
-
-class LaneWrapper:
-    """A partner in lanes around another, `inner` (as SB3's VecEnvWrapper wraps a VecEnv): it reads
-    the inner partner's view, resets it with the lanes' keys (kept as `keys`) and acts as it does; a
-    wrapper overrides only what it changes."""
-
-    def __init__(self, inner: Lanes) -> None:
-        self.inner, self.view = inner, inner.view
-
-    def reset(self, keys: np.ndarray) -> None:
-        self.inner.reset(keys)
-        self.keys = keys
-
-    def act(self, obs: np.ndarray, frame: int) -> np.ndarray:
-        return self.inner.act(obs, frame)
-
-
-class Noisy(LaneWrapper):
-    """noisy(X): a uniformly random action with probability `noise`, lane by lane."""
-
-    def __init__(self, inner: Lanes, noise: float, streams: Iterator[int]) -> None:
-        super().__init__(inner)
-        self.noise, self.slip, self.pick = noise, next(streams), next(streams)
-
-    def act(self, obs: np.ndarray, frame: int) -> np.ndarray:
-        action = self.inner.act(obs, frame)
-        slipped = lane_uniforms(self.keys, self.slip, frame) < self.noise
-        random = (lane_uniforms(self.keys, self.pick, frame) * N_ACTIONS).astype(np.int64)
-        return np.where(slipped, random, action)
-
-
-class Delayed(LaneWrapper):
-    """delayed(X): the inner partner acts on each lane's observation of `delay` frames ago (the
-    first one until that many have been seen)."""
-
-    def __init__(self, inner: Lanes, delay: int) -> None:
-        super().__init__(inner)
-        self.delay = delay
-
-    def reset(self, keys: np.ndarray) -> None:
-        super().reset(keys)
-        self.seen: np.ndarray | None = None
-        self.t = 0
-
-    def act(self, obs: np.ndarray, frame: int) -> np.ndarray:
-        kept = self.delay + 1
-        if self.seen is None:
-            self.seen = np.empty((kept, *obs.shape), obs.dtype)
-        self.seen[self.t % kept] = obs
-        oldest = max(0, self.t - self.delay)
-        self.t += 1
-        return self.inner.act(self.seen[oldest % kept], frame)
-
-
-class Sticky(LaneWrapper):
-    """sticky(X): each lane repeats its previous action with probability `sticky` (keys held too
-    long)."""
-
-    def __init__(self, inner: Lanes, sticky: float, streams: Iterator[int]) -> None:
-        super().__init__(inner)
-        self.sticky, self.stream = sticky, next(streams)
-
-    def reset(self, keys: np.ndarray) -> None:
-        super().reset(keys)
-        self.last = np.zeros(len(keys), np.int64)
-
-    def act(self, obs: np.ndarray, frame: int) -> np.ndarray:
-        action = self.inner.act(obs, frame)  # the inner partner keeps its own course either way
-        self.last = np.where(lane_uniforms(self.keys, self.stream, frame) >= self.sticky, action, self.last)
-        return self.last
-
-
-class Switching:
-    """switch(X,Y): the first partner for `at` frames, then the second."""
-
-    def __init__(self, first: Lanes, second: Lanes, at: int) -> None:
-        if first.view != second.view:
-            raise ValueError("both partners of switch(...) must read the same observation view")
-        self.first, self.second, self.at, self.view = first, second, at, first.view
-
-    def reset(self, keys: np.ndarray) -> None:
-        self.first.reset(keys)
-        self.second.reset(keys)
-        self.t = 0
-
-    def act(self, obs: np.ndarray, frame: int) -> np.ndarray:
-        self.t += 1
-        return (self.first if self.t <= self.at else self.second).act(obs, frame)
 
 
 class HumanLanes:
@@ -327,21 +224,19 @@ def _lane_wrapper(spec: SeatSpec) -> str:
     return spec.wrapper if isinstance(spec, WrapperSeat) and spec.wrapper in LANE_WRAPPERS else ""
 
 
-def _delay(spec: WrapperSeat, option: str = "--partner") -> int:
-    """delayed(...)'s frames: DELAY, or frames=N (0 to 60)."""
-    if not spec.settings:
-        return DELAY
-    (setting, frames), *more = spec.settings
-    if more or setting != "frames" or not str(frames).isdigit() or int(frames) > 60:
-        raise UsageError(option, str(spec), "delayed(...) takes one setting, frames=N (0 to 60)")
-    return int(frames)
+def _setting(spec: WrapperSeat) -> object:
+    """What of a wrapper's settings its batched form depends on (delayed(...)'s frames), checked."""
+    try:
+        return WRAPPERS[spec.wrapper].setting(spec.settings)
+    except ValueError as error:
+        raise UsageError("--partner", str(spec), str(error)) from None
 
 
 def shape(spec: SeatSpec, leaf: Leaf) -> tuple:
     """What a partner's batched form depends on: its wrappers, their settings and nesting, and the
     view of the policies inside, not which policies they are."""
     if wrapper := _lane_wrapper(spec):
-        setting = _delay(spec) if wrapper == "delayed" else None
+        setting = _setting(spec)
         return (wrapper, setting, *(shape(inner, leaf) for inner in spec.inner))
     partner = leaf(spec)
     if isinstance(partner, HumanLike) and all(_sampled(p) for p in (partner.first, partner.second) if p):
@@ -354,18 +249,14 @@ def lanes(specs: list[SeatSpec], leaf: Leaf, stream: int, streams: Iterator[int]
     `stream`, every other draw of the wrappers from the next of `streams` (unique in one form)."""
     kind, first = _lane_wrapper(specs[0]), specs[0]
 
-    def inner(i: int, stream: int = stream, offset: int = offset) -> Lanes:
-        return lanes([spec.inner[i] for spec in specs], leaf, stream, streams, offset)
+    def inner(i: int, own: bool = False) -> Lanes:
+        inside = [spec.inner[i] for spec in specs]
+        if own:  # a stream and a seed offset of its own (a switch's second partner)
+            return lanes(inside, leaf, next(streams), streams, offset + 1)
+        return lanes(inside, leaf, stream, streams, offset)
 
-    if kind == "noisy":
-        return Noisy(inner(0), NOISE, streams)
-    if kind == "delayed":
-        return Delayed(inner(0), _delay(first))
-    if kind == "sticky":
-        return Sticky(inner(0), STICKY, streams)
-    if kind == "switch":
-        second = inner(1, next(streams), offset + 1)
-        return Switching(inner(0), second, SWITCH_AT)
+    if kind:
+        return WRAPPERS[kind].lanes(inner, _setting(first), streams)
     partners = [leaf(spec) for spec in specs]
     played = shape(first, leaf)[0]
     if played == "human":

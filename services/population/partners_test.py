@@ -10,23 +10,18 @@ import pytest
 
 from services.population.human_like import HumanLike
 from services.population.partners import (
-    DELAY,
-    SWITCH_AT,
-    Delayed,
     EachLane,
     HumanLanes,
-    Noisy,
     OneGame,
     Partner,
     Partners,
     PolicyLanes,
-    Sticky,
-    Switching,
     kind_of,
     make_partner,
     population,
 )
 from services.population.seat import SeatSpec, seats_of
+from services.population.wrappers import DELAY, SWITCH_AT, Delayed, Noisy, Sticky, Switching
 from services.sim.batch import BatchGame
 from services.sim.observation import observe
 from services.sim.play import policy_seed

@@ -31,20 +31,12 @@ from services.agent.outside import BY_KEY, PLUGIN, PROXY_KIND, ZIP, policy_kind
 from services.agent.scripted import SCRIPTED
 from services.agent.seats import check_seat, policy_of
 from services.population.adaptive import ADAPTIVE, AdapterConfig, setting_text
+from services.population.wrappers import WRAPPERS
 from shared.errors import UsageError
 from shared.game import HUMAN
 
 KEY = BY_KEY  # how a policy is found (KEY, ZIP, PLUGIN, PROXY_KIND) is outside.policy_kind's
 HUMANS = "humans:"  # stand-ins fitted by `tsf humans fit`: humans:DIR@NAME (services/proxy/humans.py)
-WRAPPERS = {
-    "noisy": (1,),
-    "delayed": (1,),
-    "sticky": (1,),
-    "switch": (2,),
-    "human": (1, 2),
-}  # partners each takes
-# their values: partners.build; human's are human_like.SETTINGS (skill, input_ms, the model's parameters)
-WRAPPER_SETTINGS = {"delayed": ("frames",), "human": ("skill", "input_ms", "reaction_ms", "...")}
 POLICIES = (KEY, ZIP, PLUGIN, PROXY_KIND)  # a policy by its key: services/agent/seats.policy_of
 _CALL = re.compile(r"^(\w+)\((.*)\)$")
 
@@ -69,11 +61,11 @@ class SeatSpec:
             parts = arguments(call[2])
             settings = [part for part in parts if "=" in part and "(" not in part]
             parts = [part for part in parts if part not in settings]
-            if len(parts) not in WRAPPERS[call[1]]:
-                counts = " or ".join(("one", "two")[n - 1] for n in WRAPPERS[call[1]])
+            if len(parts) not in WRAPPERS[call[1]].partners:
+                counts = " or ".join(("one", "two")[n - 1] for n in WRAPPERS[call[1]].partners)
                 raise UsageError(option, name, f"{call[1]}(...) needs {counts} partners, not {len(parts)}")
             named = tuple(tuple(part.strip() for part in s.partition("=")[::2]) for s in settings)
-            if named and call[1] not in WRAPPER_SETTINGS:
+            if named and not WRAPPERS[call[1]].settings:
                 raise UsageError(option, name, f"{call[1]}(...) takes no settings")
             return WrapperSeat(call[1], tuple(cls.parse(part, option) for part in parts), named)
         if call and call[1] in SCRIPTED:

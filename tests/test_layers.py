@@ -249,3 +249,20 @@ def test_the_checks_see_imports_inside_functions_and_circles(tmp_path):
         layer_of("services/commands/adapter.py") == COMMAND_LINE
         and layer_of("services/adapter/core.py") == "adapter"
     )
+
+
+MOST_LINES = 80  # a function a reader takes in at once; a Typer command's options are types (Annotated)
+
+
+def long_functions(path: Path) -> list[str]:
+    tree = ast.parse(path.read_text())
+    return [
+        f"{relative(path)}:{node.lineno} {node.name} ({node.end_lineno - node.lineno + 1} lines)"
+        for node in ast.walk(tree)
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef)
+        and node.end_lineno - node.lineno + 1 > MOST_LINES
+    ]
+
+
+def test_no_function_is_longer_than_a_reader_takes_in():
+    assert [long for path in files() for long in long_functions(path)] == []

@@ -102,7 +102,8 @@ def run_study(
     stop = stop or threading.Event()
     lock = one_server(Path(directory))  # before anything is read or started
     study = Study(config, directory)
-    for sidecar in reconcile(study):
+    settled = reconcile(study)
+    for sidecar in settled:
         log.info("attempt %s left %s by an earlier server", sidecar["match"], sidecar["status"])
     matches = Matches(serving.max_matches)
     remote = Remote(serving.hosts, serving.host_secret) if serving.hosts else None
@@ -113,6 +114,7 @@ def run_study(
         pool.__enter__()
         judging = Judge()
         runner = TrialRunner(study, serving, matches, pool, judging, remote)
+        runner.cut = {s["match"] for s in settled if s["status"] == "failed"}  # replayed: the page says why
         front = Front(study, serving, runner, web.trusted)
         gateway = Gateway(None, front.handle, web)
         # A running match holds a thread (run_trial) for its length, its start-up another: asyncio's

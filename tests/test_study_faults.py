@@ -175,3 +175,28 @@ def test_a_trial_played_again_after_a_restart_says_why(tmp_path, study_server):
     stop.set()
     statuses = [a["status"] for a in server.result(timeout=60).participants[participant.id].attempts]
     assert statuses == ["failed", "done"], statuses
+
+
+def test_check_refuses_a_study_another_server_serves(tmp_path, capsys):
+    """`tsf study --check` says what `tsf study` would: the study's directory is served already."""
+    from importlib import resources
+
+    from services.commands.app import app
+    from services.commands.entry import run
+    from services.study.runner import one_server
+
+    config = tmp_path / "static.toml"
+    config.write_text((resources.files("services.study") / "configs" / "static.toml").read_text())
+    lock = one_server(tmp_path / "studies" / "static")
+    try:
+        status = run(
+            app, ["study", str(config), "--check", "--port", "0", "--out", str(tmp_path / "studies")]
+        )
+    finally:
+        lock.close()
+    [line] = capsys.readouterr().err.splitlines()
+    assert status == 2 and line == (
+        f"tsf study: --out {tmp_path}/studies/static: another study server (pid {os.getpid()}) serves this "
+        "study; stop it first"
+    )
+    assert run(app, ["study", str(config), "--check", "--port", "0", "--out", str(tmp_path / "studies")]) == 0

@@ -311,7 +311,7 @@ def study(
     from services.human.gateway import Web
     from services.study.crowd import BONUSES
     from services.study.preflight import load_checked
-    from services.study.runner import run_study
+    from services.study.runner import no_server, run_study
     from services.study.serving import Serving, check_tls
 
     trusted = tuple(ip_address(a, "--trusted-proxy") for a in trusted_proxy or ())
@@ -327,14 +327,15 @@ def study(
         arrivals=arrivals, arrivals_per_address=arrivals_per_address, reconnects=reconnects,
         max_lag=max_lag / 1e3,
     )  # fmt: skip
+    directory = out / protocol.name
     if check:
+        no_server(directory)
         console.print(
             f"{config}: study {protocol.name}, {len(protocol.variants)} variants x {protocol.trials} "
             f"trials of {protocol.trial_seconds:g} s: every setting, every variant's agent in each "
             "seat it plays and every serving option checked; ready to serve"
         )
         return
-    directory = out / protocol.name
 
     def show(gateway) -> None:  # noqa: ANN001 - a Gateway
         console.print(

@@ -74,8 +74,26 @@ def one_server(directory: Path) -> IO[str]:
     carry flock across machines, run one server per directory yourself."""
     directory.mkdir(parents=True, exist_ok=True)
     file = (directory / "server.lock").open("a+")
+    _locked(file, directory, fcntl.LOCK_EX)
+    file.truncate(0)
+    file.write(f"{os.getpid()}\n")
+    file.flush()
+    return file
+
+
+def no_server(directory: Path) -> None:
+    """Refuse (UsageError) a study directory another server serves, as one_server would, without
+    writing anything (`tsf study --check`)."""
+    path = directory / "server.lock"
+    if path.exists():
+        with path.open() as file:
+            _locked(file, directory, fcntl.LOCK_SH)
+
+
+def _locked(file: IO[str], directory: Path, how: int) -> None:
+    """Lock `file` (`how`: exclusive or shared) at once, or close it and refuse naming the pid in it."""
     try:
-        fcntl.flock(file, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        fcntl.flock(file, how | fcntl.LOCK_NB)
     except BlockingIOError:
         file.seek(0)
         other = file.read().strip() or "unknown"
@@ -83,10 +101,6 @@ def one_server(directory: Path) -> IO[str]:
         raise UsageError(
             "--out", directory, f"another study server (pid {other}) serves this study; stop it first"
         ) from None
-    file.truncate(0)
-    file.write(f"{os.getpid()}\n")
-    file.flush()
-    return file
 
 
 def run_study(

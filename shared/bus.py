@@ -26,7 +26,7 @@ import zenoh
 
 from shared import keys
 from shared.errors import UsageError
-from shared.messages import M, MatchOrder, Summary, decode
+from shared.messages import M, MatchOrder, MatchRefused, Summary, decode, printable
 
 T = TypeVar("T")
 
@@ -262,11 +262,11 @@ def serve_orders(
 ) -> None:
     """Play the matches a pool's orders name until `stop` is set, then close every part still open.
     Each order's match gets the parts `start` makes (none: the service plays no part in it; a
-    ValueError: the order is counted as a drop). The launcher re-puts an order until it sees the
-    match's tokens, so the last ORDERS_KEPT ids are remembered and an order of one of them is
-    ignored, a bad one's included. Once `every` seconds this thread closes the parts that ended and
-    calls `tick` with the others (zenoh's callback threads never undeclare). The pool's token
-    is declared once the order key is subscribed."""
+    ValueError: the order is counted as a drop, and refused at once, `refuse_order`). The launcher
+    re-puts an order until it sees the match's tokens, so the last ORDERS_KEPT ids are remembered
+    and an order of one of them is ignored, a bad one's included. Once `every` seconds this thread
+    closes the parts that ended and calls `tick` with the others (zenoh's callback threads never
+    undeclare). The pool's token is declared once the order key is subscribed."""
     seen = Seen()
     parts: list[P] = []
     lock = threading.Lock()
@@ -275,7 +275,12 @@ def serve_orders(
         with lock:
             if not seen.add(order.match):
                 return
-        made = start(order)
+        try:
+            made = start(order)
+        except ValueError as error:
+            drops.drop(keys.pool_order(pool), error)
+            refuse_order(z, pool, service, order, error)
+            return
         with lock:
             parts.extend(made)
 
@@ -297,6 +302,16 @@ def serve_orders(
             left, parts[:] = list(parts), []
         for part in left:
             part.close()
+
+
+def refuse_order(z: zenoh.Session, pool: str, service: str, order: MatchOrder, error: Exception) -> None:
+    """Say at once, on tsf/pool/<pool>/refused, that `service` cannot play its part of `order`
+    (`error` its reason): the launcher fails the match now. Silent, the order's launcher waited for
+    a token that never came (two 30-s waits), and a study's participant three attempts (302 s)."""
+    refusal = MatchRefused(
+        match=order.match, frame=0, sender=service, service=service, reason=printable(str(error), 300)
+    )
+    z.put(keys.pool_refused(pool), refusal.encode())
 
 
 def weakly(method: Callable[[T], None]) -> Callable[[T], None]:

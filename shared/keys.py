@@ -26,6 +26,7 @@ tsf/host/<host>/recording/<match>   study server -> host, a query (?offset=N): R
 
 tsf/pool/<pool>/order               launcher -> a pool's services: MatchOrder (play this match)
 tsf/pool/<pool>/stop                launcher -> a pool's services: MatchStop (end this match now)
+tsf/pool/<pool>/refused             a pool's service -> launcher: MatchRefused (it cannot play its part)
 tsf/pool/<pool>/alive/<service>     liveliness token of each of a pool's services
 """
 
@@ -179,6 +180,10 @@ def pool_stop(pool: str) -> str:
     return f"{PREFIX}/pool/{check_name(pool)}/stop"
 
 
+def pool_refused(pool: str) -> str:
+    return f"{PREFIX}/pool/{check_name(pool)}/refused"
+
+
 def pool_alive(pool: str, service: str = "*") -> str:
     """A pool service's liveliness token (the default `*` matches each of the pool's services)."""
     if service != "*" and service not in SERVICES:
@@ -229,7 +234,7 @@ def _parse(key: str) -> Key:
             return Key(check_match(rest[0]), kind, worker=check_name(host))
     if len(chunks) >= 4 and chunks[:2] == [PREFIX, "pool"]:
         _, _, pool, kind, *rest = chunks
-        if kind in ("order", "stop") and not rest:
+        if kind in ("order", "stop", "refused") and not rest:
             return Key("", kind, worker=check_name(pool))
         if kind == "alive" and len(rest) == 1 and rest[0] in SERVICES:
             return Key("", kind, service=rest[0], worker=check_name(pool))

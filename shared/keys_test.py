@@ -110,6 +110,7 @@ def test_unknown_service(service: str) -> None:
         (keys.host_recording("lab-2", M), keys.Key(M, "recording", worker="lab-2")),
         (keys.pool_order("lab"), keys.Key("", "order", worker="lab")),
         (keys.pool_stop("lab"), keys.Key("", "stop", worker="lab")),
+        (keys.pool_refused("lab"), keys.Key("", "refused", worker="lab")),
         (keys.pool_alive("lab", "sim"), keys.Key("", "alive", service="sim", worker="lab")),
     ],
 )

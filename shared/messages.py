@@ -555,6 +555,23 @@ class MatchDone(MatchMessage):
 
 
 @dataclass(frozen=True, kw_only=True)
+class MatchRefused(MatchMessage):
+    """A pool's service cannot play its part of an ordered match (an agent whose policy does not
+    load: its weights file gone): it says so at once, on tsf/pool/<pool>/refused, so that the
+    launcher fails the match now with this `reason` instead of waiting for a token that never
+    comes. `service` is the one that refused (`agent`, `adapter`, `recorder`, `sim`)."""
+
+    TYPE: ClassVar[str] = "match_refused"
+    CHECKS: ClassVar[dict[str, Check]] = {
+        "service": one_of(keys.SERVICES),
+        "reason": matching(r"[ -~]{0,300}"),
+    }
+
+    service: str = "agent"
+    reason: str = ""
+
+
+@dataclass(frozen=True, kw_only=True)
 class RecordingChunk(MatchMessage):
     """A host's reply to a recording query: up to CHUNK bytes from `offset` of a `size`-byte file."""
 
@@ -605,8 +622,8 @@ def recording_auth(key: str, offset: str, secret: bytes) -> str:
 TYPES: dict[str, type[Message]] = {
     t.TYPE: t
     for t in (
-        Start, State, Action, PolicySwitch, Ruling, GameEvent, Summary, AdapterStatus, JobOrder,
-        JobResult, HostStatus, MatchOffer, MatchAnswer, MatchStop, MatchDone, RecordingChunk, MatchOrder,
+        Start, State, Action, PolicySwitch, Ruling, GameEvent, Summary, AdapterStatus, JobOrder, JobResult,
+        HostStatus, MatchOffer, MatchAnswer, MatchStop, MatchDone, RecordingChunk, MatchOrder, MatchRefused,
     )
 }  # fmt: skip
 # Version 1 named every family's id `match`: for a match's own traffic, what a recording holds, that

@@ -31,6 +31,7 @@ from shared.messages import (
     MatchDone,
     MatchOffer,
     MatchOrder,
+    MatchRefused,
     MatchStop,
     Message,
     MessageError,
@@ -132,6 +133,9 @@ def examples() -> dict[str, Message]:
             match=M, frame=0, sender="host/lab-2", accepted=False, reason="no free slot"
         ),
         "match_stop": MatchStop(match=M, frame=0, sender="study"),
+        "match_refused": MatchRefused(
+            match=M, frame=0, sender="pool/lab/agent", service="agent", reason="policy: OSError: gone"
+        ),
         "match_order": MatchOrder(
             match=M,
             frame=0,

@@ -326,11 +326,12 @@ class Wait(PageMessage):
     "trial", False,
     {"role": _ROLE, "agent": text(64), "last": or_none(whole(0)), "session": whole(1), "sessions": whole(1),
      "trial": whole(1), "trials": whole(1), "again": boolean, "practice": boolean, "instructions": _TEXT,
-     "points": _POINTS},
+     "points": _POINTS, "why": text(400)},
 )  # fmt: skip
 class Trial(PageMessage):
     """The next game: where it sits in the study, the partner's label, the last game's kills, whether
-    it is played again, the role's instructions ("" for the page's own) and how points count (None:
+    it is played again and why (the last game failed, or was cut short by a reload or by the
+    server's stop), the role's instructions ("" for the page's own) and how points count (None:
     hidden by the study)."""
 
     role: str
@@ -344,6 +345,7 @@ class Trial(PageMessage):
     practice: bool
     instructions: str
     points: dict[str, int] | None
+    why: str = ""  # the game is played again because ... ("" when it is not)
 
 
 @_message("queue", False, {"place": whole(1), "wait": whole(0)})

@@ -314,10 +314,10 @@ def test_a_hosted_trial_whose_recording_is_incomplete_lists_each_problem_once(tm
             remote.z.put(
                 keys.summary("cut"), Summary(match="cut", frame=5, sender="sim", counters=counters).encode()
             )
-            kills, problems, failure = trial.result(timeout=120)
+            kills, problems, failure, refused = trial.result(timeout=120)
     finally:
         remote.close()
-    assert kills == 0 and failure == "" and len(problems) == len(set(problems)), problems
+    assert kills == 0 and failure == "" and not refused and len(problems) == len(set(problems)), problems
     assert problems[0] == "stopped at frame 5 of 300" and not any("incomplete" in p for p in problems)
     assert problems[-1] == "no action of the participant's bait seat was recorded", problems
     assert (tmp_path / "cut.tsflog").read_bytes() == (tmp_path / "lab-1" / "cut.tsflog").read_bytes()

@@ -399,6 +399,43 @@ MISTAKES = [
         2,
         "tsf study: --trusted-proxy proxy.example: an IP address, e.g. 127.0.0.1 or ::1",
     ),
+    (
+        "study {tmp}/static.toml --check --max-matches 0",
+        2,
+        "tsf study: --max-matches 0: no match could run: give match hosts with --listen or --connect, or 1",
+    ),
+    (
+        "study {tmp}/static.toml --check --trusted-proxy proxy.example",
+        2,
+        "tsf study: --trusted-proxy proxy.example: an IP address, e.g. 127.0.0.1 or ::1",
+    ),
+    (
+        "study {tmp}/static.toml --check --key {garbage}",
+        2,
+        "tsf study: --cert/--key {garbage}: --cert is missing: give both, or neither",
+    ),
+    (
+        "study {tmp}/static.toml --check --cert {garbage}",
+        2,
+        "tsf study: --cert/--key {garbage}: --key is missing: give both, or neither",
+    ),
+    (
+        "study {tmp}/static.toml --check --cert {garbage} --key {garbage}",
+        2,
+        "tsf study: --cert/--key {garbage} {garbage}: not a PEM certificate chain and its key",
+    ),
+    (
+        "study {tmp}/spaced.toml --check",
+        2,
+        "tsf study: CONFIG {tmp}/spaced.toml: not a study: variant name 'B1-S1 ': 1-64 printable characters, "
+        "no blank at either end",
+    ),
+    (
+        "study {tmp}/blank-code.toml --check",
+        2,
+        "tsf study: CONFIG {tmp}/blank-code.toml: not a study: crowd.completion_code '   ': the platform's "
+        "code, without blanks at either end",
+    ),
     ("study {tmp}/long.toml --arrivals 0", 2, "'--arrivals': 0 is outside the range 0.01 to 1000.0"),
     ("match-host", 2, "tsf match-host: --connect (none): a match host needs the router's endpoint"),
     (
@@ -597,6 +634,9 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
     (tmp / "typo.toml").write_text(study.replace("trial_seconds = 60", "trial_secnds = 60"))
     (tmp / "text.toml").write_text(f'{study}\n[crowd.bonus]\nper_kill = 0.1\nmax = "2"\n')
     (tmp / "s55.toml").write_text(study.replace('shooter = "S5"', 'shooter = "S55"'))
+    (tmp / "static.toml").write_text(study)  # a good study: the options beside it are what is wrong
+    (tmp / "spaced.toml").write_text(study.replace('name = "B4-S2"', 'name = "B1-S1 "'))
+    (tmp / "blank-code.toml").write_text(f'{study}\n[crowd]\ncompletion_code = "   "\n')
     names = {"done": done, "torn": torn, "tampered": tmp / "tampered.tsflog", "garbage": tmp / "garbage"}
     return {"tmp": str(tmp), **{name: str(path) for name, path in names.items()}}
 

@@ -117,8 +117,8 @@ def test_a_pooled_trial_whose_recording_is_incomplete_lists_each_problem_once(po
         counters = {role: Counters().to_dict() for role in ROLES}
         early = Summary(match=match, frame=5, sender="sim", counters=counters)
         pool.z.put(keys.summary(match), early.encode())
-        kills, problems, failure = trial.result(timeout=60)
-    assert kills == 0 and failure == "" and len(problems) == len(set(problems)), problems
+        kills, problems, failure, refused = trial.result(timeout=60)
+    assert kills == 0 and failure == "" and not refused and len(problems) == len(set(problems)), problems
     assert problems[0] == "stopped at frame 5 of 300" and not any("incomplete" in p for p in problems)
     assert problems[-1] == "no action of the participant's bait seat was recorded", problems
 

@@ -205,130 +205,138 @@ def ip_address(text: str, option: str) -> str:
         raise UsageError(option, text, "an IP address, e.g. 127.0.0.1 or ::1") from None
 
 
+STUDY_CONFIG = typer.Argument(
+    ..., exists=True, dir_okay=False, help="The study's TOML file (see services/study/configs/)."
+)
+MAX_MATCHES = typer.Option(
+    4, min=0, help="Matches at once on this machine (0: only on match hosts); more wait in a queue."
+)
+TRIAL_TIMEOUT = typer.Option(
+    120.0, min=1.0, help="Seconds a trial's match may take beyond its length before it is ended and replayed."
+)
+CERT = typer.Option(None, exists=True, dir_okay=False, help="TLS certificate chain (PEM).")
+KEY = typer.Option(None, exists=True, dir_okay=False, help="TLS private key (PEM), with --cert.")
+ORIGIN = typer.Option(
+    None,
+    help="The study's public origin, e.g. https://study.example.org: its pages may open the socket "
+    "and requests for its host name are taken (repeatable; needed when participants reach the "
+    "server by a name, as behind a reverse proxy).",
+)
+PER_ADDRESS = typer.Option(8, min=0, help="Sockets one address may hold at once (0: no cap).")
+MAX_LAG = number(
+    25.0,
+    Range(0.0, 1000.0),
+    "Milliseconds this machine's matches' frames may reach the server late (the worst of the last "
+    "5 s) before new matches wait until they catch up (0: never).",
+)
+TRUSTED_PROXY = typer.Option(
+    None,
+    help="A reverse proxy's address (e.g. 127.0.0.1) whose X-Forwarded-For names the client: the "
+    "limits per address count clients, not the proxy (repeatable; no other peer's header is read).",
+)
+ARRIVALS_OPTION = number(1.0, ARRIVALS, "New participant ids a second, on average (bursts of 20).")
+ARRIVALS_PER_ADDRESS = number(
+    0.1, RATES, "New participant ids a second from one address (bursts of 5; 0: no limit)."
+)
+RECONNECTS = number(
+    0.1,
+    RATES,
+    "Reconnects a second of one participant, by any way back in (their id and key, a signed link, "
+    "the platform's link; bursts of 5); 0: none, a participant who leaves cannot come back.",
+)
+TEST_TOKEN = typer.Option(
+    "", envvar="TSF_TEST_TOKEN", help="Stand-ins that show this token get the observation values."
+)
+LINK_SECRET = typer.Option(
+    None,
+    envvar="TSF_LINK_SECRET_FILE",
+    dir_okay=False,
+    help="Sign the links: a file holding the secret; new participants then need a worker id and "
+    "its signature (sig=HMAC-SHA256 of the id, hex).",
+)
+LISTEN = typer.Option(
+    None,
+    help="Be the router that match hosts (`tsf match-host`) connect to, at this zenoh endpoint, "
+    "e.g. tcp/0.0.0.0:7447 (repeatable).",
+)
+CONNECT = typer.Option(
+    None, help="Meet match hosts at this zenoh router (`tsf router`), e.g. tcp/10.0.0.1:7447 (repeatable)."
+)
+DASHBOARD_TOKEN = typer.Option(
+    None,
+    exists=True,
+    dir_okay=False,
+    help="Serve the experimenter's dashboard to whoever shows the token this file holds "
+    "(16-64 characters, e.g. from `openssl rand -hex 24`), on --dashboard-port.",
+)
+DASHBOARD_PORT = number(8001, PORTS, "Port of the experimenter's dashboard (--dashboard-token).")
+CHECK = typer.Option(
+    False,
+    "--check",
+    help="Check everything serving would refuse (the study's config: every setting, every variant's "
+    "agent in every seat; and the serving options beside it: ports, TLS files, proxies, secrets, "
+    "capacity), say so and exit: a lab's pre-flight. Nothing is started or written.",
+)
+
+
 @commands.command()
 def study(
-    config: Path = typer.Argument(
-        ..., exists=True, dir_okay=False, help="The study's TOML file (see services/study/configs/)."
-    ),
+    config: Path = STUDY_CONFIG,
     out: Path = output(Path("studies"), "Studies go to OUT/<name>: progress and recordings.", directory=True),
     host: Host = "127.0.0.1",
     port: Port = 8000,
-    max_matches: int = typer.Option(
-        4, min=0, help="Matches at once on this machine (0: only on match hosts); more wait in a queue."
-    ),
-    trial_timeout: float = typer.Option(
-        120.0,
-        min=1.0,
-        help="Seconds a trial's match may take beyond its length before it is ended and replayed.",
-    ),
-    cert: Path | None = typer.Option(None, exists=True, dir_okay=False, help="TLS certificate chain (PEM)."),
-    key: Path | None = typer.Option(
-        None, exists=True, dir_okay=False, help="TLS private key (PEM), with --cert."
-    ),
-    origin: list[str] | None = typer.Option(
-        None,
-        help="The study's public origin, e.g. https://study.example.org: its pages may open the socket "
-        "and requests for its host name are taken (repeatable; needed when participants reach the "
-        "server by a name, as behind a reverse proxy).",
-    ),
-    per_address: int = typer.Option(8, min=0, help="Sockets one address may hold at once (0: no cap)."),
-    max_lag: float = number(
-        25.0,
-        Range(0.0, 1000.0),
-        "Milliseconds this machine's matches' frames may reach the server late (the worst of the last "
-        "5 s) before new matches wait until they catch up (0: never).",
-    ),
-    trusted_proxy: list[str] | None = typer.Option(
-        None,
-        help="A reverse proxy's address (e.g. 127.0.0.1) whose X-Forwarded-For names the client: the "
-        "limits per address count clients, not the proxy (repeatable; no other peer's header is read).",
-    ),
-    arrivals: float = number(1.0, ARRIVALS, "New participant ids a second, on average (bursts of 20)."),
-    arrivals_per_address: float = number(
-        0.1, RATES, "New participant ids a second from one address (bursts of 5; 0: no limit)."
-    ),
-    reconnects: float = number(
-        0.1,
-        RATES,
-        "Reconnects a second of one participant, and failed resumes of one address (bursts of 5; 0: none).",
-    ),
-    test_token: str = typer.Option(
-        "", envvar="TSF_TEST_TOKEN", help="Stand-ins that show this token get the observation values."
-    ),
-    link_secret: Path | None = typer.Option(
-        None,
-        envvar="TSF_LINK_SECRET_FILE",
-        dir_okay=False,
-        help="Sign the links: a file holding the secret; new participants then need a worker id and "
-        "its signature (sig=HMAC-SHA256 of the id, hex).",
-    ),
-    listen: list[str] | None = typer.Option(
-        None,
-        help="Be the router that match hosts (`tsf match-host`) connect to, at this zenoh endpoint, "
-        "e.g. tcp/0.0.0.0:7447 (repeatable).",
-    ),
-    connect: list[str] | None = typer.Option(
-        None,
-        help="Meet match hosts at this zenoh router (`tsf router`), e.g. tcp/10.0.0.1:7447 (repeatable).",
-    ),
+    max_matches: int = MAX_MATCHES,
+    trial_timeout: float = TRIAL_TIMEOUT,
+    cert: Path | None = CERT,
+    key: Path | None = KEY,
+    origin: list[str] | None = ORIGIN,
+    per_address: int = PER_ADDRESS,
+    max_lag: float = MAX_LAG,
+    trusted_proxy: list[str] | None = TRUSTED_PROXY,
+    arrivals: float = ARRIVALS_OPTION,
+    arrivals_per_address: float = ARRIVALS_PER_ADDRESS,
+    reconnects: float = RECONNECTS,
+    test_token: str = TEST_TOKEN,
+    link_secret: Path | None = LINK_SECRET,
+    listen: list[str] | None = LISTEN,
+    connect: list[str] | None = CONNECT,
     host_secret: Path | None = HOST_SECRET,
-    dashboard_token: Path | None = typer.Option(
-        None,
-        exists=True,
-        dir_okay=False,
-        help="Serve the experimenter's dashboard to whoever shows the token this file holds "
-        "(16-64 characters, e.g. from `openssl rand -hex 24`), on --dashboard-port.",
-    ),
-    dashboard_port: int = number(8001, PORTS, "Port of the experimenter's dashboard (--dashboard-token)."),
-    check: bool = typer.Option(
-        False,
-        "--check",
-        help="Check the study's config as serving it would (every setting, every variant's agent in "
-        "every seat), say so and exit: a lab's pre-flight. Nothing is started or written.",
-    ),
+    dashboard_token: Path | None = DASHBOARD_TOKEN,
+    dashboard_port: int = DASHBOARD_PORT,
+    check: bool = CHECK,
 ) -> None:
     """Serve a study: participants open the link, consent, get a role and play every agent variant.
     With --listen or --connect, match hosts on other machines add capacity beyond --max-matches.
-    Everything is checked before anything starts: a mistake in the config is one line (exit 2)."""
+    Everything is checked before anything starts, --check or not: a mistake in the config or in the
+    options is one line (exit 2)."""
     from services.human.gateway import Web
     from services.study.crowd import BONUSES
-    from services.study.dashboard import read_token
     from services.study.preflight import load_checked
-    from services.study.runner import run_study
-    from services.study.serving import Serving
-    from shared.secret import read_secret
+    from services.study.runner import no_server, run_study
+    from services.study.serving import Serving, check_tls
 
+    trusted = tuple(ip_address(a, "--trusted-proxy") for a in trusted_proxy or ())
+    hosts, sealing, signed = _study_bus(max_matches, listen, connect, host_secret, link_secret)
+    check_tls(cert, key)
+    board, token = _dashboard(dashboard_token, dashboard_port, host, port, cert, key, trusted)
+    free_port(host, port)  # before the pool starts and anything is written
+    protocol = load_checked(config)
+    web = Web(host, port, cert, key, tuple(origin or ()), per_address, trusted)
+    serving = Serving(
+        max_matches, trial_timeout, test_token=test_token, hosts=hosts, link_secret=signed,
+        host_secret=sealing, dashboard=board, dashboard_token=token,
+        arrivals=arrivals, arrivals_per_address=arrivals_per_address, reconnects=reconnects,
+        max_lag=max_lag / 1e3,
+    )  # fmt: skip
+    directory = out / protocol.name
     if check:
-        protocol = load_checked(config)
+        no_server(directory)
         console.print(
             f"{config}: study {protocol.name}, {len(protocol.variants)} variants x {protocol.trials} "
-            f"trials of {protocol.trial_seconds:g} s: every setting and every variant's agent in each "
-            "seat it plays checked; ready to serve"
+            f"trials of {protocol.trial_seconds:g} s: every setting, every variant's agent in each "
+            "seat it plays and every serving option checked; ready to serve"
         )
         return
-
-    hosts, sealing = None, b""
-    if listen or connect:
-        hosts = BusConfig("router" if listen else "client", tuple(listen or ()), tuple(connect or ()))
-        sealing = host_secret_of(host_secret)
-    elif max_matches == 0:
-        raise UsageError(
-            "--max-matches", 0, "no match could run: give match hosts with --listen or --connect"
-        )
-    signed = read_secret(link_secret, "--link-secret") if link_secret else b""
-    trusted = tuple(ip_address(a, "--trusted-proxy") for a in trusted_proxy or ())
-    board, token = None, ""
-    if dashboard_token is not None:
-        try:
-            token = read_token(dashboard_token.read_text())
-        except (ValueError, UnicodeDecodeError) as error:
-            raise UsageError("--dashboard-token", str(dashboard_token), str(error)) from None
-        if dashboard_port == port:
-            raise UsageError("--dashboard-port", port, "the participants' port: give another")
-        free_port(host, dashboard_port, "--dashboard-port")
-        board = Web(host, dashboard_port, cert, key, trusted=trusted)
-    protocol = load_checked(config)
-    directory = out / protocol.name
 
     def show(gateway) -> None:  # noqa: ANN001 - a Gateway
         console.print(
@@ -340,21 +348,60 @@ def study(
             dashboard = gateway.url.replace(f":{gateway.port}/", f":{board.port}/")
             console.print(f"the dashboard: [bold]{dashboard}#token=[/]<the token in {dashboard_token}>")
 
-    if (cert is None) != (key is None):
-        raise UsageError("--cert/--key", str(cert or key), "give both, or neither")
-    free_port(host, port)  # before the pool starts and anything is written
-    web = Web(host, port, cert, key, tuple(origin or ()), per_address, trusted)
-    serving = Serving(
-        max_matches, trial_timeout, test_token=test_token, hosts=hosts, link_secret=signed,
-        host_secret=sealing, dashboard=board, dashboard_token=token,
-        arrivals=arrivals, arrivals_per_address=arrivals_per_address, reconnects=reconnects,
-        max_lag=max_lag / 1e3,
-    )  # fmt: skip
     done = run_study(protocol, directory, web, stop_on_signals(), show, serving)
     finished = sum(done.next_trial(p) is None for p in done.participants.values())
     console.print(f"{len(done.participants)} participants, {finished} finished")
     if protocol.crowd.bonus is not None:
         console.print(f"bonuses for the platform's bulk upload: {directory / BONUSES}")
+
+
+def _study_bus(
+    max_matches: int,
+    listen: list[str] | None,
+    connect: list[str] | None,
+    host_secret: Path | None,
+    link_secret: Path | None,
+) -> tuple[BusConfig | None, bytes, bytes]:
+    """The study's router for match hosts (None: this machine only), the host secret that seals
+    their messages and the link secret; a UsageError where no match could run."""
+    from shared.secret import read_secret
+
+    hosts, sealing = None, b""
+    if listen or connect:
+        hosts = BusConfig("router" if listen else "client", tuple(listen or ()), tuple(connect or ()))
+        sealing = host_secret_of(host_secret)
+    elif max_matches == 0:
+        raise UsageError(
+            "--max-matches",
+            0,
+            "no match could run: give match hosts with --listen or --connect, or 1 or more",
+        )
+    return hosts, sealing, read_secret(link_secret, "--link-secret") if link_secret else b""
+
+
+def _dashboard(
+    token_file: Path | None,
+    port: int,
+    host: str,
+    study_port: int,
+    cert: Path | None,
+    key: Path | None,
+    trusted: tuple[str, ...],
+):  # noqa: ANN202 - (Web | None, str)
+    """Where the experimenter's dashboard is served and its token; (None, "") without --dashboard-token."""
+    from services.human.gateway import Web
+    from services.study.dashboard import read_token
+
+    if token_file is None:
+        return None, ""
+    try:
+        token = read_token(token_file.read_text())
+    except (ValueError, UnicodeDecodeError) as error:
+        raise UsageError("--dashboard-token", str(token_file), str(error)) from None
+    if port == study_port:
+        raise UsageError("--dashboard-port", port, "the participants' port: give another")
+    free_port(host, port, "--dashboard-port")
+    return Web(host, port, cert, key, trusted=trusted), token
 
 
 @commands.command("match-host")

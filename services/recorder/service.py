@@ -24,7 +24,7 @@ import zenoh
 from services.agent import library
 from services.recorder.log import GapTracker, LogWriter, read_log
 from shared import keys
-from shared.bus import BusConfig, Drops, Seen, session, subscribe, until_stopped
+from shared.bus import BusConfig, Drops, Seen, refuse_order, session, subscribe, until_stopped
 from shared.errors import Failure, UsageError
 from shared.game import ROLES, GameConfig
 from shared.messages import MatchOrder, Message, MessageError, Start, State, Summary, decode_any
@@ -204,8 +204,11 @@ class PoolRecorder:
     `<out>/<order.folder>/<match>.tsflog`. An order for a match it has or had is ignored (the
     launcher re-puts orders until every service answers; shared.bus.Seen)."""
 
-    def __init__(self, z: zenoh.Session, client: bool, out: Path, drain: Drain, drops: Drops) -> None:
+    def __init__(
+        self, z: zenoh.Session, client: bool, out: Path, drain: Drain, drops: Drops, pool: str = ""
+    ) -> None:
         self.z, self.client, self.out, self.drain, self.drops = z, client, out, drain, drops
+        self.pool = pool  # where an order it cannot record is refused ("": nowhere)
         self.seen = Seen()
         self.open: dict[str, tuple[MatchRecording, threading.Thread]] = {}
         self.closing = False
@@ -225,6 +228,8 @@ class PoolRecorder:
             recording = MatchRecording(order.match, path, self.drops)
         except (UsageError, OSError) as error:
             log.warning("match %s not recorded: %s", order.match, error)
+            if self.pool:
+                refuse_order(self.z, self.pool, "recorder", order, error)
             return
         with self.lock:
             if self.closing:  # SIGTERM came while its log opened
@@ -258,7 +263,7 @@ def run_pool_recorder(
     stop = stop or threading.Event()
     drops = Drops("recorder")
     with Drain() as drain, session(bus) as z:
-        recorder = PoolRecorder(z, bus.mode == "client", Path(out), drain, drops)
+        recorder = PoolRecorder(z, bus.mode == "client", Path(out), drain, drops, pool)
         try:
             with (
                 subscribe(z, keys.pool_order(pool), MatchOrder, recorder.order, drops),

@@ -42,7 +42,7 @@ from services.runtime.launch import (
 from shared import keys
 from shared.bus import free_endpoint, subscribe
 from shared.errors import Failure, UsageError
-from shared.messages import MatchStop, Summary
+from shared.messages import MatchRefused, MatchStop, Summary
 from shared.processes import Processes, may_raise, spawner, step_down
 
 log = logging.getLogger("tsf.pool")
@@ -50,6 +50,11 @@ READY = 60.0  # seconds a new pool's services may take to come up (a busy machin
 ORDER_AGAIN = 1.0  # seconds between puts of an order, until every service of the match has taken it
 TAKE = 30.0  # seconds every service has to take an order (a restarting service's start-up)
 CLOSE = 10.0  # seconds a stopped match's sim has to send its summary, and its recorder to close the log
+
+
+class Refused(Failure):
+    """A service of the pool said it cannot play its part of the match (MatchRefused): the match
+    failed at once, and every new attempt of the same match would fail the same way."""
 
 
 def pool_name(prefix: str) -> str:
@@ -180,7 +185,8 @@ class Pool:
         a process of its own). `on_taken` is called once (on zenoh's thread) when every service
         has taken the match: it is ready for its people (the study offers the trial then). A match
         that was stopped or ran past `plan.timeout`, or that some service of the pool did not take
-        or left before the end, is a Failure. Any recording is kept."""
+        or left before the end, is a Failure; one that some service refused (MatchRefused: it
+        cannot play its part) is Refused, at once. Any recording is kept."""
         stop = stop or threading.Event()
         order = plan.order(self.sender, self.folder(plan))
         path = recording_path(plan.directory, plan.match)
@@ -188,7 +194,7 @@ class Pool:
             raise UsageError("--match", plan.match, f"{path} exists: a pooled match needs a new id")
         match = plan.match
         deadline = time.monotonic() + plan.timeout if plan.timeout else float("inf")
-        with MatchWatch(self.z, match, plan.tokens(), on_taken) as watch:
+        with MatchWatch(self.z, match, plan.tokens(), on_taken, keys.pool_refused(self.name)) as watch:
             ordered, put_at, why = time.monotonic(), 0.0, ""
             while not watch.ended.wait(0.05):
                 now = time.monotonic()
@@ -196,6 +202,9 @@ class Pool:
                     why = f"match {match} was stopped before its end"
                 elif now >= deadline:
                     why = f"match {match} ran past its {plan.timeout:g} s"
+                elif watch.refusal is not None:
+                    refusal = watch.refusal
+                    why = f"match {match}: the pool's {refusal.service} cannot play it: {refusal.reason}"
                 elif lost := watch.lost():
                     why = f"match {match}: the pool's {lost} left it before its end"
                 elif not watch.tokens.taken() and now - ordered > plan.wait_services + TAKE:
@@ -214,7 +223,7 @@ class Pool:
         if stop.is_set() and not why:  # as run_match: a stop before the recording is closed fails it
             why = f"match {match} was stopped before its end"
         if why:
-            raise Failure(why)
+            raise (Refused if watch.refusal is not None else Failure)(why)
         return path
 
 
@@ -322,16 +331,26 @@ class MatchWatch:
     whether it is closed: its recorder's token gone after the summary (the log closed), or every
     token it had gone (a killed service's match, or one stopped early). A context manager."""
 
-    def __init__(self, z: zenoh.Session, match: str, needed: set[str], on_taken: Callable[[], None]) -> None:
-        self.z, self.match = z, match
+    def __init__(
+        self,
+        z: zenoh.Session,
+        match: str,
+        needed: set[str],
+        on_taken: Callable[[], None],
+        refusals: str = "",
+    ) -> None:
+        self.z, self.match, self.refusals = z, match, refusals
         self.tokens = Tokens(z, keys.services_alive(match), needed, on_change=self._close, on_taken=on_taken)
         self.summary: Summary | None = None
+        self.refusal: MatchRefused | None = None  # a service's word that it cannot play its part
         self.ended, self.closed = threading.Event(), threading.Event()
         self.stack = contextlib.ExitStack()
 
     def __enter__(self) -> MatchWatch:
         self.stack.enter_context(self.tokens)
         self.stack.enter_context(subscribe(self.z, keys.summary(self.match), Summary, self.on_summary))
+        if self.refusals:  # the pool's refusals: this match's
+            self.stack.enter_context(subscribe(self.z, self.refusals, MatchRefused, self.on_refused))
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -341,6 +360,10 @@ class MatchWatch:
         self.summary = summary
         self._close()
         self.ended.set()
+
+    def on_refused(self, refusal: MatchRefused) -> None:
+        if refusal.match == self.match and self.refusal is None:
+            self.refusal = refusal
 
     def _close(self) -> None:
         """Either callback reads what the other wrote before its own _close (the tokens under their

@@ -26,7 +26,8 @@ from shared.secret import same_secret, signature
 log = logging.getLogger("tsf.study")
 ARRIVAL_BURST = 20  # participant ids issued at once, beyond the rate
 ADDRESS_BURST = 5  # ... to one address
-RECONNECT_BURST = 5  # reconnects of one participant at once (reloads), and failed resumes of one address
+RECONNECT_BURST = 5  # reconnects of one participant at once (reloads), and refusals of one address
+REFUSALS = 0.1  # refused attempts a second of one address, beyond the burst (a wrong key, an unproven link)
 BUSY = "Too many people are starting right now. Please try again in a minute."
 TAKEN = "This worker id has already taken part in this study."
 NOT_YOURS = (
@@ -59,8 +60,9 @@ class Front:
         ] = {}  # participant -> their socket, set once it left
         self.arrivals = RateLimit(serving.arrivals, ARRIVAL_BURST)
         self.per_address = PerAddress(serving.arrivals_per_address, ADDRESS_BURST)
-        self.reconnects = PerAddress(serving.reconnects, RECONNECT_BURST)  # by participant, or address
-        self.quiet = Quiet()  # refusals over a limit: logged once per address and minute
+        self.reconnects = PerAddress(serving.reconnects, RECONNECT_BURST)  # by participant
+        self.refusals = PerAddress(REFUSALS, RECONNECT_BURST)  # by address
+        self.quiet = Quiet()  # refusals: logged once per address, kind and minute
 
     async def over_limit(self, socket: Socket, address: str, reason: str, line: str) -> None:
         """Refuse a socket over one of the limits with `reason`; `line` goes to the log, once per
@@ -105,33 +107,36 @@ class Front:
     async def admit(self, socket: Socket, hello: Hello) -> Participant | None:
         """The participant who resumes (id and key), or a new one once they consent: ids are
         issued only then, at a limited rate, and once per crowd-sourcing worker id."""
-        study, config = self.study, self.study.config
         address = client_address(socket.ws, self.trusted)
         if hello.participant is not None:
-            participant = study.resume(hello.participant, hello.key or "")
+            participant = self.study.resume(hello.participant, hello.key or "")
             if participant is None:
-                if not self.reconnects.allow(address):
-                    await self.over_limit(socket, address, RECONNECTS, "too many failed resumes")
-                    return None
-                await self.refuse(socket, study.participants.get(hello.participant), UNKNOWN, "resume key")
-            elif not self.reconnects.allow(f"participant {participant.id}"):
-                await self.over_limit(socket, address, RECONNECTS, f"too many reconnects of {participant.id}")
+                known = self.study.participants.get(hello.participant)
+                await self.turn_away(socket, address, self.contact(UNKNOWN), "resume key", known)
                 return None
-            return participant
-        ids = [worker_id(v) for v in config.crowd.ids(hello.link or {})]
+            return await self.back(socket, address, participant, "their id and key")
+        ids = [worker_id(v) for v in self.study.config.crowd.ids(hello.link or {})]
         worker = ids[0] or worker_id(hello.worker)
         if worker is None or None in ids:
-            await refuse(socket.ws, NO_WORKER)
+            await self.turn_away(socket, address, NO_WORKER, "no worker id")
             return None
         if self.serving.link_secret and not (
             worker and same_secret(hello.sig, signature(self.serving.link_secret, worker))
         ):
-            await refuse(socket.ws, UNSIGNED)
+            await self.turn_away(socket, address, UNSIGNED, "unsigned")
             return None
         link = {k: v for k, v in zip(("study", "session"), ids[1:], strict=True) if v}
+        return await self.arrive(socket, address, worker, link)
+
+    async def arrive(
+        self, socket: Socket, address: str, worker: str, link: dict[str, str]
+    ) -> Participant | None:
+        """A worker id with its link: back through it if it has taken part, else asked to consent
+        and, once they do, given a participant id (at a limited rate)."""
+        study = self.study
         if study.taken(worker):  # back through the platform's link: another tab, browser or device
-            return await self.returning(socket, study.by_worker(worker), link)
-        socket.send(ConsentText(text=config.consent_text()))
+            return await self.returning(socket, address, study.by_worker(worker), link)
+        socket.send(ConsentText(text=study.config.consent_text()))
         answer = await socket.wait_for(("consent", "decline"))
         if answer == "decline":  # no id, nothing written
             socket.send(Declined(text=DECLINED))
@@ -139,7 +144,7 @@ class Front:
         if answer != "consent":
             return None
         if study.taken(worker):  # a second window of the same worker consented first
-            return await self.returning(socket, study.by_worker(worker), link)
+            return await self.returning(socket, address, study.by_worker(worker), link)
         if socket.closed:  # consented and left: no id, no match
             return None
         if not (self.per_address.allow(address) and self.arrivals.allow()):
@@ -160,31 +165,50 @@ class Front:
         return self.study.config.crowd.resume == "session" and bool(began) and link.get("session") == began
 
     async def returning(
-        self, socket: Socket, participant: Participant, link: dict[str, str]
+        self, socket: Socket, address: str, participant: Participant, link: dict[str, str]
     ) -> Participant | None:
         """A worker id that has taken part comes back through a link (a crashed tab, another
         browser, a phone): resumed where they left off if the link is proven theirs (a finished
-        or screened-out one is shown their end again), else refused, journalled and logged."""
+        or screened-out one is shown their end again), else refused."""
         if self.proven(participant, link):
-            log.info("participant %s resumes through the platform's link", participant.id)
-            socket.send(ParticipantId(participant=participant.id, key=participant.key))
-            return participant
+            how = "a signed link" if self.serving.link_secret else "the platform's link"
+            return await self.back(socket, address, participant, how)
         finished = self.study.next_trial(participant) is None or participant.screened
-        await self.refuse(
-            socket, participant, TAKEN if finished else NOT_YOURS, "taken" if finished else "unproven"
-        )
+        text, why = (TAKEN, "taken") if finished else (NOT_YOURS, "unproven")
+        await self.turn_away(socket, address, self.contact(text), why, participant)
         return None
 
-    async def refuse(self, socket: Socket, participant: Participant | None, text: str, why: str) -> None:
-        """Refuse a returning participant with whom to contact; journalled (the dashboard shows it)
-        and logged."""
+    async def back(
+        self, socket: Socket, address: str, participant: Participant, how: str
+    ) -> Participant | None:
+        """A participant back in through `how` (their id and key, a signed link, the platform's
+        link): every way counts against the one limit on their reconnects (`--reconnects`; 0:
+        none), since each cuts the trial being played."""
+        if not (self.serving.reconnects and self.reconnects.allow(f"participant {participant.id}")):
+            await self.over_limit(socket, address, RECONNECTS, f"too many reconnects of {participant.id}")
+            return None
+        log.info("participant %s resumes through %s", participant.id, how)
+        socket.send(ParticipantId(participant=participant.id, key=participant.key))
+        return participant
+
+    def contact(self, text: str) -> str:
+        """A refusal's text with whom to contact if it is wrong."""
         contact = self.study.config.crowd.contact or CONTACT
-        if participant is not None:
-            self.study.refused(participant, why)
-        log.warning(
-            "refused %s from %s: %s",
-            participant.id if participant else "a resume",
-            socket.ws.remote_address[0],
-            why,
-        )
-        await refuse(socket.ws, f"{text.rstrip('.')}. If this is wrong, please contact {contact}.")
+        return f"{text.rstrip('.')}. If this is wrong, please contact {contact}."
+
+    async def turn_away(
+        self, socket: Socket, address: str, text: str, why: str, participant: Participant | None = None
+    ) -> None:
+        """Refuse a socket with `text`: every refusal comes here. At most RECONNECT_BURST of one
+        address at once and REFUSALS a second (then RECONNECTS); journalled for `participant`
+        (the dashboard shows it) and logged once per address, kind (`why`) and minute: 200
+        attempts wrote 200 journal lines and 200 warnings."""
+        if not self.refusals.allow(address):
+            await self.over_limit(socket, address, RECONNECTS, "too many refused attempts")
+            return
+        if self.quiet(f"{why} {address}"):
+            if participant is not None:
+                self.study.refused(participant, why)
+            who = participant.id if participant else "a hello"
+            log.warning("refused %s from %s: %s (said once a minute per address)", who, address, why)
+        await refuse(socket.ws, text)

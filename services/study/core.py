@@ -73,6 +73,9 @@ class Variant:
     adapter: SeatSpec | None = None
 
     def __post_init__(self) -> None:
+        name = self.name  # "S5" and "S5 " were two variants, the same on every page
+        if not (0 < len(name) <= 64 and name.isprintable() and name == name.strip()):
+            raise ValueError(f"variant name {self.name!r}: 1-64 printable characters, no blank at either end")
         if self.adapter and not isinstance(self.adapter, AdaptiveSeat):
             raise ValueError(f"variant {self.name}: {str(self.adapter)!r} names no adaptive agent")
 

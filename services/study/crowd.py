@@ -84,6 +84,11 @@ class Crowd:
         for name, most in (("completion_code", 64), ("contact", 200)):
             if len(getattr(self, name)) > most or not getattr(self, name).isprintable():
                 raise ValueError(f"crowd.{name}: at most {most} printable characters")
+        if self.completion_code != self.completion_code.strip():  # "   " was shown as the code
+            raise ValueError(
+                f"crowd.completion_code {self.completion_code!r}: the platform's code, without blanks at "
+                "either end (or leave it out: each participant's own code)"
+            )
         if self.resume not in RESUMES:
             raise ValueError(f"crowd.resume {self.resume!r}: one of {', '.join(RESUMES)}")
         for name in ("completion_url", "screened_out_url"):

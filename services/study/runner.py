@@ -74,8 +74,26 @@ def one_server(directory: Path) -> IO[str]:
     carry flock across machines, run one server per directory yourself."""
     directory.mkdir(parents=True, exist_ok=True)
     file = (directory / "server.lock").open("a+")
+    _locked(file, directory, fcntl.LOCK_EX)
+    file.truncate(0)
+    file.write(f"{os.getpid()}\n")
+    file.flush()
+    return file
+
+
+def no_server(directory: Path) -> None:
+    """Refuse (UsageError) a study directory another server serves, as one_server would, without
+    writing anything (`tsf study --check`)."""
+    path = directory / "server.lock"
+    if path.exists():
+        with path.open() as file:
+            _locked(file, directory, fcntl.LOCK_SH)
+
+
+def _locked(file: IO[str], directory: Path, how: int) -> None:
+    """Lock `file` (`how`: exclusive or shared) at once, or close it and refuse naming the pid in it."""
     try:
-        fcntl.flock(file, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        fcntl.flock(file, how | fcntl.LOCK_NB)
     except BlockingIOError:
         file.seek(0)
         other = file.read().strip() or "unknown"
@@ -83,10 +101,6 @@ def one_server(directory: Path) -> IO[str]:
         raise UsageError(
             "--out", directory, f"another study server (pid {other}) serves this study; stop it first"
         ) from None
-    file.truncate(0)
-    file.write(f"{os.getpid()}\n")
-    file.flush()
-    return file
 
 
 def run_study(
@@ -102,7 +116,8 @@ def run_study(
     stop = stop or threading.Event()
     lock = one_server(Path(directory))  # before anything is read or started
     study = Study(config, directory)
-    for sidecar in reconcile(study):
+    settled = reconcile(study)
+    for sidecar in settled:
         log.info("attempt %s left %s by an earlier server", sidecar["match"], sidecar["status"])
     matches = Matches(serving.max_matches)
     remote = Remote(serving.hosts, serving.host_secret) if serving.hosts else None
@@ -113,6 +128,7 @@ def run_study(
         pool.__enter__()
         judging = Judge()
         runner = TrialRunner(study, serving, matches, pool, judging, remote)
+        runner.cut = {s["match"] for s in settled if s["status"] == "failed"}  # replayed: the page says why
         front = Front(study, serving, runner, web.trusted)
         gateway = Gateway(None, front.handle, web)
         # A running match holds a thread (run_trial) for its length, its start-up another: asyncio's

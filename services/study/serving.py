@@ -3,10 +3,13 @@ dashboard; none of it is part of the protocol, so changing it keeps the journal.
 
 from __future__ import annotations
 
+import ssl
 from dataclasses import dataclass
+from pathlib import Path
 
 from services.human.gateway import Web
 from shared.bus import BusConfig
+from shared.errors import UsageError
 
 
 @dataclass(frozen=True)
@@ -21,8 +24,9 @@ class Serving:
     # ... and from one address (bursts of ADDRESS_BURST; 0: none), so that one client cannot drain
     # the ids of all; behind a reverse proxy, the address it forwards (Web.trusted)
     arrivals_per_address: float = 0.1
-    # Reconnects (a reload resumes, and cuts the trial being played) of one participant a second,
-    # and failed resumes (an unknown id or key) of one address (bursts of RECONNECT_BURST; 0: none)
+    # Reconnects (a reload resumes, and cuts the trial being played) of one participant a second, by
+    # any way back in: their id and key, a signed link, the platform's link (bursts of RECONNECT_BURST;
+    # 0: none, a participant who leaves cannot come back). Refusals of one address: admission.REFUSALS
     reconnects: float = 0.1
     # Seconds the running matches' frames may reach the server late (Lag, the worst of the last 5 s)
     # before no new match starts on this machine until they catch up (0: no hold)
@@ -41,3 +45,20 @@ SERVING, WEB = Serving(), Web()
 
 
 SERVING, WEB = Serving(), Web()
+
+
+def check_tls(cert: Path | None, key: Path | None) -> None:
+    """Refuse (UsageError) TLS files that would stop the server as it starts serving: a certificate
+    without its key or a key without its certificate, or files that are no PEM certificate chain
+    and its private key (the server found out only once its pool had started)."""
+    if (cert is None) != (key is None):
+        missing, given = ("--key", cert) if key is None else ("--cert", key)
+        raise UsageError("--cert/--key", given, f"{missing} is missing: give both, or neither")
+    if cert is None:
+        return
+    try:
+        Web(cert=cert, key=key).tls()
+    except (ssl.SSLError, OSError) as error:
+        why = getattr(error, "reason", None) or error
+        problem = f"not a PEM certificate chain and its key ({why})"
+        raise UsageError("--cert/--key", f"{cert} {key}", problem) from None

@@ -62,6 +62,7 @@ class StandInReport:
     # seconds to each trial's offer: the first from the consent, each next one from the trial's end before it
     offers: list[float] = field(default_factory=list)
     again: int = 0  # trials offered again after a failed attempt
+    why: list[str] = field(default_factory=list)  # why each trial offered again is (the page says it)
     set_ups: int = 0  # `wait` messages: a game being set up, said before each trial
 
 
@@ -130,6 +131,7 @@ class _Visit:
             report.waits.append(time.monotonic() - self.queued)
             self.queued = 0.0
         report.again += message.again
+        report.why += [message.why] if message.why else []
         report.role = message.role
         report.agents.append(message.agent)
         self.policy = make_partner(self.policies[report.role], report.role)

@@ -23,7 +23,7 @@ from services.human.gateway import Bridge
 from services.population.seat import PersonSeat
 from services.recorder.service import recording_path
 from services.runtime.launch import MatchPlan
-from services.runtime.pool import Pool
+from services.runtime.pool import Pool, Refused
 from services.study.connection import Socket, first
 from services.study.core import AROUND, SET_UP, Admission, Lag, Study, Trial
 from services.study.judge import Judge, judge
@@ -41,12 +41,14 @@ SETTING_UP = "Your next game is being set up."
 
 
 class Judged(NamedTuple):
-    """How a trial's match ended: its recording's kills and problems (the judge's verdict), and
-    the launcher's own failure line, if the match failed before its end ("" if not)."""
+    """How a trial's match ended: its recording's kills and problems (the judge's verdict), the
+    launcher's own failure line, if the match failed before its end ("" if not), and whether a
+    service of the pool refused the match (it cannot play its part: every attempt would fail)."""
 
     kills: int | None
     problems: list[str]
     failure: str
+    refused: bool = False
 
 
 def run_trial(
@@ -64,15 +66,15 @@ def run_trial(
     complete recording with the participant's seat played from this server has no problems.
     `on_taken` is called once every service has taken the match (the launcher's watch of its
     tokens). The recording is read once, by the judge, whether the match ended or failed."""
-    path, failure = recording_path(plan.directory, plan.match), ""
+    path, failure, refused = recording_path(plan.directory, plan.match), "", False
     try:
         if host and remote is not None:
             remote.run(host, plan, stop, on_taken)
         else:
             pool.play(plan, stop, on_taken)
     except Exception as error:  # noqa: BLE001 - any failure fails the trial, never the server
-        failure = str(error) or type(error).__name__
-    return Judged(*judged(path, role), failure)
+        failure, refused = str(error) or type(error).__name__, isinstance(error, Refused)
+    return Judged(*judged(path, role), failure, refused)
 
 
 class Metered(Bridge):
@@ -155,7 +157,7 @@ def settle(study: Study, trial: Trial, kills: int | None, problems: list[str]) -
     status = "failed" if problems else "done"
     if problems:
         log.error("trial %s failed: %s", trial.match, "; ".join(problems))
-    sidecar = study.record(trial, status, kills)
+    sidecar = {**study.record(trial, status, kills), **({"problems": problems} if problems else {})}
     recordings = study.directory / "recordings"
     recordings.mkdir(parents=True, exist_ok=True)
     (recordings / f"{trial.match}.study.json").write_text(json.dumps(sidecar, indent=1))
@@ -196,6 +198,7 @@ class TrialRunner:
         self.practice_frames = round(config.practice_seconds * FPS)
         self.match_seconds = config.trial_seconds + AROUND  # a slot's time: a queue's estimated wait
         self.limit = config.trial_seconds + serving.trial_timeout  # seconds a trial may play
+        self.cut: set[str] = set()  # the matches an earlier server left cut short (run_study's reconcile)
 
     async def slot(self, socket: Socket, match: str) -> bool:
         """Wait for a free match, telling the participant their place; False if they leave."""
@@ -266,24 +269,34 @@ class TrialRunner:
             self.matches.lag, self.pool.z, trial.match, trial.role, socket.controls, socket.outbox, obs
         )
 
-    async def play(self, socket: Socket, trial: Trial, obs: bool, offer: page.Trial) -> dict | None:
-        """Run one trial: wait for a free match, start it (its processes start while the participant
-        reads the `offer`, and its sim waits for them: a warm start), then play it from their Ready
-        for at most its length and `trial_timeout`. Returns the sidecar and `played` (whether the
-        participant played the game to its end), or None if the participant left (a match they
-        started runs out with their ship idle; one they had not is ended; either is marked dropped)."""
+    async def cannot_play(self, socket: Socket, trial: Trial, why: str) -> None:
+        """Tell the participant at once that their trial cannot be played (every new attempt would
+        fail the same way; they may resume once the study is mended), a trial's attempt written
+        down as failed with `why`."""
+        if not trial.practice:
+            settle(self.study, trial, None, [why])
+        else:
+            log.error("the practice game %s cannot be set up: %s", trial.match, why)
+        socket.send(Problem(text=PROBLEM))
+        await socket.close()
+
+    async def set_up(self, socket: Socket, trial: Trial) -> MatchPlan | None:
+        """The trial's match plan; None (the participant told, the attempt failed) where its
+        variant names a policy that cannot play the seat (a UsageError) or that fails to load
+        however it fails (OSError: its weights file gone), before any slot is taken."""
         try:
-            plan = self.plan(trial)
-        except ValueError as error:  # its variant names a policy that cannot play the seat (UsageError)
-            # Before any slot is taken; told at once, since every new attempt would fail the same way
-            # (the participant may resume once the study is mended).
-            if not trial.practice:
-                settle(self.study, trial, None, [f"its match cannot be set up: {error}"])
-            else:
-                log.error("the practice game %s cannot be set up: %s", trial.match, error)
-            socket.send(Problem(text=PROBLEM))
-            await socket.close()
+            return self.plan(trial)
+        except Exception as error:  # noqa: BLE001 - a policy from outside may raise anything as it loads
+            why = str(error) if isinstance(error, ValueError) else f"{type(error).__name__}: {error}"
+            await self.cannot_play(socket, trial, f"its match cannot be set up: {why}")
             return None
+
+    async def start(
+        self, socket: Socket, trial: Trial, plan: MatchPlan
+    ) -> tuple[asyncio.Future, threading.Event, asyncio.Event, str] | None:
+        """Take a free slot (telling the participant their place) and start the trial's match
+        there: its future (run_trial's Judged), its stop, its `taken` (every service took it) and
+        its host ("" for this machine); None if the participant left first (nothing started)."""
         if not await self.slot(socket, trial.match):
             return None
         try:
@@ -309,7 +322,26 @@ class TrialRunner:
             self.matches.admission.end(trial.match)
             self.matches.notify()
             raise
+        return running, stop, taken, host
+
+    async def play(self, socket: Socket, trial: Trial, obs: bool, offer: page.Trial) -> dict | None:
+        """Run one trial: wait for a free match, start it (its processes start while the participant
+        reads the `offer`, and its sim waits for them: a warm start), then play it from their Ready
+        for at most its length and `trial_timeout`. Returns the sidecar and `played` (whether the
+        participant played the game to its end), or None if the participant left (a match they
+        started runs out with their ship idle; one they had not is ended; either is marked dropped)
+        or was told the trial cannot be played (its match refused by a service of the pool: the
+        attempt is failed at once, and its slot free)."""
+        plan = await self.set_up(socket, trial)
+        started = plan and await self.start(socket, trial, plan)
+        if not started:
+            return None
+        running, stop, taken, host = started
         seat = await self.bridge(socket, trial, bool(host), obs, stop, taken, running)
+        if running.done() and not running.cancelled() and running.result().refused:  # never offered
+            seat.close()
+            await self.cannot_play(socket, trial, running.result().failure)
+            return None
         ready = await self.live(socket, trial, seat, offer, running, stop)
         seat.close()
         dropped = socket.gone.is_set() and not (ready and running.done())
@@ -352,7 +384,7 @@ class TrialRunner:
         if done.cancelled():
             kills, problems = None, ["cancelled"]
         else:
-            kills, problems, failure = done.result()
+            kills, problems, failure, _ = done.result()
             if failure and not dropped:  # the page went: the recording alone says whether it was played
                 problems = [failure, *problems]
         if trial.practice:  # no trial: nothing written down

@@ -125,7 +125,8 @@ const CONTRACT = Object.freeze({
    "again",
    "practice",
    "instructions",
-   "points"
+   "points",
+   "why"
   ],
   "queue": [
    "place",

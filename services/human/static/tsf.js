@@ -180,7 +180,7 @@ const handlers = {
     tsf.points = m.points || null;
     const last = m.last === null || m.last === undefined ? "" :
       `Last game: your team destroyed ${m.last} fortress${m.last === 1 ? "" : "es"}.\n\n`;
-    const again = m.again ? "The last game could not be completed; please play it again.\n\n" : "";
+    const again = m.again ? `${m.why || "The last game could not be completed; please play it again."}\n\n` : "";
     const intro = m.trial === 1 ? instructions(m.role, m.instructions) + "\n\n" : "";
     if (m.practice) {
       show("Practice game", `${intro}This short game is for practice; it does not count. ` +

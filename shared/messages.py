@@ -248,16 +248,17 @@ class PolicySwitch(MatchMessage):
 @dataclass(frozen=True, kw_only=True)
 class Ruling(MatchMessage):
     """The adapter's ruling on the scoring frame `frame` (shared.game.scoring): the agent of `role`
-    plays `policy` from the next frame on; `partner` is the estimate it rests on ("" while the
-    window fills). Put on every scoring frame, a switch or not: in a lockstep match the adaptive
-    seat answers the next state only once it has it (services/agent/gate.py), so a switch plays
-    from the same frame on every run, the frame the in-process evaluation gives."""
+    plays `policy` from the next frame on ("" before the adapter has an estimate: it goes on with
+    what it plays); `partner` is the estimate ("" while the window fills). Put on every scoring
+    frame, a switch or not: in a lockstep match the adaptive seat answers the next state only once
+    it has it (services/agent/gate.py), so a switch plays from the same frame on every run, the
+    frame the in-process evaluation gives."""
 
     TYPE: ClassVar[str] = "ruling"
-    CHECKS: ClassVar[dict[str, Check]] = {"role": _ROLE, "policy": _KEY, "partner": _KEY_OR_NONE}
+    CHECKS: ClassVar[dict[str, Check]] = {"role": _ROLE, "policy": _KEY_OR_NONE, "partner": _KEY_OR_NONE}
 
     role: str = "bait"
-    policy: str = "circle"
+    policy: str = ""
     partner: str = ""
 
 

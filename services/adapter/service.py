@@ -30,7 +30,7 @@ from services.population.seat import SeatSpec
 from services.table.table import DEFAULT_TABLE
 from shared import keys
 from shared.bus import BusConfig, Drops, on_match_end, serve_orders, session, subscribe, woken
-from shared.game import SCORE_FRAMES, other
+from shared.game import FRAMES, SCORE_FRAMES, other
 from shared.messages import (
     Action,
     AdapterStatus,
@@ -93,6 +93,7 @@ class AdapterShell:
         self.latest = 0  # the newest frame scored
         self.due = self.ruled = -1  # the last scoring frame paired, and the last one ruled on
         self.decided = -1  # the frame on which the core made its present choice
+        self.frames = FRAMES.high  # the game's length, from its states
         self.paired: list[tuple[tuple[list[float], int], int]] = []  # (values, action), frame: not scored yet
         with ExitStack() as declared:
             self.switch = declared.enter_context(z.declare_publisher(keys.policy(match, config.role)))
@@ -154,8 +155,18 @@ class AdapterShell:
         """The ruling on scoring frame `frame`, every frame up to it scored: what the agent plays
         from the next frame (the core's choice once it has an estimate; before, "": it goes on
         with what it plays, so a restarted adapter never switches it back to the initial policy),
-        a switch where that is not what it plays, and a status if the core changed (under `lock`)."""
+        a switch where that is not what it plays, and a status if the core changed (under `lock`).
+        No ruling is put on the game's last answered frame: its next state is the last, which no
+        seat answers, and a ruling then would reach the recording or not by timing."""
         adapter, self.ruled = self.adapter, frame
+        if frame < self.frames - 1:
+            self.put_ruling(frame)
+        if adapter.frames != self.reported_frames or adapter.partner != self.reported_partner:
+            self.report(frame)
+
+    def put_ruling(self, frame: int) -> None:
+        """The ruling on `frame`, and the switch it may need (under `lock`)."""
+        adapter = self.adapter
         ruling = Ruling(
             match=self.match,
             frame=frame,
@@ -166,8 +177,6 @@ class AdapterShell:
         )
         self.rulings.put(ruling.encode())
         self.decide(frame)
-        if adapter.frames != self.reported_frames or adapter.partner != self.reported_partner:
-            self.report(frame)
 
     def decide(self, frame: int) -> None:
         """Switch the agent when the core's choice differs from what it plays (again after
@@ -198,6 +207,7 @@ class AdapterShell:
             raise MessageError("mismatch", f"state of {state.match} on {keys.state(self.match)}")
         with self.lock:
             if self.open:
+                self.frames = state.frames
                 self.feed(self.pairing.state(state.frame, state.obs[self.config.partner_role]), state.frame)
 
     def on_action(self, action: Action) -> None:

@@ -259,14 +259,16 @@ def serve_orders(
     stop: threading.Event,
     every: float = 0.5,
     tick: Callable[[list[P]], None] = lambda parts: None,
+    wake: threading.Event | None = None,
 ) -> None:
     """Play the matches a pool's orders name until `stop` is set, then close every part still open.
     Each order's match gets the parts `start` makes (none: the service plays no part in it; a
     ValueError: the order is counted as a drop, and refused at once, `refuse_order`). The launcher
     re-puts an order until it sees the match's tokens, so the last ORDERS_KEPT ids are remembered
-    and an order of one of them is ignored, a bad one's included. Once `every` seconds this thread
-    closes the parts that ended and calls `tick` with the others (zenoh's callback threads never
-    undeclare). The pool's token is declared once the order key is subscribed."""
+    and an order of one of them is ignored, a bad one's included. Once `every` seconds, and at once
+    whenever a part sets `wake`, this thread closes the parts that ended and calls `tick` with the
+    others (zenoh's callback threads never undeclare). The pool's token is declared once the order
+    key is subscribed."""
     seen = Seen()
     parts: list[P] = []
     lock = threading.Lock()
@@ -289,7 +291,7 @@ def serve_orders(
             subscribe(z, keys.pool_order(pool), MatchOrder, on_order, drops),
             z.liveliness().declare_token(keys.pool_alive(pool, service)),
         ):
-            while not stop.wait(every):
+            while not woken(stop, wake, every):
                 with lock:
                     ended = [part for part in parts if part.ended.is_set()]
                     parts[:] = [part for part in parts if not part.ended.is_set()]
@@ -312,6 +314,17 @@ def refuse_order(z: zenoh.Session, pool: str, service: str, order: MatchOrder, e
         match=order.match, frame=0, sender=service, service=service, reason=printable(str(error), 300)
     )
     z.put(keys.pool_refused(pool), refusal.encode())
+
+
+def woken(stop: threading.Event, wake: threading.Event | None, most: float) -> bool:
+    """Wait up to `most` seconds for `wake` (cleared as it returns, so that a part that sets it
+    while the caller works wakes the next wait), or for `stop` where there is no `wake`; whether
+    `stop` is set."""
+    if wake is None:
+        return stop.wait(most)
+    wake.wait(most)
+    wake.clear()
+    return stop.is_set()
 
 
 def weakly(method: Callable[[T], None]) -> Callable[[T], None]:

@@ -5,10 +5,12 @@ from __future__ import annotations
 import socket
 import subprocess
 import sys
+import threading
+import time
 import weakref
 from pathlib import Path
 
-from shared.bus import ephemeral_low, free_endpoint, weakly
+from shared.bus import ephemeral_low, free_endpoint, weakly, woken
 
 ROOT = Path(__file__).parent.parent
 
@@ -66,3 +68,13 @@ def test_a_free_endpoint_lies_below_the_ephemeral_range_where_no_outgoing_connec
         with socket.socket() as sock:
             sock.bind((host, int(port)))  # still free
         assert int(port) < low or low <= 11024, endpoint
+
+
+def test_woken_returns_at_once_when_woken_and_clears_the_wake() -> None:
+    stop, wake = threading.Event(), threading.Event()
+    wake.set()
+    began = time.monotonic()
+    assert not woken(stop, wake, 10.0) and not wake.is_set()
+    assert time.monotonic() - began < 1.0
+    stop.set()
+    assert woken(stop, wake, 0.01) and woken(stop, None, 10.0)  # stop reads at once without a wake

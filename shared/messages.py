@@ -202,16 +202,18 @@ class PolicySwitch(MatchMessage):
 @dataclass(frozen=True, kw_only=True)
 class Ruling(MatchMessage):
     """The adapter's ruling on the scoring frame `frame` (shared.game.scoring): the agent of `role`
-    plays `policy` from the next frame on; `partner` is the estimate it rests on ("" while the
-    window fills). Put on every scoring frame, a switch or not: in a lockstep match the adaptive
-    seat answers the next state only once it has it (services/agent/gate.py), so a switch plays
-    from the same frame on every run, the frame the in-process evaluation gives."""
+    plays `policy` from the next frame on ("" before the adapter has an estimate: it goes on with
+    what it plays); `partner` is the estimate ("" while the window fills). Put on every scoring
+    frame but the game's last answered one (no seat answers the state after it), a switch or not:
+    in a lockstep match the adaptive seat answers the next state only once it has it
+    (services/agent/gate.py), so a switch plays from the same frame on every run, the frame the
+    in-process evaluation gives."""
 
     TYPE: ClassVar[str] = "ruling"
-    CHECKS: ClassVar[dict[str, Check]] = {"role": _ROLE, "policy": _KEY, "partner": _KEY_OR_NONE}
+    CHECKS: ClassVar[dict[str, Check]] = {"role": _ROLE, "policy": _KEY_OR_NONE, "partner": _KEY_OR_NONE}
 
     role: str = "bait"
-    policy: str = "circle"
+    policy: str = ""
     partner: str = ""
 
 
@@ -304,7 +306,8 @@ STRATEGY_NAME = re.compile(r"[a-z-]{1,32}")
 
 @dataclass(frozen=True, kw_only=True)
 class AdapterStatus(MatchMessage):
-    """The adapter's view of the partner, published a few times a second and on every switch.
+    """The adapter's view of the partner, published with each ruling whose batch changed it (every
+    SCORE_FRAMES frames of the match) and at the match's end.
 
     `role` is the adaptive agent's seat (the partner plays the other); `scores` holds the CEM
     similarity (mean log-probability over the window) of each library policy of the partner's role;

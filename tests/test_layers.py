@@ -22,6 +22,7 @@ PURE_CORES = (
     "services/sim/match.py",
     "services/sim/play.py",
     "services/agent/player.py",
+    "services/agent/gate.py",
     "services/adapter/core.py",
     "services/human/core.py",
     "services/study/core.py",

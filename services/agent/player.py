@@ -32,12 +32,26 @@ class Player:
     def key(self) -> str:
         return self.policy.key
 
+    @property
+    def next_key(self) -> str:
+        """The policy the next state is answered with: the one asked for, else the one playing."""
+        with self._lock:
+            return self._next_key()
+
+    def _next_key(self) -> str:
+        return self.pending if self.pending is not None else self.policy.key
+
     def switch(self, key: str) -> None:
-        """Ask for another policy; it is loaded now (a bad key raises here) and played from the next state."""
+        """Ask for another policy; it is loaded now (a bad key raises here) and played from the next
+        state. A switch to the policy that plays next anyway changes nothing: the adapter's ruling
+        and its switch message name the same policy, and whichever comes second must not reset it
+        at a later frame (asked again once loaded: the other may have come, and played, meanwhile)."""
+        if key == self.next_key:
+            return
         policy = self.load(key, self.role)
         with self._lock:
-            self.pending = key
-            self._next = policy
+            if key != self._next_key():
+                self.pending, self._next = key, policy
 
     def act(self, state: State, sender: str) -> Action:
         with self._lock:

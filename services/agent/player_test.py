@@ -157,3 +157,19 @@ def test_a_policy_that_fails_plays_no_op_and_the_actions_count_it(bad):
     assert [a.failures for a in actions] == [0] * 5 + [1, 2, 3, 4, 5]
     assert actions[4].failure == "" and actions[5].failure.startswith("fails_late at frame 5: ")
     assert ("RuntimeError: boom" if isinstance(bad, Exception) else "not an action") in actions[5].failure
+
+
+def test_a_switch_to_what_plays_next_changes_nothing() -> None:
+    """The adapter's ruling and its switch message name the same policy: the second must not reset
+    it at a later frame (in a lockstep match that frame would be the arrival's, not the ruling's)."""
+    player = Player("shooter", "a", seed=7, load=fake_loader())
+    answers = iter(states())
+    player.switch("ccc")
+    player.switch("ccc")  # the same, still pending
+    player.act(next(answers), "a")
+    switched = player.policy
+    player.switch("ccc")  # the same, now playing
+    player.act(next(answers), "a")
+    assert player.policy is switched and switched.seeds == [policy_seed(7, "shooter") * 1_000_003 + 0]
+    player.switch("a")  # another: loaded and played from the next state
+    assert player.act(next(answers), "a").policy == "a"

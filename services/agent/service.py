@@ -16,6 +16,7 @@ from contextlib import ExitStack
 import zenoh
 
 from services.agent import library
+from services.agent.gate import RULING_WAIT, Gate
 from services.agent.networks import load
 from services.agent.outside import BY_KEY, policy_kind
 from services.agent.player import Player, PolicyLoader
@@ -23,7 +24,7 @@ from services.agent.seats import check_seat, policy_for
 from shared import keys
 from shared.bus import BusConfig, Drops, on_match_end, serve_orders, session, subscribe, until_stopped
 from shared.game import ROLES, Policy
-from shared.messages import MatchOrder, MessageError, PolicySwitch, State
+from shared.messages import MatchOrder, MessageError, PolicySwitch, Ruling, Start, State
 
 log = logging.getLogger("tsf.agent")
 
@@ -31,9 +32,12 @@ log = logging.getLogger("tsf.agent")
 class Seats:
     """The seats an agent service plays in one live match (one player a seat): answers each state
     but the last with every player's action (the state decoded once for all), plays the policy a
-    switch names from the next state, and holds each seat's token. `ended` is set when the match is
-    over (its summary, or its sim gone); `close` undeclares everything, and no answer is put after
-    it (a state's callback may still be running)."""
+    switch names from the next state, and holds each seat's token. A seat in `adaptive` plays as
+    the adapter rules too: in a lockstep match (its Start says so) it answers the state after a
+    scoring frame only once it has the ruling on that frame (gate.py; RULING_WAIT at most), and
+    plays the policy it names from there. `ended` is set when the match is over (its summary, or
+    its sim gone); `close` undeclares everything, and no answer is put after it (a state's
+    callback may still be running)."""
 
     def __init__(
         self,
@@ -42,10 +46,12 @@ class Seats:
         players: list[Player],
         drops: Drops,
         ended: threading.Event | None = None,
+        adaptive: str = "",
     ) -> None:
         self.match = match
         self.ended = ended or threading.Event()
         self.lock, self.open = threading.Lock(), True
+        self.gates = {p.role: (Gate(), threading.Lock()) for p in players if p.role == adaptive}
         with ExitStack() as declared:
             self.players = [
                 (
@@ -61,39 +67,93 @@ class Seats:
                 )
                 for player in players
             ]
+            declared.enter_context(subscribe(z, keys.start(match), Start, self.on_start, drops))
             declared.enter_context(subscribe(z, keys.state(match), State, self.on_state, drops))
-            for player in players:
+            for seat in self.players:
+                player = seat[0]
                 switch = functools.partial(self.on_switch, player)
                 declared.enter_context(
                     subscribe(z, keys.policy(match, player.role), PolicySwitch, switch, drops)
                 )
+                if player.role in self.gates:
+                    ruling = functools.partial(self.on_ruling, seat)
+                    declared.enter_context(
+                        subscribe(z, keys.ruling(match, player.role), Ruling, ruling, drops)
+                    )
             declared.enter_context(on_match_end(z, match, self.ended, drops))
             for player in players:
                 declared.enter_context(z.liveliness().declare_token(keys.alive(match, "agent", player.role)))
             self.declared = declared.pop_all()
 
+    def on_start(self, start: Start) -> None:
+        """A lockstep match arms the adaptive seat's gate (declared before the seat's token, so
+        the sim, which waits for the token, puts its Start after)."""
+        for gate, lock in self.gates.values():
+            with lock:
+                gate.armed = start.mode == "lockstep"
+
     def on_state(self, state: State) -> None:
         if state.last:
             return
-        for player, sender, publisher in self.players:
-            action = player.act(state, sender)
-            if action.failure and action.failures == 1:  # one line a match; the sim counts the rest
-                log.error("%s: the policy failed and plays no-op on such frames: %s", sender, action.failure)
-            data = action.encode()
-            with self.lock:
-                if self.open:
-                    publisher.put(data)
+        for seat in self.players:
+            if seat[0].role not in self.gates:
+                self.answer(seat, state)
+                continue
+            gate, lock = self.gates[seat[0].role]
+            with lock:
+                if gate.offer(state):
+                    self.answer(seat, state)
+                    continue
+            threading.Timer(RULING_WAIT, self.expire, (seat, state)).start()
+
+    def on_ruling(self, seat: tuple[Player, str, zenoh.Publisher], ruling: Ruling) -> None:
+        """The adapter's ruling: its policy from the next frame, and the held answer it frees."""
+        player = seat[0]
+        if ruling.role != player.role:
+            raise MessageError("mismatch", f"ruling for {ruling.role} on {player.role}'s key")
+        gate, lock = self.gates[player.role]
+        with lock:
+            if not gate.armed:
+                return  # in real time the switch message alone switches: nothing waits
+            if ruling.policy:
+                self.switch(player, ruling.policy, f"ruling on frame {ruling.frame}")
+            if (held := gate.rule(ruling.frame)) is not None:
+                self.answer(seat, held)
+
+    def expire(self, seat: tuple[Player, str, zenoh.Publisher], state: State) -> None:
+        """The wait for a held state's ruling ran out: answer it as the seat plays now."""
+        gate, lock = self.gates[seat[0].role]
+        with lock:
+            if (held := gate.expire(state)) is not None:
+                log.warning(
+                    "%s: no ruling on frame %d in %.1f s; not waiting for the adapter until its next one",
+                    seat[1], state.frame - 1, RULING_WAIT,
+                )  # fmt: skip
+                self.answer(seat, held)
+
+    def answer(self, seat: tuple[Player, str, zenoh.Publisher], state: State) -> None:
+        player, sender, publisher = seat
+        action = player.act(state, sender)
+        if action.failure and action.failures == 1:  # one line a match; the sim counts the rest
+            log.error("%s: the policy failed and plays no-op on such frames: %s", sender, action.failure)
+        data = action.encode()
+        with self.lock:
+            if self.open:
+                publisher.put(data)
 
     def on_switch(self, player: Player, message: PolicySwitch) -> None:
         if message.role != player.role:
             raise MessageError("mismatch", f"switch for {message.role} on {player.role}'s key")
+        self.switch(player, message.policy, message.reason)
+
+    def switch(self, player: Player, policy: str, reason: str) -> None:
+        if policy == player.next_key:
+            return
         try:
-            player.switch(message.policy)
+            player.switch(policy)
         except ValueError as error:  # a key this seat cannot play
             raise MessageError("policy", str(error)) from error
-        log.info(
-            "agent/%s switches to %s from the next frame (%s)", player.role, message.policy, message.reason
-        )
+        log.info("agent/%s switches to %s from the next frame (%s)", player.role, policy, reason)
 
     def close(self) -> None:
         with self.lock:
@@ -102,15 +162,21 @@ class Seats:
 
 
 def run_agent(
-    bus: BusConfig, match: str, role: str, policy: str, seed: int = 0, stop: threading.Event | None = None
+    bus: BusConfig,
+    match: str,
+    role: str,
+    policy: str,
+    seed: int = 0,
+    stop: threading.Event | None = None,
+    adaptive: bool = False,
 ) -> Drops:
-    """Play `role` until the match is over (its summary, or its sim gone) or `stop` is set; returns
-    the drop counts."""
+    """Play `role` until the match is over (its summary, or its sim gone) or `stop` is set, as the
+    adapter rules where the seat is `adaptive` (Seats); returns the drop counts."""
     stop = stop or threading.Event()
     drops = Drops(f"agent/{role}")
     player = Player(role, policy, seed)
     with session(bus) as z:
-        seats = Seats(z, match, [player], drops, stop)
+        seats = Seats(z, match, [player], drops, stop, role if adaptive else "")
         try:
             until_stopped(stop)
         finally:
@@ -160,7 +226,7 @@ def run_agent_pool(bus: BusConfig, pool: str, stop: threading.Event | None = Non
             if not players:
                 return []
             log.info("match %s: playing %s", order.match, {p.role: p.key for p in players})
-            return [Seats(z, order.match, players, drops)]
+            return [Seats(z, order.match, players, drops, adaptive=order.adaptive)]
 
         serve_orders(z, pool, "agent", start, drops, stop)
     return drops

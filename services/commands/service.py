@@ -111,7 +111,7 @@ def agent(
         raise UsageError("--role" if role is None else "--policy", "(none)", "needed with --match")
     adaptive = SeatSpec.parse(policy, "--policy").adaptive(role, seed)
     start = core.initial_policy(adaptive) if adaptive else policy
-    run_agent(bus, match, role, start, seed, stop_on_signals())
+    run_agent(bus, match, role, start, seed, stop_on_signals(), adaptive is not None)
 
 
 @commands.command()

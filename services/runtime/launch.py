@@ -195,6 +195,8 @@ def run_match(
         for role, policy in policies.items():
             if isinstance(plan.seats[role], PersonSeat):
                 continue
+            if plan.adapter is not None and role == plan.adapter.role:
+                policy = plan.adapter.name  # the agent starts with its initial policy, and plays as ruled
             processes.start(
                 f"agent-{role}",
                 service_command(

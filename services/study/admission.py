@@ -184,7 +184,12 @@ class Front:
         """A participant back in through `how` (their id and key, a signed link, the platform's
         link): every way counts against the one limit on their reconnects (`--reconnects`; 0:
         none), since each cuts the trial being played."""
-        if not (self.serving.reconnects and self.reconnects.allow(f"participant {participant.id}")):
+        if not self.serving.reconnects:
+            await self.over_limit(
+                socket, address, RECONNECTS, f"no reconnects (--reconnects 0): {participant.id}"
+            )
+            return None
+        if not self.reconnects.allow(f"participant {participant.id}"):
             await self.over_limit(socket, address, RECONNECTS, f"too many reconnects of {participant.id}")
             return None
         log.info("participant %s resumes through %s", participant.id, how)

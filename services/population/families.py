@@ -296,26 +296,30 @@ class Split:
 
 @dataclass(frozen=True)
 class Groups:
+    """The partners' groups: at most `most`, the fewest within `regret` of the best."""
+
     most: int
     regret: float
 
     def __post_init__(self) -> None:
-        if self.most < 1 or self.regret < 0:
-            raise ValueError(
-                f"most = {self.most}, regret = {self.regret}: at least 1 group, a regret of 0 or more"
-            )
+        _bounded(self, "group")
 
 
 @dataclass(frozen=True)
 class Selection:
+    """The selected members: at most `most`, until the next adds under `gain` of the headroom."""
+
     most: int
     gain: float
 
     def __post_init__(self) -> None:
-        if self.most < 1 or self.gain < 0:
-            raise ValueError(
-                f"most = {self.most}, gain = {self.gain}: at least 1 member, a gain of 0 or more"
-            )
+        _bounded(self, "member")
+
+
+def _bounded(table: Groups | Selection, counted: str) -> None:
+    most, (name, share) = table.most, list(dataclasses.asdict(table).items())[1]
+    if most < 1 or share < 0:
+        raise ValueError(f"most = {most}, {name} = {share}: at least 1 {counted}, a {name} of 0 or more")
 
 
 @dataclass(frozen=True)

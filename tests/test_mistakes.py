@@ -427,8 +427,8 @@ MISTAKES = [
     (
         "study {tmp}/spaced.toml --check",
         2,
-        "tsf study: CONFIG {tmp}/spaced.toml: not a study: variant name 'B1-S1 ': 1-64 printable characters, "
-        "no blank at either end",
+        "tsf study: CONFIG {tmp}/spaced.toml: not a study: variants[1]: variant name 'B1-S1 ': "
+        "1-64 printable characters, no blank at either end",
     ),
     (
         "study {tmp}/blank-code.toml --check",

@@ -44,7 +44,7 @@ SPACES = {
         "max_speed": (1.5, 10.0, 0.1),
         "aim_tolerance": (1.0, 25.0, 0.5),
         "radius": (150.0, 300.0, 1.0),
-        "rear_tolerance": (5.0, 90.0, 1.0),
+        "rear_tolerance": (5.0, 180.0, 1.0),  # 180: it fires from anywhere around the fortress
     },
     "circle": {"radius": (50.0, 200.0, 1.0), "speed": (0.5, 4.5, 0.05), "outside": (205.0, 300.0, 1.0)},
 }
@@ -72,6 +72,7 @@ class Plan:
             "studies": {k: list(v) for k, v in self.studies.items()},
             "seeds": self.seeds,
             "seed": self.seed,
+            "space": {k: list(v) for k, v in SPACES[self.family].items()},
         }
 
 
@@ -131,7 +132,7 @@ def _ask(plan: Plan, trials: list[dict], turn: int) -> list[dict[str, float]]:
         )
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
-            setting = {k: float(v) for k, v in made.ask(dists).params.items()}
+            setting = {k: round(float(v), 4) for k, v in made.ask(dists).params.items()}
         if setting not in asked:
             asked.append(setting)
     return asked

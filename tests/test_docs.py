@@ -345,3 +345,14 @@ def test_the_report_figures_of_the_example_are_legible(tmp_path: Path) -> None:
     for name in checked:  # the shipped PNGs are these figures
         with Image.open(ROOT / "docs" / "figures" / name) as shipped, Image.open(tmp_path / name) as fresh:
             assert shipped.size == fresh.size
+
+
+def test_the_library_page_states_the_search_s_measured_figures() -> None:
+    """The search's table (docs/library.md) says what its records in docs/eval/search hold."""
+    text = page("docs/library.md")
+    for seat in ("shooter", "bait"):
+        measured = json.loads((ROOT / "docs" / "eval" / "search" / f"measured-{seat}.json").read_text())
+        best = measured["best"]["all"]["name"]
+        both = measured["measured"]["teammates"]["all"]["both"]
+        assert f"| {seat} | `{best}` |" in text
+        assert f"{both['kills']:.2f} vs " in text and f"**{both['against'][0]['percent']:+.1f} %**" in text

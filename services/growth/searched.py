@@ -119,7 +119,7 @@ def markdown(result: dict) -> str:
     measured, refs = result["measured"], list(result["measured"]["references"])
     n = measured["partners"]
     lines = [
-        f"# Our {result['seat']} seat's rule tuned by search ({result['trials']} settings)",
+        f"## Our {result['seat']} seat's rule tuned by search ({result['trials']} settings)",
         "",
         "| study | best setting | kills/min, training partners |",
         "| --- | --- | --- |",

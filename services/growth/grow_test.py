@@ -55,6 +55,7 @@ def test_pair_jobs_play_the_games_they_stand_for():
 @pytest.mark.timeout(900)  # two minutes alone; a loaded machine takes more
 def test_a_small_population_grows_a_library_and_a_second_run_resumes_from_its_files(tmp_path, monkeypatch):
     pytest.importorskip("stable_baselines3", reason="the `train` extra is not installed")
+    pytest.importorskip("optuna", reason="the `search` extra is not installed")  # the spec asks for a search
     from services.agent import library, networks
     from services.growth.grow import KINDS, Grow
     from services.jobs.kinds import in_process

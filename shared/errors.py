@@ -37,6 +37,7 @@ EXTRAS = {
     "sb3_contrib": "train",
     "tqdm": "train",
     "ray": "ray",
+    "optuna": "search",
 }
 
 

@@ -36,6 +36,7 @@ LAZY_PACKAGES = {  # outside the command line, the packages an import inside a f
     "torch": "the `train` extra",
     "stable_baselines3": "the `train` extra: reading an SB3 .zip",
     "ray": "the `ray` extra",
+    "optuna": "the `search` extra: only the growth's search asks it (services/growth/search.py)",
     "docker": "the Docker SDK: only `tsf workers` needs it",
     "matplotlib": "figures: seconds to import, and only a figure needs it",
     "scipy": "statistics: slow to import, and only the evaluation's tests need it",

@@ -90,6 +90,12 @@ MISTAKES = [
         "tsf library: OUT {tmp}: is no finished `tsf library grow` run (no library/groups.json)",
     ),
     ("library condition {tmp} --seat ours", 2, "Invalid value for '--seat'"),
+    (
+        "library search --seat shooter --run {tmp} --out {tmp}/searched",
+        2,
+        "tsf library: --run {tmp}: is no grown run's library (no run-population.json, run-groups.json",
+    ),
+    ("library search --seat shooter --trials 0", 2, "'--trials': 0 is outside the range 1 to 10000"),
     ("train --steps 0", 2, "Invalid value for '--steps'"),
     ("train", 2, "tsf train: KEYS (none): give library keys or --all, not both"),
     ("train B1 --all", 2, "tsf train: KEYS B1: give library keys or --all, not both"),

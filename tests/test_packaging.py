@@ -45,6 +45,7 @@ def test_every_data_file_of_the_packages_is_package_data():
 EXTRA_MODULES = {
     "train": ("stable_baselines3", "sb3_contrib", "torch", "tqdm"),
     "ray": ("ray",),
+    "search": ("optuna",),
     "docs": ("mkdocs", "mkdocstrings", "jupytext", "yaml", "build", "twine"),
 }
 SKIP = re.compile(r"""importorskip\(\s*["']([\w.]+)["'](?:,\s*reason=["']([^"']*)["'])?""")

@@ -11,6 +11,7 @@ import typer
 from rich.table import Table
 
 from services.agent.calibration import calibrate
+from services.agent.library import NAMED
 from services.agent.seats import policy_for
 from services.commands.options import (
     GAMES,
@@ -37,6 +38,7 @@ from shared.game import SEEDS, GameConfig, Range
 commands = typer.Typer()
 STEPS = Range(1, 10**9)  # environment steps of one training
 STEPS_OR_DEFAULT = Range(0, 10**9)
+SEARCH_TRIALS = Range(1, 10_000)  # settings one search plays
 SCORED = Range(0, GAMES.high)  # games a trained or added policy is scored over (0: not scored)
 View = enum.Enum("View", {v: v for v in VIEWS}, type=str)
 
@@ -218,6 +220,32 @@ def library_grow(
     console.print(
         f"the grown library: TSF_LIBRARY={(out / 'library').resolve()} ({len(summary['members'])} members)"
     )
+
+
+@library_commands.command("search")
+def library_search(
+    seat: Role = typer.Option(..., help="Our seat: its rule (mirror or circle) is searched."),
+    trials: int = number(100, SEARCH_TRIALS, "Settings played in all (every study asks one a round)."),
+    seeds: int = number(8, GAMES, "Seeded games per (partner, setting) pair, in the search and the test."),
+    seed: int = number(0, SEEDS, "The sampler's seed."),
+    run: Path | None = typer.Option(
+        None, "--run", help="A grown run's library, with its run's records (default: the shipped grown one)."
+    ),
+    out: Path = output(
+        Path("tsf-search"),
+        "Where the search writes its trials (search-SEAT.json, resumed by running again) and its "
+        "figures (measured-SEAT.json).",
+        directory=True,
+    ),
+) -> None:
+    """Tune our seat's rule by search (Optuna's TPE) on a grown run's training members, per partner
+    group and over them all, without retraining anything; then measure each group's best setting on
+    the run's test split against the run's best member and the study library's best static."""
+    from services.growth.searched import check_run, markdown, search_run
+
+    run = run or NAMED["grown"]
+    check_run(run)
+    console.print(markdown(search_run(str(seat), run, out, trials, seeds, seed)), soft_wrap=True)
 
 
 @library_commands.command("condition")

@@ -40,6 +40,14 @@ class Grid:
         index = [self.partners.index(p) for p in partners]
         return Grid(tuple(partners), self.candidates, self.kills[index])
 
+    def beside(self, more: Grid) -> Grid:
+        """This grid with `more`'s columns after its own (the same partners, in the same order)."""
+        if more.partners != self.partners:
+            raise ValueError("grids of different partners side by side")
+        return Grid(
+            self.partners, self.candidates + more.candidates, np.concatenate([self.kills, more.kills], 1)
+        )
+
     @classmethod
     def of(cls, record: dict) -> Grid:
         """A grid as a cross-play file holds it (`partners`, `candidates`, `kills` as lists)."""

@@ -1,7 +1,8 @@
 """Stages 2 and 5, cross-play: partners of each seat with every candidate teammate of the other
 seat, over the spec's seeds (`grouping`: the training members with the study's policies and the
 rule grid; `held-out`: the validation and test members, with their stand-ins, with the best
-responses too).
+responses too). The search (search.py) plays the settings it found with the held-out partners
+the same way (`search-held-out`).
 
 The games are jobs of the job system (kind `pairs`): teams of a bait and a shooter, each named in
 the partner grammar, over seeds; a worker plays every job it is handed as the lanes of one batch
@@ -26,15 +27,21 @@ from shared.game import ROLES, other
 PAIRS = 128  # teams of one job (x seeds games): a batch of a few hundred lanes
 
 
-def crossplay(ws: Workspace, stage: str, partners: dict[str, list[str]]) -> dict[str, Grid]:
-    """Every partner of each seat with every candidate teammate of the other seat, over the
-    spec's seeds; written to STAGE.json."""
+def crossplay(
+    ws: Workspace, stage: str, partners: dict[str, list[str]], teammates: dict[str, list[str]] | None = None
+) -> dict[str, Grid]:
+    """Every partner of each seat with every candidate teammate of the other seat (or the
+    `teammates` given for the partners of each seat), over the spec's seeds; written to STAGE.json."""
     done = ws.out / f"{stage}.json"
     if not done.exists():
         seeds = list(range(ws.spec.games))
         plan, jobs = {}, []
         for role in ROLES:
-            candidates = candidates_of(ws, other(role), responses=stage != "grouping")
+            candidates = (
+                teammates[role]
+                if teammates
+                else candidates_of(ws, other(role), responses=stage != "grouping")
+            )
             teams = [(p, c) if role == "bait" else (c, p) for p in partners[role] for c in candidates]
             mine = pair_jobs(f"{stage}-{role}", teams, seeds)
             plan[role] = (partners[role], candidates, slice(len(jobs), len(jobs) + len(mine)))

@@ -10,12 +10,12 @@ journal, a training from its checkpoint); workspace.py holds what the stages sha
 4. responses   responses.py: one best response per group (PPO), against its members and stand-ins.
 5. held-out    crossplay.py: the validation and test members, with their stand-ins, with every
                candidate: the study's policies, the rules and the responses.
-6. selection   selection.py: per seat, the greedy coverage selection on the validation population.
-7. library     library.py: the selected members under keys of their own (GB1.., GS1..), the table,
+6. search      search.py: where the spec asks for it, our seat's rule tuned by search (Optuna's TPE)
+               per partner group and over the whole training population; each study's best setting
+               played with the held-out partners, a column of the held-out grids beside the rest.
+7. selection   selection.py: per seat, the greedy coverage selection on the validation population.
+8. library     library.py: the selected members under keys of their own (GB1.., GS1..), the table,
                the adapter's calibration, the partner groups; summary.py: the test population's figures.
-There is no search stage: a search for new candidates (beyond the study's policies, the rule grid
-and the responses) would be a module of its own, `search.py`, run between 5 and 6, adding columns
-to the held-out grids that the selection then chooses among.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ from services.growth.crossplay import crossplay
 from services.growth.groups import groups
 from services.growth.population import population
 from services.growth.responses import responses
+from services.growth.search import search
 from services.growth.selection import selection
 from services.growth.summary import summary
 from services.growth.workspace import KINDS, Workspace
@@ -47,6 +48,7 @@ class Grow(Workspace):
         self.timed("responses", responses, grouped)
         held = {r: self.side(members[r], "validation") + self.side(members[r], "test") for r in ROLES}
         held_out = self.timed("held-out", crossplay, "held-out", held)
+        held_out = self.timed("search", search, grouped, held_out)
         selected = self.timed("selection", selection, held_out)
         return self.timed("library", _library, selected, held_out, grouped, grouping)
 

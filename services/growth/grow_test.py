@@ -20,6 +20,7 @@ skills = ["novice"]
 split = { train = 0.5, validation = 0.25, test = 0.25 }
 groups = { most = 2, regret = 0.05 }
 selection = { most = 3, gain = 0.01 }
+search = { trials = 4, seeds = 1 }
 
 [bait]
 library = ["B1", "B3", "B5", "B6"]
@@ -54,6 +55,7 @@ def test_pair_jobs_play_the_games_they_stand_for():
 @pytest.mark.timeout(900)  # two minutes alone; a loaded machine takes more
 def test_a_small_population_grows_a_library_and_a_second_run_resumes_from_its_files(tmp_path, monkeypatch):
     pytest.importorskip("stable_baselines3", reason="the `train` extra is not installed")
+    pytest.importorskip("optuna", reason="the `search` extra is not installed")  # the spec asks for a search
     from services.agent import library, networks
     from services.growth.grow import KINDS, Grow
     from services.jobs.kinds import in_process
@@ -72,6 +74,12 @@ def test_a_small_population_grows_a_library_and_a_second_run_resumes_from_its_fi
         grouped = sorted(m for g in groups[role]["groups"] for m in g)
         train = sorted(row["name"] for row in population[role] if row["split"] == "train")
         assert grouped == train  # every training member in one group, nothing else
+    for ours, partners in (("shooter", "bait"), ("bait", "shooter")):  # the search's settings: candidates
+        searched = json.loads((out / f"search-{ours}.json").read_text())
+        trained = sorted(m for g in groups[partners]["groups"] for m in g)
+        assert len(searched["trials"]) == 4 and sorted(searched["partners"]) == trained
+        found = json.loads((out / "search-held-out.json").read_text())[partners]["candidates"]
+        assert found and set(found) <= {t["name"] for t in searched["trials"]}
     for seat in summary["seats"].values():
         curve = seat["curve"]
         assert curve[0]["headroom"] == 0.0 and 1 <= len(curve) <= 3

@@ -110,6 +110,7 @@ class Spec:
     selection: dict[str, float]
     seats: dict[str, Seat]
     text_hash: str
+    search: dict[str, int] | None = None  # the growth's search stage (services/growth/search.py)
 
     def events_runs(self, role: str) -> list[EventsRun]:
         """The seat's events runs, each with its weights drawn from the spec's seed."""
@@ -180,6 +181,7 @@ def read(path: Path = SPEC) -> Spec:
         selection=dataclasses.asdict(raw.selection),
         seats={role: getattr(raw, role).seat(role) for role in ROLES},
         text_hash=hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16],
+        search=dataclasses.asdict(raw.search) if raw.search else None,
     )
     return spec
 
@@ -323,6 +325,19 @@ def _bounded(table: Groups | Selection, counted: str) -> None:
 
 
 @dataclass(frozen=True)
+class Search:
+    """The growth's search stage (services/growth/search.py): settings of our seat's rule played in
+    all per seat, and seeded games per (partner, setting) pair. A spec without it grows no search."""
+
+    trials: int
+    seeds: int = 8
+
+    def __post_init__(self) -> None:
+        if self.trials < 1 or self.seeds < 1:
+            raise ValueError(f"trials = {self.trials}, seeds = {self.seeds}: at least 1 of each")
+
+
+@dataclass(frozen=True)
 class SpecFile:
     """A population spec as its file holds it."""
 
@@ -334,6 +349,7 @@ class SpecFile:
     seed: int = 0
     games: int = 4
     skills: tuple[str, ...] = ()
+    search: Search | None = None
 
     def __post_init__(self) -> None:
         if self.games < 2 or self.games % 2:

@@ -59,6 +59,7 @@ def test_stand_ins_at_each_skill():
         (("levels = [0.25, 0.5, 1.0]", "levels = [0.5, 0.25, 1.0]"), "increasing fractions"),
         (('family = "circle"', 'family = "mirror"'), "the bait's rule is 'circle'"),
         (("seed = 2026", "seed = [2026"), "cannot be read as TOML"),
+        (("seed = 2026", "search = { trials = 0 }\nseed = 2026"), "search: trials = 0, seeds = 8"),
     ],
 )
 def test_a_wrong_spec_is_one_line(tmp_path, change, says):
@@ -67,6 +68,14 @@ def test_a_wrong_spec_is_one_line(tmp_path, change, says):
     with pytest.raises(UsageError, match="--population") as error:
         read(path)
     assert says in str(error.value) and "\n" not in str(error.value)
+
+
+def test_a_spec_grows_a_search_only_where_it_asks_for_one(tmp_path):
+    """The shipped spec has no search (its library was grown without one); seeds default to 8."""
+    assert read().search is None
+    path = tmp_path / "population.toml"
+    path.write_text("search = { trials = 100 }\n" + SPEC.read_text())
+    assert read(path).search == {"trials": 100, "seeds": 8}
 
 
 def test_a_seat_cannot_end_without_members(tmp_path):

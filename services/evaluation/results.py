@@ -9,6 +9,7 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 from services.agent import library
+from services.population.adaptive import SHIPPED
 from services.population.seat import AdaptiveSeat, SeatSpec
 from shared.errors import UsageError
 from shared.provenance import lines as provenance_lines
@@ -46,6 +47,13 @@ def percent_text(value: float | None, digits: int = 1) -> str:
     return NOT_DEFINED if value is None else f"{value:+.{digits}f} %"
 
 
+# The fixed references every adaptive variant is compared with (Comparison.references' labels).
+BEST = "best static"  # the best static policy of every library compared, chosen on these games
+STUDY = "study's best static"  # the study library's best static policy (S1-S7 / B1-B9) on these games
+PREVIOUS = "previous default"  # the previous release's default teammate of our seat (GS1 / GB1)
+SCORING = 1.0  # kills/min: a partner who can score has a static teammate this good or better
+
+
 @dataclass(frozen=True)
 class Comparison:
     """What `team.compare` measured (comparison.json): every agent's mean, each adaptive variant
@@ -68,6 +76,12 @@ class Comparison:
     switches: dict[str, dict]  # variant -> switches per game, most, games its guard fell back in
     margin: float  # kills/min: the non-inferiority margin
     known_partner: dict[str, dict]  # "all" and each part -> the known-partner headroom
+    references: dict[str, str]  # label (BEST, STUDY, PREVIOUS) -> the agent played as that reference
+    unplayed: dict[str, str]  # label -> the reference these games did not play (what was asked for)
+    scoring: list[str]  # the partners who can score: a static teammate at SCORING kills/min or more
+    # variant -> "all" or "scoring" (partners) -> reference label -> the variant against it, with the
+    # game and the partner as the unit, and each part's share of the gain (team._versus)
+    glance: dict[str, dict[str, dict[str, dict]]]
 
     @property
     def base(self) -> float:
@@ -89,9 +103,11 @@ class Comparison:
     @classmethod
     def of(cls, data: dict) -> Comparison:
         """A comparison.json read back: one written before parts were named reads as groups, and a
-        part an older one lacks (its population, each partner's part, its subsets) as empty."""
+        part an older one lacks (its population, each partner's part, its subsets, the figures at a
+        glance) as empty."""
         renamed = {"group_of": "part_of", "per_group": "per_part", "tests_by_group": "tests_by_part"}
         older = {"population": "", "parts": "group", "part_of": {}, "by_subset": {}, "known_partner": {}}
+        older |= {"references": {}, "unplayed": {}, "scoring": [], "glance": {}}
         data = older | {renamed.get(k, k): v for k, v in data.items()}
         return cls(**{f.name: data[f.name] for f in fields(cls)})
 
@@ -198,7 +214,7 @@ def _at_a_glance(c: Comparison) -> list[str]:
     for agent, t in c.tests.items():
         n = t.get("per_partner", {})
         lines.append(
-            f"| {agent} | {percent_text(c.effect(agent))} | {t.get('p_holm', float('nan')):.2g} | "
+            f"| {_named(agent)} | {percent_text(c.effect(agent))} | {t.get('p_holm', float('nan')):.2g} | "
             f"{n.get('better', '-')} / {n.get('equal', '-')} / {n.get('worse', '-')} | "
             f"{_share(t.get('top_tenth_share'))} | {_share(t.get('headroom_realised'))} |"
         )
@@ -210,6 +226,69 @@ def _at_a_glance(c: Comparison) -> list[str]:
                 f"| {agent}, {name} ({t['partners']}) | {percent_text(effect)} | {t['p_holm']:.2g} | "
                 f"{n['better']} / {n['equal']} / {n['worse']} | - | {_share(realised)} |"
             )
+    return [*lines, ""]
+
+
+def _named(agent: str) -> str:
+    """An agent as the summary names it: the shipped default (adaptive.SHIPPED) marked as such."""
+    return f"{agent} (default)" if agent == SHIPPED.name else agent
+
+
+def _versus_row(agent: str, subset: str, against: str, v: dict) -> str:
+    """One row of `_against_references`: the agent against one reference on one set of partners."""
+
+    def cell(unit: dict) -> str:
+        return f"{unit['difference']:+.3f} ± {unit['stderr']:.3f} ({percent_text(unit['percent'])})"
+
+    top = NOT_DEFINED if v["top_part"] is None else f"{v['top_part']}: {100 * v['top_share']:.0f} %"
+    return (
+        f"| {_named(agent)} | {subset} | {against} | {v['mean']:.3f} / {v['reference']:.3f} | "
+        f"{cell(v['games'])} | {cell(v['partners'])} | {v['games']['p']:.2g} / {v['partners']['p']:.2g} | "
+        f"{top} |"
+    )
+
+
+def _against_references(c: Comparison) -> list[str]:
+    """Each adaptive agent, the shipped default first, against every fixed reference played (the
+    best static policy, the study library's best static, the previous release's default teammate;
+    one row where they are one agent), on every partner and on those who can score; a reference
+    not played is said to be."""
+    if not c.glance:
+        return []
+    refs: dict[str, list[str]] = {}
+    for label, agent in c.references.items():
+        refs.setdefault(agent, []).append(label)
+    lines = [
+        "## Against fixed references",
+        "",
+        "Each adaptive agent against each reference these games played ("
+        + "; ".join(f"{' and '.join(labels)}: {agent}" for agent, labels in refs.items())
+        + "): kills/min, the difference in kills/min and % with the game as the unit (every partner "
+        "and seed) and with the partner as the unit (the mean over partners of each partner's mean), "
+        "one-sided paired t-tests over games / over partners, and the share of the gain (partner "
+        f"unit) from the top partner {c.parts}. On every partner, and on the partners who can score "
+        f"(a static teammate at {SCORING:g} kill/min or more: {len(c.scoring)} of {c.partners}).",
+        "",
+        *(
+            f"Not played in these games: the {label} ({asked}), so no comparison with it."
+            for label, asked in c.unplayed.items()
+        ),
+        *([""] if c.unplayed else []),
+        f"| adaptive | partners | against | kills/min (agent / reference) | difference, games | "
+        f"difference, partners | p, games / partners | top {c.parts}'s share of the gain |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    names = {"all": f"all ({c.partners})", "scoring": f"can score ({len(c.scoring)})"}
+    for agent in sorted(c.glance, key=lambda a: a != SHIPPED.name):
+        for subset, by_label in c.glance[agent].items():
+            for ref, labels in refs.items():
+                against = f"{ref} ({', '.join(labels)})"
+                lines.append(_versus_row(agent, names[subset], against, by_label[labels[0]]))
+    if not c.scoring:
+        lines += [
+            "",
+            f"No partner can score here (no static teammate reaches {SCORING:g} kill/min with any).",
+        ]
     return [*lines, ""]
 
 
@@ -316,7 +395,7 @@ def write_results(
     Markdown summary (summary.md)."""
     out.mkdir(parents=True, exist_ok=True)
     lines = ["# Adapter evaluation", "", f"Population: {population or '(unnamed)'}.", ""]
-    lines += _at_a_glance(comparison) if comparison else []
+    lines += [*_at_a_glance(comparison), *_against_references(comparison)] if comparison else []
     if identification_result:
         lines += _identification(out, identification_result | {"population": population})
     if games:

@@ -10,16 +10,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from services.agent import library
+from services.evaluation import held_out
 from services.evaluation.evaluate import batches, play_games, play_session
 from services.evaluation.oracle import chosen_on_other_half
 from services.evaluation.populations import Population, listed
-from services.evaluation.results import Comparison, TeamGame
+from services.evaluation.results import BEST, PREVIOUS, SCORING, STUDY, Comparison, TeamGame, percent
 from services.jobs.core import Spec, spec
 from services.jobs.kinds import Runner, in_process
 from services.population.adaptive import AdapterConfig
 from services.population.human_like import SESSION_TRIALS
 from services.population.seat import AdaptiveSeat, SeatSpec, plugins_in
-from shared.game import check_role
+from shared.game import ROLES, check_role, other
 
 JOB_GAMES = 256  # games of a team or identification job (the lanes of one batch): tsf eval --job-games
 KINDS = {"team": f"{__name__}:run_team_jobs", "session": f"{__name__}:run_session_jobs"}  # for services/jobs
@@ -327,7 +329,92 @@ def compare(games: list[TeamGame], population: Population | None = None) -> Comp
         switches=_switching(games, adaptive),
         margin=MARGIN,
         known_partner={"all": overall, **{g: _headroom(paired, known, label == g) for g in parts}},
+        **_glance(paired, part_of, population.role),
     )
+
+
+PREVIOUS_DEFAULT = {"shooter": "GS1", "bait": "GB1"}  # our seat -> the previous release's default teammate
+
+
+def _references(paired: _Paired, partner_role: str) -> tuple[dict[str, str], dict[str, str]]:
+    """The fixed references these games played (label -> agent) and those they did not (label ->
+    what was asked for): the best static policy (of every library compared), the study library's
+    best static on these games and the previous release's default teammate of our seat (the
+    partners' other seat, else the seat whose shipped static policies were played)."""
+    played: dict[str, str] = {BEST: paired.best}
+    mine = [other(partner_role)] if partner_role else ROLES
+    seats = [r for r in mine if partner_role or set(held_out.statics(r)) & set(paired.statics)]
+    if not seats:
+        return played, {}
+    missing: dict[str, str] = {}
+    study = [a for a in paired.statics if a in library.keys(seats[0])]
+    if study:
+        played[STUDY] = max(study, key=lambda a: float(paired.values[a].mean()))
+    else:
+        missing[STUDY] = f"any of {', '.join(library.keys(seats[0]))}"
+    previous = PREVIOUS_DEFAULT[seats[0]]
+    (played if previous in paired.statics else missing)[PREVIOUS] = previous
+    return played, missing
+
+
+def _family_shares(by_partner: np.ndarray, parts: list[str]) -> dict:
+    """Each part's share of the total gain over partners (their mean differences summed), and the
+    part with the largest: empty and None where there is no gain to share (a total of 0 or less)."""
+    total = by_partner.sum()
+    labels = np.array(parts)
+    shares = (
+        {g: float(by_partner[labels == g].sum() / total) for g in sorted(set(parts))} if total > 0 else {}
+    )
+    top = max(shares, key=shares.get) if shares else None
+    return {"part_shares": shares, "top_part": top, "top_share": shares[top] if top else None}
+
+
+def _unit(diff: np.ndarray, base: float) -> dict:
+    """Differences with one unit (games or partners): their mean ± s.e., in % of `base` (None: not
+    defined), and the one-sided paired t-test that the agent is better (team.paired_tests)."""
+    t = paired_tests(diff)
+    return {
+        "difference": t["mean_difference"],
+        "stderr": t["stderr"],
+        "percent": percent(t["mean_difference"], base),
+        "p": t["p_superior"],
+        "n": t["n"],
+    }
+
+
+def _versus(paired: _Paired, agent: str, ref: str, chosen: list[str], part_of: dict[str, str]) -> dict:
+    """`agent` against `ref` on the `chosen` partners, with the game and with the partner as the unit
+    (the mean over partners of each partner's mean: a partner with more games weighs no more), and
+    each partner part's share of the gain (partner unit)."""
+    among = set(chosen)
+    where = np.array([u[0] in among for u in paired.units])
+    mine = np.array([p in among for p in paired.partners])
+    ours, theirs = paired.partner_means(agent)[mine], paired.partner_means(ref)[mine]
+    base = float(paired.values[ref][where].mean())
+    return {
+        "reference": base,
+        "mean": float(paired.values[agent][where].mean()),
+        "games": _unit(paired.values[agent][where] - paired.values[ref][where], base),
+        "partners": _unit(ours - theirs, float(theirs.mean())),
+        **_family_shares(ours - theirs, [part_of[p] for p in paired.partners if p in among]),
+    }
+
+
+def _glance(paired: _Paired, part_of: dict[str, str], partner_role: str) -> dict:
+    """Comparison's figures at a glance: each adaptive variant against every fixed reference played
+    (`_references`), on every partner and on the partners who can score (a static teammate at
+    SCORING kills/min or more with them; the static teammates only, so that who counts does not
+    depend on the agent tested)."""
+    played, missing = _references(paired, partner_role)
+    best_teammate = np.max([paired.partner_means(s) for s in paired.statics], axis=0)
+    scoring = [p for p, kills in zip(paired.partners, best_teammate, strict=True) if kills >= SCORING]
+    subsets = {"all": paired.partners, "scoring": scoring}
+    glance = {
+        a: {n: {label: _versus(paired, a, ref, chosen, part_of) for label, ref in played.items()}
+            for n, chosen in subsets.items() if chosen}
+        for a in paired.adaptive
+    }  # fmt: skip
+    return {"references": played, "unplayed": missing, "scoring": scoring, "glance": glance}
 
 
 def _counts(by_partner: np.ndarray) -> dict[str, int]:

@@ -292,7 +292,10 @@ def compare(games: list[TeamGame], population: Population | None = None) -> Comp
     one of these static policies per partner can gain, and the share of it each variant realises.
     Per variant also how many partners it serves better, as well or worse than the best static
     policy (a partner's mean beyond MARGIN either way), and the share of its gain that the top
-    tenth of partners carry. `population` (default: a list of these games' partners, by kind)
+    tenth of partners carry. At a glance (`_glance`), each variant against fixed references (the
+    best static policy, the study library's best static, the previous release's default teammate)
+    with the game and the partner as the unit, the top part's share of the gain, on every partner
+    and on those who can score. `population` (default: a list of these games' partners, by kind)
     names each partner's part and the subsets each variant's effect is also given for."""
     population = population or listed(sorted({g.partner for g in games}), "")
     paired = _Paired.of(games)
@@ -342,17 +345,17 @@ def _references(paired: _Paired, partner_role: str) -> tuple[dict[str, str], dic
     best static on these games and the previous release's default teammate of our seat (the
     partners' other seat, else the seat whose shipped static policies were played)."""
     played: dict[str, str] = {BEST: paired.best}
-    mine = [other(partner_role)] if partner_role else ROLES
-    seats = [r for r in mine if partner_role or set(held_out.statics(r)) & set(paired.statics)]
-    if not seats:
+    shipped = (r for r in ROLES if set(held_out.statics(r)) & set(paired.statics))
+    seat = other(partner_role) if partner_role else next(shipped, None)
+    if seat is None:
         return played, {}
     missing: dict[str, str] = {}
-    study = [a for a in paired.statics if a in library.keys(seats[0])]
+    study = [a for a in paired.statics if a in library.keys(seat)]
     if study:
         played[STUDY] = max(study, key=lambda a: float(paired.values[a].mean()))
     else:
-        missing[STUDY] = f"any of {', '.join(library.keys(seats[0]))}"
-    previous = PREVIOUS_DEFAULT[seats[0]]
+        missing[STUDY] = f"any of {', '.join(library.keys(seat))}"
+    previous = PREVIOUS_DEFAULT[seat]
     (played if previous in paired.statics else missing)[PREVIOUS] = previous
     return played, missing
 
@@ -366,7 +369,7 @@ def _family_shares(by_partner: np.ndarray, parts: list[str]) -> dict:
         {g: float(by_partner[labels == g].sum() / total) for g in sorted(set(parts))} if total > 0 else {}
     )
     top = max(shares, key=shares.get) if shares else None
-    return {"part_shares": shares, "top_part": top, "top_share": shares[top] if top else None}
+    return {"part_shares": shares, "top_part": top, "top_share": None if top is None else shares[top]}
 
 
 def _unit(diff: np.ndarray, base: float) -> dict:

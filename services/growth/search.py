@@ -47,6 +47,16 @@ SPACES = {
         "rear_tolerance": (5.0, 180.0, 1.0),  # 180: it fires from anywhere around the fortress
     },
     "circle": {"radius": (50.0, 200.0, 1.0), "speed": (0.5, 4.5, 0.05), "outside": (205.0, 300.0, 1.0)},
+    "orbit": {  # `tsf library search --family orbit`: the bait that holds its radius, placed by the shooter
+        "radius": (100.0, 200.0, 1.0),
+        "speed": (0.0, 4.5, 0.05),
+        "gain": (0.01, 0.3, 0.005),
+        "damping": (0.0, 30.0, 0.5),
+        "margin": (0.0, 40.0, 0.5),
+        "place": (0.0, 4.0, 0.05),
+        "lead": (-90.0, 90.0, 1.0),
+        "outside": (205.0, 300.0, 1.0),
+    },
 }
 WHOLE = "all"  # the study over the whole training population
 Score = Callable[[list[str]], np.ndarray]  # setting names -> (settings, partners) mean kills/min

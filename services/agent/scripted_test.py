@@ -1,0 +1,92 @@
+"""The orbit bait: it holds its radius (feedback on the radial error), stays inside the turning
+activation hexagon where the circle of the same radius leaves it, gives distributions, plays the
+same in its scalar and its compiled batch form, and is a rule of the grammar and of the search."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from services.agent.scripted import CircleBait, MirrorShooter, OrbitBait, region_edge, scripted_keys
+from services.sim import observation as ob
+from services.sim.engine import Game
+from services.sim.observation import observe
+
+SETTLE = 150  # frames of orbiting (the bait alive, the fortress up) before a frame is judged
+
+
+def _flight(bait, shooter, frames: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """Over one game's first `frames` frames: the bait's distance from the fortress and whether it
+    was in the region on the frames after SETTLE frames of orbiting (NaN and False on the others:
+    the spawn, a death, the fortress down and the way back), and every observation of the bait's."""
+    game, radii, inside, seen, orbiting = Game(seed=seed), [], [], [], 0
+    bait.reset(seed), shooter.reset(seed)
+    for _ in range(frames):
+        obs = observe(game, "bait", bait.view)
+        orbiting = orbiting + 1 if game.bait.alive and game.fortress_alive else 0
+        radii.append(math.hypot(game.bait.x, game.bait.y) if orbiting > SETTLE else np.nan)
+        inside.append(orbiting > SETTLE and game.bait.in_region)
+        seen.append(obs)
+        game.step(bait.act(obs), shooter.act(observe(game, "shooter", shooter.view)))
+    return np.array(radii), np.array(inside), seen
+
+
+def _settled(bait, seeds: tuple[int, ...] = (0, 1)) -> tuple[np.ndarray, float]:
+    """The settled frames' distances from the fortress and share in the region, over `seeds`' games
+    with a mirror shooter (it kills now and then: the bait leaves the region and comes back)."""
+    flights = [_flight(bait, MirrorShooter(), 1800, seed)[:2] for seed in seeds]
+    radii = np.concatenate([r for r, _ in flights])
+    inside = sum(int(i.sum()) for _, i in flights)
+    return radii[~np.isnan(radii)], inside / int((~np.isnan(radii)).sum())
+
+
+def test_it_holds_its_radius():
+    """Settled, the orbit stays within a few px of its radius, closer than the circle does."""
+    orbit, _ = _settled(OrbitBait(radius=170.0, speed=1.5, gain=0.1, damping=10.0))
+    circle, _ = _settled(CircleBait(radius=170.0, speed=1.5))
+    assert len(orbit) > 200 and np.median(np.abs(orbit - 170.0)) < 5.0
+    assert np.median(np.abs(orbit - 170.0)) < np.median(np.abs(circle - 170.0))
+
+
+def test_it_stays_in_the_turning_hexagon_where_the_circle_leaves_it():
+    """At radius 195 the circle spends most frames outside the hexagon (its flat sides are 173 px
+    out); the orbit aims at the hexagon's edge less its margin and stays in, near the edge."""
+    radii, orbit_in = _settled(OrbitBait(radius=195.0, margin=10.0))
+    _, circle_in = _settled(CircleBait(radius=195.0, speed=1.5))
+    assert orbit_in > 0.6 and circle_in < 0.3
+    assert np.median(radii) > 180.0
+
+
+def test_the_region_edge_is_the_hexagons():
+    assert region_edge(200.0, 0.0, 0.0) == pytest.approx(200.0)  # a vertex on the facing
+    assert region_edge(0.0, 200.0, math.pi / 2) == pytest.approx(200.0)
+    assert region_edge(math.cos(math.pi / 6), math.sin(math.pi / 6), 0.0) == pytest.approx(
+        200 * math.cos(math.pi / 6)
+    )
+
+
+def test_probs_are_distributions_and_scalar_and_batch_agree():
+    """Rows from a game where it places itself by a moving shooter (both branches: the fortress up
+    and down), with placement and lead in play."""
+    bait = OrbitBait(radius=160.0, speed=0.5, place=1.5, lead=20.0)
+    _, _, seen = _flight(bait, MirrorShooter(max_speed=7.0), 900)
+    obs = np.stack(seen).astype(np.float32)
+    assert (obs[:, ob.FORTRESS + ob.F_ALIVE] < 0.5).any()  # it killed: the leaving branch was played
+    batch = bait.probs_batch(obs)
+    np.testing.assert_allclose(batch, np.array([bait.probs(o) for o in obs]), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(batch.sum(axis=1), 1.0)
+    assert (bait.rule_batch(obs) == np.array([bait.rule(o) for o in obs])).all()
+
+
+def test_it_is_a_bait_rule_of_the_grammar():
+    from services.population.seat import RuleSeat, seats_of
+
+    assert "orbit" in scripted_keys("bait") and "orbit" not in scripted_keys("shooter")
+    from shared.errors import UsageError
+
+    (seat,) = seats_of(["orbit(radius=190,speed=2,place=1.5)"])
+    assert seat == RuleSeat("orbit", (("radius", 190.0), ("speed", 2.0), ("place", 1.5)))
+    with pytest.raises(UsageError, match="not SETTING=NUMBER for a setting of orbit"):
+        seats_of(["orbit(angle=3)"])

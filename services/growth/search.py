@@ -12,6 +12,10 @@ each partner's mean kills/min. Each study's best setting becomes a candidate: th
 play it (the spec's seeds, as every column of the held-out grids) and the selection chooses among
 the grid, the study's policies, the responses and these.
 
+SPACES also holds the bait seat's `orbit` (a rule that holds its radius and places itself by the
+shooter): `tsf library search --seat bait --family orbit` searches it; the growth searches each
+seat's own rule (RULE_FAMILIES).
+
 Resumable and deterministic: the trials are written after each round (`search-SEAT.json`), and a
 round's studies are rebuilt from the written trials with a sampler seeded by (spec seed, round,
 study), so that a resumed search asks what an unbroken one would have.

@@ -4,7 +4,8 @@
   leaves the region while the fortress is down so that it can respawn.
 - `orbit` (bait): holds a radius about the fortress with feedback on the radial error, kept inside
   the activation hexagon as it turns (the region's edge at the ship's bearing, less a margin), and
-  can steer its bearing toward the point opposite the shooter (plus a lead angle).
+  can steer its bearing toward the point opposite the shooter (plus a lead angle); while the
+  fortress is down it orbits just outside the hexagon rather than leaving.
 - `mirror` (shooter): holds the point opposite the bait just outside the region, moving along the
   circle rather than through the region, faces the fortress and fires into the open rear when the
   missile will arrive inside the vulnerability window.
@@ -128,7 +129,9 @@ def _circle_rows(observations, radius, speed, outside, out):
 class OrbitBait(RulePolicy):
     """Orbits the fortress at a held radius inside the turning activation hexagon, placing itself
     by the shooter: circle's orbit, with the radius error fed back at a searched gain and the
-    orbit's speed raised or lowered to bring its bearing opposite the shooter (plus `lead`)."""
+    orbit's speed raised or lowered to bring its bearing opposite the shooter (plus `lead`). While
+    the fortress is down it orbits on, just outside the hexagon (`clear` px beyond its edge), so
+    that the fortress respawns without the bait's leaving and coming back from far out."""
 
     key = "orbit"
     role = "bait"
@@ -142,13 +145,12 @@ class OrbitBait(RulePolicy):
         margin: float = 10.0,
         place: float = 0.0,
         lead: float = 0.0,
-        outside: float = 260.0,
+        clear: float = 10.0,
         epsilon: float = RulePolicy.EPSILON,
     ) -> None:
         super().__init__(epsilon)
         self.radius, self.speed, self.gain, self.damping = radius, speed, gain, damping
-        self.margin = margin
-        self.place, self.lead, self.outside = place, lead, outside
+        self.margin, self.place, self.lead, self.clear = margin, place, lead, clear
 
     def choose(self, obs: np.ndarray) -> tuple[int, int, int]:
         return orbit_choice(obs, *self._numbers())
@@ -162,7 +164,7 @@ class OrbitBait(RulePolicy):
         """orbit_choice's numbers after the observation."""
         return (
             *(self.radius, self.speed, self.gain, self.damping),
-            *(self.margin, self.place, self.lead, self.outside),
+            *(self.margin, self.place, self.lead, self.clear),
         )
 
 
@@ -189,29 +191,24 @@ def orbit_choice(
     margin: float,
     place: float,
     lead: float,
-    outside: float,
+    clear: float,
 ) -> tuple[int, int, int]:
-    """OrbitBait's rule: while the fortress is up, the velocity along the orbit is `speed` plus
-    `place` px/frame per radian that the bearing lags the point opposite the shooter turned by
-    `lead` degrees, and across it `gain` times the radius error `damping` frames ahead (a PD
-    controller: the lookahead damps the overshoot of a ship that must turn to brake), the target
-    radius being `radius` or the hexagon's edge less `margin` where that is nearer; else leave past
-    `outside`."""
+    """OrbitBait's rule. Along the orbit: `speed` plus `place` px/frame per radian that the bearing
+    lags the point opposite the shooter turned by `lead` degrees. Across it: `gain` times the radius
+    error `damping` frames ahead (a PD controller: the lookahead damps the overshoot of a ship that
+    must turn to brake). The target radius: while the fortress is up, `radius` or the hexagon's
+    edge less `margin` where that is nearer; while it is down, the edge plus `clear`."""
     x, y, vx, vy = ship(obs, ob.SELF)
-    if obs[ob.FORTRESS + ob.F_ALIVE] > 0.5:
-        facing = math.atan2(float(obs[ob.FORTRESS + ob.F_SIN]), float(obs[ob.FORTRESS + ob.F_COS]))
-        target = min(radius, region_edge(x, y, facing) - margin)
-        sx, sy, _, _ = ship(obs, ob.PARTNER)
-        gap = (math.atan2(-sy, -sx) + math.radians(lead) - math.atan2(y, x) + math.pi) % (
-            2 * math.pi
-        ) - math.pi
-        tangential = max(-ORBIT_MAX_SPEED, min(ORBIT_MAX_SPEED, speed + place * gap))
-        r = max(math.hypot(x, y), 1.0)
-        ahead = r + damping * (x * vx + y * vy) / r  # the radius `damping` frames on: the D term
-        radial = max(-ORBIT_MAX_RADIAL, min(ORBIT_MAX_RADIAL, gain * (target - ahead)))
-        dvx, dvy = x / r * radial - y / r * tangential, y / r * radial + x / r * tangential
-    else:  # leave the region so the fortress can respawn
-        dvx, dvy = orbit_velocity(x, y, outside, 0.0, 0.1)
+    facing = math.atan2(float(obs[ob.FORTRESS + ob.F_SIN]), float(obs[ob.FORTRESS + ob.F_COS]))
+    edge = region_edge(x, y, facing)
+    target = min(radius, edge - margin) if obs[ob.FORTRESS + ob.F_ALIVE] > 0.5 else edge + clear
+    sx, sy, _, _ = ship(obs, ob.PARTNER)
+    gap = (math.atan2(-sy, -sx) + math.radians(lead) - math.atan2(y, x) + math.pi) % (2 * math.pi) - math.pi
+    tangential = max(-ORBIT_MAX_SPEED, min(ORBIT_MAX_SPEED, speed + place * gap))
+    r = max(math.hypot(x, y), 1.0)
+    ahead = r + damping * (x * vx + y * vy) / r  # the radius `damping` frames on: the D term
+    radial = max(-ORBIT_MAX_RADIAL, min(ORBIT_MAX_RADIAL, gain * (target - ahead)))
+    dvx, dvy = x / r * radial - y / r * tangential, y / r * radial + x / r * tangential
     ex, ey = evade(obs, x, y)
     needed, turn, thrust = seek(obs, dvx + ex, dvy + ey)
     return (turn, thrust, 0) if needed else (0, 0, 0)

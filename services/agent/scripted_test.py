@@ -1,6 +1,7 @@
 """The orbit bait: it holds its radius (feedback on the radial error), stays inside the turning
-activation hexagon where the circle of the same radius leaves it, gives distributions, plays the
-same in its scalar and its compiled batch form, and is a rule of the grammar and of the search."""
+activation hexagon where the circle of the same radius leaves it, waits just outside it while the
+fortress is down, gives distributions, plays the same in its scalar and its compiled batch form,
+and is a rule of the grammar."""
 
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ SETTLE = 150  # frames of orbiting (the bait alive, the fortress up) before a fr
 def _flight(bait, shooter, frames: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
     """Over one game's first `frames` frames: the bait's distance from the fortress and whether it
     was in the region on the frames after SETTLE frames of orbiting (NaN and False on the others:
-    the spawn, a death, the fortress down and the way back), and every observation of the bait's."""
+    the spawn, a death, the fortress down and the way back in), and the bait's observations."""
     game, radii, inside, seen, orbiting = Game(seed=seed), [], [], [], 0
     bait.reset(seed), shooter.reset(seed)
     for _ in range(frames):
@@ -35,19 +36,21 @@ def _flight(bait, shooter, frames: int, seed: int = 0) -> tuple[np.ndarray, np.n
 
 def _settled(bait, seeds: tuple[int, ...] = (0, 1)) -> tuple[np.ndarray, float]:
     """The settled frames' distances from the fortress and share in the region, over `seeds`' games
-    with a mirror shooter (it kills now and then: the bait leaves the region and comes back)."""
-    flights = [_flight(bait, MirrorShooter(), 1800, seed)[:2] for seed in seeds]
+    with a mirror shooter that never fires (the fortress stays up: the orbit alone is judged)."""
+    flights = [_flight(bait, MirrorShooter(rear_tolerance=-1.0), 1800, seed)[:2] for seed in seeds]
     radii = np.concatenate([r for r, _ in flights])
     inside = sum(int(i.sum()) for _, i in flights)
     return radii[~np.isnan(radii)], inside / int((~np.isnan(radii)).sum())
 
 
 def test_it_holds_its_radius():
-    """Settled, the orbit stays within a few px of its radius, closer than the circle does."""
-    orbit, _ = _settled(OrbitBait(radius=170.0, speed=1.5, gain=0.1, damping=10.0))
+    """Settled, the orbit stays within a few px of its radius (the misses are its sidesteps from
+    shells), its 90th percentile nearer than the circle's."""
+    orbit, _ = _settled(OrbitBait(radius=170.0, speed=1.5, gain=0.2, damping=20.0))
     circle, _ = _settled(CircleBait(radius=170.0, speed=1.5))
-    assert len(orbit) > 200 and np.median(np.abs(orbit - 170.0)) < 5.0
-    assert np.median(np.abs(orbit - 170.0)) < np.median(np.abs(circle - 170.0))
+    error = np.abs(orbit - 170.0)
+    assert len(orbit) > 1000 and np.median(error) < 4.0 and np.percentile(error, 90) < 10.0
+    assert np.percentile(error, 90) < np.percentile(np.abs(circle - 170.0), 90)
 
 
 def test_it_stays_in_the_turning_hexagon_where_the_circle_leaves_it():
@@ -57,6 +60,18 @@ def test_it_stays_in_the_turning_hexagon_where_the_circle_leaves_it():
     _, circle_in = _settled(CircleBait(radius=195.0, speed=1.5))
     assert orbit_in > 0.6 and circle_in < 0.3
     assert np.median(radii) > 180.0
+
+
+def test_it_waits_just_outside_the_hexagon_while_the_fortress_is_down():
+    """With a shooter that kills, the fortress respawns without the orbit's leaving far: it stays
+    within its clearance of the edge while down, where the circle goes out to `outside`."""
+    game, bait, shooter, down = Game(seed=0), OrbitBait(radius=170.0, clear=10.0), MirrorShooter(), []
+    for _ in range(1800):
+        obs = observe(game, "bait", bait.view)
+        if not game.fortress_alive and game.bait.alive:
+            down.append(math.hypot(game.bait.x, game.bait.y))
+        game.step(bait.act(obs), shooter.act(observe(game, "shooter", shooter.view)))
+    assert len(down) > 100 and max(down) < 230.0
 
 
 def test_the_region_edge_is_the_hexagons():

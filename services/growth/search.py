@@ -59,7 +59,7 @@ SPACES = {
         "margin": (0.0, 40.0, 0.5),
         "place": (0.0, 4.0, 0.05),
         "lead": (-90.0, 90.0, 1.0),
-        "outside": (205.0, 300.0, 1.0),
+        "clear": (0.0, 60.0, 0.5),
     },
 }
 WHOLE = "all"  # the study over the whole training population

@@ -105,3 +105,17 @@ def test_it_is_a_bait_rule_of_the_grammar():
     assert seat == RuleSeat("orbit", (("radius", 190.0), ("speed", 2.0), ("place", 1.5)))
     with pytest.raises(UsageError, match="not SETTING=NUMBER for a setting of orbit"):
         seats_of(["orbit(angle=3)"])
+
+
+def test_orbits_stacked_in_one_batch_play_the_games_each_plays_alone():
+    """Bulk play (play_pairs: the rules of one kind as one stack, every pair a lane) gives each
+    orbit setting the very game it plays in a batch of its own."""
+    from services.sim.batch_play import play_batch, play_pairs
+
+    orbits = [OrbitBait(), OrbitBait(radius=150.0, speed=2.5, place=2.0, lead=-30.0, clear=25.0)]
+    shooter = MirrorShooter(max_speed=7.0)
+    together = play_pairs(orbits, [shooter], np.array([0, 1, 1]), np.zeros(3, np.int64), [0, 0, 1])
+    alone = [play_batch(orbits[0], shooter, [0])[0], *play_batch(orbits[1], shooter, [0, 1])]
+    assert [g.counters for g in together] == [g.counters for g in alone]
+    assert together[0].counters != together[1].counters  # two settings, two games
+    assert [g.kills for g in together] == [g.kills for g in alone] and sum(g.kills for g in alone) > 0

@@ -379,11 +379,11 @@ def test_the_report_figures_of_the_example_are_legible(tmp_path: Path) -> None:
 def test_the_library_page_states_the_search_s_measured_figures() -> None:
     """The search's table (docs/library.md) says what its records in docs/eval/search hold."""
     text = page("docs/library.md")
-    for seat in ("shooter", "bait"):
-        measured = json.loads((ROOT / "docs" / "eval" / "search" / f"measured-{seat}.json").read_text())
+    for stem, row in (("shooter", "shooter"), ("bait", "bait"), ("bait-orbit", "bait, orbit")):
+        measured = json.loads((ROOT / "docs" / "eval" / "search" / f"measured-{stem}.json").read_text())
         best = measured["best"]["all"]["name"]
         both = measured["measured"]["teammates"]["all"]["both"]
-        assert f"| {seat} | `{best}` |" in text
+        assert f"| {row} | `{best}` |" in text
         assert f"{both['kills']:.2f} vs " in text and f"**{both['against'][0]['percent']:+.1f} %**" in text
 
 

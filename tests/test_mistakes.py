@@ -28,7 +28,7 @@ from services.commands.entry import run
 from services.recorder.recording_test import M, record_match
 from shared.errors import UsageError, install_line
 
-BAITS = "B1, B2, B3, B4, B5, B6, B7, B8, B9, circle, idle, random"
+BAITS = "B1, B2, B3, B4, B5, B6, B7, B8, B9, circle, orbit, idle, random"
 SHOOTERS = "S1, S2, S3, S4, S5, S6, S7, mirror, idle, random"
 STRATEGIES = (
     "cem, cem-dwell, cem-ood, bayes, bayes-dwell-ood, bayes-dwell-ood-guard, bayes-dwell-ood-guard-memory, "
@@ -96,6 +96,11 @@ MISTAKES = [
         "tsf library: --run {tmp}: is no grown run's library (no run-population.json, run-groups.json",
     ),
     ("library search --seat shooter --trials 0", 2, "'--trials': 0 is outside the range 1 to 10000"),
+    (
+        "library search --seat shooter --family orbit",
+        2,
+        "tsf library: --family orbit: is no searchable rule of the shooter seat; valid: mirror",
+    ),
     ("train --steps 0", 2, "Invalid value for '--steps'"),
     ("train", 2, "tsf train: KEYS (none): give library keys or --all, not both"),
     ("train B1 --all", 2, "tsf train: KEYS B1: give library keys or --all, not both"),

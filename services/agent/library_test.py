@@ -80,7 +80,7 @@ def test_policy_for_resolves_library_and_scripted_keys():
     assert seats.policy_for("circle", "bait").key == "circle"
 
 
-BAITS = "B1, B2, B3, B4, B5, B6, B7, B8, B9, circle, idle, random"
+BAITS = "B1, B2, B3, B4, B5, B6, B7, B8, B9, circle, orbit, idle, random"
 
 
 @pytest.mark.parametrize(

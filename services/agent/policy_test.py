@@ -7,7 +7,7 @@ import pytest
 
 from services.agent import library, networks
 from services.agent.policy import end_round_batch, end_round_choice, rule_probs, stalled
-from services.agent.scripted import CircleBait, Idle, MirrorShooter
+from services.agent.scripted import CircleBait, Idle, MirrorShooter, OrbitBait
 from services.sim import observation as ob
 from services.sim.batch_play import play_batch
 from services.sim.engine import Game
@@ -79,6 +79,7 @@ def test_stalled_rows_play_the_end_round_rule_in_probs_and_in_bulk(view):
         networks.load("S1"),
         networks.load("S5"),
         CircleBait(),
+        OrbitBait(place=1.0),
         MirrorShooter(),
     ]:
         if policy.view != view:

@@ -2,6 +2,10 @@
 
 - `circle` (bait): circles inside the activation region, sidestepping shells about to hit it, and
   leaves the region while the fortress is down so that it can respawn.
+- `orbit` (bait): holds a radius about the fortress with feedback on the radial error, kept inside
+  the activation hexagon as it turns (the region's edge at the ship's bearing, less a margin), and
+  can steer its bearing toward the point opposite the shooter (plus a lead angle); while the
+  fortress is down it orbits just outside the hexagon rather than leaving.
 - `mirror` (shooter): holds the point opposite the bait just outside the region, moving along the
   circle rather than through the region, faces the fortress and fires into the open rear when the
   missile will arrive inside the vulnerability window.
@@ -120,6 +124,100 @@ def evade(obs: np.ndarray, x: float, y: float) -> tuple[float, float]:
 def _circle_rows(observations, radius, speed, outside, out):
     for i in range(observations.shape[0]):
         out[i] = circle_choice(observations[i], radius, speed, outside)
+
+
+class OrbitBait(RulePolicy):
+    """Orbits the fortress at a held radius inside the turning activation hexagon, placing itself
+    by the shooter: circle's orbit, with the radius error fed back at a searched gain and the
+    orbit's speed raised or lowered to bring its bearing opposite the shooter (plus `lead`). While
+    the fortress is down it orbits on, just outside the hexagon (`clear` px beyond its edge), so
+    that the fortress respawns without the bait's leaving and coming back from far out."""
+
+    key = "orbit"
+    role = "bait"
+
+    def __init__(
+        self,
+        radius: float = 190.0,
+        speed: float = 1.5,
+        gain: float = 0.1,
+        damping: float = 10.0,
+        margin: float = 10.0,
+        place: float = 0.0,
+        lead: float = 0.0,
+        clear: float = 10.0,
+        epsilon: float = RulePolicy.EPSILON,
+    ) -> None:
+        super().__init__(epsilon)
+        self.radius, self.speed, self.gain, self.damping = radius, speed, gain, damping
+        self.margin, self.place, self.lead, self.clear = margin, place, lead, clear
+
+    def choose(self, obs: np.ndarray) -> tuple[int, int, int]:
+        return orbit_choice(obs, *self._numbers())
+
+    def choose_batch(self, observations: np.ndarray) -> np.ndarray:
+        out = np.empty((len(observations), 3), np.int64)
+        _orbit_rows(observations, self._numbers(), out)
+        return out
+
+    def _numbers(self) -> tuple[float, ...]:
+        """orbit_choice's numbers after the observation."""
+        return (
+            *(self.radius, self.speed, self.gain, self.damping),
+            *(self.margin, self.place, self.lead, self.clear),
+        )
+
+
+ORBIT_MAX_SPEED = 6.0  # px/frame: the most the placement may ask along the orbit
+ORBIT_MAX_RADIAL = 2.0  # px/frame: the most the radius feedback may ask across it
+REGION_RADIUS = _DEFAULTS.region_radius  # the hexagon's circumradius, a plain number for the compiled loop
+
+
+@jitable
+def region_edge(x: float, y: float, facing: float) -> float:
+    """The activation hexagon's edge (px from the centre) on the ship's bearing: the hexagon's
+    vertices lie on the fortress's facing and every 60 degrees from it (docs/rules.md)."""
+    off = (math.atan2(y, x) - facing) % (math.pi / 3)
+    return REGION_RADIUS * math.cos(math.pi / 6) / math.cos(off - math.pi / 6)
+
+
+@jitable
+def orbit_choice(
+    obs: np.ndarray,
+    radius: float,
+    speed: float,
+    gain: float,
+    damping: float,
+    margin: float,
+    place: float,
+    lead: float,
+    clear: float,
+) -> tuple[int, int, int]:
+    """OrbitBait's rule. Along the orbit: `speed` plus `place` px/frame per radian that the bearing
+    lags the point opposite the shooter turned by `lead` degrees. Across it: `gain` times the radius
+    error `damping` frames ahead (a PD controller: the lookahead damps the overshoot of a ship that
+    must turn to brake). The target radius: while the fortress is up, `radius` or the hexagon's
+    edge less `margin` where that is nearer; while it is down, the edge plus `clear`."""
+    x, y, vx, vy = ship(obs, ob.SELF)
+    facing = math.atan2(float(obs[ob.FORTRESS + ob.F_SIN]), float(obs[ob.FORTRESS + ob.F_COS]))
+    edge = region_edge(x, y, facing)
+    target = min(radius, edge - margin) if obs[ob.FORTRESS + ob.F_ALIVE] > 0.5 else edge + clear
+    sx, sy, _, _ = ship(obs, ob.PARTNER)
+    gap = (math.atan2(-sy, -sx) + math.radians(lead) - math.atan2(y, x) + math.pi) % (2 * math.pi) - math.pi
+    tangential = max(-ORBIT_MAX_SPEED, min(ORBIT_MAX_SPEED, speed + place * gap))
+    r = max(math.hypot(x, y), 1.0)
+    ahead = r + damping * (x * vx + y * vy) / r  # the radius `damping` frames on: the D term
+    radial = max(-ORBIT_MAX_RADIAL, min(ORBIT_MAX_RADIAL, gain * (target - ahead)))
+    dvx, dvy = x / r * radial - y / r * tangential, y / r * radial + x / r * tangential
+    ex, ey = evade(obs, x, y)
+    needed, turn, thrust = seek(obs, dvx + ex, dvy + ey)
+    return (turn, thrust, 0) if needed else (0, 0, 0)
+
+
+@compiled
+def _orbit_rows(observations, numbers, out):
+    for i in range(observations.shape[0]):
+        out[i] = orbit_choice(observations[i], *numbers)
 
 
 class MirrorShooter(RulePolicy):
@@ -268,7 +366,7 @@ def _good_shot_rows(observations, numbers, out):
         out[i] = good_shot_at(observations[i], *numbers)
 
 
-SCRIPTED = {"circle": CircleBait, "mirror": MirrorShooter}
+SCRIPTED = {"circle": CircleBait, "orbit": OrbitBait, "mirror": MirrorShooter}
 
 
 def scripted_keys(role: str) -> list[str]:
@@ -277,7 +375,7 @@ def scripted_keys(role: str) -> list[str]:
 
 
 def scripted_policy(key: str, role: str) -> RulePolicy | UniformPolicy:
-    """A scripted policy by key for a seat: circle, mirror, idle or random (any role)."""
+    """A scripted policy by key for a seat: circle, orbit, mirror, idle or random (any role)."""
     if key == "idle":
         return Idle(role)
     if key == "random":

@@ -225,6 +225,9 @@ def library_grow(
 @library_commands.command("search")
 def library_search(
     seat: Role = typer.Option(..., help="Our seat: its rule (mirror or circle) is searched."),
+    family: str | None = typer.Option(
+        None, "--family", help="The rule to search (default: the seat's own; the bait seat also has orbit)."
+    ),
     trials: int = number(100, SEARCH_TRIALS, "Settings played in all (every study asks one a round)."),
     seeds: int = number(8, GAMES, "Seeded games per (partner, setting) pair, in the search and the test."),
     seed: int = number(0, SEEDS, "The sampler's seed."),
@@ -241,11 +244,13 @@ def library_search(
     """Tune our seat's rule by search (Optuna's TPE) on a grown run's training members, per partner
     group and over them all, without retraining anything; then measure each group's best setting on
     the run's test split against the run's best member and the study library's best static."""
-    from services.growth.searched import check_run, markdown, search_run
+    from services.growth.searched import check_run, families, markdown, search_run
 
+    if family is not None and family not in families(str(seat)):
+        raise UsageError("--family", family, f"is no searchable rule of the {seat} seat", families(str(seat)))
     run = run or NAMED["grown"]
     check_run(run)
-    console.print(markdown(search_run(str(seat), run, out, trials, seeds, seed)), soft_wrap=True)
+    console.print(markdown(search_run(str(seat), run, out, trials, seeds, seed, family)), soft_wrap=True)
 
 
 @library_commands.command("condition")

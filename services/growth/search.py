@@ -12,6 +12,10 @@ each partner's mean kills/min. Each study's best setting becomes a candidate: th
 play it (the spec's seeds, as every column of the held-out grids) and the selection chooses among
 the grid, the study's policies, the responses and these.
 
+SPACES also holds the bait seat's `orbit` (a rule that holds its radius and places itself by the
+shooter): `tsf library search --seat bait --family orbit` searches it; the growth searches each
+seat's own rule (RULE_FAMILIES).
+
 Resumable and deterministic: the trials are written after each round (`search-SEAT.json`), and a
 round's studies are rebuilt from the written trials with a sampler seeded by (spec seed, round,
 study), so that a resumed search asks what an unbroken one would have.
@@ -47,6 +51,16 @@ SPACES = {
         "rear_tolerance": (5.0, 180.0, 1.0),  # 180: it fires from anywhere around the fortress
     },
     "circle": {"radius": (50.0, 200.0, 1.0), "speed": (0.5, 4.5, 0.05), "outside": (205.0, 300.0, 1.0)},
+    "orbit": {  # `tsf library search --family orbit`: the bait that holds its radius, placed by the shooter
+        "radius": (100.0, 200.0, 1.0),
+        "speed": (0.0, 4.5, 0.05),
+        "gain": (0.01, 0.3, 0.005),
+        "damping": (0.0, 30.0, 0.5),
+        "margin": (0.0, 40.0, 0.5),
+        "place": (0.0, 4.0, 0.05),
+        "lead": (-90.0, 90.0, 1.0),
+        "clear": (0.0, 60.0, 0.5),
+    },
 }
 WHOLE = "all"  # the study over the whole training population
 Score = Callable[[list[str]], np.ndarray]  # setting names -> (settings, partners) mean kills/min

@@ -16,10 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
+from services.agent.scripted import SCRIPTED
 from services.evaluation import held_out
 from services.evaluation.evaluate import play_teams
 from services.evaluation.team import paired_tests
-from services.growth.search import WHOLE, best, curve, plan_of, scorer, tune
+from services.growth.search import SPACES, WHOLE, best, curve, plan_of, scorer, tune
 from services.population.families import RULE_FAMILIES
 from services.population.seat import seats_of
 from shared.errors import UsageError
@@ -50,17 +51,29 @@ def check_run(run: Path) -> None:
         raise UsageError("--run", run, f"is no grown run's library (no {', '.join(missing)})")
 
 
-def search_run(ours: str, run: Path, out: Path, trials: int, seeds: int, seed: int) -> dict:
-    """Our seat's rule searched over the run's training members (written to OUT/search-SEAT.json as
-    it goes, resumed from there), then measured on its test split (OUT/measured-SEAT.json)."""
+def families(ours: str) -> list[str]:
+    """The rule families our seat's search can tune: the seat's own rule first (the growth's), then
+    the other scripted rules of that seat that have a search space (the bait's orbit)."""
+    rules = [k for k, policy in SCRIPTED.items() if policy.role == ours and k in SPACES]
+    return [RULE_FAMILIES[ours], *(k for k in rules if k != RULE_FAMILIES[ours])]
+
+
+def search_run(
+    ours: str, run: Path, out: Path, trials: int, seeds: int, seed: int, family: str | None = None
+) -> dict:
+    """Our seat's rule (`family`, default the seat's own) searched over the run's training members
+    (written to OUT/search-SEAT.json as it goes, resumed from there; search-SEAT-FAMILY.json for a
+    family other than the seat's own), then measured on its test split (OUT/measured-SEAT....json)."""
+    family = family or RULE_FAMILIES[ours]
+    stem = ours if family == RULE_FAMILIES[ours] else f"{ours}-{family}"
     groups = json.loads((run / "run-groups.json").read_text())[other(ours)]["groups"]
-    plan = plan_of(RULE_FAMILIES[ours], groups, trials, seeds, seed)
+    plan = plan_of(family, groups, trials, seeds, seed)
     out.mkdir(parents=True, exist_ok=True)
-    record = tune(plan, scorer(ours, plan.partners, seeds), out / f"search-{ours}.json")
+    record = tune(plan, scorer(ours, plan.partners, seeds), out / f"search-{stem}.json")
     measured = measure(ours, run, best(record), seeds)
     result = {"seat": ours, "trials": len(record["trials"]), "best": best(record), "measured": measured}
     result["curves"] = {s: curve(record, s) for s in record["studies"]}
-    write_json(out / f"measured-{ours}.json", result)
+    write_json(out / f"measured-{stem}.json", result)
     return result
 
 
@@ -117,9 +130,10 @@ def markdown(result: dict) -> str:
     """The seat's search as tables: each study's best setting with its value on the training
     partners, and every teammate on the test split against the references."""
     measured, refs = result["measured"], list(result["measured"]["references"])
+    family = result["best"][WHOLE]["name"].partition("(")[0]
     n = measured["partners"]
     lines = [
-        f"## Our {result['seat']} seat's rule tuned by search ({result['trials']} settings)",
+        f"## Our {result['seat']} seat's rule tuned by search ({family}, {result['trials']} settings)",
         "",
         "| study | best setting | kills/min, training partners |",
         "| --- | --- | --- |",

@@ -37,3 +37,17 @@ def test_a_teammate_is_compared_with_the_partner_and_the_game_as_the_unit():
     assert first["percent"] == pytest.approx(100 * 0.5 / ref.mean(), abs=1.0) and second["percent"] < 0
     assert first["p_games"] <= first["p_partners"] < 0.01
     assert second["p_partners"] > 0.99
+
+
+def test_the_searchable_families_are_each_seats_rules_with_their_settings():
+    """Our seat's own rule first (the growth's), then the seat's other rules with a search space;
+    every space's settings are settings of its rule."""
+    import inspect
+
+    from services.agent.scripted import SCRIPTED
+    from services.growth.search import SPACES
+    from services.growth.searched import families
+
+    assert families("bait") == ["circle", "orbit"] and families("shooter") == ["mirror"]
+    for family, space in SPACES.items():
+        assert set(space) <= set(inspect.signature(SCRIPTED[family]).parameters), family

@@ -19,6 +19,7 @@ import numpy as np
 from services.agent.scripted import SCRIPTED
 from services.evaluation import held_out
 from services.evaluation.evaluate import play_teams
+from services.evaluation.results import percent, percent_text
 from services.evaluation.team import paired_tests
 from services.growth.search import SPACES, WHOLE, best, curve, plan_of, scorer, tune
 from services.population.families import RULE_FAMILIES
@@ -110,15 +111,17 @@ def _compared(row: np.ndarray, refs: list[np.ndarray]) -> dict:
     """A teammate's (partners, seeds) kills/min on one part: its mean, and against each reference
     the difference in kills/min and %, and the one-sided p that it is better, with the partner as
     the unit and with the game."""
-    out: dict = {"kills": round(float(row.mean()), 4), "against": []}
+    mean = float(row.mean())
+    out: dict = {"kills": round(mean, 4), "against": []}
     for ref in refs:
         base = float(ref.mean())
+        share = percent(mean - base, base)  # None: not defined, where the reference scores 0
         by_partner = paired_tests(row.mean(axis=1) - ref.mean(axis=1))
         by_game = paired_tests((row - ref).ravel())
         out["against"].append(
             {
-                "difference": round(float(row.mean()) - base, 4),
-                "percent": round(100 * (float(row.mean()) - base) / base, 1) if base > 0 else 0.0,
+                "difference": round(mean - base, 4),
+                "percent": None if share is None else round(share, 1),
                 "p_partners": round(by_partner["p_superior"], 4),
                 "p_games": round(by_game["p_superior"], 4),
             }
@@ -157,5 +160,5 @@ def markdown(result: dict) -> str:
 
 
 def _cell(compared: dict) -> str:
-    against = " / ".join(f"{a['percent']:+.1f} %" for a in compared["against"])
+    against = " / ".join(percent_text(a["percent"]) for a in compared["against"])
     return f"{compared['kills']:.2f} ({against})"

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from services.agent.library import NAMED
-from services.growth.searched import _compared, check_run, references
+from services.growth.searched import _cell, _compared, check_run, references
 from shared.errors import UsageError
 
 
@@ -37,6 +37,12 @@ def test_a_teammate_is_compared_with_the_partner_and_the_game_as_the_unit():
     assert first["percent"] == pytest.approx(100 * 0.5 / ref.mean(), abs=1.0) and second["percent"] < 0
     assert first["p_games"] <= first["p_partners"] < 0.01
     assert second["p_partners"] > 0.99
+
+
+def test_a_reference_that_scores_nothing_leaves_the_percent_not_defined():
+    """As every summary of the project says it (results.percent), never 0 %."""
+    compared = _compared(np.ones((3, 2)), [np.zeros((3, 2))])
+    assert compared["against"][0]["percent"] is None and "not defined" in _cell(compared)
 
 
 def test_the_searchable_families_are_each_seats_rules_with_their_settings():

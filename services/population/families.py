@@ -32,7 +32,6 @@ from services.agent.library import FEATURES
 from services.agent.networks import HEADS
 from services.population.human_like import parse_skill
 from shared import config
-from shared.errors import UsageError
 from shared.game import ROLES
 
 SPEC = Path(__file__).parent / "population.toml"
@@ -263,12 +262,6 @@ class SeatTable:
     response: ResponseTable
 
     def seat(self, role: str) -> Seat:
-        if self.rule.family != RULE_FAMILIES[role]:
-            raise UsageError(
-                "--population",
-                f"{role}.rule.family = {self.rule.family!r}",
-                f"the {role}'s rule is {RULE_FAMILIES[role]!r}",
-            )
         events = self.events
         return Seat(
             role=role,
@@ -304,7 +297,7 @@ class Groups:
     regret: float
 
     def __post_init__(self) -> None:
-        _bounded(self, "group")
+        _bounded(self.most, "regret", self.regret, "group")
 
 
 @dataclass(frozen=True)
@@ -315,11 +308,10 @@ class Selection:
     gain: float
 
     def __post_init__(self) -> None:
-        _bounded(self, "member")
+        _bounded(self.most, "gain", self.gain, "member")
 
 
-def _bounded(table: Groups | Selection, counted: str) -> None:
-    most, (name, share) = table.most, list(dataclasses.asdict(table).items())[1]
+def _bounded(most: int, name: str, share: float, counted: str) -> None:
     if most < 1 or share < 0:
         raise ValueError(f"most = {most}, {name} = {share}: at least 1 {counted}, a {name} of 0 or more")
 
@@ -356,6 +348,12 @@ class SpecFile:
             raise ValueError(f"games = {self.games}: an even number of at least 2 (two halves)")
         for skill in self.skills:
             parse_skill(skill)
+        for role in ROLES:  # said with the file, as every other key (shared.config.read)
+            family = getattr(self, role).rule.family
+            if family != RULE_FAMILIES[role]:
+                raise ValueError(
+                    f"{role}.rule.family = {family!r}: the {role}'s rule is {RULE_FAMILIES[role]!r}"
+                )
 
 
 def _heads(learned: tuple[str, ...]) -> None:

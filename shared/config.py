@@ -49,8 +49,8 @@ def load(path: str | Path, option: str) -> dict:
 
 def build(kind: Any, table: object, where: str = "") -> Any:
     """A `kind` (a dataclass, or a type with a `read` classmethod that takes the table's keys) from
-    a TOML table: nested tables build their own dataclasses, lists become tuples. `where` names the
-    table in messages (`crowd.`, `variants[2].`)."""
+    a TOML or JSON file's table: nested tables build their own dataclasses, lists become tuples.
+    `where` names the table in messages (`crowd.`, `variants[2].`)."""
     make = getattr(kind, "read", kind)
     if not isinstance(table, dict):
         raise ValueError(f"{where.rstrip('.') or 'the file'}: a table expected, got {table!r}")

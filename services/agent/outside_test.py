@@ -15,7 +15,7 @@ pytest.importorskip("stable_baselines3", reason="the `train` extra is not instal
 import torch as th  # noqa: E402
 from stable_baselines3 import PPO  # noqa: E402
 
-from services.agent import library, outside
+from services.agent import envs, library, outside
 from services.agent.networks import FLOOR
 from services.agent.player import Player
 from services.agent.seats import policy_for
@@ -33,7 +33,7 @@ from shared.messages import decode_any
 @pytest.fixture(scope="module")
 def model_zip(tmp_path_factory):
     """The docs' worked example, tiny: a bait trained against S5 for a few hundred steps."""
-    env = gymnasium.make("tsf/Role-v0", role="bait", partner="S5", config=GameConfig(frames=100))
+    env = gymnasium.make(envs.ENV_ID, role="bait", partner="S5", config=GameConfig(frames=100))
     model = PPO("MlpPolicy", env, n_steps=64, batch_size=32, n_epochs=1, seed=0, device="cpu")
     model.learn(total_timesteps=128)
     path = tmp_path_factory.mktemp("model") / "my_bait.zip"

@@ -32,7 +32,7 @@ from services.agent import library
 from services.growth import choice
 from services.growth.choice import Grid
 from services.growth.crossplay import kills_of, pair_jobs
-from services.growth.groups import labels
+from services.growth.groups import grouped
 from services.growth.library import GROUPS, recipe_fields
 from services.growth.responses import RESPONSE, response_partners
 from services.growth.training import train_levels
@@ -157,7 +157,7 @@ def run_conditioned(grow: Workspace, ours: str, steps: int | None = None, separa
         record["kills"] = kills_of(values, len(held.partners), len(teammates), len(seeds))
     played = Grid(held.partners, tuple(teammates), np.array(record["kills"]))
     grouping = Grid.of(json.loads((out / "grouping.json").read_text())[partner_role])
-    placed = choice.place(held, grouping, labels(grouping, groups))
+    placed = choice.place(held, *grouped(grouping, groups))
     grown = json.loads((grow.library_dir / GROUPS).read_text())["seats"][ours]
     switching = [grown["names"][int(np.argmax(g["values"]))] for g in grown["groups"]]
     sides = grow.sides()

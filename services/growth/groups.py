@@ -1,5 +1,10 @@
 """Stage 3, the groups: each seat's training members grouped by what works with them
-(choice.groups, over the grouping cross-play), written to `groups.json`."""
+(choice.groups, over the grouping cross-play), written to `groups.json`.
+
+A member that scores under the spec's competence floor (`groups.floor`, kills/min) with every
+candidate is kept out of the groups and listed apart (`left_out`, with its best): no teammate
+serves it, and in the adapter its near-uniform likelihoods would only take posterior from the
+groups that matter (issue 57's audit: 16-25 %)."""
 
 from __future__ import annotations
 
@@ -14,28 +19,39 @@ from shared.files import write_json
 
 
 def groups(ws: Workspace, grouping: dict[str, Grid]) -> dict[str, dict]:
-    """Each seat's training members grouped by what works with them (choice.groups)."""
+    """Each seat's competent training members grouped by what works with them (choice.groups)."""
     done = ws.out / "groups.json"
     if not done.exists():
         record = {}
         for role, grid in grouping.items():
+            best = competence(grid)
+            kept = grid.only([p for p in grid.partners if best[p] >= ws.spec.groups["floor"]])
             label, tried = choice.groups(
-                grid, int(ws.spec.groups["most"]), ws.spec.groups["regret"], ws.spec.seed
+                kept, int(ws.spec.groups["most"]), ws.spec.groups["regret"], ws.spec.seed
             )
             members = [
-                [p for p, g in zip(grid.partners, label, strict=True) if g == j]
+                [p for p, g in zip(kept.partners, label, strict=True) if g == j]
                 for j in range(label.max() + 1)
             ]
-            record[role] = {"groups": members, "tried": tried}
-            ws.say(f"groups of {role}s: {len(members)} ({', '.join(str(len(m)) for m in members)} members)")
+            left = {p: v for p, v in best.items() if p not in kept.partners}
+            record[role] = {"groups": members, "tried": tried} | ({"left_out": left} if left else {})
+            ws.say(
+                f"groups of {role}s: {len(members)} ({', '.join(str(len(m)) for m in members)} members)"
+                + (f", {len(left)} left out (under {ws.spec.groups['floor']:g} kills/min)" if left else "")
+            )
         write_json(done, record)
     return json.loads(done.read_text())
 
 
-def labels(grid: Grid, groups: list[list[str]]) -> np.ndarray:
-    """Each of `grid`'s partners' group, from the groups' member lists."""
-    label = np.zeros(len(grid.partners), np.int64)
-    for j, members in enumerate(groups):
-        for m in members:
-            label[grid.partners.index(m)] = j
-    return label
+def competence(grid: Grid) -> dict[str, float]:
+    """Each partner's best candidate's mean kills/min: what the best teammate on offer gets."""
+    means = grid.kills.mean(axis=2).max(axis=1)
+    return {p: round(float(v), 4) for p, v in zip(grid.partners, means, strict=True)}
+
+
+def grouped(grid: Grid, groups: list[list[str]]) -> tuple[Grid, np.ndarray]:
+    """`grid` of the grouped partners alone (those left out of every group dropped), and each
+    one's group, from the groups' member lists."""
+    group = {m: j for j, members in enumerate(groups) for m in members}
+    kept = grid.only([p for p in grid.partners if p in group])
+    return kept, np.array([group[p] for p in kept.partners], np.int64)

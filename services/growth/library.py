@@ -16,7 +16,7 @@ import sys
 from services.agent import library
 from services.growth import choice
 from services.growth.choice import Grid
-from services.growth.groups import labels
+from services.growth.groups import competence, grouped
 from services.growth.workspace import Workspace, is_library
 from services.table.plot import heatmap
 from services.table.sweep import cell_spec
@@ -117,10 +117,11 @@ def partner_groups(
     seats = {}
     for ours, steps in selection.items():
         partner_role = other(ours)
-        train = grouping[partner_role]
-        label = labels(train, groups[partner_role]["groups"])
+        train, label = grouped(grouping[partner_role], groups[partner_role]["groups"])
         held = held_out[partner_role]
-        validation = held.only([p for p in held.partners if sides[p] == "validation"])
+        floor = ws.spec.groups["floor"]
+        best = competence(held.only([p for p in held.partners if sides[p] == "validation"]))
+        validation = held.only([p for p, v in best.items() if v >= floor])
         played = [p for p in validation.partners if not p.startswith("human(")]
         teammates = steps[-1]["library"]
         seats[ours] = {

@@ -12,6 +12,7 @@ import json
 from dataclasses import asdict
 
 from services.agent import library
+from services.agent.library import NAMED
 from services.growth.workspace import Workspace, train_job
 from services.population.families import EventsRun, Member, Spec
 from shared.files import write_json
@@ -43,18 +44,41 @@ def _train_events(ws: Workspace) -> None:
     library.record(
         ws.population_dir, {k: events_recipe(ws.spec, run) for run in runs for k in run.level_keys()}
     )
-    jobs = [
-        train_job(
-            run.key,
-            ws.staging,
-            {k: int(run.steps * level) for k, level in zip(run.level_keys(), run.levels, strict=True)},
-            ws.runs,
+    trained = library.manifest(ws.population_dir) if (ws.population_dir / "manifest.json").exists() else {}
+    runs = [run for run in runs if not set(run.level_keys()) <= set(trained)]
+    shipped = [run for run in runs if _shipped(ws, run)]
+    if shipped:  # the same recipes, trained to the same steps: the same members
+        library.adopt_members(
+            NAMED["population"], ws.population_dir, [k for r in shipped for k in r.level_keys()]
         )
-        for run in runs
-    ]
+        ws.say(f"population: {len(shipped)} events runs as the shipped population trained them")
+    runs = [run for run in runs if run not in shipped]
+    if not runs:
+        return
+    jobs = [train_job(run.key, ws.staging, _levels(run), ws.runs) for run in runs]
     ws.say(f"population: training {len(runs)} events runs to {len(runs[0].levels)} levels each")
     ws.jobs("population", jobs, roots=[])
     library.adopt_members(ws.staging, ws.population_dir, [k for run in runs for k in run.level_keys()])
+
+
+def _levels(run: EventsRun) -> dict[str, int]:
+    """Each level's key and the steps it is trained to."""
+    return {k: int(run.steps * level) for k, level in zip(run.level_keys(), run.levels, strict=True)}
+
+
+def _shipped(ws: Workspace, run: EventsRun) -> bool:
+    """Whether the shipped population (library.NAMED["population"]) holds every level of `run` under
+    the recipe this spec gives it, trained to the steps it asks (`tsf train KEY --steps N`, as its
+    manifest records the command): a growth of a new spec over the same events runs trains nothing."""
+    root = NAMED["population"]
+    ours, theirs, made = library.registry(ws.population_dir), library.registry(root), library.manifest(root)
+    return all(
+        key in theirs
+        and key in made
+        and library.recipe_hash(theirs[key]) == library.recipe_hash(ours[key])
+        and f" --steps {steps} " in f"{made[key].get('command', '')} "
+        for key, steps in _levels(run).items()
+    )
 
 
 def events_recipe(spec: Spec, run: EventsRun) -> dict:

@@ -13,8 +13,8 @@ play it (the spec's seeds, as every column of the held-out grids) and the select
 the grid, the study's policies, the responses and these.
 
 SPACES also holds the bait seat's `orbit` (a rule that holds its radius and places itself by the
-shooter): `tsf library search --seat bait --family orbit` searches it; the growth searches each
-seat's own rule (RULE_FAMILIES).
+shooter): a spec's `search.families` names the families of each of our seats the growth searches
+(each seat's own rule, RULE_FAMILIES, where it names none); `tsf library search --family` alike.
 
 Resumable and deterministic: the trials are written after each round (`search-SEAT.json`), and a
 round's studies are rebuilt from the written trials with a sampler seeded by (spec seed, round,
@@ -193,19 +193,26 @@ def found(record: dict) -> list[str]:
     return list(dict.fromkeys(b["name"] for b in best(record).values()))
 
 
+def stem(ours: str, family: str) -> str:
+    """A search's file stem: our seat, and the family where it is not the seat's own rule
+    (`search-bait.json`, `search-bait-orbit.json`)."""
+    return ours if family == RULE_FAMILIES[ours] else f"{ours}-{family}"
+
+
 def search(ws: Workspace, grouped: dict, held_out: dict[str, Grid]) -> dict[str, Grid]:
-    """The held-out grids with a column for each setting the search found (the spec's `search`;
-    without one, the grids as they are)."""
+    """The held-out grids with a column for each setting the search found (the spec's `search`,
+    each of our seat's families it names; without one, the grids as they are)."""
     if ws.spec.search is None:
         return held_out
-    trials, seeds = int(ws.spec.search["trials"]), int(ws.spec.search["seeds"])
-    settings = {}
+    trials, seeds = ws.spec.search.trials, ws.spec.search.seeds
+    settings: dict[str, list[str]] = {}
     with ws.playing([ws.population_dir, ws.responses_dir]):
         for role in ROLES:
-            ours = other(role)
-            plan = plan_of(RULE_FAMILIES[ours], grouped[role]["groups"], trials, seeds, ws.spec.seed)
-            record = tune(plan, scorer(ours, plan.partners, seeds), ws.out / f"search-{ours}.json", ws.say)
-            settings[role] = found(record)
+            ours, settings[role] = other(role), []
+            for family in ws.spec.search.of(ours):
+                plan = plan_of(family, grouped[role]["groups"], trials, seeds, ws.spec.seed)
+                path = ws.out / f"search-{stem(ours, family)}.json"
+                settings[role] += found(tune(plan, scorer(ours, plan.partners, seeds), path, ws.say))
     partners = {r: list(g.partners) for r, g in held_out.items()}
     extra = crossplay(ws, "search-held-out", partners, settings)
     return {r: held_out[r].beside(extra[r]) for r in ROLES}

@@ -21,7 +21,7 @@ from services.evaluation import held_out
 from services.evaluation.evaluate import play_teams
 from services.evaluation.results import percent, percent_text
 from services.evaluation.team import paired_tests
-from services.growth.search import SPACES, WHOLE, best, curve, plan_of, scorer, tune
+from services.growth.search import SPACES, WHOLE, best, curve, plan_of, scorer, stem, tune
 from services.population.families import RULE_FAMILIES
 from services.population.seat import seats_of
 from shared.errors import UsageError
@@ -66,15 +66,15 @@ def search_run(
     (written to OUT/search-SEAT.json as it goes, resumed from there; search-SEAT-FAMILY.json for a
     family other than the seat's own), then measured on its test split (OUT/measured-SEAT....json)."""
     family = family or RULE_FAMILIES[ours]
-    stem = ours if family == RULE_FAMILIES[ours] else f"{ours}-{family}"
+    name = stem(ours, family)
     groups = json.loads((run / "run-groups.json").read_text())[other(ours)]["groups"]
     plan = plan_of(family, groups, trials, seeds, seed)
     out.mkdir(parents=True, exist_ok=True)
-    record = tune(plan, scorer(ours, plan.partners, seeds), out / f"search-{stem}.json")
+    record = tune(plan, scorer(ours, plan.partners, seeds), out / f"search-{name}.json")
     measured = measure(ours, run, best(record), seeds)
     result = {"seat": ours, "trials": len(record["trials"]), "best": best(record), "measured": measured}
     result["curves"] = {s: curve(record, s) for s in record["studies"]}
-    write_json(out / f"measured-{stem}.json", result)
+    write_json(out / f"measured-{name}.json", result)
     return result
 
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from services.growth import choice
 from services.growth.choice import Grid
-from services.growth.groups import labels
+from services.growth.groups import grouped
 from services.growth.library import MEMBERS
 from services.growth.workspace import Workspace
 from shared.files import write_json
@@ -26,7 +26,8 @@ def summary(
     sides = ws.sides()
     record: dict = {"population": ws.spec.text_hash, "members": names, "seats": {}}
     for ours, steps in selection.items():
-        grid, train = held_out[other(ours)], grouping[other(ours)]
+        grid = held_out[other(ours)]
+        train, label = grouped(grouping[other(ours)], groups[other(ours)]["groups"])
         chosen = steps[-1]["library"]
         study = [c for c in grid.candidates if c in ws.spec.seats[ours].library]
         test = [p for p in grid.partners if sides[p] == "test"]
@@ -35,7 +36,6 @@ def summary(
         figures = {}
         for label, rows in (("members", members), ("stand-ins", people), ("both", test)):
             figures[label] = figures_on(grid.only(rows), chosen, study)
-        label = labels(train, groups[other(ours)]["groups"])
         assigned = choice.place(grid, train, label)
         record["seats"][ours] = {
             "curve": steps,

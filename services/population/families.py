@@ -30,6 +30,7 @@ import numpy as np
 
 from services.agent.library import FEATURES
 from services.agent.networks import HEADS
+from services.agent.scripted import SCRIPTED
 from services.population.human_like import parse_skill
 from shared import config
 from shared.game import ROLES
@@ -109,7 +110,7 @@ class Spec:
     selection: dict[str, float]
     seats: dict[str, Seat]
     text_hash: str
-    search: dict[str, int] | None = None  # the growth's search stage (services/growth/search.py)
+    search: Search | None = None  # the growth's search stage (services/growth/search.py)
 
     def events_runs(self, role: str) -> list[EventsRun]:
         """The seat's events runs, each with its weights drawn from the spec's seed."""
@@ -180,7 +181,7 @@ def read(path: Path = SPEC) -> Spec:
         selection=dataclasses.asdict(raw.selection),
         seats={role: getattr(raw, role).seat(role) for role in ROLES},
         text_hash=hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16],
-        search=dataclasses.asdict(raw.search) if raw.search else None,
+        search=raw.search,
     )
     return spec
 
@@ -291,13 +292,17 @@ class Split:
 
 @dataclass(frozen=True)
 class Groups:
-    """The partners' groups: at most `most`, the fewest within `regret` of the best."""
+    """The partners' groups: at most `most`, the fewest within `regret` of the best; a member whose
+    best candidate scores under `floor` kills/min is kept out of them (services/growth/groups.py)."""
 
     most: int
     regret: float
+    floor: float = 0.0
 
     def __post_init__(self) -> None:
         _bounded(self.most, "regret", self.regret, "group")
+        if self.floor < 0:
+            raise ValueError(f"floor = {self.floor}: kills/min, 0 or more")
 
 
 @dataclass(frozen=True)
@@ -323,10 +328,24 @@ class Search:
 
     trials: int
     seeds: int = 8
+    # Our seat's rule families searched, each its own search (`bait = ["circle", "orbit"]`); a seat
+    # not named searches its own rule (RULE_FAMILIES) alone.
+    families: dict[str, tuple[str, ...]] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.trials < 1 or self.seeds < 1:
             raise ValueError(f"trials = {self.trials}, seeds = {self.seeds}: at least 1 of each")
+        for seat, names in self.families.items():
+            rules = [k for k, policy in SCRIPTED.items() if policy.role == seat]
+            if seat not in ROLES or not names or not set(names) <= set(rules):
+                raise ValueError(
+                    f"families.{seat} = {list(names)}: a seat ({', '.join(ROLES)}) and one or more of "
+                    f"its rules ({', '.join(rules) or 'none'})"
+                )
+
+    def of(self, seat: str) -> tuple[str, ...]:
+        """The rule families searched for our seat `seat`."""
+        return self.families.get(seat, (RULE_FAMILIES[seat],))
 
 
 @dataclass(frozen=True)

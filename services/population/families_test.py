@@ -60,6 +60,11 @@ def test_stand_ins_at_each_skill():
         (('family = "circle"', 'family = "mirror"'), "the bait's rule is 'circle'"),
         (("seed = 2026", "seed = [2026"), "cannot be read as TOML"),
         (("seed = 2026", "search = { trials = 0 }\nseed = 2026"), "search: trials = 0, seeds = 8"),
+        (
+            ("seed = 2026", 'search = { trials = 9, families = { bait = ["mirror"] } }\nseed = 2026'),
+            "families.bait = ['mirror']: a seat (bait, shooter) and one or more of its rules (circle, orbit)",
+        ),
+        (("regret = 0.05", "regret = 0.05, floor = -1"), "floor = -1: kills/min, 0 or more"),
     ],
 )
 def test_a_wrong_spec_is_one_line(tmp_path, change, says):
@@ -75,7 +80,21 @@ def test_a_spec_grows_a_search_only_where_it_asks_for_one(tmp_path):
     assert read().search is None
     path = tmp_path / "population.toml"
     path.write_text("search = { trials = 100 }\n" + SPEC.read_text())
-    assert read(path).search == {"trials": 100, "seeds": 8}
+    search = read(path).search
+    assert (search.trials, search.seeds) == (100, 8)
+    assert search.of("bait") == ("circle",) and search.of("shooter") == ("mirror",)  # each seat's own rule
+
+
+def test_the_second_population_searches_the_orbit_too_and_grows_from_the_first_ones_members():
+    """population-2.toml: the first version's members (the same events recipes and split) with 8
+    games a pair, a competence floor and the search, the bait seat's orbit as well as its circle."""
+    first, second = read(), read(SPEC.with_name("population-2.toml"))
+    assert second.search.of("bait") == ("circle", "orbit") and second.search.seeds >= 8
+    assert second.games >= 8 and second.groups["floor"] == 1.0
+    for role in ("bait", "shooter"):
+        assert first.members(role) == second.members(role)
+        assert first.split_of(first.members(role)) == second.split_of(second.members(role))
+        assert first.events_runs(role) == second.events_runs(role)
 
 
 def test_a_seat_cannot_end_without_members(tmp_path):

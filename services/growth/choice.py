@@ -199,3 +199,58 @@ def _training_means(grouping: Grid, rows: np.ndarray, teammates: list[str]) -> n
     return np.array(
         [means[grouping.candidates.index(t)] if t in grouping.candidates else 0.0 for t in teammates]
     )
+
+
+def identified(confusion: np.ndarray) -> float:
+    """The share of frames the filter estimates the partner's own group: (true, estimated) counts."""
+    total = confusion.sum()
+    return float(np.trace(confusion) / total) if total > 0 else 0.0
+
+
+def expected(confusion: np.ndarray, values: np.ndarray, weight: np.ndarray) -> float:
+    """The mean kills/min an adapter gets that, on each estimate, plays the teammate best for the
+    groups that estimate stands for (as Payoff.trust weighs them): each group weighted by `weight`
+    (its partners), scored by how often it is estimated as each group."""
+    seen = confusion.sum(axis=0, keepdims=True)
+    trust = np.where(seen > 0, confusion / np.where(seen > 0, seen, 1), np.eye(len(confusion)))
+    played = (trust.T @ values).argmax(axis=1)  # each estimate's teammate
+    share = confusion / np.maximum(confusion.sum(axis=1, keepdims=True), 1)
+    gets = (share * values[:, played]).sum(axis=1)
+    return float(weight @ gets / weight.sum())
+
+
+def merge(
+    confusion: np.ndarray, values: np.ndarray, weight: np.ndarray, target: float, regret: float
+) -> list[list[int]]:
+    """Groups the calibrated filter cannot tell apart, merged: while the share identified is under
+    `target`, the pair most often taken for each other is merged, unless that costs more than
+    `regret` (relative) of what the adapter expects over the unmerged groups (`expected`). The
+    partition, as lists of the original groups (each alone where nothing is merged)."""
+    parts = [[j] for j in range(len(confusion))]
+    start = expected(confusion, values, weight)
+    while len(parts) > 1 and identified(confusion) < target:
+        share = confusion / np.maximum(confusion.sum(axis=1, keepdims=True), 1)
+        mixed = share + share.T
+        np.fill_diagonal(mixed, -1.0)
+        i, j = sorted(np.unravel_index(int(mixed.argmax()), mixed.shape))
+        joined = _joined(confusion, values, weight, i, j)
+        if expected(*joined) < start * (1 - regret):
+            break
+        confusion, values, weight = joined
+        parts[i] += parts.pop(j)
+    return parts
+
+
+def _joined(
+    confusion: np.ndarray, values: np.ndarray, weight: np.ndarray, i: int, j: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Groups i and j as one (i's place): their counts added, their rows averaged by weight."""
+    keep = [k for k in range(len(confusion)) if k != j]
+    confusion = confusion.copy()
+    confusion[i] += confusion[j]
+    confusion[:, i] += confusion[:, j]
+    values = values.copy()
+    values[i] = (weight[i] * values[i] + weight[j] * values[j]) / max(weight[i] + weight[j], 1e-12)
+    weight = weight.copy()
+    weight[i] += weight[j]
+    return confusion[np.ix_(keep, keep)], values[keep], weight[keep]

@@ -85,3 +85,21 @@ def test_partner_groups_place_new_partners_by_what_works_and_average_the_validat
     assert groups[0]["members"] == ["p0", "p1", "v0"] and groups[1]["members"] == ["p2", "p3", "v1"]
     assert groups[0]["values"] == [2.0, 0.0] and groups[0]["partners"] == 1
     assert groups[1]["values"] == [0.5, 3.0] and groups[1]["partners"] == 2  # v1 and its stand-in
+
+
+def test_groups_the_filter_confuses_are_merged_while_merging_costs_little():
+    """G2 and G3 are taken for each other half the time and want the same teammate: merged. G1 is
+    told apart and wants another; merging it would cost far more than the regret bound."""
+    from services.growth.choice import expected, identified, merge
+
+    confusion = np.array([[90.0, 5.0, 5.0], [5.0, 50.0, 45.0], [5.0, 45.0, 50.0]])
+    values = np.array([[8.0, 1.0], [1.0, 6.0], [1.5, 5.0]])
+    weight = np.array([10.0, 10.0, 10.0])
+    assert identified(confusion) < 0.85
+    assert merge(confusion, values, weight, 0.85, 0.05) == [[0], [1, 2]]
+    assert merge(confusion, values, weight, 0.5, 0.05) == [[0], [1], [2]]  # identified enough already
+    assert 5.0 < expected(confusion, values, weight) < 7.0
+    apart = np.array([[80.0, 20.0, 0.0], [20.0, 80.0, 0.0], [0.0, 0.0, 100.0]])
+    sharp = np.array([[8.0, 0.0], [0.0, 6.0], [1.5, 5.0]])
+    assert identified(apart) < 0.9  # but G1 and G2 want other teammates, and are mostly told apart
+    assert merge(apart, sharp, weight, 0.9, 0.05) == [[0], [1], [2]]

@@ -13,11 +13,14 @@ import shutil
 import subprocess
 import sys
 
+import numpy as np
+
 from services.agent import library
 from services.growth import choice
 from services.growth.choice import Grid
 from services.growth.groups import competence, grouped
 from services.growth.workspace import Workspace, is_library
+from services.population.adaptive import AdapterConfig
 from services.table.plot import heatmap
 from services.table.sweep import cell_spec
 from services.table.table import CHUNK, Table, assemble, jobs
@@ -26,6 +29,7 @@ from shared.game import other
 
 PREFIX = {"bait": "GB", "shooter": "GS"}  # the grown library's keys
 GROUPS = "groups.json"  # the partner groups the adaptive agent identifies, in the grown library
+MERGED = "merged.json"  # the run's record of the groups merged because the filter confused them
 MEMBERS = "members.json"  # the grown library's keys -> the names of the members they stand for
 # A recipe's fields that a grown library's entry keeps, where they are set.
 FIELDS = (
@@ -112,18 +116,61 @@ def partner_groups(
     """groups.json: per seat of ours, the partner groups the adaptive agent identifies (their
     training and validation members) and the mean kills/min of each group with each member of
     ours (services/adapter/core.py reads it as a Payoff), then their out-of-library thresholds
-    (`tsf calibrate-adapter --partners groups`)."""
-    sides, names = ws.sides(), json.loads((ws.library_dir / MEMBERS).read_text())
-    seats = {}
+    and confusion (`tsf calibrate-adapter --partners groups`). Where the spec asks the groups to be
+    identified (`groups.identify`), the groups the calibrated filter confuses are merged
+    (choice.merge, at the default window), written again and calibrated again; MERGED records it."""
+    views = _views(ws, selection, held_out, groups, grouping)
+    _write_groups(ws, views, {ours: None for ours in views})
+    target = ws.spec.groups["identify"]
+    if not target:
+        return
+    seats = json.loads((ws.library_dir / GROUPS).read_text())["seats"]
+    parts, record = {}, {}
+    for ours, seat in seats.items():
+        confusion = np.array(seat["confusion"][str(AdapterConfig.window)], float)
+        values = np.array([g["values"] for g in seat["groups"]], float)
+        weight = np.array([g["partners"] for g in seat["groups"]], float)
+        parts[ours] = choice.merge(confusion, values, weight, target, ws.spec.groups["regret"])
+        record[ours] = {
+            "window": AdapterConfig.window,
+            "groups": [[seat["groups"][j]["name"] for j in part] for part in parts[ours]],
+            "identified": round(choice.identified(confusion), 4),
+            "expected": round(choice.expected(confusion, values, weight), 4),
+        }
+    if any(len(parts[s]) < len(seats[s]["groups"]) for s in seats):
+        _write_groups(ws, views, parts)
+        merged = json.loads((ws.library_dir / GROUPS).read_text())["seats"]
+        for ours, seat in merged.items():
+            confusion = np.array(seat["confusion"][str(AdapterConfig.window)], float)
+            record[ours]["identified after"] = round(choice.identified(confusion), 4)
+            ws.say(f"groups of {other(ours)}s merged for our {ours}: {record[ours]['groups']}")
+    write_json(ws.out / MERGED, record)
+
+
+def _views(
+    ws: Workspace, selection: dict, held_out: dict[str, Grid], groups: dict, grouping: dict[str, Grid]
+) -> dict:
+    """Per seat of ours, what its groups are made from: the grouped training members and their
+    groups, the competent validation partners, their members, our selected teammates."""
+    sides, views = ws.sides(), {}
     for ours, steps in selection.items():
         partner_role = other(ours)
         train, label = grouped(grouping[partner_role], groups[partner_role]["groups"])
         held = held_out[partner_role]
-        floor = ws.spec.groups["floor"]
         best = competence(held.only([p for p in held.partners if sides[p] == "validation"]))
-        validation = held.only([p for p, v in best.items() if v >= floor])
+        validation = held.only([p for p, v in best.items() if v >= ws.spec.groups["floor"]])
         played = [p for p in validation.partners if not p.startswith("human(")]
-        teammates = steps[-1]["library"]
+        views[ours] = (train, label, validation, played, steps[-1]["library"])
+    return views
+
+
+def _write_groups(ws: Workspace, views: dict, parts: dict[str, list[list[int]] | None]) -> None:
+    """groups.json from `views`, each seat's groups joined as `parts` says (None: as grouped), then
+    calibrated."""
+    names, seats = json.loads((ws.library_dir / MEMBERS).read_text()), {}
+    for ours, (train, label, validation, played, teammates) in views.items():
+        if parts[ours] is not None:
+            label = np.array([next(k for k, p in enumerate(parts[ours]) if j in p) for j in label], np.int64)
         seats[ours] = {
             "teammates": [key_of(names, t, ours) for t in teammates],
             "names": teammates,

@@ -293,16 +293,21 @@ class Split:
 @dataclass(frozen=True)
 class Groups:
     """The partners' groups: at most `most`, the fewest within `regret` of the best; a member whose
-    best candidate scores under `floor` kills/min is kept out of them (services/growth/groups.py)."""
+    best candidate scores under `floor` kills/min is kept out of them (services/growth/groups.py);
+    groups the adapter's filter confuses are merged while it identifies under `identify` of the
+    frames and merging costs it at most `regret` (services/growth/library.py)."""
 
     most: int
     regret: float
     floor: float = 0.0
+    identify: float = 0.0  # merge the groups the calibrated filter confuses, up to this share identified
 
     def __post_init__(self) -> None:
         _bounded(self.most, "regret", self.regret, "group")
-        if self.floor < 0:
-            raise ValueError(f"floor = {self.floor}: kills/min, 0 or more")
+        if self.floor < 0 or not 0 <= self.identify <= 1:
+            raise ValueError(
+                f"floor = {self.floor}, identify = {self.identify}: kills/min, 0 or more; a share from 0 to 1"
+            )
 
 
 @dataclass(frozen=True)

@@ -53,5 +53,5 @@ def statics(role: str, run: Path = RUN) -> list[str]:
     policy under another key)."""
     study = library.keys(role)
     grown = json.loads((run / "members.json").read_text())
-    prefix = {"bait": "GB", "shooter": "GS"}[role]
-    return study + [key for key, name in grown.items() if key.startswith(prefix) and name not in study]
+    seat = library.registry(run)
+    return study + [key for key, name in grown.items() if seat[key].role == role and name not in study]

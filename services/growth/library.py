@@ -27,7 +27,6 @@ from services.table.table import CHUNK, Table, assemble, jobs
 from shared.files import write_json
 from shared.game import other
 
-PREFIX = {"bait": "GB", "shooter": "GS"}  # the grown library's keys
 GROUPS = "groups.json"  # the partner groups the adaptive agent identifies, in the grown library
 MERGED = "merged.json"  # the run's record of the groups merged because the filter confused them
 MEMBERS = "members.json"  # the grown library's keys -> the names of the members they stand for
@@ -71,7 +70,7 @@ def members(ws: Workspace, selection: dict) -> dict[str, str]:
         shutil.rmtree(ws.library_dir)
     for ours, steps in selection.items():
         for i, name in enumerate(steps[-1]["library"]):
-            key = f"{PREFIX[ours]}{i + 1}"
+            key = f"{ws.spec.keys[ours]}{i + 1}"
             names[key] = name
             source = study.get(name) or responses.get(name)
             if source is None:  # a rule with its settings
@@ -98,8 +97,8 @@ def tables(ws: Workspace) -> None:
     """The grown library's self-play table P and the adapter's calibration, measured with the
     grown library alone in use (what a table is bound to), and P's heatmap."""
     with ws.playing([ws.library_dir]):
-        baits = [k for k in library.keys("bait") if k.startswith(PREFIX["bait"])]
-        shooters = [k for k in library.keys("shooter") if k.startswith(PREFIX["shooter"])]
+        baits = [k for k in library.keys("bait") if k.startswith(ws.spec.keys["bait"])]
+        shooters = [k for k in library.keys("shooter") if k.startswith(ws.spec.keys["shooter"])]
         games = 16
         todo = jobs(baits, shooters, games, CHUNK)
         values = ws.jobs("table", [cell_spec(job) for job in todo], roots=[ws.library_dir])
@@ -172,7 +171,7 @@ def _write_groups(ws: Workspace, views: dict, parts: dict[str, list[list[int]] |
         if parts[ours] is not None:
             label = np.array([next(k for k, p in enumerate(parts[ours]) if j in p) for j in label], np.int64)
         seats[ours] = {
-            "teammates": [key_of(names, t, ours) for t in teammates],
+            "teammates": [key_of(names, t, ws.spec.keys[ours]) for t in teammates],
             "names": teammates,
             "groups": choice.partner_groups(train, label, validation, played, teammates),
         }
@@ -192,9 +191,10 @@ def _calibrate(ws: Workspace, name: str, options: list[str]) -> None:
     path.with_name(f"{name}.journal").unlink(missing_ok=True)
 
 
-def key_of(names: dict[str, str], name: str, role: str) -> str:
-    """The grown library's key of a selected member of `role`'s seat (members.json: key -> name)."""
-    return next(k for k, n in names.items() if n == name and k.startswith(PREFIX[role]))
+def key_of(names: dict[str, str], name: str, prefix: str) -> str:
+    """The grown library's key of a selected member of the seat whose keys begin with `prefix`
+    (members.json: key -> name)."""
+    return next(k for k, n in names.items() if n == name and k.startswith(prefix))
 
 
 def recipe_fields(recipe: library.Recipe) -> dict:

@@ -23,6 +23,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import itertools
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -40,6 +41,9 @@ FAMILIES = ("library", "rule", "events")
 SPLITS = ("train", "validation", "test")
 RULE_FAMILIES = {"bait": "circle", "shooter": "mirror"}  # the scripted rule of each seat
 EVENT_PREFIX = {"bait": "PB", "shooter": "PS"}  # keys of the events members: PB03b, PS10a
+# The grown library's keys by seat (GB1.., GS1..); a spec names others (`keys`), so that libraries
+# grown from different specs are used side by side (the tuned library's TB1.., TS1..).
+KEYS = {"bait": "GB", "shooter": "GS"}
 LEVELS = "abcdefgh"  # an events run's levels, in training order
 # The event weights' ranges (HSP draws each event's weight at random): kills always pay, deaths
 # always cost, and each shaping term is left out (weight 0) or drawn from its range, per frame or
@@ -111,6 +115,7 @@ class Spec:
     seats: dict[str, Seat]
     text_hash: str
     search: Search | None = None  # the growth's search stage (services/growth/search.py)
+    keys: dict[str, str] = dataclasses.field(default_factory=lambda: dict(KEYS))  # the grown library's
 
     def events_runs(self, role: str) -> list[EventsRun]:
         """The seat's events runs, each with its weights drawn from the spec's seed."""
@@ -182,6 +187,7 @@ def read(path: Path = SPEC) -> Spec:
         seats={role: getattr(raw, role).seat(role) for role in ROLES},
         text_hash=hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16],
         search=raw.search,
+        keys=KEYS | raw.keys,
     )
     return spec
 
@@ -366,8 +372,18 @@ class SpecFile:
     games: int = 4
     skills: tuple[str, ...] = ()
     search: Search | None = None
+    keys: dict[str, str] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        for seat, prefix in self.keys.items():
+            taken = set(EVENT_PREFIX.values()) | {"B", "S", "RB", "RS", "CB", "CS"}
+            if seat not in ROLES or not re.fullmatch(r"[A-Z]{2}", prefix) or prefix in taken:
+                raise ValueError(
+                    f"keys.{seat} = {prefix!r}: a seat ({', '.join(ROLES)}) and two capital letters, "
+                    f"not one of {', '.join(sorted(taken))}"
+                )
+        if len(set((KEYS | self.keys).values())) < len(ROLES):
+            raise ValueError(f"keys = {KEYS | self.keys}: a prefix of its own for each seat")
         if self.games < 2 or self.games % 2:
             raise ValueError(f"games = {self.games}: an even number of at least 2 (two halves)")
         for skill in self.skills:

@@ -64,6 +64,8 @@ def test_stand_ins_at_each_skill():
             ("seed = 2026", 'search = { trials = 9, families = { bait = ["mirror"] } }\nseed = 2026'),
             "families.bait = ['mirror']: a seat (bait, shooter) and one or more of its rules (circle, orbit)",
         ),
+        (("seed = 2026", 'keys = { bait = "PB" }\nseed = 2026'), "keys.bait = 'PB': a seat (bait, shooter)"),
+        (("seed = 2026", 'keys = { bait = "GS" }\nseed = 2026'), "a prefix of its own for each seat"),
         (("regret = 0.05", "regret = 0.05, floor = -1"), "floor = -1, identify = 0.0: kills/min, 0 or more"),
     ],
 )
@@ -91,6 +93,7 @@ def test_the_second_population_searches_the_orbit_too_and_grows_from_the_first_o
     first, second = read(), read(SPEC.with_name("population-2.toml"))
     assert second.search.of("bait") == ("circle", "orbit") and second.search.seeds >= 8
     assert second.games >= 8 and second.groups["floor"] == 1.0 and second.groups["identify"] == 0.85
+    assert first.keys == {"bait": "GB", "shooter": "GS"} and second.keys == {"bait": "TB", "shooter": "TS"}
     for role in ("bait", "shooter"):
         assert first.members(role) == second.members(role)
         assert first.split_of(first.members(role)) == second.split_of(second.members(role))

@@ -45,3 +45,14 @@ def test_grouped_keeps_the_grids_order_and_drops_who_is_in_no_group():
     grid, label = grouped(_grid(), [["p3", "p4"], ["p2", "p1"]])
     assert grid.partners == ("p1", "p2", "p3", "p4") and label.tolist() == [1, 1, 0, 0]
     assert competence(grid) == {"p1": 6.0, "p2": 5.0, "p3": 7.0, "p4": 6.0}
+
+
+def test_the_merged_groups_relabel_the_grouped_members_as_the_library_names_them(tmp_path):
+    from services.growth.library import MERGED, merged_label
+
+    ws = _workspace(tmp_path, 1.0)
+    ws.out.mkdir()
+    label = np.array([0, 1, 2, 3, 2])
+    assert merged_label(ws, "shooter", label).tolist() == label.tolist()  # nothing merged
+    (ws.out / MERGED).write_text(json.dumps({"shooter": {"groups": [["G1", "G3"], ["G2"], ["G4"]]}}))
+    assert merged_label(ws, "shooter", label).tolist() == [0, 1, 0, 2, 0]

@@ -146,6 +146,17 @@ def partner_groups(
     write_json(ws.out / MERGED, record)
 
 
+def merged_label(ws: Workspace, ours: str, label: np.ndarray) -> np.ndarray:
+    """The groups' labels (as grouped) as the library's groups name them: where groups were merged
+    for our seat `ours` (MERGED), each label is its merged group's."""
+    path = ws.out / MERGED
+    parts = json.loads(path.read_text())[ours]["groups"] if path.exists() else None
+    if not parts:
+        return label
+    index = {int(name[1:]) - 1: k for k, part in enumerate(parts) for name in part}
+    return np.array([index[j] for j in label], np.int64)
+
+
 def _views(
     ws: Workspace, selection: dict, held_out: dict[str, Grid], groups: dict, grouping: dict[str, Grid]
 ) -> dict:

@@ -12,7 +12,7 @@ import numpy as np
 from services.growth import choice
 from services.growth.choice import Grid
 from services.growth.groups import grouped
-from services.growth.library import MEMBERS
+from services.growth.library import MEMBERS, merged_label
 from services.growth.workspace import Workspace
 from shared.files import write_json
 from shared.game import other
@@ -28,6 +28,7 @@ def summary(
     for ours, steps in selection.items():
         grid = held_out[other(ours)]
         train, label = grouped(grouping[other(ours)], groups[other(ours)]["groups"])
+        label = merged_label(ws, ours, label)  # the groups as the library's groups.json names them
         chosen = steps[-1]["library"]
         study = [c for c in grid.candidates if c in ws.spec.seats[ours].library]
         test = [p for p in grid.partners if sides[p] == "test"]

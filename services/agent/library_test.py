@@ -135,6 +135,27 @@ def test_an_unknown_thrust_rule_is_named(tmp_path):
         library.registry(root)
 
 
+def test_every_scripted_rule_is_a_family_a_library_entry_can_name(tmp_path, monkeypatch):
+    """A grown library's members are rules with their settings: the bait's orbit too."""
+    root = empty_library(tmp_path / "mine")
+    library.write_registry(
+        root,
+        {
+            "XB1": {"role": "bait", "family": "orbit", "description": "an orbit", "rule": {"radius": 190.0}},
+            "XS1": {
+                "role": "shooter",
+                "family": "mirror",
+                "description": "a mirror",
+                "rule": {"radius": 200.0},
+            },
+        },
+    )
+    monkeypatch.setenv("TSF_LIBRARY", str(root))
+    orbit = networks.load("XB1")
+    assert orbit.radius == 190.0 and np.isclose(orbit.probs(np.zeros(64, np.float32)).sum(), 1.0)
+    assert networks.load("XS1").radius == 200.0
+
+
 def copy_library(tmp_path: Path) -> Path:
     return library.copy(tmp_path / "library")
 

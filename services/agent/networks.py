@@ -39,7 +39,7 @@ from services.agent.policy import (
     rule_head_probs,
     stalled,
 )
-from services.agent.scripted import CircleBait, MirrorShooter, good_shot, good_shot_batch
+from services.agent.scripted import SCRIPTED, MirrorShooter, good_shot, good_shot_batch
 from services.sim import observation as ob
 from shared.game import N_ACTIONS, N_FIRE, N_THRUST, N_TURN, GameConfig, Policy, join_action
 
@@ -287,16 +287,13 @@ class JointPolicy:
         return draw(self.rng, self.probs(obs))
 
 
-RULE_FAMILIES = {"mirror": MirrorShooter, "circle": CircleBait}  # a rule-based entry's family: its rule
-
-
 def rule_variant(recipe: Recipe) -> RulePolicy:
     """A rule-based library policy: its family's scripted rule with the entry's `rule` settings
     (S4-S7: the mirror shooter with their own placement distances)."""
-    if recipe.family not in RULE_FAMILIES:
-        families = list(RULE_FAMILIES)
+    if recipe.family not in SCRIPTED:  # a rule-based entry's family is its scripted rule
+        families = list(SCRIPTED)
         raise ValueError(f"registry entry {recipe.key}: no rule for family {recipe.family!r}; {families}")
-    policy = RULE_FAMILIES[recipe.family](**recipe.rule)
+    policy = SCRIPTED[recipe.family](**recipe.rule)
     policy.key, policy.role = recipe.key, recipe.role
     return policy
 

@@ -63,7 +63,7 @@ from shared.errors import UsageError
 from shared.game import N_ACTIONS, OBS_SIZE, ROLES, Policy
 
 T = TypeVar("T")
-GROUPS = library.NAMED["grown"] / "groups.json"  # the grown library's partner groups (tsf library grow)
+GROUPS = library.NAMED["tuned"] / "groups.json"  # the default agent's partner groups (tsf library grow)
 
 
 @dataclass(frozen=True)
@@ -214,7 +214,7 @@ class GroupsFile:
 
 def groups_path() -> Path:
     """The partner groups in use: those of the last library TSF_LIBRARY names that has them (a
-    grown library being made), else the shipped grown library's."""
+    grown library being made), else the shipped tuned library's (the default agent's)."""
     found = [root / GROUPS.name for root in library.roots() if (root / GROUPS.name).exists()]
     return found[-1] if found else GROUPS
 

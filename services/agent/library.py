@@ -35,11 +35,14 @@ LIBRARY = Path(__file__).parent / "library"
 # registry), not members of the shipped library, its table or the adapter's candidates.
 CANDIDATES = LIBRARY / "candidates.toml"
 # Libraries shipped beside the study's, by the name TSF_LIBRARY may give instead of a directory:
-# `grown` is the library grown for coverage by `tsf library grow` (docs/library.md, "The grown library").
-# `population` holds the partner population's trained members (PB01a.., PS01a..), which its
-# cross-play and test figures name.
+# `grown` is the library grown for coverage by `tsf library grow` from the first population
+# (GB1.., GS1..; docs/library.md, "The grown library"); `tuned` the one grown from its second version,
+# with rule teammates tuned by search and groups the adapter can tell apart (TB1.., TS1..: the
+# default agent's; "The tuned library"). `population` holds the partner population's trained members
+# (PB01a.., PS01a..), which their cross-play and test figures name.
 NAMED = {
     "grown": Path(__file__).parent / "grown",
+    "tuned": Path(__file__).parent / "tuned",
     "population": Path(__file__).parents[1] / "population" / "members",
 }
 OUTSIDE = "outside"  # the family of a policy added from outside (a network over all 12 actions)

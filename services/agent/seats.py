@@ -1,9 +1,10 @@
 """What plays a seat: a policy by key, and the check that a key can play a seat.
 
 A key is a library policy (B1-B9, S1-S7, and those of TSF_LIBRARY: networks.py), a policy of a
-library shipped beside the study's (library.NAMED: the grown library's GB1.., GS1.. and the partner
-population's PB01a.., PS01a..; found by key with or without TSF_LIBRARY, since the adaptive agent
-plays the grown library's members and its groups name the population's), a scripted one
+library shipped beside the study's (library.NAMED: the grown library's GB1.., GS1.., the tuned
+library's TB1.., TS1.. and the partner population's PB01a.., PS01a..; found by key with or without
+TSF_LIBRARY, since the adaptive agent plays the tuned library's members and its groups name the
+population's), a scripted one
 (scripted.py), or a policy from outside the library: an SB3 `.zip`, a `module:attr` or a
 `proxy:DIR` (outside.py). `policy_for` classifies a key (outside.policy_kind) and loads it;
 `policy_of` loads a key already classified (a SeatSpec's kind and key).
@@ -39,7 +40,7 @@ def beside_keys(role: str) -> dict[str, Path]:
 
 def libraries() -> dict[str, Path]:
     """Every library whose keys load, by the name `tsf keys` gives it: the study's (`study`: B1-B9,
-    S1-S7), those shipped beside it (library.NAMED: `grown`, the library the default agent plays;
+    S1-S7), those shipped beside it (library.NAMED: `grown`; `tuned`, the library the default agent plays;
     `population`, the partner population's trained members) and the user's own in TSF_LIBRARY (a
     shipped one named there keeps its name)."""
     named = {"study": library.LIBRARY, **library.NAMED}

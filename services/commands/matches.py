@@ -77,7 +77,7 @@ def match_command(
     ),
     adaptive: Role | None = typer.Option(
         None,
-        help="Make this seat the adaptive agent: the shipped default, the grown library's agent over "
+        help="Make this seat the adaptive agent: the shipped default, the tuned library's agent over "
         "partner groups, unless the adapter options say otherwise (its results in either seat: "
         "docs/adapter.md).",
     ),

@@ -313,7 +313,7 @@ def _grow(population: Path, out: Path, workers: int, ray: str | None, bus: BusCo
 @commands.command("keys")
 def keys_command(role: Role | None = typer.Option(None, help="Only the keys of this seat.")) -> None:
     """Every policy key that loads, by library, with the seat it plays: the study's (B1-B9, S1-S7),
-    the grown library's (GB1.., GS1..: the default agent's), the partner population's members
+    the grown libraries' (GB1.., GS1..; TB1.., TS1..: the default agent's), the partner population's members
     (PB01a.., PS01a..), the scripted rules, yours in TSF_LIBRARY; and the other forms a key can take."""
     from services.agent.seats import listed_keys
     from services.population.adaptive import STRATEGIES

@@ -1,12 +1,13 @@
-"""The partner population's test split, as the shipped grown library's run left it: the partners
-that training, grouping and selection never saw (members and their human-like stand-ins), each
-with the partner group its results place it in. `tsf eval --population held-out`
-measures the adaptive teammate on them (populations.py).
+"""The partner population's test split, as the default agent's library's run left it (the tuned
+library's; the grown library's run split the same members alike): the partners that training,
+grouping and selection never saw (members and their human-like stand-ins), each with the partner
+group its results place it in. `tsf eval --population held-out` measures the adaptive teammate on
+them (populations.py).
 
-The grown library keeps its run's records (services/agent/grown/run-*.json, written by `tsf library
+A grown library keeps its run's records (services/agent/tuned/run-*.json, written by `tsf library
 grow`): the members' split sides (run-population.json) and, per seat of ours, every held-out
 partner's group (run-summary.json: the group whose training members' rows, what works with them,
-its own row is nearest).
+its own row is nearest; as the library's groups.json names them).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from services.agent import library
 from services.population import families
 from shared.game import other
 
-RUN = library.NAMED["grown"]  # the shipped grown library, with its run's records
+RUN = library.NAMED["tuned"]  # the default agent's library, with its run's records (grown's: the same split)
 STAND_IN = "human("  # how a member played through a stand-in is named (families.Spec.stand_ins)
 PARTS = {  # the parts of the test population each result is also given for
     "members": lambda partner: not partner.startswith(STAND_IN),
@@ -47,11 +48,18 @@ def members(partner_role: str, run: Path = RUN) -> dict[str, str]:
     return {p: g for p, g in test_partners(partner_role, run).items() if PARTS["members"](p)}
 
 
-def statics(role: str, run: Path = RUN) -> list[str]:
+def statics(role: str) -> list[str]:
     """Every static policy of our seat `role` the comparison chooses its best from: the study's
-    library policies and the grown library's members (GB1.., GS1..; not those that are a study
-    policy under another key)."""
-    study = library.keys(role)
-    grown = json.loads((run / "members.json").read_text())
-    seat = library.registry(run)
-    return study + [key for key, name in grown.items() if seat[key].role == role and name not in study]
+    library policies and the members of every shipped grown library (GB1.., GS1..; TB1.., TS1..),
+    each once (not one that is a study policy, or an earlier library's member, under another key)."""
+    keys = library.keys(role)
+    names = set(keys)
+    for root in library.NAMED.values():
+        if not (root / "members.json").is_file():
+            continue
+        seat = library.registry(root)
+        for key, name in json.loads((root / "members.json").read_text()).items():
+            if seat[key].role == role and name not in names:
+                keys.append(key)
+                names.add(name)
+    return keys

@@ -35,8 +35,8 @@ def summary(
         people = [p for p in test if p.startswith("human(")]
         members = [p for p in test if p not in people]
         figures = {}
-        for label, rows in (("members", members), ("stand-ins", people), ("both", test)):
-            figures[label] = figures_on(grid.only(rows), chosen, study)
+        for part, rows in (("members", members), ("stand-ins", people), ("both", test)):
+            figures[part] = figures_on(grid.only(rows), chosen, study)
         assigned = choice.place(grid, train, label)
         record["seats"][ours] = {
             "curve": steps,

@@ -12,16 +12,19 @@ from services.agent.seats import libraries, listed_keys, policy_for
 
 def test_every_listed_key_loads_and_plays_its_seat() -> None:
     rows = listed_keys()
-    assert {name for _, _, name, _ in rows} == {"study", "grown", "population", "rules"}
+    assert {name for _, _, name, _ in rows} == {"study", "grown", "tuned", "population", "rules"}
     for key, seat, _, _ in rows:
         assert policy_for(key, seat).role == seat, key
 
 
 def test_the_libraries_are_named_by_what_they_are(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
-    keys = {name: [key for key, _, n, _ in listed_keys("bait") if n == name] for name in ("study", "grown")}
+    keys = {
+        n: [key for key, _, name, _ in listed_keys("bait") if n == name] for n in ("study", "grown", "tuned")
+    }
     assert keys["study"] == [f"B{i}" for i in range(1, 10)] and keys["grown"][0] == "GB1"
+    assert keys["tuned"][0] == "TB1"
     monkeypatch.setenv("TSF_LIBRARY", str(library.NAMED["grown"]))  # a shipped one keeps its name
-    assert list(libraries()) == ["study", "grown", "population"]
+    assert list(libraries()) == ["study", "grown", "tuned", "population"]
     (tmp_path / "mine").mkdir()
     monkeypatch.setenv("TSF_LIBRARY", str(tmp_path / "mine"))
     assert list(libraries())[-1] == f"yours ({tmp_path / 'mine'})"

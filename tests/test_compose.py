@@ -189,10 +189,15 @@ def _inspect(container: str, template: str) -> str:
 @pytest.mark.docker
 @pytest.mark.slow
 @pytest.mark.timeout(1800)
-def test_compose_up_plays_a_full_adaptive_match(inputs: dict[str, float], tmp_path: Path) -> None:
+def test_compose_up_plays_a_full_adaptive_match(
+    inputs: dict[str, float], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     took = dict(inputs)
     match = f"compose-{uuid.uuid4().hex[:8]}"
-    env = _compose_env(TSF_MATCH=match, TSF_BAIT="GB1")  # a slow circle: the agent must switch (below)
+    # The grown library's agent (the previous default; the tuned one plays TS1 with every group) with
+    # GB1, a slow circle: the agent must switch (below).
+    monkeypatch.setenv("TSF_LIBRARY", "grown")
+    env = _compose_env(TSF_MATCH=match, TSF_BAIT="GB1")
     try:
         log = _step("up", ["docker-compose", "up", "--no-color"], 900, tmp_path, took, **env)
         containers = _containers(env)
@@ -368,7 +373,7 @@ def test_the_human_profile_seats_a_person_from_the_browser(inputs: dict, tmp_pat
 
     recording = load(tmp_path / f"{match}.tsflog")
     assert recording.summary is not None and recording.summary.frame == frames
-    shooter = "adaptive-T400-bayes-dwell-ood-guard_partners-groups"  # the grown library's agent, by default
+    shooter = "adaptive-T400-bayes-dwell-ood-guard_partners-groups"  # the tuned library's agent, by default
     assert recording.start.policies == {"bait": "human", "shooter": shooter}
     bait = [a for _, a in recording.actions if a.role == "bait"]
     assert bait and all(a.sender == "human/bait" for a in bait), "only the person played the bait"

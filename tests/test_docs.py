@@ -18,7 +18,7 @@ import pytest
 from PIL import Image
 from ruamel.yaml import YAML
 
-from services.adapter.core import initial_policy, payoff_of
+from services.adapter.core import Payoff, initial_policy, payoff_of
 from services.agent.library import NAMED
 from services.population.adaptive import ADAPTIVE, SHIPPED, STRATEGIES, AdapterConfig
 from services.report import figures
@@ -185,24 +185,32 @@ def test_the_pages_name_the_shipped_tables_best_responses(table: Table) -> None:
     best_shooter = {b: table.best_shooter(b) for b in table.baits}
     best_bait = {s: table.best_bait(s) for s in table.shooters}
     start = initial_policy(shooter)
-    grown = payoff_of("shooter", "groups")  # the compose match's adaptive shooter, and its bait B5's group
-    b5 = grown.types[grown.group[grown.partners.index("B5")]]
-    answers = np.argmax(grown.trust(AdapterConfig().window) @ grown.type_values, axis=1)
-    b5_choice = grown.ours[answers[grown.types.index(b5)]]
-    default = SHIPPED
-    grown_start = grown.initial(default)
     circle = json.loads((NAMED["grown"] / "members.json").read_text())["GB1"]  # the picture's bait
-    gb1 = grown.types[grown.group[grown.partners.index(circle)]]
-    gb1_choice = grown.ours[answers[grown.types.index(gb1)]]
+    tuned = payoff_of("shooter", "groups")  # the default: the compose match's adaptive shooter
+    grown = Payoff.from_groups("shooter", NAMED["grown"] / "groups.json")  # the picture's (the previous)
+    default = SHIPPED
+
+    def chosen(payoff: Payoff, partner: str) -> tuple[str, str]:
+        """The group the agent over `payoff` places `partner` in, and the member it plays for it."""
+        answers = np.argmax(payoff.trust(AdapterConfig().window) @ payoff.type_values, axis=1)
+        group = payoff.types[payoff.group[payoff.partners.index(partner)]]
+        return group, payoff.ours[answers[payoff.types.index(group)]]
+
+    b5, b5_choice = chosen(tuned, "B5")
+    tuned_gb1, tuned_gb1_choice = chosen(tuned, circle)
+    gb1, gb1_choice = chosen(grown, circle)
     claims = {
         "README.md": [
-            f"which starts as {grown_start} (the best on average)",
+            f"which starts as {grown.initial(default)} (the best on average)",
             f"takes its partner for group {gb1} after about six seconds and switches to {gb1_choice}, "
             "that group's best teammate",
             f"`partner like {b5}`: it has placed its partner in bait group {b5}, "
             f"whose best member is {b5_choice}",
+            f"placed in group {tuned_gb1}, whose best member is {tuned_gb1_choice} as well",
+            f"places GB1 in group {gb1} and switches to {gb1_choice}",
             f"the table's best shooter for it, {best_shooter['B3']}, not {start}",
-            f"a shooter agent that starts with `{grown_start}` (the grown library's member best on average)",
+            f"a shooter agent that starts with `{tuned.initial(default)}` "
+            "(the tuned library's member best on average)",
             f"(`B5` is in group {b5}, whose best is `{b5_choice}` itself)",
             f"`{default.strategy}`, window {default.window}, identifying the bait's partner group",
         ],

@@ -70,7 +70,7 @@ _PAIRS = np.array(
 def observe(game: Game | BatchGame, role: str, view: str = "world") -> np.ndarray:
     """The float32 observations of `role` (bait or shooter) in the given view: (lanes, 64) for a
     BatchGame; for a Game, its one lane's (64,)."""
-    rows = _world_rows(game, role)
+    rows = world_rows(game, role)
     _check_view(view)
     if isinstance(game, Game):
         if view == "role":
@@ -83,7 +83,7 @@ def observe(game: Game | BatchGame, role: str, view: str = "world") -> np.ndarra
 
 def world_values(game: Game, role: str) -> list[float]:
     """One game's observation of `role` in the world view, as the float64 values the sim publishes."""
-    return _world_rows(game, role)[0].tolist()
+    return world_rows(game, role)[0].tolist()
 
 
 def world_views(game: Game) -> dict[str, list[float]]:
@@ -146,7 +146,7 @@ class _Lane(NamedTuple):
         )  # fmt: skip
 
 
-def _world_rows(game: Game | BatchGame, role: str) -> np.ndarray:
+def world_rows(game: Game | BatchGame, role: str) -> np.ndarray:
     """The (lanes, 64) float64 world-view values of `role`: compiled for a batch, Python for a Game."""
     settings = _settings(game, role)
     if isinstance(game, Game):

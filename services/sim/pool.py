@@ -1,5 +1,6 @@
 """The pool's sim: one long-lived process that plays every match a launcher orders on one clock
-(`tsf sim --pool P`), each match exactly as a match's own sim plays it (service.MatchSim)."""
+(`tsf sim --pool P`), each match exactly as a match's own sim plays it (service.MatchSim), every
+match a lane of the batched engine (lanes.py): the matches of a clock's pass step in one call."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import threading
 import zenoh
 
 from services.sim.clock import Clock
+from services.sim.lanes import Lanes, warm
 from services.sim.service import MatchSim, _raise_priority, real_time
 from shared import keys
 from shared.bus import BusConfig, Drops, Seen, session, subscribe
@@ -28,8 +30,8 @@ class PoolSim:
     """Starts a match per order (a repeated order, for a match it has or had, is ignored) and ends
     one on its stop; the clock plays them. Bad orders and stops are counted in `drops`."""
 
-    def __init__(self, z: zenoh.Session, pool: str, clock: Clock) -> None:
-        self.z, self.pool, self.clock = z, pool, clock
+    def __init__(self, z: zenoh.Session, pool: str, clock: Clock, lanes: Lanes) -> None:
+        self.z, self.pool, self.clock, self.lanes = z, pool, clock, lanes
         self.seen, self.drops = Seen(), Drops("sim")
         self.lock = threading.Lock()
 
@@ -44,8 +46,8 @@ class PoolSim:
             if not self.seen.add(order.match):
                 return
         match = MatchSim(
-            self.z, self.clock.changed, order.match, order.seed, GameConfig(frames=order.frames), order.mode,
-            order.names, order.wait_players, order.wait_services,
+            self.z, self.clock.changed, self.lanes, order.match, order.seed, GameConfig(frames=order.frames),
+            order.mode, order.names, order.wait_players, order.wait_services,
             wait_adapter=order.wait_services if order.adapter else 0.0,
         )  # fmt: skip
         match.open()
@@ -70,9 +72,11 @@ def run_pool(bus: BusConfig, pool: str, stop: threading.Event, priority: int = 0
     user: docs/architecture.md, "Capacity as an ordinary user"). Offers the GIL more often so that
     the bus's callbacks delay the clock less. The pool's name is checked where it enters
     (options.in_pool)."""
+    warm()  # before the pool's token: no order waits for numba
     with session(bus) as z, contextlib.ExitStack() as stack:
-        clock = Clock(PHASES)
-        sim = PoolSim(z, pool, clock)
+        lanes = Lanes()
+        clock = Clock(PHASES, lanes.step)
+        sim = PoolSim(z, pool, clock, lanes)
         _raise_priority(priority)
         below = priority > 0 and not real_time()
         sys.setswitchinterval(SWITCH_INTERVAL)

@@ -22,7 +22,7 @@ from collections.abc import Callable
 import zenoh
 
 from services.sim.clock import Clock, on_phase
-from services.sim.engine import Game
+from services.sim.lanes import Lane, Lanes, warm
 from services.sim.match import Seats, event_messages, start_message, state_message, summary_message
 from shared import keys
 from shared.bus import BusConfig, Drops, session, subscribe, weakly
@@ -68,11 +68,14 @@ class Sim:
         )  # fmt: skip
 
     def play(self) -> Summary:
-        """Play the match and return its summary (also published on the summary key)."""
+        """Play the match, a pool of one lane, and return its summary (also published on the
+        summary key)."""
+        warm()
         with session(self.bus) as z:
-            clock = Clock()
+            lanes = Lanes()
+            clock = Clock(step=lanes.step)
             match = MatchSim(
-                z, clock.changed, **self.match, on_first_frame=lambda: _raise_priority(self.priority)
+                z, clock.changed, lanes, **self.match, on_first_frame=lambda: _raise_priority(self.priority)
             )
             match.open()
             clock.add(match)
@@ -82,8 +85,9 @@ class Sim:
 
 
 class MatchSim:
-    """One match on an open session, played by a `Clock` (alone, or with a pool's other matches).
-    The fields are what the bus's callbacks share with the clock (under `changed`, the clock's).
+    """One match on an open session, played by a `Clock` (alone, or with a pool's other matches) as
+    a lane of its `lanes` (taken at the first frame, freed at the close). The fields are what the
+    bus's callbacks share with the clock (under `changed`, the clock's).
 
     Waits up to `wait_players` seconds for both seats, then up to `wait_recorder` for a recorder
     and `wait_adapter` for an adapter (in adaptive matches); a seat still empty then plays no-op
@@ -99,6 +103,7 @@ class MatchSim:
         self,
         z: zenoh.Session,
         changed: threading.Condition,
+        lanes: Lanes,
         match: str,
         seed: int = 0,
         config: GameConfig | None = None,
@@ -115,8 +120,9 @@ class MatchSim:
         self.z, self.changed, self.match, self.mode = z, changed, match, mode
         self.policies = {role: (policies or {}).get(role, "") for role in ROLES}  # the contract wants both
         self.step_timeout, self.on_first_frame = step_timeout, on_first_frame
-        self.game = Game(config, seed)
-        self.period = 1.0 / self.game.config.fps
+        self.lanes, self.config, self.seed = lanes, config or GameConfig(), seed
+        self.game: Lane | None = None  # from the first frame (or a summary before it) to the close
+        self.period = 1.0 / self.config.fps
         self.seats, self.drops = Seats(), Drops("sim")
         self.answered_at: dict[tuple[str, int], int] = {}  # (role, frame) -> arrival time, for round trips
         self.observers: Counter[str] = Counter()  # live recorder and adapter tokens
@@ -172,10 +178,13 @@ class MatchSim:
             return now if self.seats.answered(self.game.frame) else self.sent_at + self.step_timeout
         return self.started + (self.game.frame + 1) * self.period
 
-    def tick(self) -> None:
+    def tick(self) -> bool:
         if self.summary is not None:
             self.closed = True
             self.declared.close()
+            if self.game is not None:
+                self.game.free()
+                self.game = None
         elif self.started is None:
             self._start()
         elif self.ended:
@@ -185,13 +194,22 @@ class MatchSim:
                 self.ticks.append(time.monotonic())
             with self.changed:
                 self.applied = self.seats.actions()
-            self.game.step(*self.applied)
-            self._publish()
+            self.game.play(self.applied)
+            return True
+        return False
+
+    def played(self) -> None:
+        self._publish()
+
+    def _lane(self) -> Lane:
+        if self.game is None:
+            self.game = self.lanes.take(self.config, self.seed)
+        return self.game
 
     def _start(self) -> None:
         # At the states' priority: zenoh orders messages only within one priority, so a start put
         # at the default priority could arrive after state 0.
-        start = start_message(self.game, self.match, "sim", self.mode, self.policies)
+        start = start_message(self._lane(), self.match, "sim", self.mode, self.policies)
         self.z.put(keys.start(self.match), start.encode(), priority=zenoh.Priority.REAL_TIME)
         self.on_first_frame()
         self.started = on_phase(time.monotonic(), self.period, self.phase)  # the first frame is put now
@@ -221,7 +239,7 @@ class MatchSim:
             }
         timing = _timing(trips, self.ticks, self.period)
         summary = summary_message(
-            self.game, self.match, "sim", self.drops.counts, timing, self.seats.failures
+            self._lane(), self.match, "sim", self.drops.counts, timing, self.seats.failures
         )
         self.z.put(keys.summary(self.match), summary.encode())
         self.summary_at, self.summary = time.monotonic(), summary

@@ -22,7 +22,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from services.sim.engine import Event, fortress_turn, hash_values, hexagon, in_rear_arc, steer
+from services.sim.engine import Event, fortress_turn, hash_bytes, hexagon, in_rear_arc, steer
 from services.sim.jit import njit
 from shared.game import DEATH_CAUSES, EVENT_KINDS, N_ACTIONS, ROLES, GameConfig, split_action
 
@@ -34,6 +34,7 @@ KILL, DEATH, SHIELD_HIT, MISSILE, SHELL, LOCK, FORTRESS_RESPAWN, RESET, RESPAWN 
 BORDER, SHIELD, SHELL_HIT = (DEATH_CAUSES.index(cause) for cause in ("border", "shield", "shell"))
 DRAWS_PER_SPAWN = 3  # random.uniform calls in a spawn: angle, distance, heading jitter
 _REFILL = 64  # spawns' worth of draws taken from a lane's generator at a time
+_SEPARATOR = np.array([-1.0], "<f8").tobytes()  # between a state's missiles and its shells
 
 
 class Rules(NamedTuple):
@@ -287,21 +288,36 @@ class BatchGame:
 
     def state_values(self, lane: int) -> list[float]:
         """The lane's full state in `Game.state_values()` order."""
-        s, i = self.state, lane
-        values = [
-            s.frame[i], s.facing[i], s.fortress_alive[i], s.lock[i], s.since_shell[i], s.vulnerable[i],
-            s.down_frames[i], s.reset_in[i], s.kills[i], s.points[i], s.spawns[i],
-        ]  # fmt: skip
-        for k in range(2):
-            values += [s.x[i, k], s.y[i, k], s.vx[i, k], s.vy[i, k], s.heading[i, k], s.alive[i, k]]
-            values.append(s.cooldown[i, k])
-        values += s.missiles[i, : s.n_missiles[i]].ravel().tolist()
-        values.append(-1.0)
-        values += s.shells[i, : s.n_shells[i]].ravel().tolist()
-        return [float(v) for v in values]
+        return np.frombuffer(self._packed([lane])[0], "<f8").tolist()
 
     def state_hash(self, lane: int) -> str:
-        return hash_values(self.state_values(lane))
+        return self.state_hashes([lane])[0]
+
+    def state_hashes(self, lanes: object) -> list[str]:
+        """state_hash() of each of `lanes` (a live sim's, every frame)."""
+        return [hash_bytes(packed) for packed in self._packed(lanes)]
+
+    def _packed(self, lanes: object) -> list[bytes]:
+        """Each lane's state values as `hash_values` packs them (little-endian float64): the
+        values every lane has in a fixed place gathered for all of `lanes` at once, then each
+        lane's missiles, -1 and its shells."""
+        s, lanes = self.state, np.asarray(lanes, dtype=np.int64)
+        lane = (s.frame, s.facing, s.fortress_alive, s.lock, s.since_shell, s.vulnerable, s.down_frames,
+                s.reset_in, s.kills, s.points, s.spawns)  # fmt: skip
+        ships = np.stack([s.x, s.y, s.vx, s.vy, s.heading, s.alive, s.cooldown], axis=2)[lanes]
+        fixed = np.concatenate([np.stack(lane, axis=1)[lanes], ships.reshape(len(lanes), -1)], axis=1)
+        fixed = fixed.astype("<f8")
+        return [
+            b"".join(
+                (
+                    fixed[k].tobytes(),
+                    s.missiles[i, : s.n_missiles[i]].astype("<f8").tobytes(),
+                    _SEPARATOR,
+                    s.shells[i, : s.n_shells[i]].astype("<f8").tobytes(),
+                )
+            )  # fmt: skip
+            for k, i in enumerate(lanes.tolist())
+        ]
 
     def counters(self, lane: int) -> dict[str, dict]:
         """The lane's per-player counters, as `Game.counters()`."""

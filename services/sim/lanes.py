@@ -26,13 +26,15 @@ from shared.game import ROLES, GameConfig
 
 class Engine:
     """One GameConfig's lanes: the engine, the lanes free, the actions of the lanes due to step,
-    and the world views of every lane as they are now (computed once a frame, for all lanes)."""
+    what a state message reads of each lane as Python values (`rows`, read for all the lanes
+    just stepped at once), and the world views of every lane (computed once a frame for all)."""
 
     def __init__(self, config: GameConfig) -> None:
         self.game = BatchGame(1, config)
         self.free = [0]
         self.due: list[int] = []
         self.actions = np.zeros((2, 1), np.int64)
+        self.rows: dict[int, Row] = {}
         self.views: np.ndarray | None = None  # (seat, lane, 64) float64
 
     def take(self, seed: int) -> int:
@@ -43,18 +45,52 @@ class Engine:
             self.actions = np.zeros((2, 2 * held), np.int64)
         lane = self.free.pop(0)
         self.game.reset([lane], [seed])
-        self.views = None
+        self._read(np.array([lane]))
         return lane
 
     def step(self) -> None:
         lanes, self.due = np.array(self.due, np.int64), []
         self.game.step(self.actions[0], self.actions[1], lanes)
-        self.views = None
+        self._read(lanes)
+
+    def _read(self, lanes: np.ndarray) -> None:
+        """The rows of `lanes` as they are now, each array read once for all of them."""
+        s, self.views = self.game.state, None
+        ints = np.stack([s.frame, s.vulnerable, s.lock, s.since_shell, s.kills, s.points])[
+            :, lanes
+        ].T.tolist()
+        facing, up = s.facing[lanes].tolist(), s.fortress_alive[lanes].tolist()
+        ships = np.stack([s.x, s.y, s.vx, s.vy, s.heading], axis=2)[lanes].tolist()
+        alive, hashes = s.alive[lanes].tolist(), self.game.state_hashes(lanes)
+        for k, i in enumerate(lanes.tolist()):
+            missiles = [[*m[:4], int(m[4])] for m in s.missiles[i, : s.n_missiles[i]].tolist()]
+            self.rows[i] = Row(
+                *ints[k], facing[k], up[k], [Ship(*v, a) for v, a in zip(ships[k], alive[k], strict=True)],
+                missiles, s.shells[i, : s.n_shells[i]].tolist(), hashes[k],
+            )  # fmt: skip
 
     def world_views(self, lane: int) -> dict[str, list[float]]:
         if self.views is None:
             self.views = np.stack([world_rows(self.game, role) for role in ROLES])
         return dict(zip(ROLES, self.views[:, lane].tolist(), strict=True))
+
+
+class Row(NamedTuple):
+    """What a state message reads of a lane, as Python numbers (the owner of a missile an int, as
+    the scalar engine's)."""
+
+    frame: int
+    vulnerable: int
+    lock: int
+    since_shell: int
+    kills: int
+    points: int
+    facing: float
+    fortress_alive: bool
+    ships: list[Ship]
+    missiles: list[list]
+    shells: list[list[float]]
+    hash: str
 
 
 class Lanes:
@@ -112,45 +148,31 @@ class Lane:
     def free(self) -> None:
         self.engine.free.append(self.lane)
 
-    def _read(self, name: str) -> object:
-        return getattr(self.engine.game.state, name)[self.lane].item()
+    def _row(self, name: str) -> object:
+        return getattr(self.engine.rows[self.lane], name)
 
-    frame = property(lambda self: self._read("frame"))
-    facing = property(lambda self: self._read("facing"))
-    fortress_alive = property(lambda self: self._read("fortress_alive"))
-    vulnerable = property(lambda self: self._read("vulnerable"))
-    lock = property(lambda self: self._read("lock"))
-    since_shell = property(lambda self: self._read("since_shell"))
-    kills = property(lambda self: self._read("kills"))
-    points = property(lambda self: self._read("points"))
+    frame = property(lambda self: self._row("frame"))
+    facing = property(lambda self: self._row("facing"))
+    fortress_alive = property(lambda self: self._row("fortress_alive"))
+    vulnerable = property(lambda self: self._row("vulnerable"))
+    lock = property(lambda self: self._row("lock"))
+    since_shell = property(lambda self: self._row("since_shell"))
+    kills = property(lambda self: self._row("kills"))
+    points = property(lambda self: self._row("points"))
+    ships = property(lambda self: self._row("ships"))
+    missiles = property(lambda self: self._row("missiles"))
+    shells = property(lambda self: self._row("shells"))
 
     @property
     def done(self) -> bool:
         return self.frame >= self.config.frames
 
     @property
-    def ships(self) -> list[Ship]:
-        s, i = self.engine.game.state, self.lane
-        fields = np.stack([s.x[i], s.y[i], s.vx[i], s.vy[i], s.heading[i]], axis=1).tolist()
-        return [Ship(*values, alive) for values, alive in zip(fields, s.alive[i].tolist(), strict=True)]
-
-    @property
-    def missiles(self) -> list[list]:
-        """[x, y, vx, vy, owner index] in launch order, the owner an int as the scalar engine's."""
-        s, i = self.engine.game.state, self.lane
-        return [[*m[:4], int(m[4])] for m in s.missiles[i, : s.n_missiles[i]].tolist()]
-
-    @property
-    def shells(self) -> list[list[float]]:
-        s, i = self.engine.game.state, self.lane
-        return s.shells[i, : s.n_shells[i]].tolist()
-
-    @property
     def events(self) -> list[Event]:
         return self.engine.game.events(self.lane)
 
     def state_hash(self) -> str:
-        return self.engine.game.state_hash(self.lane)
+        return self._row("hash")
 
     def counters(self) -> dict[str, dict]:
         return self.engine.game.counters(self.lane)

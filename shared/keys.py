@@ -184,6 +184,11 @@ def pool_refused(pool: str) -> str:
     return f"{PREFIX}/pool/{check_name(pool)}/refused"
 
 
+def pool_tick(pool: str) -> str:
+    """The pool's own frames, one message a pass of its sim's clock (messages.Tick)."""
+    return f"{PREFIX}/pool/{check_name(pool)}/tick"
+
+
 def pool_alive(pool: str, service: str = "*") -> str:
     """A pool service's liveliness token (the default `*` matches each of the pool's services)."""
     if service != "*" and service not in SERVICES:

@@ -54,14 +54,20 @@ class Clock:
     """Plays every match it holds: sleeps until the earliest due tick (woken early by `changed`,
     which the bus's callbacks notify when a match may be due sooner: a seat arrives, a lockstep
     answer, an order) and plays each due match's tick, earliest first; then `step` plays the frame
-    of every match that ticked one, all in one call (lanes.Lanes.step), and each puts its own. A
+    of every match that ticked one, all in one call (lanes.Lanes.step), each puts its own, and
+    `after` ends the pass (a pool's sim puts its Tick: pool.Ticks). A
     match's ticks are due on its own schedule, so lateness never accumulates; a closed match is
     dropped."""
 
-    def __init__(self, phases: int = 1, step: Callable[[], None] = lambda: None) -> None:
+    def __init__(
+        self,
+        phases: int = 1,
+        step: Callable[[], None] = lambda: None,
+        after: Callable[[], None] = lambda: None,
+    ) -> None:
         self.changed = threading.Condition()
         self.matches: list[Played] = []
-        self.phases, self.step = phases, step
+        self.phases, self.step, self.after = phases, step, after
 
     def add(self, match: Played) -> None:
         """Play `match` from now on, in the phase that the fewest of the matches held use."""
@@ -106,3 +112,4 @@ class Clock:
             self.step()
         for match in stepped:
             match.played()
+        self.after()

@@ -69,10 +69,11 @@ class Engine:
                 missiles, s.shells[i, : s.n_shells[i]].tolist(), hashes[k],
             )  # fmt: skip
 
-    def world_views(self, lane: int) -> dict[str, list[float]]:
+    def world_views(self, lane: int) -> np.ndarray:
+        """(seat, 64): the lane's world-view values, computed for every lane once a frame."""
         if self.views is None:
             self.views = np.stack([world_rows(self.game, role) for role in ROLES])
-        return dict(zip(ROLES, self.views[:, lane].tolist(), strict=True))
+        return self.views[:, lane]
 
 
 class Row(NamedTuple):
@@ -180,6 +181,10 @@ class Lane:
     def kills_per_minute(self) -> float:
         return self.engine.game.kills_per_minute()[self.lane].item()
 
+    def views(self) -> np.ndarray:
+        """(seat in ROLES order, 64): each seat's world-view observation values, float64."""
+        return self.engine.world_views(self.lane)
+
     def world_views(self) -> dict[str, list[float]]:
         """Each seat's world-view observation values, as observation.world_views gives a Game's."""
-        return self.engine.world_views(self.lane)
+        return dict(zip(ROLES, self.views().tolist(), strict=True))

@@ -99,11 +99,17 @@ def as_observation(values: list[float], view: str = "world") -> np.ndarray:
 
     The role view is computed from the float64 world values here, in-process and on the bus alike,
     so that a policy sees bit-identical input either way."""
+    return as_observations(np.array([values], dtype=np.float64), view)[0]
+
+
+def as_observations(rows: np.ndarray, view: str = "world") -> np.ndarray:
+    """as_observation() of every row of an (n, 64) array of world-view values (a pool's agent, for
+    the seats of a tick that play one policy)."""
     _check_view(view)
-    rows = np.array([values], dtype=np.float64)
+    rows = np.array(rows, dtype=np.float64)  # a copy: the role view turns it in place
     if view == "role":
         _rotate(memoryview(rows))
-    return rows[0].astype(np.float32)
+    return rows.astype(np.float32)
 
 
 def _check_view(view: str) -> None:

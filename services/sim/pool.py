@@ -13,7 +13,7 @@ import zenoh
 
 from services.sim.clock import Clock
 from services.sim.lanes import Lanes, warm
-from services.sim.service import MatchSim, _raise_priority, real_time
+from services.sim.service import MatchSim, Ticks, _raise_priority, real_time
 from shared import keys
 from shared.bus import BusConfig, Drops, Seen, session, subscribe
 from shared.game import GameConfig
@@ -30,8 +30,8 @@ class PoolSim:
     """Starts a match per order (a repeated order, for a match it has or had, is ignored) and ends
     one on its stop; the clock plays them. Bad orders and stops are counted in `drops`."""
 
-    def __init__(self, z: zenoh.Session, pool: str, clock: Clock, lanes: Lanes) -> None:
-        self.z, self.pool, self.clock, self.lanes = z, pool, clock, lanes
+    def __init__(self, z: zenoh.Session, pool: str, clock: Clock, lanes: Lanes, ticks: Ticks) -> None:
+        self.z, self.pool, self.clock, self.lanes, self.ticks = z, pool, clock, lanes, ticks
         self.seen, self.drops = Seen(), Drops("sim")
         self.lock = threading.Lock()
 
@@ -48,7 +48,7 @@ class PoolSim:
         match = MatchSim(
             self.z, self.clock.changed, self.lanes, order.match, order.seed, GameConfig(frames=order.frames),
             order.mode, order.names, order.wait_players, order.wait_services,
-            wait_adapter=order.wait_services if order.adapter else 0.0,
+            wait_adapter=order.wait_services if order.adapter else 0.0, pool_ticks=self.ticks,
         )  # fmt: skip
         match.open()
         self.clock.add(match)
@@ -74,9 +74,9 @@ def run_pool(bus: BusConfig, pool: str, stop: threading.Event, priority: int = 0
     (options.in_pool)."""
     warm()  # before the pool's token: no order waits for numba
     with session(bus) as z, contextlib.ExitStack() as stack:
-        lanes = Lanes()
-        clock = Clock(PHASES, lanes.step)
-        sim = PoolSim(z, pool, clock, lanes)
+        lanes, ticks = Lanes(), Ticks(z, pool)
+        clock = Clock(PHASES, lanes.step, ticks.put)
+        sim = PoolSim(z, pool, clock, lanes, ticks)
         _raise_priority(priority)
         below = priority > 0 and not real_time()
         sys.setswitchinterval(SWITCH_INTERVAL)

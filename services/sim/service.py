@@ -18,18 +18,22 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
+import numpy as np
 import zenoh
 
 from services.sim.clock import Clock, on_phase
-from services.sim.lanes import Lane, Lanes, warm
 from services.sim.match import Seats, event_messages, start_message, state_message, summary_message
 from shared import keys
 from shared.bus import BusConfig, Drops, session, subscribe, weakly
 from shared.errors import UsageError
 from shared.game import ROLES, GameConfig
-from shared.messages import Action, Summary, seat_actions
+from shared.messages import TICK_MATCHES, Action, Summary, Tick, seat_actions
 from shared.processes import threads
+
+if TYPE_CHECKING:
+    from services.sim.lanes import Lane, Lanes
 
 log = logging.getLogger("tsf.sim")
 MODES = ("realtime", "lockstep")
@@ -69,7 +73,10 @@ class Sim:
 
     def play(self) -> Summary:
         """Play the match, a pool of one lane, and return its summary (also published on the
-        summary key)."""
+        summary key). The batched engine is imported here, not with the module: numba comes with it,
+        and a service that only imports this one (a launcher's) does not need it."""
+        from services.sim.lanes import Lanes, warm
+
         warm()
         with session(self.bus) as z:
             lanes = Lanes()
@@ -94,7 +101,8 @@ class MatchSim:
     until its player arrives. Real time ticks at the game's fps (tick k due at the first frame +
     k/fps) with each seat's latest action; lockstep steps once both present seats have answered,
     or `step_timeout` after the state. State is put with congestion control *drop*: a frozen
-    subscriber can never stall the clock. After the summary it keeps its declarations `LINGER`
+    subscriber can never stall the clock. In a pool (`pool_ticks`), each state goes in the pass's Tick
+    too, for the pool's own agent and recorder. After the summary it keeps its declarations `LINGER`
     seconds (the last puts leave before its token goes), then undeclares them all (`closed`)."""
 
     LINGER = 0.2
@@ -114,12 +122,13 @@ class MatchSim:
         step_timeout: float = 1.0,
         wait_adapter: float = 0.0,
         on_first_frame: Callable[[], None] = lambda: None,
+        pool_ticks: Ticks | None = None,
     ) -> None:
         if mode not in MODES:
             raise UsageError("--sim-mode", mode, "unknown", MODES)
         self.z, self.changed, self.match, self.mode = z, changed, match, mode
         self.policies = {role: (policies or {}).get(role, "") for role in ROLES}  # the contract wants both
-        self.step_timeout, self.on_first_frame = step_timeout, on_first_frame
+        self.step_timeout, self.on_first_frame, self.pool_ticks = step_timeout, on_first_frame, pool_ticks
         self.lanes, self.config, self.seed = lanes, config or GameConfig(), seed
         self.game: Lane | None = None  # from the first frame (or a summary before it) to the close
         self.period = 1.0 / self.config.fps
@@ -219,7 +228,10 @@ class MatchSim:
         """Put the state and the events of the frame just played; the summary after the last."""
         game, match = self.game, self.match
         self.sent_at, self.sent[game.frame] = time.monotonic(), time.perf_counter_ns()
-        self.state_pub.put(state_message(game, match, "sim", self.applied).encode())
+        state = state_message(game, match, "sim", self.applied).encode()
+        self.state_pub.put(state)
+        if self.pool_ticks is not None:
+            self.pool_ticks.add(match, game.frame, game.done, game.views(), state)
         with self.changed:
             failed = self.seats.failure_events(match, "sim")
         for event in [*event_messages(game, match, "sim"), *failed]:
@@ -263,6 +275,33 @@ class MatchSim:
             elif key.service in ("recorder", "adapter"):
                 self.observers[key.service] += 1 if sample.kind == zenoh.SampleKind.PUT else -1
             self.changed.notify_all()
+
+
+class Ticks:
+    """The pass's Tick (shared.messages.Tick): the frames the clock's matches put in one pass,
+    gathered as they are put, then put as one message on the pool's tick key (as several where the
+    pass held more than TICK_MATCHES), at the states' priority and as they are put (dropped rather
+    than stall the clock). Runs on the clock's thread."""
+
+    def __init__(self, z: zenoh.Session, pool: str) -> None:
+        self.pool, self.frames = pool, []
+        self.publisher = z.declare_publisher(
+            keys.pool_tick(pool), priority=zenoh.Priority.REAL_TIME,
+            congestion_control=zenoh.CongestionControl.DROP, express=True,
+        )  # fmt: skip
+
+    def add(self, match: str, frame: int, last: bool, views: np.ndarray, state: bytes) -> None:
+        self.frames.append((match, frame, last, views, state))
+
+    def put(self) -> None:
+        frames, self.frames = self.frames, []
+        for at in range(0, len(frames), TICK_MATCHES):
+            matches, numbers, last, views, states = zip(*frames[at : at + TICK_MATCHES], strict=True)
+            tick = Tick(
+                frame=0, sender="sim", pool=self.pool, matches=list(matches), frames=list(numbers),
+                last=list(last), views=np.stack(views).astype("<f8").tobytes(), states=list(states),
+            )  # fmt: skip
+            self.publisher.put(tick.encode())
 
 
 def _raise_priority(steps: int) -> None:

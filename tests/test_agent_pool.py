@@ -6,9 +6,9 @@ from __future__ import annotations
 import signal
 from collections import Counter
 
-import numpy as np
 import pytest
 import zenoh
+from test_recorder_contract import tick_of
 
 from services.adapter.core import initial_policy
 from services.adapter.service import run_adapter_pool
@@ -23,7 +23,7 @@ from services.sim.pool import run_pool
 from services.table.table import DEFAULT_TABLE, Table
 from shared import keys
 from shared.game import ROLES, GameConfig
-from shared.messages import Action, AdapterStatus, MatchOrder, PolicySwitch, State, Summary, Tick
+from shared.messages import Action, AdapterStatus, MatchOrder, PolicySwitch, State, Summary
 
 POOL, FRAMES = "pool", 12
 BLOCK = {"congestion_control": zenoh.CongestionControl.BLOCK}
@@ -78,12 +78,7 @@ def together(matches: list[tuple[Played, tuple[str, ...]]], wait_until) -> None:
     """One frame of each match, all in one Tick (as a pass of the pool's clock puts them), then
     each seat's answer."""
     states = [played.state() for played, _ in matches]
-    views = np.array([[state.obs[role] for role in ROLES] for state in states], "<f8")
-    tick = Tick(
-        frame=0, sender="sim", pool=POOL, matches=[s.match for s in states], frames=[s.frame for s in states],
-        last=[s.last for s in states], views=views.tobytes(), states=[s.encode() for s in states],
-    )  # fmt: skip
-    matches[0][0].z.put(keys.pool_tick(POOL), tick.encode(), **BLOCK)
+    matches[0][0].z.put(keys.pool_tick(POOL), tick_of(states, POOL).encode(), **BLOCK)
     for (played, roles), state in zip(matches, states, strict=True):
         played.answered(roles, state.frame, wait_until)
 

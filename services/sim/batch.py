@@ -1,8 +1,8 @@
 """The bulk engine: N independent games of TSF advanced together, as arrays.
 
-Training, sweeps and evaluation need millions of frames; the scalar `Game` (engine.py, pymunk) is
-the live engine and the reference, and this one plays the same games in bulk (a live sim does not
-run it with one lane: docs/architecture.md, "Two engines"). Each lane is one
+Training, sweeps and evaluation need millions of frames, and a live sim many matches at once (each
+a lane: lanes.py, `step` of the lanes due); the scalar `Game` (engine.py, pymunk) is the reference
+(docs/architecture.md, "Two engines"). Each lane is one
 game with its own seed, actions, resets, counters and events; the state is a struct of arrays and
 one numba-compiled loop advances every lane by a frame.
 

@@ -18,8 +18,10 @@ it). The fortress is the origin in both.
 One function observes one game and many: it is written for lanes (the batched engine's arrays),
 and a scalar `Game` is one lane. Each step is written once: numba compiles it for a batch
 (`compiled`, `jitable`), and for a Game or a bus message Python runs the same source over one
-lane (lists and memoryviews), so a live sim or agent never loads numba. Both do the same float64
-operations in the same order: the values are bit-identical (batch_test.py).
+lane (lists and memoryviews), so an agent that reads one bus message loads no numba. Both do the
+same float64 operations in the same order: the values are bit-identical (batch_test.py). A live
+sim's matches are lanes of the batched engine (lanes.py): their views are computed compiled, for
+all of them at once.
 """
 
 from __future__ import annotations

@@ -24,7 +24,10 @@ from services.agent.gate import RULING_WAIT, Gate
 from services.agent.networks import load
 from services.agent.outside import BY_KEY, policy_kind
 from services.agent.player import Frame, Player, PolicyLoader, play_together
+from services.agent.policy import FEW_ROWS
+from services.agent.scripted import scripted_keys
 from services.agent.seats import check_seat, policy_for
+from services.sim import observation as ob
 from services.sim.observation import as_observations
 from shared import keys
 from shared.bus import BusConfig, Drops, on_match_end, serve_orders, session, subscribe, until_stopped
@@ -271,10 +274,11 @@ class TickAnswers:
         with self.lock:
             self.playing[seats.match] = seats
 
-    def keep(self, parts: list[Seats]) -> None:
-        """Forget the matches that ended (serve_orders's tick: the parts still open)."""
+    def keep(self, _parts: list[Seats]) -> None:
+        """Forget the matches that ended (serve_orders's tick). Not by the parts it is given: a
+        match being ordered is added here before serve_orders holds it as a part."""
         with self.lock:
-            self.playing = {seats.match: seats for seats in parts if seats.match in self.playing}
+            self.playing = {match: seats for match, seats in self.playing.items() if not seats.ended.is_set()}
 
     def on_tick(self, tick: Tick) -> None:
         views = np.frombuffer(tick.views, "<f8").reshape(-1, len(ROLES), OBS_SIZE)
@@ -309,9 +313,16 @@ class TickAnswers:
 
 
 def warm(load: Library) -> None:
-    """Load every library policy of either seat, and play it once in a batch of one."""
+    """Play every library and scripted policy of either seat once, in a batch of rows in which the
+    ship plays alone (so that the compiled end of a stalled round, for more than FEW_ROWS rows, is
+    played too): numba's compiled rules are loaded, or compiled where its cache is cold, before the
+    pool's token, not when a seat first plays one mid-match (the adapter switches seats to the
+    grown library's policies, whose rule heads are the same compiled rules; 10 s and more at load
+    12, every match of the pool unanswered meanwhile)."""
+    rows = np.zeros((FEW_ROWS + 1, OBS_SIZE))
+    rows[:, ob.SELF + ob.ALIVE] = rows[:, ob.FORTRESS + ob.F_ALIVE] = 1.0
     for role in ROLES:
-        for key in library.keys(role):
+        for key in (*library.keys(role), *scripted_keys(role)):
             with contextlib.suppress(Exception):  # one that does not load is refused by its order
                 policy = load(key, role)
-                play_together([policy], as_observations(np.zeros((1, OBS_SIZE)), policy.view))
+                play_together([policy] * len(rows), as_observations(rows, policy.view))

@@ -43,7 +43,8 @@ class Engine:
             self.game.grow(2 * held)
             self.free = list(range(held, 2 * held))
             self.actions = np.zeros((2, 2 * held), np.int64)
-        lane = self.free.pop(0)
+        lane = min(self.free)  # the lowest: the lanes held stay few and together
+        self.free.remove(lane)
         self.game.reset([lane], [seed])
         self._read(np.array([lane]))
         return lane

@@ -8,17 +8,20 @@ import contextlib
 import logging
 import sys
 import threading
+from typing import TYPE_CHECKING
 
 import zenoh
 
 from services.sim.clock import Clock
-from services.sim.lanes import Lanes, warm
 from services.sim.service import MatchSim, Ticks, _raise_priority, real_time
 from shared import keys
 from shared.bus import BusConfig, Drops, Seen, session, subscribe
 from shared.game import GameConfig
 from shared.messages import MatchOrder, MatchStop
 from shared.processes import step_down
+
+if TYPE_CHECKING:
+    from services.sim.lanes import Lanes
 
 log = logging.getLogger("tsf.sim")
 PHASES = 8  # of the period, in which the pool's matches tick (clock.py: measured against 1, 4 and 12)
@@ -72,6 +75,8 @@ def run_pool(bus: BusConfig, pool: str, stop: threading.Event, priority: int = 0
     user: docs/architecture.md, "Capacity as an ordinary user"). Offers the GIL more often so that
     the bus's callbacks delay the clock less. The pool's name is checked where it enters
     (options.in_pool)."""
+    from services.sim.lanes import Lanes, warm  # numba comes with it: a launcher that reads PHASES needs none
+
     warm()  # before the pool's token: no order waits for numba
     with session(bus) as z, contextlib.ExitStack() as stack:
         lanes, ticks = Lanes(), Ticks(z, pool)

@@ -64,3 +64,41 @@ def test_matches_tick_on_their_phases():
         # played on its phase of the grid: never early, and (on a loaded machine) at most a few ms late
         lateness = [(t - match.phase * match.period) % match.period for t in match.played]
         assert all(late < match.period / 2 for late in lateness), lateness
+
+
+@dataclass
+class Stepped:
+    """A match whose every tick plays a frame: it sets its lane's actions (tick), then puts the frame
+    the engine stepped (played)."""
+
+    match: str
+    engine: list
+    phase: float = 0.0
+    closed: bool = False
+    frames: list[int] = field(default_factory=list)
+
+    def due(self, now: float) -> float:
+        return now
+
+    def tick(self) -> bool:
+        self.engine.append(("due", self.match))
+        return True
+
+    def played(self) -> None:
+        self.frames.append(len([e for e in self.engine if e == ("step",)]))
+        self.closed = len(self.frames) >= 3
+
+    def end(self) -> None:
+        self.closed = True
+
+
+def test_a_pass_steps_every_match_it_ticked_in_one_call_then_each_puts_its_frame():
+    engine: list = []
+    clock = Clock(1, step=lambda: engine.append(("step",)), after=lambda: engine.append(("after",)))
+    matches = [Stepped(f"m{n}", engine) for n in range(3)]
+    for match in matches:
+        clock.add(match)
+    clock.run(threading.Event(), until_empty=True)
+    one_pass = [("due", "m0"), ("due", "m1"), ("due", "m2"), ("step",), ("after",)]
+    assert engine == one_pass * 3
+    assert all(match.frames == [1, 2, 3] for match in matches)

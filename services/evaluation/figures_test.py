@@ -37,7 +37,8 @@ def test_the_headline_figure_draws_differences_from_the_best_static_policy(shipp
         tests = comparison.tests
         widths = [bar.get_width() for bar in ax.patches]
         assert widths == pytest.approx([t["mean_difference"] for t in tests.values()])
-        assert ax.get_xlim()[0] < min(0, *widths) < 0 < max(widths)  # bars from zero, either way
+        low, high = ax.get_xlim()
+        assert low < min(0, *widths) and max(0, *widths) < high  # bars from zero, either way
         labels = [t.get_text() for t in ax.get_yticklabels()]
         default = SHIPPED.name
         marked = [label for label in labels if "(default)" in label]

@@ -128,14 +128,6 @@ def everything(match: str) -> str:
     return f"{PREFIX}/{check_match(match)}/**"
 
 
-def beside_state(match: str) -> tuple[str, ...]:
-    """Every data key of a match but its state: what a pool's recorder subscribes to, whose states
-    come in the pool's Tick (pool_tick)."""
-    at = f"{PREFIX}/{check_match(match)}"
-    return (*(f"{at}/{kind}" for kind in ("start", "event", "summary", "adapter")),
-            *(f"{at}/{kind}/*" for kind in ("action", "policy", "ruling")))  # fmt: skip
-
-
 def job_worker(sweep: str, worker: str = "*") -> str:
     """A sweep worker's liveliness token (the default `*` matches every worker of the sweep)."""
     return f"{PREFIX}/sweep/{check_name(sweep)}/worker/{_worker(worker)}"
@@ -190,11 +182,6 @@ def pool_stop(pool: str) -> str:
 
 def pool_refused(pool: str) -> str:
     return f"{PREFIX}/pool/{check_name(pool)}/refused"
-
-
-def pool_tick(pool: str) -> str:
-    """The pool's own frames, one message a pass of its sim's clock (messages.Tick)."""
-    return f"{PREFIX}/pool/{check_name(pool)}/tick"
 
 
 def pool_alive(pool: str, service: str = "*") -> str:

@@ -592,47 +592,6 @@ class RecordingChunk(MatchMessage):
     auth: str = ""
 
 
-TICK_MATCHES = 16  # matches a Tick holds at most: 16 states and their views stay well within MAX_BYTES
-_VIEWS = len(ROLES) * OBS_SIZE * 8  # bytes of one match's world views in a Tick
-
-
-@dataclass(frozen=True, kw_only=True)
-class Tick(Message):
-    """One pass of a pool's sim clock for the pool's own services (tsf/pool/<pool>/tick): the frame
-    of every match it put in the pass, so that its agent and its recorder take one message a pass
-    where they took one a match (a pass of more than TICK_MATCHES is put as several). Each match
-    keeps its own keys for what is outside the pool: its state is put there as well (a person's
-    page, an external agent, a match host's router), and is the very record `states` holds.
-
-    `matches`, `frames` and `last` (the game's last frame: no seat answers it) are each match's;
-    `views` is every match's world-view observations (docs/observation.md), float64 little-endian,
-    (match, seat in ROLES order, 64), the values of its state's `obs` (the agent reads them without
-    decoding the state); `states` is each match's State record as put on tsf/<match>/state (the
-    recorder writes it as it is). A pool-internal contract: never recorded."""
-
-    TYPE: ClassVar[str] = "tick"
-    ID: ClassVar[str] = "pool"
-    CHECKS: ClassVar[dict[str, Check]] = {
-        "matches": lambda v: isinstance(v, list) and len(v) <= TICK_MATCHES and all(map(_ID, v)),
-        "frames": lambda v: isinstance(v, list) and all(map(whole(0, MAX_FRAME), v)),
-        "last": lambda v: isinstance(v, list) and all(map(boolean, v)),
-        "views": lambda v: isinstance(v, bytes),
-        "states": lambda v: isinstance(v, list) and all(isinstance(b, bytes) for b in v),
-    }
-
-    pool: str
-    matches: list[str] = field(default_factory=list)
-    frames: list[int] = field(default_factory=list)
-    last: list[bool] = field(default_factory=list)
-    views: bytes = b""
-    states: list[bytes] = field(default_factory=list)
-
-    def __post_init__(self) -> None:
-        n = len(self.matches)
-        if not len(self.frames) == len(self.last) == len(self.states) == n or len(self.views) != n * _VIEWS:
-            raise MessageError("shape", f"a tick of {n} matches with fields of other lengths")
-
-
 Sealed = TypeVar("Sealed", bound=Message)  # one of the six above, each with its `auth`
 
 
@@ -668,7 +627,6 @@ TYPES: dict[str, type[Message]] = {
     for t in (
         Start, State, Action, PolicySwitch, Ruling, GameEvent, Summary, AdapterStatus, JobOrder, JobResult,
         HostStatus, MatchOffer, MatchAnswer, MatchStop, MatchDone, RecordingChunk, MatchOrder, MatchRefused,
-        Tick,
     )
 }  # fmt: skip
 # Version 1 named every family's id `match`: for a match's own traffic, what a recording holds, that

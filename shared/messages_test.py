@@ -8,14 +8,13 @@ from collections.abc import Callable
 from typing import Any
 
 import msgpack
-import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from services.sim.engine import Game
 from services.sim.match import start_message, state_message, summary_message
-from shared.game import OBS_SIZE, ROLES, GameConfig
+from shared.game import OBS_SIZE, GameConfig
 from shared.messages import (
     CHUNK,
     MAX_BYTES,
@@ -42,7 +41,6 @@ from shared.messages import (
     Start,
     State,
     Summary,
-    Tick,
     decode,
     decode_any,
 )
@@ -158,17 +156,7 @@ def examples() -> dict[str, Message]:
         "recording_chunk": RecordingChunk(
             match=M, frame=0, sender="host/lab-2", offset=0, size=5, data=b"TSF\x00\x01"
         ),
-        "tick": tick_of(state_message(game, M, "sim", (6, 1))),
     }
-
-
-def tick_of(state: State) -> Tick:
-    """A pool's Tick of one match's frame."""
-    views = np.array([[state.obs[role] for role in ROLES]], "<f8").tobytes()
-    return Tick(
-        frame=0, sender="sim", pool="lab", matches=[state.match], frames=[state.frame], last=[state.last],
-        views=views, states=[state.encode()],
-    )  # fmt: skip
 
 
 EXAMPLES = examples()
@@ -240,16 +228,8 @@ def test_version_1(kind: str) -> None:
 def test_families_name_their_id() -> None:
     """Each message's id says what it holds: a match's, a sweep's or a host's."""
     ids = {kind: message.ID for kind, message in EXAMPLES.items()}
-    assert {k for k, i in ids.items() if i != "match"} == {"sweep_job", "sweep_result", "host_status", "tick"}
+    assert {k for k, i in ids.items() if i != "match"} == {"sweep_job", "sweep_result", "host_status"}
     assert (EXAMPLES["sweep_job"].sweep, EXAMPLES["host_status"].host) == ("table", "lab-2")
-    assert EXAMPLES["tick"].pool == "lab"
-
-
-def test_a_tick_whose_fields_disagree_in_length_is_a_shape_error() -> None:
-    state = EXAMPLES["state"]
-    assert reason(pack(record("tick", frames=[1, 2]))) == "shape"
-    assert reason(pack(record("tick", views=b"\0" * 8))) == "shape"
-    assert reason(pack(record("tick", states=[state.encode()] * 2))) == "shape"
 
 
 def obs_with(value: float, role: str = "shooter", index: int = 5, length: int | None = None) -> bytes:

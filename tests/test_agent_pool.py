@@ -8,7 +8,6 @@ from collections import Counter
 
 import pytest
 import zenoh
-from test_recorder_contract import tick_of
 
 from services.adapter.core import initial_policy
 from services.adapter.service import run_adapter_pool
@@ -19,11 +18,11 @@ from services.sim.engine import Game
 from services.sim.match import state_message, summary_message
 from services.sim.observation import observe
 from services.sim.play import policy_seed
-from services.sim.pool import run_pool
+from services.sim.service import run_sim
 from services.table.table import DEFAULT_TABLE, Table
 from shared import keys
 from shared.game import ROLES, GameConfig
-from shared.messages import Action, AdapterStatus, MatchOrder, PolicySwitch, State, Summary
+from shared.messages import Action, AdapterStatus, MatchOrder, PolicySwitch, Summary
 
 POOL, FRAMES = "pool", 12
 BLOCK = {"congestion_control": zenoh.CongestionControl.BLOCK}
@@ -41,9 +40,8 @@ def pool_alive(z: zenoh.Session, service: str) -> bool:
 
 
 class Played:
-    """One match's sim side, without a sim: puts the states of a real game one at a time, on the
-    match's own key and in the pool's Tick (the pool's agent reads the Tick), and waits for each
-    seat's answer."""
+    """One match's sim side, without a sim: publishes the states of a real game one at a time and
+    waits for each seat's answer."""
 
     def __init__(self, z: zenoh.Session, recorded, match: str, seed: int) -> None:  # noqa: ANN001 - a Tap
         self.z, self.recorded, self.match = z, recorded, match
@@ -53,14 +51,10 @@ class Played:
         return self.recorded.of(Action, keys.action(self.match, role))
 
     def step(self, roles: tuple[str, ...], wait_until) -> None:  # noqa: ANN001 - the poll helper
-        together([(self, roles)], wait_until)
-
-    def state(self) -> State:
-        state = state_message(self.game, self.match, "sim", (0, 0))
-        self.z.put(keys.state(self.match), state.encode(), **BLOCK)
-        return state
-
-    def answered(self, roles: tuple[str, ...], frame: int, wait_until) -> None:  # noqa: ANN001
+        frame = self.game.frame
+        self.z.put(
+            keys.state(self.match), state_message(self.game, self.match, "sim", (0, 0)).encode(), **BLOCK
+        )
         for role in roles:
             assert wait_until(lambda r=role: any(a.frame == frame for a in self.actions(r)), timeout=3), (
                 role,
@@ -72,15 +66,6 @@ class Played:
         self.z.put(
             keys.summary(self.match), summary_message(self.game, self.match, "sim", {}, {}).encode(), **BLOCK
         )
-
-
-def together(matches: list[tuple[Played, tuple[str, ...]]], wait_until) -> None:  # noqa: ANN001
-    """One frame of each match, all in one Tick (as a pass of the pool's clock puts them), then
-    each seat's answer."""
-    states = [played.state() for played, _ in matches]
-    matches[0][0].z.put(keys.pool_tick(POOL), tick_of(states, POOL).encode(), **BLOCK)
-    for (played, roles), state in zip(matches, states, strict=True):
-        played.answered(roles, state.frame, wait_until)
 
 
 def expected(role: str, policy: str, seed: int, frames: int) -> list[int]:
@@ -112,11 +97,9 @@ def test_the_pool_plays_each_ordered_seat_as_a_single_agent_does(agents, tap, wa
         lambda: all(both.is_alive("agent", r) for r in ROLES) and shooter_only.is_alive("agent", "shooter")
     )
     a, b = Played(z, both, "both", 3), Played(z, shooter_only, "person", 4)
-    for _ in range(3):  # the two matches' frames interleave
+    for _ in range(6):  # the two matches' frames interleave
         a.step(ROLES, wait_until)
         b.step(("shooter",), wait_until)
-    for _ in range(3):  # and come in one tick: S1 answers both shooters in one batch
-        together([(a, ROLES), (b, ("shooter",))], wait_until)
     assert not shooter_only.is_alive("agent", "bait") and not b.actions("bait")  # a person's seat
     for played, role, policy, seed in (
         (a, "bait", "B3", 3),
@@ -201,18 +184,18 @@ def test_the_adapter_pool_switches_an_ordered_match_as_the_single_adapter_does(
     adapted, plain = tap(z, "adapted"), tap(z, "plain")
     adapters = background(run_adapter_pool, bus.config(), POOL)
     agents = background(run_agent_pool, bus.config(), POOL)
-    sims = background(run_pool, bus.config(), POOL)  # the pool's agent takes its frames from its Tick
-    parts = ("adapter", "agent", "sim")
-    assert wait_until(lambda: all(pool_alive(z, part) for part in parts), timeout=30)
+    assert wait_until(lambda: pool_alive(z, "adapter") and pool_alive(z, "agent"), timeout=10)
     config = AdapterConfig("shooter", window=100, strategy="cem", seed=7)
     ordered = order(
-        "adapted", 7, bait="B3", shooter=initial_policy(config), adapter=config.name, adaptive="shooter",
-        frames=400, mode="lockstep", wait_services=1.0,
-    )  # fmt: skip
-    for made in (ordered, order("plain", 7, bait="B3", shooter="S5", frames=400, wait_services=1.0)):
+        "adapted", 7, bait="B3", shooter=initial_policy(config), adapter=config.name, adaptive="shooter"
+    )
+    for made in (ordered, order("plain", 7, bait="B3", shooter="S5")):
         z.put(keys.pool_order(POOL), made.encode(), **BLOCK)
-    assert wait_until(lambda: adapted.of(Summary), timeout=60)
-    assert adapted.of(Summary)[0].frame == 400
+    assert wait_until(
+        lambda: adapted.is_alive("adapter") and all(adapted.is_alive("agent", r) for r in ROLES)
+    )
+    sim = background(run_sim, bus.config(), "adapted", 7, GameConfig(frames=400), "lockstep", NAMES)
+    assert sim.result(timeout=60).frame == 400
     switches = adapted.of(PolicySwitch, keys.policy("adapted", "shooter"))
     assert switches and switches[0].policy == BEST_FOR_B3 and "B3" in switches[0].reason
     assert any(a.policy == BEST_FOR_B3 for a in adapted.of(Action, keys.action("adapted", "shooter")))
@@ -223,8 +206,6 @@ def test_the_adapter_pool_switches_an_ordered_match_as_the_single_adapter_does(
     for service in (adapters, agents):
         service.stop.set()
         assert service.result(timeout=5).total == 0
-    sims.stop.set()
-    sims.result(timeout=10)
 
 
 def test_pool_processes_leave_on_sigterm_with_their_matches_tokens(bus, tap, spawn, wait_until) -> None:

@@ -49,14 +49,6 @@ BULK = "bulk play only: numba loads with it"
 MADE_ENV = "gymnasium loads agent/envs.py as its plug-in: only a made env loads policies and the engine"
 LAZY_MODULES = {  # (file, project module): an import inside a function outside the command line, and why
     ("services/evaluation/evaluate.py", "services.sim.batch"): BULK,
-    (
-        "services/sim/service.py",
-        "services.sim.lanes",
-    ): "a match's own sim plays it; a launcher that imports the sim does not",
-    (
-        "services/sim/pool.py",
-        "services.sim.lanes",
-    ): "a pool's sim plays it; a launcher that reads PHASES does not",
     ("services/evaluation/evaluate.py", "services.sim.batch_play"): BULK,
     ("services/table/table.py", "services.sim.batch_play"): BULK + " (the table's readers never load it)",
     ("services/agent/envs.py", "services.agent.library"): MADE_ENV,

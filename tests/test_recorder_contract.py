@@ -9,7 +9,6 @@ import subprocess
 from concurrent.futures import Future
 
 import msgpack
-import numpy as np
 import pytest
 import zenoh
 
@@ -23,31 +22,18 @@ from shared import keys
 from shared.bus import BusConfig, session
 from shared.errors import Failure, UsageError
 from shared.game import ROLES, GameConfig
-from shared.messages import Action, GameEvent, MatchOrder, PolicySwitch, State, Tick
+from shared.messages import Action, GameEvent, MatchOrder, PolicySwitch
 from shared.provenance import read_sidecar
 
 MATCH, SEED = "rec", 3
-
-
-def tick_of(states: list[State], pool: str) -> Tick:
-    """A pool's Tick of these matches' frames, as the pool's sim puts it (shared.messages.Tick)."""
-    views = np.array([[state.obs[role] for role in ROLES] for state in states], "<f8").tobytes()
-    return Tick(
-        frame=0, sender="sim", pool=pool, matches=[s.match for s in states], frames=[s.frame for s in states],
-        last=[s.last for s in states], views=views, states=[s.encode() for s in states],
-    )  # fmt: skip
-
-
 POLICIES = {"bait": "circle", "shooter": "mirror"}
 
 
 class FakeMatch:
-    """Publishes the messages of a real game (states skipped where asked) and remembers the valid ones;
-    in a pool, each state in the pool's Tick too (as the pool's sim puts it)."""
+    """Publishes the messages of a real game (states skipped where asked) and remembers the valid ones."""
 
-    def __init__(self, z, match: str = MATCH, pool: str = "") -> None:  # noqa: ANN001 - a session
+    def __init__(self, z, match: str = MATCH) -> None:  # noqa: ANN001 - a session
         self.z, self.match, self.game, self.sent = z, match, Game(GameConfig(frames=20), SEED), []
-        self.pool = pool
         self.state_at: dict[int, int] = {}  # frame -> index of its state in `sent`
 
     def put(self, key: str, data: bytes, valid: bool = True) -> None:
@@ -66,13 +52,10 @@ class FakeMatch:
             frame = self.game.frame
             if frame not in skip:
                 self.state_at[frame] = len(self.sent)
-                state = state_message(self.game, self.match, "sim", (frame % 12, 3))
-                self.put(keys.state(self.match), state.encode())
-                if self.pool:
-                    tick = tick_of([state], self.pool).encode()
-                    self.z.put(
-                        keys.pool_tick(self.pool), tick, congestion_control=zenoh.CongestionControl.BLOCK
-                    )
+                self.put(
+                    keys.state(self.match),
+                    state_message(self.game, self.match, "sim", (frame % 12, 3)).encode(),
+                )
             for role, action in (("bait", frame % 12), ("shooter", 3)):
                 self.put(
                     keys.action(self.match, role),
@@ -280,7 +263,7 @@ class Pool:
         self.router.put(keys.pool_order(POOL), order(match, folder))
         self.router.put(keys.pool_order(POOL), order(match, folder))  # re-put: ignored
         assert self.wait_until(lambda: tap.is_alive("recorder"), timeout=10)
-        return FakeMatch(self.router, match, POOL)
+        return FakeMatch(self.router, match)
 
     def watch(self, match: str):  # noqa: ANN201 - a Tap
         self.taps[match] = self.tap(self.router, match)
@@ -309,16 +292,6 @@ def records(path) -> list:  # noqa: ANN001 - a Path
     return [(r.key, r.data) for r in read_log(path)[0]]
 
 
-def each_key(pairs: list[tuple[str, bytes]]) -> dict[str, list[bytes]]:
-    """What came on each key, in order: a pool's recorder takes the states from the pool's Tick and
-    the rest from the match's own keys, each subscriber on a zenoh thread of its own, so the records
-    of different keys interleave as they came (those of one key stay in order)."""
-    out: dict[str, list[bytes]] = {}
-    for key, data in pairs:
-        out.setdefault(key, []).append(data)
-    return out
-
-
 def test_a_pool_records_overlapping_matches_from_their_orders_into_their_folders(pool, tmp_path):
     made, future = pool
     a = made.order("pa", folder="one")
@@ -338,8 +311,7 @@ def test_a_pool_records_overlapping_matches_from_their_orders_into_their_folders
     assert made.ended("pb")
     assert not made.wait_until(lambda: made.taps["pa"].is_alive("recorder"), timeout=0.5)
     a_path, b_path = tmp_path / "one" / "pa.tsflog", tmp_path / "two" / "pb.tsflog"
-    assert each_key(records(a_path)) == each_key(a.sent[:recorded])
-    assert each_key(records(b_path)) == each_key(b.sent)
+    assert records(a_path) == a.sent[:recorded] and records(b_path) == b.sent
     assert all(load(path).summary is not None and load(path).clean for path in (a_path, b_path))
     assert sorted(p.name for p in tmp_path.rglob("*.tsflog")) == ["pa.tsflog", "pb.tsflog"]
     assert not future.done()
@@ -360,7 +332,7 @@ def test_a_killed_sim_ends_its_match_s_recording_only(pool, tmp_path):
     sims["kb"].undeclare()
     killed = load(tmp_path / "ka.tsflog")
     assert killed.clean and killed.problems() == ["no summary (last state: frame 3)"]
-    assert each_key(records(tmp_path / "kb.tsflog")) == each_key(b.sent)
+    assert records(tmp_path / "kb.tsflog") == b.sent
 
 
 def test_an_order_it_cannot_take_is_dropped_with_one_line_and_the_pool_records_on(pool, tmp_path, caplog):
@@ -405,7 +377,7 @@ def test_sigterm_closes_every_open_log(pool_router, spawn, tmp_path, wait_until)
     for match in matches:
         recording = load(tmp_path / f"{match.match}.tsflog")
         assert recording.clean and [s.frame for s in recording.states] == [0, 1, 2, 3]
-        assert each_key(records(recording.path)) == each_key(match.sent)
+        assert records(recording.path) == match.sent
 
 
 def test_a_disk_error_fails_that_match_s_recording_alone_with_one_line(
@@ -427,7 +399,7 @@ def test_a_disk_error_fails_that_match_s_recording_alone_with_one_line(
         fits.start()
         fits.frames(3)  # about 10 KB
         fits.summary()
-        assert made.ended("fits") and each_key(records(tmp_path / "fits.tsflog")) == each_key(fits.sent)
+        assert made.ended("fits") and records(tmp_path / "fits.tsflog") == fits.sent
         assert recorder.poll() is None, "the recorder serves on"
         recorder.send_signal(signal.SIGTERM)
         assert recorder.wait(10) == 0
@@ -441,5 +413,7 @@ def test_a_disk_error_fails_that_match_s_recording_alone_with_one_line(
     ), failed
     cut = load(tmp_path / "full.tsflog")  # as it stood: the records written before the error
     assert cut.summary is None and [s.frame for s in cut.states] == list(range(len(cut.states)))
-    written, sent = each_key(records(tmp_path / "full.tsflog")), each_key(full.sent)
-    assert 0 < len(cut.states) < 20 and all(sent[key][: len(data)] == data for key, data in written.items())
+    assert (
+        0 < len(cut.states) < 20
+        and records(tmp_path / "full.tsflog") == full.sent[: len(read_log(cut.path)[0])]
+    )

@@ -32,7 +32,6 @@ from services.agent.library import (
 from services.agent.policy import (
     Ending,
     RulePolicy,
-    end_round_batch,
     end_round_choice,
     end_stalled_rounds,
     factored_probs,
@@ -206,25 +205,8 @@ class LearnedPolicy:
             self.alone = Stack([self])
         return self.alone(observations)[0]
 
-    def head_probs_batch(self, observations: np.ndarray) -> dict[str, np.ndarray]:
-        """head_probs() of every row of an (n, 64) array: each head's (n, size), the network in one
-        pass for all rows (a pool's agent, for every seat that plays this policy in a tick). The
-        batch's products may round the last bit otherwise than one row's: a draw's uniform would
-        have to fall within that bit to play another action."""
-        heads = dict(zip(self.recipe.learned, self.learned_heads(observations), strict=True))
-        for name, choices in rule_heads_batch(self.recipe, observations, self.config).items():
-            heads[name] = rule_head_probs(choices, HEAD_SIZES[name], RulePolicy.EPSILON)
-        mask, end = end_round_batch(observations, self.view)
-        for k, name in enumerate(HEADS):
-            if mask.any():
-                heads[name][mask] = rule_head_probs(end[mask, k], HEAD_SIZES[name], RulePolicy.EPSILON)
-        return heads
-
     def act(self, obs: np.ndarray) -> int:
-        return self.sample(self.head_probs(obs))
-
-    def sample(self, heads: dict[str, np.ndarray]) -> int:
-        """An action drawn from one row's head distributions with this policy's random stream."""
+        heads = self.head_probs(obs)
         turn, thrust, fire = (draw(self.rng, heads[name]) for name in HEADS)
         return join_action(turn, thrust, fire)
 

@@ -4,12 +4,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
-from typing import NamedTuple
 
-import numpy as np
-
-from services.agent.networks import LearnedPolicy
-from services.agent.policy import rule_stack_key
 from services.agent.seats import policy_for
 from services.sim.observation import as_observation
 from services.sim.play import policy_seed, switch_seed
@@ -58,24 +53,15 @@ class Player:
             if key != self._next_key():
                 self.pending, self._next = key, policy
 
-    def ready(self, frame: int) -> Policy:
-        """The policy that answers the state of `frame`: a pending switch takes effect here."""
+    def act(self, state: State, sender: str) -> Action:
         with self._lock:
             if self.pending is not None:
                 self.policy, self.pending = self._next, None
-                self.policy.reset(switch_seed(self.seed, self.role, frame))
-            return self.policy
-
-    def act(self, state: State | Frame, sender: str) -> Action:
-        policy = self.ready(state.frame)
+                self.policy.reset(switch_seed(self.seed, self.role, state.frame))
+            policy = self.policy
         obs = as_observation(state.obs[self.role], policy.view)
-        return self.answer(state, sender, policy, lambda: policy.act(obs))
-
-    def answer(self, state: State | Frame, sender: str, policy: Policy, play: Callable[[], int]) -> Action:
-        """The action `play` gives (a policy's act, or its row of a batch's), or no-op where it
-        raises or answers no action, counted and said."""
         try:
-            action, failure = checked_action(play()), ""
+            action, failure = checked_action(policy.act(obs)), ""
         except Exception as error:  # noqa: BLE001 - a policy from outside may raise anything; the match goes on
             self.failures += 1
             action, failure = NOOP, f"{policy.key} at frame {state.frame}: {type(error).__name__}: {error}"
@@ -89,27 +75,3 @@ class Player:
             failures=self.failures,
             failure=printable(failure, 200),
         )
-
-
-class Frame(NamedTuple):
-    """One match's frame as a pool's Tick gives it to the agent (shared.messages.Tick): what a
-    player reads of a State, each seat's world-view values a float64 row."""
-
-    match: str
-    frame: int
-    obs: dict[str, np.ndarray]
-
-
-def play_together(policies: list[Policy], observations: np.ndarray) -> list[int] | None:
-    """The actions of seats that play one library policy (each its own copy and random stream),
-    for their (seats, 64) observations, the policy evaluated once for all rows: a rule's choices
-    (its compiled form), a network's heads; then each seat draws with its own stream, as `act`
-    does. None for any other kind of policy (each seat then acts alone)."""
-    first = policies[0]
-    if type(first) is LearnedPolicy:
-        heads = first.head_probs_batch(observations)
-        return [p.sample({name: h[i] for name, h in heads.items()}) for i, p in enumerate(policies)]
-    if rule_stack_key(first) is not None:
-        choices = first.rule_batch(observations).tolist()
-        return [p.explore(tuple(c)) for p, c in zip(policies, choices, strict=True)]
-    return None

@@ -79,12 +79,7 @@ class RulePolicy:
         return RuleStack([self]).rules(observations)[0]
 
     def act(self, obs: np.ndarray) -> int:
-        return self.explore(self.rule(obs))
-
-    def explore(self, choice: tuple[int, int, int]) -> int:
-        """The action played for the rule's choice: each head kept with 1 - epsilon, else another
-        (this policy's random stream; a pool's agent draws here for each seat of a batch)."""
-        turn, thrust, fire = choice
+        turn, thrust, fire = self.rule(obs)
         rng, eps = self.rng, self.epsilon
         if rng.random() < eps:
             turn = (turn + rng.randrange(1, N_TURN)) % N_TURN

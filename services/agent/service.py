@@ -2,40 +2,31 @@
 
 An agent's seats in one match are a `Seats`; `run_agent` plays the seat a command line names,
 `run_agent_pool` the seats of every match a pool's orders name (shared.bus.serve_orders), with the
-same class. A pool's agent takes its matches' frames from the pool's Tick, one message a pass of
-the sim's clock (shared.messages.Tick), and answers every seat of every match in it with one
-evaluation per policy (`Tick`, player.play_together).
+same class.
 """
 
 from __future__ import annotations
 
-import contextlib
 import copy
 import functools
 import logging
 import threading
 from contextlib import ExitStack
 
-import numpy as np
 import zenoh
 
 from services.agent import library
 from services.agent.gate import RULING_WAIT, Gate
 from services.agent.networks import load
 from services.agent.outside import BY_KEY, policy_kind
-from services.agent.player import Frame, Player, PolicyLoader, play_together
-from services.agent.policy import FEW_ROWS
-from services.agent.scripted import scripted_keys
+from services.agent.player import Player, PolicyLoader
 from services.agent.seats import check_seat, policy_for
-from services.sim import observation as ob
-from services.sim.observation import as_observations
 from shared import keys
 from shared.bus import BusConfig, Drops, on_match_end, serve_orders, session, subscribe, until_stopped
-from shared.game import OBS_SIZE, ROLES, Policy
-from shared.messages import Action, MatchOrder, MessageError, PolicySwitch, Ruling, Start, State, Tick
+from shared.game import ROLES, Policy
+from shared.messages import MatchOrder, MessageError, PolicySwitch, Ruling, Start, State
 
 log = logging.getLogger("tsf.agent")
-Seat = tuple[Player, str, zenoh.Publisher]  # a seat's player, its sender name and its action's publisher
 
 
 class Seats:
@@ -46,8 +37,7 @@ class Seats:
     scoring frame only once it has the ruling on that frame (gate.py; RULING_WAIT at most), and
     plays the policy it names from there. `ended` is set when the match is over (its summary, or
     its sim gone); `close` undeclares everything, and no answer is put after it (a state's
-    callback may still be running). In a pool (`ticks`), its frames come from the pool's Tick, and
-    it is added to the pool's answers before its tokens are declared."""
+    callback may still be running)."""
 
     def __init__(
         self,
@@ -57,7 +47,6 @@ class Seats:
         drops: Drops,
         ended: threading.Event | None = None,
         adaptive: str = "",
-        ticks: TickAnswers | None = None,
     ) -> None:
         self.match = match
         self.ended = ended or threading.Event()
@@ -79,8 +68,7 @@ class Seats:
                 for player in players
             ]
             declared.enter_context(subscribe(z, keys.start(match), Start, self.on_start, drops))
-            if ticks is None:  # else the pool's Tick brings its frames
-                declared.enter_context(subscribe(z, keys.state(match), State, self.on_state, drops))
+            declared.enter_context(subscribe(z, keys.state(match), State, self.on_state, drops))
             for seat in self.players:
                 player = seat[0]
                 switch = functools.partial(self.on_switch, player)
@@ -93,8 +81,6 @@ class Seats:
                         subscribe(z, keys.ruling(match, player.role), Ruling, ruling, drops)
                     )
             declared.enter_context(on_match_end(z, match, self.ended, drops))
-            if ticks is not None:  # before the tokens: the sim's first frame may come right after them
-                ticks.add(self)
             for player in players:
                 declared.enter_context(z.liveliness().declare_token(keys.alive(match, "agent", player.role)))
             self.declared = declared.pop_all()
@@ -107,27 +93,20 @@ class Seats:
                 gate.armed = start.mode == "lockstep"
 
     def on_state(self, state: State) -> None:
-        if not state.last:
-            for seat in self.due(state):
-                self.answer(seat, state)
-
-    def due(self, state: State | Frame) -> list[Seat]:
-        """The seats that answer `state` now; an adaptive seat's gate may hold its answer for the
-        adapter's ruling (a timer answers it, at the latest, after RULING_WAIT)."""
-        due = []
+        if state.last:
+            return
         for seat in self.players:
             if seat[0].role not in self.gates:
-                due.append(seat)
+                self.answer(seat, state)
                 continue
             gate, lock = self.gates[seat[0].role]
             with lock:
                 if gate.offer(state):
-                    due.append(seat)
+                    self.answer(seat, state)
                     continue
             threading.Timer(RULING_WAIT, self.expire, (seat, state)).start()
-        return due
 
-    def on_ruling(self, seat: Seat, ruling: Ruling) -> None:
+    def on_ruling(self, seat: tuple[Player, str, zenoh.Publisher], ruling: Ruling) -> None:
         """The adapter's ruling: its policy from the next frame, and the held answer it frees."""
         player = seat[0]
         if ruling.role != player.role:
@@ -141,7 +120,7 @@ class Seats:
             if (held := gate.rule(ruling.frame)) is not None:
                 self.answer(seat, held)
 
-    def expire(self, seat: Seat, state: State) -> None:
+    def expire(self, seat: tuple[Player, str, zenoh.Publisher], state: State) -> None:
         """The wait for a held state's ruling ran out: answer it as the seat plays now."""
         gate, lock = self.gates[seat[0].role]
         with lock:
@@ -152,13 +131,11 @@ class Seats:
                 )  # fmt: skip
                 self.answer(seat, held)
 
-    def answer(self, seat: Seat, state: State | Frame) -> None:
-        self.put(seat, seat[0].act(state, seat[1]))
-
-    def put(self, seat: Seat, action: Action) -> None:
-        publisher = seat[2]
+    def answer(self, seat: tuple[Player, str, zenoh.Publisher], state: State) -> None:
+        player, sender, publisher = seat
+        action = player.act(state, sender)
         if action.failure and action.failures == 1:  # one line a match; the sim counts the rest
-            log.error("%s: the policy failed and plays no-op on such frames: %s", seat[1], action.failure)
+            log.error("%s: the policy failed and plays no-op on such frames: %s", sender, action.failure)
         data = action.encode()
         with self.lock:
             if self.open:
@@ -238,91 +215,18 @@ def players_of(order: MatchOrder, load: PolicyLoader) -> list[Player]:
 
 
 def run_agent_pool(bus: BusConfig, pool: str, stop: threading.Event | None = None) -> Drops:
-    """Play every agent seat of the matches `pool`'s orders name until `stop` is set, their frames
-    from the pool's Tick (TickAnswers); returns the drop counts (bad orders and bad input of every
-    match). Every library policy is loaded and played once first (numba's compiled rules loaded,
-    or compiled where the cache is cold), before the pool's token says the agent is up."""
+    """Play every agent seat of the matches `pool`'s orders name until `stop` is set; returns the
+    drop counts (bad orders and bad input of every match)."""
     stop = stop or threading.Event()
     drops, load = Drops("agent"), Library()
-    warm(load)
     with session(bus) as z:
-        answers = TickAnswers()
 
         def start(order: MatchOrder) -> list[Seats]:
             players = players_of(order, load)
             if not players:
                 return []
             log.info("match %s: playing %s", order.match, {p.role: p.key for p in players})
-            return [Seats(z, order.match, players, drops, adaptive=order.adaptive, ticks=answers)]
+            return [Seats(z, order.match, players, drops, adaptive=order.adaptive)]
 
-        with subscribe(z, keys.pool_tick(pool), Tick, answers.on_tick, drops):
-            serve_orders(z, pool, "agent", start, drops, stop, tick=answers.keep)
+        serve_orders(z, pool, "agent", start, drops, stop)
     return drops
-
-
-class TickAnswers:
-    """A pool's agent's answers to its Ticks: the seats of every match it plays that a tick's frame
-    is due for, grouped by the policy they play (its key), each group's policy evaluated once for
-    all its rows (player.play_together; a policy from outside acts seat by seat), and each answer
-    put on its match's own action key."""
-
-    def __init__(self) -> None:
-        self.playing: dict[str, Seats] = {}
-        self.lock = threading.Lock()
-
-    def add(self, seats: Seats) -> None:
-        with self.lock:
-            self.playing[seats.match] = seats
-
-    def keep(self, _parts: list[Seats]) -> None:
-        """Forget the matches that ended (serve_orders's tick). Not by the parts it is given: a
-        match being ordered is added here before serve_orders holds it as a part."""
-        with self.lock:
-            self.playing = {match: seats for match, seats in self.playing.items() if not seats.ended.is_set()}
-
-    def on_tick(self, tick: Tick) -> None:
-        views = np.frombuffer(tick.views, "<f8").reshape(-1, len(ROLES), OBS_SIZE)
-        with self.lock:
-            playing = [(self.playing.get(match), n) for n, match in enumerate(tick.matches)]
-        groups: dict[tuple, list[tuple[Seats, Seat, Frame, Policy]]] = {}
-        for seats, n in playing:
-            if seats is None or tick.last[n]:
-                continue
-            frame = Frame(tick.matches[n], tick.frames[n], dict(zip(ROLES, views[n], strict=True)))
-            for seat in seats.due(frame):
-                policy = seat[0].ready(frame.frame)
-                groups.setdefault((type(policy), policy.key), []).append((seats, seat, frame, policy))
-        for group in groups.values():
-            self.answer(group)
-
-    @staticmethod
-    def answer(group: list[tuple[Seats, Seat, Frame, Policy]]) -> None:
-        view = group[0][3].view
-        rows = np.stack([frame.obs[seat[0].role] for _, seat, frame, _ in group])
-        try:
-            actions = play_together([policy for *_, policy in group], as_observations(rows, view))
-        except Exception:  # noqa: BLE001 - a policy's batch that fails: each seat acts alone, and says why
-            actions = None
-        for n, (seats, seat, frame, policy) in enumerate(group):
-            if actions is None:
-                obs = as_observations(rows[n : n + 1], view)[0]
-                action = seat[0].answer(frame, seat[1], policy, lambda p=policy, o=obs: p.act(o))
-            else:
-                action = seat[0].answer(frame, seat[1], policy, lambda a=actions[n]: a)
-            seats.put(seat, action)
-
-
-def warm(load: Library) -> None:
-    """Play every library and scripted policy of either seat once, in a batch of rows in which the
-    ship plays alone (so that the compiled end of a stalled round, for more than FEW_ROWS rows, is
-    played too): numba's compiled rules are loaded, or compiled where its cache is cold, before the
-    pool's token, not when a seat first plays one mid-match (the adapter switches seats to the
-    grown library's policies, whose rule heads are the same compiled rules; 10 s and more at load
-    12, every match of the pool unanswered meanwhile)."""
-    rows = np.zeros((FEW_ROWS + 1, OBS_SIZE))
-    rows[:, ob.SELF + ob.ALIVE] = rows[:, ob.FORTRESS + ob.F_ALIVE] = 1.0
-    for role in ROLES:
-        for key in (*library.keys(role), *scripted_keys(role)):
-            with contextlib.suppress(Exception):  # one that does not load is refused by its order
-                policy = load(key, role)
-                play_together([policy] * len(rows), as_observations(rows, policy.view))

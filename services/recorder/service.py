@@ -1,10 +1,7 @@
 """The recorder service: a thin shell that writes everything a match puts on the bus to its log.
 
 One match given on the command line (run_recorder), or a pool's matches as their orders come
-(run_pool_recorder): the same per-match code (MatchRecording, _record) either way. A pool's
-recorder takes its matches' states from the pool's Tick (one message a pass of the sim's clock,
-shared.messages.Tick), each the very record the match's state key carries, and everything else
-from the match's own keys. The zenoh
+(run_pool_recorder): the same per-match code (MatchRecording, _record) either way. The zenoh
 callbacks only timestamp and queue the bytes (they never block the session's receive thread); one
 drain thread validates, writes and tracks gaps for every match of the process. Bad input is
 counted and dropped.
@@ -30,7 +27,7 @@ from shared import keys
 from shared.bus import BusConfig, Drops, Seen, refuse_order, session, subscribe, until_stopped
 from shared.errors import Failure, UsageError
 from shared.game import ROLES, GameConfig
-from shared.messages import MatchOrder, Message, MessageError, Start, State, Summary, Tick, decode_any
+from shared.messages import MatchOrder, Message, MessageError, Start, State, Summary, decode_any
 from shared.provenance import provenance, sidecar
 
 log = logging.getLogger("tsf.recorder")
@@ -119,10 +116,6 @@ class Drain:
             (recording, str(sample.key_expr), sample.payload.to_bytes(), time.time_ns())
         )
 
-    def take(self, recording: MatchRecording, key: str, data: bytes, t: int) -> None:
-        """Queue what came some other way than on its key (a state in the pool's Tick)."""
-        self.inbox.put((recording, key, data, t))
-
     def close(self, recording: MatchRecording) -> None:
         """Close the log once everything queued before is written (call after undeclaring its feed)."""
         self.inbox.put((recording, None, b"", 0))
@@ -168,12 +161,7 @@ def run_recorder(
 
 
 def _record(
-    z: zenoh.Session,
-    client: bool,
-    recording: MatchRecording,
-    drain: Drain,
-    wait_seats: float,
-    ticked: bool = False,
+    z: zenoh.Session, client: bool, recording: MatchRecording, drain: Drain, wait_seats: float
 ) -> None:
     """Record one match on `z` until `recording.ended`, then close its log; everything declared for
     it is undeclared (a pool records for hours). The match also ends when the sim's token goes away
@@ -189,10 +177,8 @@ def _record(
     and a study can offer the trial without waiting for a person's Ready. A peer declares it once
     both seats' players are seen, or after `wait_seats` seconds: it learns of the other peers over
     gossip after the sim has seen them, so a token declared at once could start the match before
-    the seats' first actions reach this recorder. A pool's recorder (`ticked`) subscribes to every
-    key of the match but its state: its states come in the pool's Tick (PoolRecorder.on_tick)."""
+    the seats' first actions reach this recorder."""
     match, ended = recording.match, recording.ended
-    wanted = keys.beside_state(match) if ticked else (keys.everything(match),)
 
     def on_sim(sample: zenoh.Sample) -> None:
         if sample.kind == zenoh.SampleKind.DELETE:
@@ -200,12 +186,10 @@ def _record(
 
     with contextlib.ExitStack() as token:  # undeclared last: once it goes, the log is closed
         try:
-            with contextlib.ExitStack() as feeds:
-                for key in wanted:
-                    feeds.enter_context(z.declare_subscriber(key, drain.feed(recording)))
-                feeds.enter_context(
-                    z.liveliness().declare_subscriber(keys.alive(match, "sim"), on_sim, history=True)
-                )
+            with (
+                z.declare_subscriber(keys.everything(match), drain.feed(recording)),
+                z.liveliness().declare_subscriber(keys.alive(match, "sim"), on_sim, history=True),
+            ):
                 if not client:
                     _wait_for_seats(z, match, wait_seats, ended)
                 token.enter_context(z.liveliness().declare_token(keys.alive(match, "recorder")))
@@ -252,26 +236,13 @@ class PoolRecorder:
                 recording.ended.set()
             self.open[order.match] = (recording, threading.current_thread())
         try:
-            _record(self.z, self.client, recording, self.drain, order.wait_players, ticked=True)
+            _record(self.z, self.client, recording, self.drain, order.wait_players)
         finally:
             with self.lock:
                 del self.open[order.match]
         if recording.second is not None:
             log.warning("%s: a second match started under the id %s; it was not recorded", path, order.match)
         log.info("match %s recorded to %s", order.match, path)
-
-    def on_tick(self, tick: Tick) -> None:
-        """Each state of the pool's Tick, to its match's recording (if it records that match), as
-        if it had come on the match's state key."""
-        t = time.time_ns()
-        with self.lock:
-            held = [
-                (self.open.get(match), match, state)
-                for match, state in zip(tick.matches, tick.states, strict=True)
-            ]
-        for opened, match, state in held:
-            if opened is not None:
-                self.drain.take(opened[0], keys.state(match), state, t)
 
     def close(self) -> None:
         """End every open recording (each log flushed and closed) and take no more orders."""
@@ -295,7 +266,6 @@ def run_pool_recorder(
         recorder = PoolRecorder(z, bus.mode == "client", Path(out), drain, drops, pool)
         try:
             with (
-                subscribe(z, keys.pool_tick(pool), Tick, recorder.on_tick, drops),
                 subscribe(z, keys.pool_order(pool), MatchOrder, recorder.order, drops),
                 z.liveliness().declare_token(keys.pool_alive(pool, "recorder")),
             ):

@@ -1,8 +1,8 @@
 """The bulk engine: N independent games of TSF advanced together, as arrays.
 
-Training, sweeps and evaluation need millions of frames, and a live sim many matches at once (each
-a lane: lanes.py, `step` of the lanes due); the scalar `Game` (engine.py, pymunk) is the reference
-(docs/architecture.md, "Two engines"). Each lane is one
+Training, sweeps and evaluation need millions of frames; the scalar `Game` (engine.py, pymunk) is
+the live engine and the reference, and this one plays the same games in bulk (a live sim does not
+run it with one lane: docs/architecture.md, "Two engines"). Each lane is one
 game with its own seed, actions, resets, counters and events; the state is a struct of arrays and
 one numba-compiled loop advances every lane by a frame.
 
@@ -22,7 +22,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from services.sim.engine import Event, fortress_turn, hash_bytes, hexagon, in_rear_arc, steer
+from services.sim.engine import Event, fortress_turn, hash_values, hexagon, in_rear_arc, steer
 from services.sim.jit import njit
 from shared.game import DEATH_CAUSES, EVENT_KINDS, N_ACTIONS, ROLES, GameConfig, split_action
 
@@ -34,7 +34,6 @@ KILL, DEATH, SHIELD_HIT, MISSILE, SHELL, LOCK, FORTRESS_RESPAWN, RESET, RESPAWN 
 BORDER, SHIELD, SHELL_HIT = (DEATH_CAUSES.index(cause) for cause in ("border", "shield", "shell"))
 DRAWS_PER_SPAWN = 3  # random.uniform calls in a spawn: angle, distance, heading jitter
 _REFILL = 64  # spawns' worth of draws taken from a lane's generator at a time
-_SEPARATOR = np.array([-1.0], "<f8").tobytes()  # between a state's missiles and its shells
 
 
 class Rules(NamedTuple):
@@ -209,33 +208,15 @@ class BatchGame:
             self._draw(lane)
         _reset_lanes(self.state, self.rules, lanes)
 
-    def step(self, bait_actions: object, shooter_actions: object, lanes: np.ndarray | None = None) -> None:
-        """Advance every lane one frame, or only `lanes` (a live sim's matches due on this tick; the
-        actions of the others are not read). Invalid input raises before any lane changes."""
+    def step(self, bait_actions: object, shooter_actions: object) -> None:
+        """Advance every lane one frame. Invalid input raises before any lane changes."""
         actions = np.stack([self._check(bait_actions, 0), self._check(shooter_actions, 1)], axis=1)
-        lanes = np.arange(self.n) if lanes is None else np.asarray(lanes, dtype=np.int64)
-        over = lanes[self.done[lanes]]
+        over = np.flatnonzero(self.done)
         if over.size:
             raise ValueError(f"lane {over[0]}: game is over after {self.config.frames} frames")
-        low = lanes[self._drawn[lanes] - self.state.used[lanes] < 2 * DRAWS_PER_SPAWN]
-        for lane in low.tolist():
+        for lane in np.flatnonzero(self._drawn - self.state.used < 2 * DRAWS_PER_SPAWN).tolist():
             self._draw(lane)
-        _step(self.state, self.rules, actions, lanes)
-
-    def grow(self, n: int) -> None:
-        """Room for `n` lanes: the games held go on untouched, and the new lanes start games seeded
-        by their index (a live sim's pool takes more lanes as more matches play at once)."""
-        old = self.n
-        if n <= old:
-            return
-        state = State.zeros(n, self.config)
-        for grown, held in zip(state, self.state, strict=True):
-            grown[:old] = held
-        self.state, self.n = state, n
-        self.seeds = np.concatenate([self.seeds, np.zeros(n - old, np.int64)])
-        self._rngs += [random.Random(0)] * (n - old)
-        self._drawn = np.concatenate([self._drawn, np.zeros(n - old, np.int64)])
-        self.reset(np.arange(old, n), np.arange(old, n))
+        _step(self.state, self.rules, actions)
 
     def _check(self, actions: object, seat: int) -> np.ndarray:
         role = ROLES[seat]
@@ -288,36 +269,21 @@ class BatchGame:
 
     def state_values(self, lane: int) -> list[float]:
         """The lane's full state in `Game.state_values()` order."""
-        return np.frombuffer(self._packed([lane])[0], "<f8").tolist()
+        s, i = self.state, lane
+        values = [
+            s.frame[i], s.facing[i], s.fortress_alive[i], s.lock[i], s.since_shell[i], s.vulnerable[i],
+            s.down_frames[i], s.reset_in[i], s.kills[i], s.points[i], s.spawns[i],
+        ]  # fmt: skip
+        for k in range(2):
+            values += [s.x[i, k], s.y[i, k], s.vx[i, k], s.vy[i, k], s.heading[i, k], s.alive[i, k]]
+            values.append(s.cooldown[i, k])
+        values += s.missiles[i, : s.n_missiles[i]].ravel().tolist()
+        values.append(-1.0)
+        values += s.shells[i, : s.n_shells[i]].ravel().tolist()
+        return [float(v) for v in values]
 
     def state_hash(self, lane: int) -> str:
-        return self.state_hashes([lane])[0]
-
-    def state_hashes(self, lanes: object) -> list[str]:
-        """state_hash() of each of `lanes` (a live sim's, every frame)."""
-        return [hash_bytes(packed) for packed in self._packed(lanes)]
-
-    def _packed(self, lanes: object) -> list[bytes]:
-        """Each lane's state values as `hash_values` packs them (little-endian float64): the
-        values every lane has in a fixed place gathered for all of `lanes` at once, then each
-        lane's missiles, -1 and its shells."""
-        s, lanes = self.state, np.asarray(lanes, dtype=np.int64)
-        lane = (s.frame, s.facing, s.fortress_alive, s.lock, s.since_shell, s.vulnerable, s.down_frames,
-                s.reset_in, s.kills, s.points, s.spawns)  # fmt: skip
-        ships = np.stack([s.x, s.y, s.vx, s.vy, s.heading, s.alive, s.cooldown], axis=2)[lanes]
-        fixed = np.concatenate([np.stack(lane, axis=1)[lanes], ships.reshape(len(lanes), -1)], axis=1)
-        fixed = fixed.astype("<f8")
-        return [
-            b"".join(
-                (
-                    fixed[k].tobytes(),
-                    s.missiles[i, : s.n_missiles[i]].astype("<f8").tobytes(),
-                    _SEPARATOR,
-                    s.shells[i, : s.n_shells[i]].astype("<f8").tobytes(),
-                )
-            )  # fmt: skip
-            for k, i in enumerate(lanes.tolist())
-        ]
+        return hash_values(self.state_values(lane))
 
     def counters(self, lane: int) -> dict[str, dict]:
         """The lane's per-player counters, as `Game.counters()`."""
@@ -346,22 +312,21 @@ class BatchGame:
 
 
 @njit
-def _step(a, r, actions, lanes):
-    """One frame of each lane in `lanes` (the others are left as they are)."""
-    _steer_ships(a, r, actions, lanes)
-    _move_projectiles(r, a.missiles, a.n_missiles, lanes)
-    _move_projectiles(r, a.shells, a.n_shells, lanes)
-    _ship_collisions(a, r, lanes)
-    killed_by = _resolve_missiles(a, r, lanes)
-    _resolve_shells(a, r, lanes)
+def _step(a, r, actions):
+    _steer_ships(a, r, actions)
+    _move_projectiles(r, a.missiles, a.n_missiles)
+    _move_projectiles(r, a.shells, a.n_shells)
+    _ship_collisions(a, r)
+    killed_by = _resolve_missiles(a, r)
+    _resolve_shells(a, r)
     planes, radius, cos30 = r.region_planes, r.region_radius, r.cos30
-    for i in lanes:
+    for i in range(a.frame.shape[0]):
         for s in range(2):
             inside = _in_hexagon(planes, radius, cos30, a.facing[i], a.x[i, s], a.y[i, s])
             a.in_region[i, s] = a.alive[i, s] and inside
-    _fortress(a, r, killed_by, lanes)
-    _both_dead_reset(a, r, lanes)
-    for i in lanes:
+    _fortress(a, r, killed_by)
+    _both_dead_reset(a, r)
+    for i in range(a.frame.shape[0]):
         for s in range(2):
             if a.in_region[i, s]:
                 a.frames_in_region[i, s] += 1
@@ -486,10 +451,10 @@ def _respawn_dead(a, r, i):
 
 
 @njit
-def _steer_ships(a, r, actions, lanes):
+def _steer_ships(a, r, actions):
     """Frame count, each living ship's steer, then the pymunk space step: every body moves by its
     velocity (a dead ship's is zero)."""
-    for i in lanes:
+    for i in range(actions.shape[0]):
         a.frame[i] += 1
         a.n_events[i] = 0
         for s in range(2):
@@ -526,9 +491,9 @@ def _steer_ships(a, r, actions, lanes):
 
 
 @njit
-def _move_projectiles(r, group, counts, lanes):
+def _move_projectiles(r, group, counts):
     """Move every missile (or shell) and drop those off the arena, keeping launch order."""
-    for i in lanes:
+    for i in range(counts.shape[0]):
         kept = 0
         for k in range(counts[i]):
             group[i, k, 0] += group[i, k, 2]
@@ -540,8 +505,8 @@ def _move_projectiles(r, group, counts, lanes):
 
 
 @njit
-def _ship_collisions(a, r, lanes):
-    for i in lanes:
+def _ship_collisions(a, r):
+    for i in range(a.frame.shape[0]):
         for s in range(2):
             if a.alive[i, s]:
                 x, y = a.x[i, s], a.y[i, s]
@@ -564,12 +529,12 @@ def _kill_ship(a, r, i, s, cause):
 
 
 @njit
-def _resolve_missiles(a, r, lanes):
+def _resolve_missiles(a, r):
     """Missiles against shield and fortress, in lanes whose fortress is up; each lane's killer
     seat (its earliest-launched killing missile's owner), or -1."""
     killed_by = np.full(a.frame.shape[0], -1, np.int64)
     reach = r.shield_radius + r.missile_radius
-    for i in lanes:
+    for i in range(a.frame.shape[0]):
         if not a.fortress_alive[i]:
             continue
         kept = 0
@@ -599,9 +564,9 @@ def _resolve_missiles(a, r, lanes):
 
 
 @njit
-def _resolve_shells(a, r, lanes):
+def _resolve_shells(a, r):
     hit2 = r.shell_hit_distance * r.shell_hit_distance
-    for i in lanes:
+    for i in range(a.frame.shape[0]):
         kept = 0
         for k in range(a.n_shells[i]):
             hit = False
@@ -622,8 +587,8 @@ def _resolve_shells(a, r, lanes):
 
 
 @njit
-def _fortress(a, r, killed_by, lanes):
-    for i in lanes:
+def _fortress(a, r, killed_by):
+    for i in range(a.frame.shape[0]):
         if killed_by[i] >= 0:
             _fortress_destroyed(a, r, i, killed_by[i])
         elif a.fortress_alive[i]:
@@ -693,8 +658,8 @@ def _fortress_down(a, r, i):
 
 
 @njit
-def _both_dead_reset(a, r, lanes):
-    for i in lanes:
+def _both_dead_reset(a, r):
+    for i in range(a.frame.shape[0]):
         if a.alive[i, 0] or a.alive[i, 1]:
             continue
         if a.reset_in[i] < 0:

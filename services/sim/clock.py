@@ -17,7 +17,6 @@ from __future__ import annotations
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable
 from typing import Protocol
 
 POLL = 0.05  # seconds between looks at the stop event while nothing is due
@@ -33,12 +32,8 @@ class Played(Protocol):
     def due(self, now: float) -> float:
         """When the match's next tick is due (monotonic seconds; `now` or earlier: at once)."""
 
-    def tick(self) -> bool:
-        """Play what is due: start, the summary or the close (False); or a frame: set its lane's
-        actions for the engine's step (True: `played` follows that step)."""
-
-    def played(self) -> None:
-        """Put the frame the engine just stepped (and the summary after the last)."""
+    def tick(self) -> None:
+        """Play what is due: start, one frame, the summary, or the close."""
 
     def end(self) -> None:
         """End the match at its next tick (its summary is published)."""
@@ -53,21 +48,13 @@ def on_phase(now: float, period: float, phase: float) -> float:
 class Clock:
     """Plays every match it holds: sleeps until the earliest due tick (woken early by `changed`,
     which the bus's callbacks notify when a match may be due sooner: a seat arrives, a lockstep
-    answer, an order) and plays each due match's tick, earliest first; then `step` plays the frame
-    of every match that ticked one, all in one call (lanes.Lanes.step), each puts its own, and
-    `after` ends the pass (a pool's sim puts its Tick: pool.Ticks). A
-    match's ticks are due on its own schedule, so lateness never accumulates; a closed match is
-    dropped."""
+    answer, an order) and plays each due match's tick, earliest first. A match's ticks are due on
+    its own schedule, so lateness never accumulates; a closed match is dropped."""
 
-    def __init__(
-        self,
-        phases: int = 1,
-        step: Callable[[], None] = lambda: None,
-        after: Callable[[], None] = lambda: None,
-    ) -> None:
+    def __init__(self, phases: int = 1) -> None:
         self.changed = threading.Condition()
         self.matches: list[Played] = []
-        self.phases, self.step, self.after = phases, step, after
+        self.phases = phases
 
     def add(self, match: Played) -> None:
         """Play `match` from now on, in the phase that the fewest of the matches held use."""
@@ -104,12 +91,9 @@ class Clock:
                     continue
             self._play([match for due, _, match in dues if due <= now])
 
-    def _play(self, due: list[Played]) -> None:
-        """Tick each match in `due`, step the frames they ticked, and put them: a function of its
-        own, so that no local of the loop holds an ended match."""
-        stepped = [match for match in due if match.tick()]
-        if stepped:
-            self.step()
-        for match in stepped:
-            match.played()
-        self.after()
+    @staticmethod
+    def _play(due: list[Played]) -> None:
+        """Tick each match in `due`: a function of its own, so that no local of the loop holds an
+        ended match."""
+        for match in due:
+            match.tick()

@@ -480,11 +480,7 @@ class Game:
 
 def hash_values(values: list[float]) -> str:
     """16 hex digits over the exact bits of a state's values; equal states give equal hashes."""
-    return hash_bytes(struct.pack(f"<{len(values)}d", *values))
-
-
-def hash_bytes(packed: bytes) -> str:
-    """hash_values of values already packed as it packs them (the batched engine packs its own)."""
+    packed = struct.pack(f"<{len(values)}d", *values)
     return hashlib.blake2b(packed, digest_size=8).hexdigest()
 
 

@@ -1,10 +1,7 @@
 """numba's compiler for the project's compiled loops (the batched engine, batched rules and sampling).
 
-numba is loaded only when something is compiled: a service that plays no lanes (a match's own
-agent) never pays its import (half a second), which matters to an agent restarted mid-match. A
-sim (every match a lane: services/sim/lanes.py) and a pool's agent (its policies evaluated for
-all its seats at once) load it, and play their compiled loops once, before their tokens say they
-are up.
+numba is loaded only when something is compiled: a live agent or sim that never plays in bulk
+never pays its import (half a second), which matters to an agent restarted mid-match.
 
 Compiled code is cached in the user's cache directory (never in the checkout or the installed
 package), so only the first run on a machine pays the compile time. numba checks a cached

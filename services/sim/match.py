@@ -3,15 +3,11 @@
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING
 
 from services.sim.engine import Game
 from services.sim.observation import world_views
 from shared.game import NOOP, ROLES
 from shared.messages import Action, GameEvent, Start, State, Summary
-
-if TYPE_CHECKING:
-    from services.sim.lanes import Lane
 
 
 class Seats:
@@ -70,7 +66,7 @@ class Seats:
         return tuple(self.latest[r] if self.present(r) else NOOP for r in ROLES)  # type: ignore[return-value]
 
 
-def start_message(game: Game | Lane, match: str, sender: str, mode: str, policies: dict[str, str]) -> Start:
+def start_message(game: Game, match: str, sender: str, mode: str, policies: dict[str, str]) -> Start:
     return Start(
         match=match,
         frame=game.frame,
@@ -82,12 +78,12 @@ def start_message(game: Game | Lane, match: str, sender: str, mode: str, policie
     )
 
 
-def state_message(game: Game | Lane, match: str, sender: str, applied: tuple[int, int]) -> State:
+def state_message(game: Game, match: str, sender: str, applied: tuple[int, int]) -> State:
     return State(
         match=match,
         frame=game.frame,
         sender=sender,
-        obs=world_views(game) if isinstance(game, Game) else game.world_views(),
+        obs=world_views(game),
         ships=[[s.x, s.y, s.vx, s.vy, s.heading, float(s.alive)] for s in game.ships],
         fortress=[game.facing, float(game.fortress_alive), game.vulnerable, game.lock, game.since_shell],
         missiles=[list(m) for m in game.missiles],
@@ -101,7 +97,7 @@ def state_message(game: Game | Lane, match: str, sender: str, applied: tuple[int
     )
 
 
-def event_messages(game: Game | Lane, match: str, sender: str) -> list[GameEvent]:
+def event_messages(game: Game, match: str, sender: str) -> list[GameEvent]:
     return [
         GameEvent(match=match, frame=e.frame, sender=sender, kind=e.kind, role=e.role, detail=e.detail)
         for e in game.events
@@ -109,7 +105,7 @@ def event_messages(game: Game | Lane, match: str, sender: str) -> list[GameEvent
 
 
 def summary_message(
-    game: Game | Lane,
+    game: Game,
     match: str,
     sender: str,
     drops: dict[str, int],

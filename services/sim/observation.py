@@ -18,10 +18,8 @@ it). The fortress is the origin in both.
 One function observes one game and many: it is written for lanes (the batched engine's arrays),
 and a scalar `Game` is one lane. Each step is written once: numba compiles it for a batch
 (`compiled`, `jitable`), and for a Game or a bus message Python runs the same source over one
-lane (lists and memoryviews), so an agent that reads one bus message loads no numba. Both do the
-same float64 operations in the same order: the values are bit-identical (batch_test.py). A live
-sim's matches are lanes of the batched engine (lanes.py): their views are computed compiled, for
-all of them at once.
+lane (lists and memoryviews), so a live sim or agent never loads numba. Both do the same float64
+operations in the same order: the values are bit-identical (batch_test.py).
 """
 
 from __future__ import annotations
@@ -72,7 +70,7 @@ _PAIRS = np.array(
 def observe(game: Game | BatchGame, role: str, view: str = "world") -> np.ndarray:
     """The float32 observations of `role` (bait or shooter) in the given view: (lanes, 64) for a
     BatchGame; for a Game, its one lane's (64,)."""
-    rows = world_rows(game, role)
+    rows = _world_rows(game, role)
     _check_view(view)
     if isinstance(game, Game):
         if view == "role":
@@ -85,7 +83,7 @@ def observe(game: Game | BatchGame, role: str, view: str = "world") -> np.ndarra
 
 def world_values(game: Game, role: str) -> list[float]:
     """One game's observation of `role` in the world view, as the float64 values the sim publishes."""
-    return world_rows(game, role)[0].tolist()
+    return _world_rows(game, role)[0].tolist()
 
 
 def world_views(game: Game) -> dict[str, list[float]]:
@@ -101,17 +99,11 @@ def as_observation(values: list[float], view: str = "world") -> np.ndarray:
 
     The role view is computed from the float64 world values here, in-process and on the bus alike,
     so that a policy sees bit-identical input either way."""
-    return as_observations(np.array([values], dtype=np.float64), view)[0]
-
-
-def as_observations(rows: np.ndarray, view: str = "world") -> np.ndarray:
-    """as_observation() of every row of an (n, 64) array of world-view values (a pool's agent, for
-    the seats of a tick that play one policy)."""
     _check_view(view)
-    rows = np.array(rows, dtype=np.float64)  # a copy: the role view turns it in place
+    rows = np.array([values], dtype=np.float64)
     if view == "role":
         _rotate(memoryview(rows))
-    return rows.astype(np.float32)
+    return rows[0].astype(np.float32)
 
 
 def _check_view(view: str) -> None:
@@ -154,7 +146,7 @@ class _Lane(NamedTuple):
         )  # fmt: skip
 
 
-def world_rows(game: Game | BatchGame, role: str) -> np.ndarray:
+def _world_rows(game: Game | BatchGame, role: str) -> np.ndarray:
     """The (lanes, 64) float64 world-view values of `role`: compiled for a batch, Python for a Game."""
     settings = _settings(game, role)
     if isinstance(game, Game):

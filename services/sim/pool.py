@@ -1,6 +1,5 @@
 """The pool's sim: one long-lived process that plays every match a launcher orders on one clock
-(`tsf sim --pool P`), each match exactly as a match's own sim plays it (service.MatchSim), every
-match a lane of the batched engine (lanes.py): the matches of a clock's pass step in one call."""
+(`tsf sim --pool P`), each match exactly as a match's own sim plays it (service.MatchSim)."""
 
 from __future__ import annotations
 
@@ -8,20 +7,16 @@ import contextlib
 import logging
 import sys
 import threading
-from typing import TYPE_CHECKING
 
 import zenoh
 
 from services.sim.clock import Clock
-from services.sim.service import MatchSim, Ticks, _raise_priority, real_time
+from services.sim.service import MatchSim, _raise_priority, real_time
 from shared import keys
 from shared.bus import BusConfig, Drops, Seen, session, subscribe
 from shared.game import GameConfig
 from shared.messages import MatchOrder, MatchStop
 from shared.processes import step_down
-
-if TYPE_CHECKING:
-    from services.sim.lanes import Lanes
 
 log = logging.getLogger("tsf.sim")
 PHASES = 8  # of the period, in which the pool's matches tick (clock.py: measured against 1, 4 and 12)
@@ -33,8 +28,8 @@ class PoolSim:
     """Starts a match per order (a repeated order, for a match it has or had, is ignored) and ends
     one on its stop; the clock plays them. Bad orders and stops are counted in `drops`."""
 
-    def __init__(self, z: zenoh.Session, pool: str, clock: Clock, lanes: Lanes, ticks: Ticks) -> None:
-        self.z, self.pool, self.clock, self.lanes, self.ticks = z, pool, clock, lanes, ticks
+    def __init__(self, z: zenoh.Session, pool: str, clock: Clock) -> None:
+        self.z, self.pool, self.clock = z, pool, clock
         self.seen, self.drops = Seen(), Drops("sim")
         self.lock = threading.Lock()
 
@@ -49,9 +44,9 @@ class PoolSim:
             if not self.seen.add(order.match):
                 return
         match = MatchSim(
-            self.z, self.clock.changed, self.lanes, order.match, order.seed, GameConfig(frames=order.frames),
-            order.mode, order.names, order.wait_players, order.wait_services,
-            wait_adapter=order.wait_services if order.adapter else 0.0, pool_ticks=self.ticks,
+            self.z, self.clock.changed, order.match, order.seed, GameConfig(frames=order.frames), order.mode,
+            order.names, order.wait_players, order.wait_services,
+            wait_adapter=order.wait_services if order.adapter else 0.0,
         )  # fmt: skip
         match.open()
         self.clock.add(match)
@@ -75,13 +70,9 @@ def run_pool(bus: BusConfig, pool: str, stop: threading.Event, priority: int = 0
     user: docs/architecture.md, "Capacity as an ordinary user"). Offers the GIL more often so that
     the bus's callbacks delay the clock less. The pool's name is checked where it enters
     (options.in_pool)."""
-    from services.sim.lanes import Lanes, warm  # numba comes with it: a launcher that reads PHASES needs none
-
-    warm()  # before the pool's token: no order waits for numba
     with session(bus) as z, contextlib.ExitStack() as stack:
-        lanes, ticks = Lanes(), Ticks(z, pool)
-        clock = Clock(PHASES, lanes.step, ticks.put)
-        sim = PoolSim(z, pool, clock, lanes, ticks)
+        clock = Clock(PHASES)
+        sim = PoolSim(z, pool, clock)
         _raise_priority(priority)
         below = priority > 0 and not real_time()
         sys.setswitchinterval(SWITCH_INTERVAL)

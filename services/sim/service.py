@@ -18,22 +18,18 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Callable
-from typing import TYPE_CHECKING
 
-import numpy as np
 import zenoh
 
 from services.sim.clock import Clock, on_phase
+from services.sim.engine import Game
 from services.sim.match import Seats, event_messages, start_message, state_message, summary_message
 from shared import keys
 from shared.bus import BusConfig, Drops, session, subscribe, weakly
 from shared.errors import UsageError
 from shared.game import ROLES, GameConfig
-from shared.messages import TICK_MATCHES, Action, Summary, Tick, seat_actions
+from shared.messages import Action, Summary, seat_actions
 from shared.processes import threads
-
-if TYPE_CHECKING:
-    from services.sim.lanes import Lane, Lanes
 
 log = logging.getLogger("tsf.sim")
 MODES = ("realtime", "lockstep")
@@ -72,17 +68,11 @@ class Sim:
         )  # fmt: skip
 
     def play(self) -> Summary:
-        """Play the match, a pool of one lane, and return its summary (also published on the
-        summary key). The batched engine is imported here, not with the module: numba comes with it,
-        and a service that only imports this one (a launcher's) does not need it."""
-        from services.sim.lanes import Lanes, warm
-
-        warm()
+        """Play the match and return its summary (also published on the summary key)."""
         with session(self.bus) as z:
-            lanes = Lanes()
-            clock = Clock(step=lanes.step)
+            clock = Clock()
             match = MatchSim(
-                z, clock.changed, lanes, **self.match, on_first_frame=lambda: _raise_priority(self.priority)
+                z, clock.changed, **self.match, on_first_frame=lambda: _raise_priority(self.priority)
             )
             match.open()
             clock.add(match)
@@ -92,17 +82,15 @@ class Sim:
 
 
 class MatchSim:
-    """One match on an open session, played by a `Clock` (alone, or with a pool's other matches) as
-    a lane of its `lanes` (taken at the first frame, freed at the close). The fields are what the
-    bus's callbacks share with the clock (under `changed`, the clock's).
+    """One match on an open session, played by a `Clock` (alone, or with a pool's other matches).
+    The fields are what the bus's callbacks share with the clock (under `changed`, the clock's).
 
     Waits up to `wait_players` seconds for both seats, then up to `wait_recorder` for a recorder
     and `wait_adapter` for an adapter (in adaptive matches); a seat still empty then plays no-op
     until its player arrives. Real time ticks at the game's fps (tick k due at the first frame +
     k/fps) with each seat's latest action; lockstep steps once both present seats have answered,
     or `step_timeout` after the state. State is put with congestion control *drop*: a frozen
-    subscriber can never stall the clock. In a pool (`pool_ticks`), each state goes in the pass's Tick
-    too, for the pool's own agent and recorder. After the summary it keeps its declarations `LINGER`
+    subscriber can never stall the clock. After the summary it keeps its declarations `LINGER`
     seconds (the last puts leave before its token goes), then undeclares them all (`closed`)."""
 
     LINGER = 0.2
@@ -111,7 +99,6 @@ class MatchSim:
         self,
         z: zenoh.Session,
         changed: threading.Condition,
-        lanes: Lanes,
         match: str,
         seed: int = 0,
         config: GameConfig | None = None,
@@ -122,16 +109,14 @@ class MatchSim:
         step_timeout: float = 1.0,
         wait_adapter: float = 0.0,
         on_first_frame: Callable[[], None] = lambda: None,
-        pool_ticks: Ticks | None = None,
     ) -> None:
         if mode not in MODES:
             raise UsageError("--sim-mode", mode, "unknown", MODES)
         self.z, self.changed, self.match, self.mode = z, changed, match, mode
         self.policies = {role: (policies or {}).get(role, "") for role in ROLES}  # the contract wants both
-        self.step_timeout, self.on_first_frame, self.pool_ticks = step_timeout, on_first_frame, pool_ticks
-        self.lanes, self.config, self.seed = lanes, config or GameConfig(), seed
-        self.game: Lane | None = None  # from the first frame (or a summary before it) to the close
-        self.period = 1.0 / self.config.fps
+        self.step_timeout, self.on_first_frame = step_timeout, on_first_frame
+        self.game = Game(config, seed)
+        self.period = 1.0 / self.game.config.fps
         self.seats, self.drops = Seats(), Drops("sim")
         self.answered_at: dict[tuple[str, int], int] = {}  # (role, frame) -> arrival time, for round trips
         self.observers: Counter[str] = Counter()  # live recorder and adapter tokens
@@ -187,13 +172,10 @@ class MatchSim:
             return now if self.seats.answered(self.game.frame) else self.sent_at + self.step_timeout
         return self.started + (self.game.frame + 1) * self.period
 
-    def tick(self) -> bool:
+    def tick(self) -> None:
         if self.summary is not None:
             self.closed = True
             self.declared.close()
-            if self.game is not None:
-                self.game.free()
-                self.game = None
         elif self.started is None:
             self._start()
         elif self.ended:
@@ -203,22 +185,13 @@ class MatchSim:
                 self.ticks.append(time.monotonic())
             with self.changed:
                 self.applied = self.seats.actions()
-            self.game.play(self.applied)
-            return True
-        return False
-
-    def played(self) -> None:
-        self._publish()
-
-    def _lane(self) -> Lane:
-        if self.game is None:
-            self.game = self.lanes.take(self.config, self.seed)
-        return self.game
+            self.game.step(*self.applied)
+            self._publish()
 
     def _start(self) -> None:
         # At the states' priority: zenoh orders messages only within one priority, so a start put
         # at the default priority could arrive after state 0.
-        start = start_message(self._lane(), self.match, "sim", self.mode, self.policies)
+        start = start_message(self.game, self.match, "sim", self.mode, self.policies)
         self.z.put(keys.start(self.match), start.encode(), priority=zenoh.Priority.REAL_TIME)
         self.on_first_frame()
         self.started = on_phase(time.monotonic(), self.period, self.phase)  # the first frame is put now
@@ -228,10 +201,7 @@ class MatchSim:
         """Put the state and the events of the frame just played; the summary after the last."""
         game, match = self.game, self.match
         self.sent_at, self.sent[game.frame] = time.monotonic(), time.perf_counter_ns()
-        state = state_message(game, match, "sim", self.applied).encode()
-        self.state_pub.put(state)
-        if self.pool_ticks is not None:
-            self.pool_ticks.add(match, game.frame, game.done, game.views(), state)
+        self.state_pub.put(state_message(game, match, "sim", self.applied).encode())
         with self.changed:
             failed = self.seats.failure_events(match, "sim")
         for event in [*event_messages(game, match, "sim"), *failed]:
@@ -251,7 +221,7 @@ class MatchSim:
             }
         timing = _timing(trips, self.ticks, self.period)
         summary = summary_message(
-            self._lane(), self.match, "sim", self.drops.counts, timing, self.seats.failures
+            self.game, self.match, "sim", self.drops.counts, timing, self.seats.failures
         )
         self.z.put(keys.summary(self.match), summary.encode())
         self.summary_at, self.summary = time.monotonic(), summary
@@ -275,33 +245,6 @@ class MatchSim:
             elif key.service in ("recorder", "adapter"):
                 self.observers[key.service] += 1 if sample.kind == zenoh.SampleKind.PUT else -1
             self.changed.notify_all()
-
-
-class Ticks:
-    """The pass's Tick (shared.messages.Tick): the frames the clock's matches put in one pass,
-    gathered as they are put, then put as one message on the pool's tick key (as several where the
-    pass held more than TICK_MATCHES), at the states' priority and as they are put (dropped rather
-    than stall the clock). Runs on the clock's thread."""
-
-    def __init__(self, z: zenoh.Session, pool: str) -> None:
-        self.pool, self.frames = pool, []
-        self.publisher = z.declare_publisher(
-            keys.pool_tick(pool), priority=zenoh.Priority.REAL_TIME,
-            congestion_control=zenoh.CongestionControl.DROP, express=True,
-        )  # fmt: skip
-
-    def add(self, match: str, frame: int, last: bool, views: np.ndarray, state: bytes) -> None:
-        self.frames.append((match, frame, last, views, state))
-
-    def put(self) -> None:
-        frames, self.frames = self.frames, []
-        for at in range(0, len(frames), TICK_MATCHES):
-            matches, numbers, last, views, states = zip(*frames[at : at + TICK_MATCHES], strict=True)
-            tick = Tick(
-                frame=0, sender="sim", pool=self.pool, matches=list(matches), frames=list(numbers),
-                last=list(last), views=np.stack(views).astype("<f8").tobytes(), states=list(states),
-            )  # fmt: skip
-            self.publisher.put(tick.encode())
 
 
 def _raise_priority(steps: int) -> None:

@@ -48,17 +48,26 @@ def main() -> None:
     if args.part:
         print(json.dumps(play(args.part, args.endpoint, args.matches, args.seconds, args.phases)))
         return
+    per_match, samples = floor(args.matches, args.seconds, args.phases)
+    print(f"{args.matches} matches, {args.seconds:.0f} s, {FPS} frames/s, states in {args.phases} phases:")
+    for part in PARTS:
+        print(f"  {part:11s} {per_match[part]:.4f} CPU-s per s of play per match, {samples[part]} samples in")
+    pool = per_match["pool"]
+    print(f"  the pool's processes (router, agent, recorder): {pool:.4f} CPU-s per s of play per match")
+
+
+def floor(matches: int, seconds: float, phases: int = PHASES) -> tuple[dict[str, float], dict[str, int]]:
+    """Play the four parts at once: each part's CPU-s per second of play per match (and "pool", the
+    sum of the pool's three), and the samples each took in. bench/study.py runs it beside its load
+    test, so that a participant's cost reads as a multiple of the floor of the same hour."""
     endpoint = free_endpoint()
-    command = [sys.executable, __file__, "--matches", str(args.matches), "--seconds", str(args.seconds)]
-    command += ["--phases", str(args.phases), "--endpoint", endpoint]
+    command = [sys.executable, __file__, "--matches", str(matches), "--seconds", str(seconds)]
+    command += ["--phases", str(phases), "--endpoint", endpoint]
     parts = {part: subprocess.Popen([*command, "--part", part], stdout=subprocess.PIPE) for part in PARTS}
     results = {part: json.loads(process.communicate()[0]) for part, process in parts.items()}
-    per_match = {part: r["cpu"] / r["seconds"] / args.matches for part, r in results.items()}
-    pool = sum(per_match[part] for part in ("router", "agent", "recorder"))
-    print(f"{args.matches} matches, {args.seconds:.0f} s, {FPS} frames/s, states in {args.phases} phases:")
-    for part, r in results.items():
-        print(f"  {part:11s} {per_match[part]:.4f} CPU-s per s of play per match, {r['samples']} samples in")
-    print(f"  the pool's processes (router, agent, recorder): {pool:.4f} CPU-s per s of play per match")
+    per_match = {part: r["cpu"] / r["seconds"] / matches for part, r in results.items()}
+    per_match["pool"] = sum(per_match[part] for part in ("router", "agent", "recorder"))
+    return per_match, {part: r["samples"] for part, r in results.items()}
 
 
 def play(part: str, endpoint: str, matches: int, seconds: float, phases: int) -> dict:

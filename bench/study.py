@@ -20,6 +20,9 @@ with them. The pool's own start-up (once per server) is printed apart. Everyone 
 once (the arrival limits are lifted). The most participants served is the largest count with
 every trial done, every match's tick jitter p99 <= 5 ms and the agent's round trip p99 (state to
 action, at the sim) <= 33 ms; `--max-lag` sets the server's admission hold (Serving.max_lag).
+After each count, bench/bus_floor.py's floor is played at as many matches (`--floor-seconds`, 0:
+none), and a participant's cost is printed as a multiple of it: the bus's cost moves with the hour,
+the ratio does not.
 
 Arrivals (`--arrivals N --over S`): N participants arrive at random times over S seconds with at
 most `--max-matches` matches at once: completed (goal N), lost (goal 0) and the queue wait
@@ -61,6 +64,8 @@ from collections import Counter
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+
+from bus_floor import floor
 
 from services.human.gateway import Web
 from services.recorder.recording import load
@@ -188,7 +193,12 @@ def cpu_of_this_process() -> tuple[float, float]:
 
 
 def load_test(
-    counts: list[int], trials: int, seconds: float, adaptive: bool = False, max_lag: float = Serving.max_lag
+    counts: list[int],
+    trials: int,
+    seconds: float,
+    adaptive: bool = False,
+    max_lag: float = Serving.max_lag,
+    floor_seconds: float = 10.0,
 ) -> None:
     shipped = StudyConfig.load(CONFIGS / ("adaptive.toml" if adaptive else "static.toml"))
     config = dataclasses.replace(shipped, trials=trials, trial_seconds=seconds, practice_seconds=0.0)
@@ -244,9 +254,27 @@ def load_test(
             f"{pool / count:.1f} MiB (the pool {pool:.0f} MiB at its peak, the judge {judge:.0f} MiB apart; "
             f"its start-up {up - began:.1f} s, {sum(at_up.values()):.1f} CPU s, once per server)"
         )
+        if floor_seconds > 0:
+            print(beside_the_floor(count, floor_seconds, sum(cost.values()), total))
     print(
         f"the largest count served with every trial done, tick jitter p99 <= {JITTER_MS:g} ms and the "
         f"agent's round trip p99 <= {TRIP_MS:g} ms: {served} (held above {max_lag * 1e3:g} ms of lag)"
+    )
+
+
+def beside_the_floor(count: int, seconds: float, pool: float, total: float) -> str:
+    """bench/bus_floor.py's floor at `count` matches, played right after the load test, and what a
+    participant costs as a multiple of it: of the pool (its processes against the floor's router,
+    agent and recorder) and in all (the server's against the floor's participant too). The bus's
+    cost moves with the hour (docs/architecture.md: 0.0099 and 0.0187 an hour apart); the ratio
+    reads the same in a slow hour and a fast one."""
+    per_match, _ = floor(count, seconds)
+    every = per_match["pool"] + per_match["participant"]
+    return (
+        f"       the bus's floor ({count} matches, {seconds:g} s, bench/bus_floor.py): the pool's "
+        f"{per_match['pool']:.4f}, with the participant's {every:.4f} CPU s per s of play per match; "
+        f"a participant costs {pool / per_match['pool']:.1f}x the floor in the pool, "
+        f"{total / every:.1f}x in all"
     )
 
 
@@ -350,6 +378,12 @@ def main() -> None:
     parser.add_argument(
         "--max-lag", type=float, default=Serving.max_lag, help="load test: Serving.max_lag, s (0: no hold)"
     )
+    parser.add_argument(
+        "--floor-seconds",
+        type=float,
+        default=10.0,
+        help="load test: seconds of bench/bus_floor.py's floor after each count (0: none)",
+    )
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     if args.second_host:
@@ -363,7 +397,9 @@ def main() -> None:
     elif args.arrivals:
         arrival_test(args.arrivals, args.over, args.trial_seconds, args.max_matches, args.seed)
     else:
-        load_test(args.counts, args.trials, args.trial_seconds, args.adaptive, args.max_lag)
+        load_test(
+            args.counts, args.trials, args.trial_seconds, args.adaptive, args.max_lag, args.floor_seconds
+        )
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ from scipy import stats
 
 from services.adapter import core
 from services.agent import networks
+from services.agent.library import NAMED
 from services.evaluation.evaluate import batches, play_games, play_session, play_teams, setup
 from services.evaluation.evaluate import policy as ours
 from services.evaluation.identification import follow_lag, windowed
@@ -154,13 +155,25 @@ GAMES = [
 ]
 
 
+@pytest.fixture
+def grown_groups(monkeypatch: pytest.MonkeyPatch):
+    """The grown library's partner groups as the groups in use (the previous default's: the tuned
+    library's groups all want one member, so its agent never switches), read afresh."""
+    monkeypatch.setattr(core, "GROUPS", NAMED["grown"] / "groups.json")
+    setup.cache_clear()
+    yield
+    setup.cache_clear()
+
+
 @pytest.mark.long
 @pytest.mark.slow
+@pytest.mark.usefixtures("grown_groups")
 def test_batched_adaptive_games_decide_as_the_scalar_engine_replays_them() -> None:
     """Replay each batched game's actions on the scalar engine with the Scorer on world values and
     a one-game Adapter: the same states and scores, switches at the same frames to the same
     policies, the same kills; and our seat's every action is the draw of the policy the timeline
-    says was playing; under the guard and with human-like partners too."""
+    says was playing; under the guard and with human-like partners too (the groups of the grown
+    library, whose agent switches)."""
     config = GameConfig(frames=900)
     played = play_games(seated(GAMES), "shooter", config, record=True, score="library")
     assert play_games(seated(GAMES[1:2]), "shooter", config)[0] == dataclasses.replace(

@@ -34,15 +34,14 @@ from services.growth.choice import Grid
 from services.growth.crossplay import kills_of, pair_jobs
 from services.growth.groups import grouped
 from services.growth.library import GROUPS, recipe_fields
-from services.growth.responses import RESPONSE, response_partners
+from services.growth.responses import response_partners
 from services.growth.training import train_levels
 from services.growth.workspace import Workspace
+from services.population.families import CONDITIONED_PREFIX, RESPONSE_PREFIX
 from services.training.algorithms import export, make_model
 from services.training.loop import whole_rollouts
 from shared.files import write_json
 from shared.game import ROLES, other
-
-PREFIX = {"bait": "CB", "shooter": "CS"}  # the keys of the conditioned teammate told each group
 
 
 class Told(VecEnvWrapper):
@@ -134,7 +133,7 @@ def run_conditioned(grow: Workspace, ours: str, steps: int | None = None, separa
     grow.bind()  # a run of another spec is refused
     out, partner_role = grow.out, other(ours)
     groups = json.loads((out / "groups.json").read_text())[partner_role]["groups"]
-    responses = [f"{RESPONSE[ours]}{j + 1}" for j in range(len(groups))]
+    responses = [f"{RESPONSE_PREFIX[ours]}{j + 1}" for j in range(len(groups))]
     steps = steps or int(grow.spec.seats[ours].response["steps"]) * (1 if separate else len(groups))
     if separate:
         root = out / f"responses-{ours}-{steps}"
@@ -142,7 +141,7 @@ def run_conditioned(grow: Workspace, ours: str, steps: int | None = None, separa
         make = _separate_library
     else:
         root = out / f"conditioned-{ours}-{steps}"
-        teammates = [f"{PREFIX[ours]}{j + 1}" for j in range(len(groups))]
+        teammates = [f"{CONDITIONED_PREFIX[ours]}{j + 1}" for j in range(len(groups))]
         make = _conditioned_library
     if not (root / "manifest.json").exists():
         make(grow, ours, groups, steps, root, teammates)
@@ -209,10 +208,10 @@ def _conditioned_library(
     }
     recipe |= {"frame": "world"} if ours == "shooter" else {}
     staging = grow.out / f"{root.name}-recipe"  # in no library in use, as grow's staging
-    library.write_registry(staging, {PREFIX[ours]: recipe})
+    library.write_registry(staging, {CONDITIONED_PREFIX[ours]: recipe})
     group_of = np.array([j for j, names in enumerate(partners) for _ in names])
     with grow.playing([grow.population_dir]):
-        trained = library.registry(staging)[PREFIX[ours]]
+        trained = library.registry(staging)[CONDITIONED_PREFIX[ours]]
         arrays = train_conditioned(trained, staging, group_of, steps, recipe["seed"])
     recipes, manifest = {}, {}
     for j, name in enumerate(teammates):
@@ -240,7 +239,7 @@ def _separate_library(
 
     recipes, manifest = {}, {}
     for j, name in enumerate(teammates):
-        key = f"{RESPONSE[ours]}{j + 1}"
+        key = f"{RESPONSE_PREFIX[ours]}{j + 1}"
         with grow.playing([grow.population_dir]):
             train_levels(key, grow.staging, {key: steps}, grow.runs)
         manifest[name] = library.copy_member(grow.staging, library.manifest(grow.staging)[key], root, name)

@@ -55,3 +55,10 @@ def grouped(grid: Grid, groups: list[list[str]]) -> tuple[Grid, np.ndarray]:
     group = {m: j for j, members in enumerate(groups) for m in members}
     kept = grid.only([p for p in grid.partners if p in group])
     return kept, np.array([group[p] for p in kept.partners], np.int64)
+
+
+def joined(label: np.ndarray, parts: list[list[int]]) -> np.ndarray:
+    """Each label as its group's place among `parts` (groups joined, as lists of the labels they
+    join: choice.merge's partition)."""
+    index = {j: k for k, part in enumerate(parts) for j in part}
+    return np.array([index[j] for j in label], np.int64)

@@ -18,7 +18,7 @@ import numpy as np
 from services.agent import library
 from services.growth import choice
 from services.growth.choice import Grid
-from services.growth.groups import competence, grouped
+from services.growth.groups import competence, grouped, joined
 from services.growth.workspace import Workspace, is_library
 from services.population.adaptive import AdapterConfig
 from services.table.plot import heatmap
@@ -126,7 +126,7 @@ def partner_groups(
     seats = json.loads((ws.library_dir / GROUPS).read_text())["seats"]
     parts, record = {}, {}
     for ours, seat in seats.items():
-        confusion = np.array(seat["confusion"][str(AdapterConfig.window)], float)
+        confusion = _confusion(seat)
         values = np.array([g["values"] for g in seat["groups"]], float)
         weight = np.array([g["partners"] for g in seat["groups"]], float)
         parts[ours] = choice.merge(confusion, values, weight, target, ws.spec.groups["regret"])
@@ -140,10 +140,14 @@ def partner_groups(
         _write_groups(ws, views, parts)
         merged = json.loads((ws.library_dir / GROUPS).read_text())["seats"]
         for ours, seat in merged.items():
-            confusion = np.array(seat["confusion"][str(AdapterConfig.window)], float)
-            record[ours]["identified after"] = round(choice.identified(confusion), 4)
+            record[ours]["identified after"] = round(choice.identified(_confusion(seat)), 4)
             ws.say(f"groups of {other(ours)}s merged for our {ours}: {record[ours]['groups']}")
     write_json(ws.out / MERGED, record)
+
+
+def _confusion(seat: dict) -> np.ndarray:
+    """A seat's calibrated confusion (true, estimated) at the default agent's window."""
+    return np.array(seat["confusion"][str(AdapterConfig.window)], float)
 
 
 def merged_label(ws: Workspace, ours: str, label: np.ndarray) -> np.ndarray:
@@ -153,8 +157,7 @@ def merged_label(ws: Workspace, ours: str, label: np.ndarray) -> np.ndarray:
     parts = json.loads(path.read_text())[ours]["groups"] if path.exists() else None
     if not parts:
         return label
-    index = {int(name[1:]) - 1: k for k, part in enumerate(parts) for name in part}
-    return np.array([index[j] for j in label], np.int64)
+    return joined(label, [[int(name[1:]) - 1 for name in part] for part in parts])  # G2 -> 1
 
 
 def _views(
@@ -180,7 +183,7 @@ def _write_groups(ws: Workspace, views: dict, parts: dict[str, list[list[int]] |
     names, seats = json.loads((ws.library_dir / MEMBERS).read_text()), {}
     for ours, (train, label, validation, played, teammates) in views.items():
         if parts[ours] is not None:
-            label = np.array([next(k for k, p in enumerate(parts[ours]) if j in p) for j in label], np.int64)
+            label = joined(label, parts[ours])
         seats[ours] = {
             "teammates": [key_of(names, t, ws.spec.keys[ours]) for t in teammates],
             "names": teammates,

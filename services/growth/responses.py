@@ -6,10 +6,8 @@ from __future__ import annotations
 
 from services.agent import library
 from services.growth.workspace import Workspace, is_library, train_job
-from services.population.families import Spec
+from services.population.families import RESPONSE_PREFIX, Spec
 from shared.game import ROLES, other
-
-RESPONSE = {"bait": "RB", "shooter": "RS"}  # a best response's key while it is a candidate
 
 
 def responses(ws: Workspace, groups: dict[str, dict]) -> None:
@@ -18,7 +16,7 @@ def responses(ws: Workspace, groups: dict[str, dict]) -> None:
     for role, record in groups.items():
         ours = other(role)
         for j, members in enumerate(record["groups"]):
-            recipes[f"{RESPONSE[ours]}{j + 1}"] = response_recipe(ws.spec, role, j, members)
+            recipes[f"{RESPONSE_PREFIX[ours]}{j + 1}"] = response_recipe(ws.spec, role, j, members)
     trained = library.manifest(ws.responses_dir) if is_library(ws.responses_dir) else {}
     todo = [k for k in recipes if k not in trained]
     if not todo:

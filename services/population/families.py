@@ -44,6 +44,10 @@ EVENT_PREFIX = {"bait": "PB", "shooter": "PS"}  # keys of the events members: PB
 # The grown library's keys by seat (GB1.., GS1..); a spec names others (`keys`), so that libraries
 # grown from different specs are used side by side (the tuned library's TB1.., TS1..).
 KEYS = {"bait": "GB", "shooter": "GS"}
+# The keys the growth gives what it trains for a partner group while it is a candidate: a group's
+# best response (RB1.., RS1..) and the conditioned teammate (CB, CS); a spec's `keys` may not take them.
+RESPONSE_PREFIX = {"bait": "RB", "shooter": "RS"}
+CONDITIONED_PREFIX = {"bait": "CB", "shooter": "CS"}
 LEVELS = "abcdefgh"  # an events run's levels, in training order
 # The event weights' ranges (HSP draws each event's weight at random): kills always pay, deaths
 # always cost, and each shaping term is left out (weight 0) or drawn from its range, per frame or
@@ -376,7 +380,7 @@ class SpecFile:
 
     def __post_init__(self) -> None:
         for seat, prefix in self.keys.items():
-            taken = set(EVENT_PREFIX.values()) | {"B", "S", "RB", "RS", "CB", "CS"}
+            taken = {*EVENT_PREFIX.values(), *RESPONSE_PREFIX.values(), *CONDITIONED_PREFIX.values()}
             if seat not in ROLES or not re.fullmatch(r"[A-Z]{2}", prefix) or prefix in taken:
                 raise ValueError(
                     f"keys.{seat} = {prefix!r}: a seat ({', '.join(ROLES)}) and two capital letters, "

@@ -263,9 +263,10 @@ def serve_orders(
 ) -> None:
     """Play the matches a pool's orders name until `stop` is set, then close every part still open.
     Each order's match gets the parts `start` makes (none: the service plays no part in it; a
-    ValueError: the order is counted as a drop, and refused at once, `refuse_order`). The launcher
-    re-puts an order until it sees the match's tokens, so the last ORDERS_KEPT ids are remembered
-    and an order of one of them is ignored, a bad one's included. Once `every` seconds, and at once
+    ValueError: the order is counted as a drop, and refused at once, `refuse_order`; any other
+    error is logged with its traceback and refused too). The launcher re-puts an order until it
+    sees the match's tokens, so the last ORDERS_KEPT ids are remembered and an order of one of
+    them is ignored, a bad one's included. Once `every` seconds, and at once
     whenever a part sets `wake`, this thread closes the parts that ended and calls `tick` with the
     others (zenoh's callback threads never undeclare). The pool's token is declared once the order
     key is subscribed."""
@@ -281,6 +282,10 @@ def serve_orders(
             made = start(order)
         except ValueError as error:
             drops.drop(keys.pool_order(pool), error)
+            refuse_order(z, pool, service, order, error)
+            return
+        except Exception as error:  # our fault, not the order's: logged whole, and refused all the same
+            log.exception("%s could not start match %s", service, order.match)
             refuse_order(z, pool, service, order, error)
             return
         with lock:

@@ -21,8 +21,9 @@ from services.sim.play import policy_seed
 from services.sim.service import run_sim
 from services.table.table import DEFAULT_TABLE, Table
 from shared import keys
+from shared.bus import Drops, serve_orders, session
 from shared.game import ROLES, GameConfig
-from shared.messages import Action, AdapterStatus, MatchOrder, PolicySwitch, Summary
+from shared.messages import Action, AdapterStatus, MatchOrder, MatchRefused, PolicySwitch, Summary, decode
 
 POOL, FRAMES = "pool", 12
 BLOCK = {"congestion_control": zenoh.CongestionControl.BLOCK}
@@ -227,3 +228,28 @@ def test_pool_processes_leave_on_sigterm_with_their_matches_tokens(bus, tap, spa
     assert wait_until(
         lambda: not recorded.alive and not pool_alive(z, "agent") and not pool_alive(z, "adapter")
     )
+
+
+def test_an_order_a_pool_fails_to_start_for_its_own_fault_is_refused_at_once(bus, background, wait_until):
+    """A fault of the service's own (a library file missing, a bug) is not the order's, yet its
+    launcher must hear of it now rather than wait for tokens that never come."""
+    z = bus.open(listen=True)
+    refusals: list[MatchRefused] = []
+    z.declare_subscriber(
+        keys.pool_refused(POOL), lambda s: refusals.append(decode(s.payload.to_bytes(), MatchRefused))
+    )
+
+    def start(made: MatchOrder) -> list:
+        raise FileNotFoundError(f"no weights for {made.match}")
+
+    def serve(config, stop):  # noqa: ANN001 - the bus config and the fixture's stop event
+        with session(config) as served:
+            serve_orders(served, POOL, "agent", start, Drops("agent"), stop)
+
+    server = background(serve, bus.config())
+    assert wait_until(lambda: pool_alive(z, "agent"), timeout=10)
+    z.put(keys.pool_order(POOL), order("broken", 1).encode(), **BLOCK)
+    assert wait_until(lambda: refusals, timeout=5)
+    assert refusals[0].match == "broken" and "no weights for broken" in refusals[0].reason
+    server.stop.set()
+    server.result(timeout=5)

@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import math
 import random
+import threading
 from functools import cache
 from pathlib import Path
 
@@ -106,6 +107,18 @@ def _mirror(max_speed: float, config: GameConfig) -> MirrorShooter:
 # --- the network ---------------------------------------------------------------------------------
 
 
+_READING = threading.Lock()
+
+
+def read_arrays(path: Path) -> dict[str, np.ndarray]:
+    """Every array of an .npz file, never unpickling anything. One reader at a time: numpy parses
+    each array's header with ast.literal_eval, and CPython 3.11 keeps the AST constructor's depth
+    count per interpreter, so two threads loading at once (a pool's agent and adapter starting one
+    match) can fail with "AST constructor recursion depth mismatch" (python/cpython#106905)."""
+    with _READING, np.load(path, allow_pickle=False) as data:
+        return {k: data[k] for k in data.files}
+
+
 class Network:
     """A multilayer perceptron held as numpy arrays: hidden layers with tanh or relu, linear out."""
 
@@ -119,8 +132,7 @@ class Network:
     @classmethod
     def load(cls, path: Path) -> tuple[Network, dict]:
         """Weights and metadata from an .npz file; never unpickles anything."""
-        with np.load(path, allow_pickle=False) as data:
-            arrays = {k: data[k] for k in data.files}
+        arrays = read_arrays(path)
         meta = json.loads(bytes(arrays.pop("meta")).decode())
         return cls(arrays, meta["activation"]), meta
 

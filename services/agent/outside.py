@@ -31,7 +31,7 @@ import numpy as np
 
 from services.agent import proxy
 from services.agent.library import PROXY_FAMILY
-from services.agent.networks import JointPolicy, Network
+from services.agent.networks import JointPolicy, Network, read_arrays
 from services.agent.proxy import PROXY
 from services.sim.observation import VIEWS
 from shared.errors import UsageError, missing_extra
@@ -136,8 +136,7 @@ def proxy_arrays(directory: Path, key: str, role: str) -> tuple[dict[str, np.nda
     """A proxy's arrays for a library (with `key` and its policy class in the metadata), its family
     and view; refused (UsageError) unless it is a proxy of `role`."""
     proxy.manifest(directory, "MODEL")
-    with np.load(directory / proxy.WEIGHTS, allow_pickle=False) as data:
-        arrays = {name: data[name] for name in data.files}
+    arrays = read_arrays(directory / proxy.WEIGHTS)
     meta = json.loads(bytes(arrays["meta"]).decode())
     if meta["role"] != role:
         raise UsageError("MODEL", directory, f"is a proxy of the {meta['role']} seat, not the {role}", [role])

@@ -10,13 +10,18 @@ from __future__ import annotations
 
 import json
 from dataclasses import asdict
+from pathlib import Path
 
 from services.agent import library
 from services.agent.library import NAMED
-from services.growth.workspace import Workspace, train_job
+from services.growth.workspace import Workspace, is_library, train_job
 from services.population.families import EventsRun, Member, Spec
 from shared.files import write_json
 from shared.game import ROLES
+
+# The shipped populations' trained members (library.NAMED), adopted where a spec's events runs are
+# theirs: the first version's PPO runs (population.toml, population-2.toml) and the third's TRPO runs.
+SHIPPED = ("population",)
 
 
 def population(ws: Workspace) -> dict[str, list[tuple[Member, str]]]:
@@ -46,13 +51,13 @@ def _train_events(ws: Workspace) -> None:
     )
     trained = library.manifest(ws.population_dir) if (ws.population_dir / "manifest.json").exists() else {}
     runs = [run for run in runs if not set(run.level_keys()) <= set(trained)]
-    shipped = [run for run in runs if _shipped(ws, run)]
-    if shipped:  # the same recipes, trained to the same steps: the same members
-        library.adopt_members(
-            NAMED["population"], ws.population_dir, [k for r in shipped for k in r.level_keys()]
-        )
-        ws.say(f"population: {len(shipped)} events runs as the shipped population trained them")
-    runs = [run for run in runs if run not in shipped]
+    for name in SHIPPED:  # the same recipes, trained to the same steps: the same members
+        shipped = [run for run in runs if _shipped(ws, run, NAMED[name])]
+        if shipped:
+            keys = [k for r in shipped for k in r.level_keys()]
+            library.adopt_members(NAMED[name], ws.population_dir, keys)
+            ws.say(f"population: {len(shipped)} events runs as the shipped {name} trained them")
+            runs = [run for run in runs if run not in shipped]
     if not runs:
         return
     jobs = [train_job(run.key, ws.staging, _levels(run), ws.runs) for run in runs]
@@ -66,11 +71,12 @@ def _levels(run: EventsRun) -> dict[str, int]:
     return {k: int(run.steps * level) for k, level in zip(run.level_keys(), run.levels, strict=True)}
 
 
-def _shipped(ws: Workspace, run: EventsRun) -> bool:
-    """Whether the shipped population (library.NAMED["population"]) holds every level of `run` under
-    the recipe this spec gives it, trained to the steps it asks (`tsf train KEY --steps N`, as its
-    manifest records the command): a growth of a new spec over the same events runs trains nothing."""
-    root = NAMED["population"]
+def _shipped(ws: Workspace, run: EventsRun, root: Path) -> bool:
+    """Whether the shipped population at `root` holds every level of `run` under the recipe this
+    spec gives it, trained to the steps it asks (`tsf train KEY --steps N`, as its manifest records
+    the command): a growth of a new spec over the same events runs trains nothing."""
+    if not is_library(root):
+        return False
     ours, theirs, made = library.registry(ws.population_dir), library.registry(root), library.manifest(root)
     return all(
         key in theirs
@@ -82,14 +88,14 @@ def _shipped(ws: Workspace, run: EventsRun) -> bool:
 
 
 def events_recipe(spec: Spec, run: EventsRun) -> dict:
-    """The registry fields of an events run: PPO on its random event weights."""
+    """The registry fields of an events run: its algorithm on its random event weights."""
     seat = spec.seats[run.role]
     recipe = {
         "role": run.role,
         "family": "events",
-        "description": "PPO on random event weights "
+        "description": f"{run.algorithm} on random event weights "
         + ", ".join(f"{k} {v:g}" for k, v in run.weights.items()),
-        "algorithm": "PPO",
+        "algorithm": run.algorithm,
         "learned": list(seat.learned),
         "features": seat.features,
         "reward": "events",

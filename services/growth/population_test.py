@@ -22,14 +22,16 @@ def _recorded(tmp_path, text: str) -> tuple[Workspace, list]:
 
 def test_a_run_the_shipped_population_trained_alike_is_adopted(tmp_path):
     ws, runs = _recorded(tmp_path, SPEC.with_name("population-2.toml").read_text())
-    assert all(_shipped(ws, run) for run in runs)
+    assert all(_shipped(ws, run, library.NAMED["population"]) for run in runs)
 
 
 def test_a_run_of_another_recipe_or_other_levels_is_trained(tmp_path):
     text = SPEC.read_text()
     ws, runs = _recorded(tmp_path / "steps", text.replace("steps = 150000", "steps = 160000", 1))
-    assert not any(_shipped(ws, run) for run in runs)  # the recipe differs
+    assert not any(_shipped(ws, run, library.NAMED["population"]) for run in runs)  # the recipe differs
     ws, runs = _recorded(
         tmp_path / "levels", text.replace("levels = [0.25, 0.5, 1.0]", "levels = [0.3, 0.5, 1.0]", 1)
     )
-    assert not any(_shipped(ws, run) for run in runs)  # the same recipe, the first level trained further
+    assert not any(
+        _shipped(ws, run, library.NAMED["population"]) for run in runs
+    )  # the same recipe, the first level trained further

@@ -1,6 +1,6 @@
-"""Stage 4, the responses: one best response of the other seat per group, trained with PPO
-against the group's members and their stand-ins (the spec's `response` recipe) into
-`responses/`, a library of its own (trained in `staging/`, then adopted)."""
+"""Stage 4, the responses: one best response of the other seat per group, trained as the spec's
+`response` recipe says (its algorithm: PPO where it names none) against the group's members and
+their stand-ins into `responses/`, a library of its own (trained in `staging/`, then adopted)."""
 
 from __future__ import annotations
 
@@ -36,9 +36,8 @@ def response_recipe(spec: Spec, role: str, j: int, members: list[str]) -> dict:
     recipe |= {
         "role": ours,
         "family": "response",
-        "description": f"PPO best response to {role} group {j + 1} ({len(members)} members), "
-        "with their stand-ins",
-        "algorithm": "PPO",
+        "description": f"{recipe['algorithm']} best response to {role} group {j + 1} "
+        f"({len(members)} members), with their stand-ins",
         "seed": spec.seed + 1000 + 10 * ROLES.index(ours) + j,
         "partners": response_partners(spec, members),
     }

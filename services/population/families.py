@@ -7,9 +7,9 @@ partners by it):
 - `library`: the study's policies of that seat;
 - `rule`: a scripted rule over a grid of its settings, each combination one member, named as the
   partner grammar names it (`circle(radius=110,speed=2.5,outside=215)`);
-- `events`: PPO policies trained on a random weighting of the game's events (as HSP makes its
-  biased partners: training's EVENT_TERMS), each kept at several points of its training (as FCP
-  keeps checkpoints), so that skill varies as well as style.
+- `events`: policies trained (PPO, or the seat's `events.algorithm`) on a random weighting of the
+  game's events (as HSP makes its biased partners: training's EVENT_TERMS), each kept at several
+  points of its training (as FCP keeps checkpoints), so that skill varies as well as style.
 
 Each member also plays through the calibrated human-like stand-ins at each skill
 (`human(MEMBER,skill=S)`): the stand-in variants. Members are split into training, validation and
@@ -48,6 +48,9 @@ KEYS = {"bait": "GB", "shooter": "GS"}
 # best response (RB1.., RS1..) and the conditioned teammate (CB, CS); a spec's `keys` may not take them.
 RESPONSE_PREFIX = {"bait": "RB", "shooter": "RS"}
 CONDITIONED_PREFIX = {"bait": "CB", "shooter": "CS"}
+# What an events run or a best response may train with: the policy gradients over the learned heads
+# (training/algorithms.py).
+EVENTS_ALGORITHMS = ("PPO", "TRPO", "A2C")
 LEVELS = "abcdefgh"  # an events run's levels, in training order
 # The event weights' ranges (HSP draws each event's weight at random): kills always pay, deaths
 # always cost, and each shaping term is left out (weight 0) or drawn from its range, per frame or
@@ -85,6 +88,7 @@ class EventsRun:
     steps: int
     levels: tuple[float, ...]
     seed: int
+    algorithm: str = "PPO"
 
     def level_keys(self) -> list[str]:
         return [self.key + LEVELS[i] for i in range(len(self.levels))]
@@ -104,6 +108,7 @@ class Seat:
     features: str
     partners: tuple[str, ...]
     response: dict
+    algorithm: str = "PPO"  # the events runs'
 
 
 @dataclass(frozen=True)
@@ -137,7 +142,13 @@ class Spec:
             key = f"{EVENT_PREFIX[role]}{i + 1:02d}"
             runs.append(
                 EventsRun(
-                    key, role, weights, seat.steps, seat.levels, self.seed + 100 * ROLES.index(role) + i
+                    key,
+                    role,
+                    weights,
+                    seat.steps,
+                    seat.levels,
+                    self.seed + 100 * ROLES.index(role) + i,
+                    seat.algorithm,
                 )
             )
         return runs
@@ -214,7 +225,9 @@ class RuleGrid:
 
 @dataclass(frozen=True)
 class EventsTable:
-    """A seat's `events`: how many events-trained partners, how long, kept at which levels."""
+    """A seat's `events`: how many events-trained partners, how long, with which algorithm (the
+    first population's PPO, or the library's TRPO settings, which learn this game about ten times
+    faster per sample), kept at which levels."""
 
     runs: int
     steps: int
@@ -222,6 +235,7 @@ class EventsTable:
     learned: tuple[str, ...]
     features: str
     partners: tuple[str, ...]
+    algorithm: str = "PPO"
 
     def __post_init__(self) -> None:
         levels = list(self.levels)
@@ -234,6 +248,8 @@ class EventsTable:
             raise ValueError(f"levels = {levels}: increasing fractions in (0, 1], at most {len(LEVELS)}")
         if self.runs < 0 or self.steps < 1:
             raise ValueError(f"runs = {self.runs}, steps = {self.steps}: 0 or more runs of at least 1 step")
+        if self.algorithm not in EVENTS_ALGORITHMS:
+            raise ValueError(f"algorithm = {self.algorithm!r}: one of {', '.join(EVENTS_ALGORITHMS)}")
         _heads(self.learned)
         _features(self.features)
         if self.runs and not self.partners:
@@ -250,8 +266,11 @@ class ResponseTable:
     reward: str
     weights: dict[str, float] = dataclasses.field(default_factory=dict)
     steps: int
+    algorithm: str = "PPO"
 
     def __post_init__(self) -> None:
+        if self.algorithm not in EVENTS_ALGORITHMS:
+            raise ValueError(f"algorithm = {self.algorithm!r}: one of {', '.join(EVENTS_ALGORITHMS)}")
         _heads(self.learned)
         _features(self.features)
         if self.steps < 1 or not self.reward:
@@ -285,6 +304,7 @@ class SeatTable:
             features=events.features,
             partners=events.partners,
             response=self.response.recipe(),
+            algorithm=events.algorithm,
         )
 
 

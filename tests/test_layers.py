@@ -202,6 +202,8 @@ def folder_edges() -> dict[str, set[str]]:
     return out
 
 
+@pytest.mark.slow
+@pytest.mark.long  # 15 s or more in the full run: kept out of the default run
 def test_folders_import_only_downward_and_never_each_other():
     """The house drawn folder by folder: each folder is on one layer, no arrow runs back up, no two
     folders import each other, and there is no circle of folders however long."""

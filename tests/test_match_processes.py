@@ -101,6 +101,8 @@ def last_line(process: subprocess.Popen) -> str:
     return text.strip().splitlines()[-1]
 
 
+@pytest.mark.slow
+@pytest.mark.long  # 15 s or more in the full run: kept out of the default run
 def test_matches_started_together_get_their_own_recordings_and_an_id_is_never_reused(tsf_match, tmp_path):
     first, second = tsf_match(*SHORT), tsf_match(*SHORT)  # the same second, the default id
     assert first.wait(120) == 0 and second.wait(120) == 0

@@ -61,6 +61,8 @@ def tsf(*args: str) -> subprocess.CompletedProcess:
     )
 
 
+@pytest.mark.slow
+@pytest.mark.long  # 15 s or more in the full run: kept out of the default run
 def test_replay_checks_every_hash(matches: dict[str, tuple[Summary, Path]], tmp_path: Path) -> None:
     _, path = next(iter(matches.values()))
     run = tsf("replay", str(path), "--video", str(tmp_path / "m.gif"), "--scale", "0.25", "--every", "10")
@@ -70,6 +72,8 @@ def test_replay_checks_every_hash(matches: dict[str, tuple[Summary, Path]], tmp_
         assert gif.n_frames == FRAMES // 10 + 1
 
 
+@pytest.mark.slow
+@pytest.mark.long  # 15 s or more in the full run: kept out of the default run
 def test_live_replay_reaches_a_watcher(matches, bus, tap, background, wait_until) -> None:  # noqa: ANN001
     _, path = next(iter(matches.values()))
     recording = load(path)

@@ -298,6 +298,8 @@ def test_attempts_an_earlier_server_left_are_settled_by_their_recordings(tmp_pat
     again.close()
 
 
+@pytest.mark.slow
+@pytest.mark.long  # 15 s or more in the full run: kept out of the default run
 def test_a_client_that_consents_and_goes_silent_frees_its_slot_for_a_newcomer(tmp_path, study_server):
     """The only slot is taken by a socket that consents, is offered its trial and never says
     Ready: after the Ready timeout its match ends and its slot goes to the newcomer waiting."""
@@ -401,6 +403,8 @@ def test_a_reload_during_set_up_is_a_resume(tmp_path, study_server):
     assert [a["status"] for a in study.participants["P001"].attempts] == ["failed", "done"]
 
 
+@pytest.mark.slow
+@pytest.mark.long  # 15 s or more in the full run: kept out of the default run
 def test_a_consent_flood_from_one_address_leaves_newcomers_from_others_served(tmp_path, study_server):
     """One client loops hello, consent, close (as fast as the server answers, 40 times): it gets at
     most its address's burst of ids and plays no match; four newcomers from other addresses

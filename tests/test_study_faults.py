@@ -14,6 +14,7 @@ import os
 import time
 from pathlib import Path
 
+import pytest
 import websockets
 from conftest import STAND_IN_TOKEN
 
@@ -76,6 +77,8 @@ def test_a_policy_that_fails_to_load_with_any_error_is_a_failed_attempt_told_at_
     )
 
 
+@pytest.mark.slow
+@pytest.mark.long  # 15 s or more in the full run: kept out of the default run
 def test_a_pool_service_that_cannot_serve_an_order_refuses_it_and_the_slot_is_free_at_once(
     tmp_path, study_server, monkeypatch, capsys
 ):
@@ -128,6 +131,8 @@ def answers(url: str, message: dict, times: int) -> list[str]:
 CONFIG = StudyConfig("back", (GOOD,), trials=1, trial_seconds=1.5, seed=1)
 
 
+@pytest.mark.slow
+@pytest.mark.long  # 15 s or more in the full run: kept out of the default run
 def test_every_way_back_in_is_under_the_reconnect_limit_and_0_is_none(tmp_path, study_server):
     """The platform's link reopened 20 times: the first RECONNECT_BURST resume, then RECONNECTS
     (all 20 were taken); with --reconnects 0, neither the id and key nor the link lets anyone back."""
@@ -143,6 +148,8 @@ def test_every_way_back_in_is_under_the_reconnect_limit_and_0_is_none(tmp_path, 
     assert answers(url, resume, 1) == answers(url, {"link": LINK}, 1) == [RECONNECTS]
 
 
+@pytest.mark.slow
+@pytest.mark.long  # 15 s or more in the full run: kept out of the default run
 def test_refusals_are_limited_and_written_down_once_per_address_and_minute(tmp_path, study_server, caplog):
     """200 hellos with a worker id that has begun and no proof: RECONNECT_BURST are refused as
     NOT_YOURS, the rest as RECONNECTS; one journal line and two warnings (200 and 200 before)."""
@@ -162,6 +169,8 @@ def test_refusals_are_limited_and_written_down_once_per_address_and_minute(tmp_p
     assert [line["refused"] for line in journal if "refused" in line] == ["unproven"]
 
 
+@pytest.mark.slow
+@pytest.mark.long  # 15 s or more in the full run: kept out of the default run
 def test_a_trial_played_again_after_a_restart_says_why(tmp_path, study_server):
     """An attempt an earlier server left running (it stopped mid-game) is settled failed; the
     participant back in is told their last game was cut short by the server's stop."""

@@ -9,6 +9,7 @@ import asyncio
 import json
 import logging
 
+import pytest
 import websockets
 from conftest import STAND_IN_TOKEN
 
@@ -37,6 +38,8 @@ async def arrive(url: str, forwarded: str = "", hello: dict | None = None) -> di
     return {"type": "closed"}
 
 
+@pytest.mark.slow
+@pytest.mark.long  # 15 s or more in the full run: kept out of the default run
 def test_behind_a_trusted_proxy_each_forwarded_client_has_its_own_limit(tmp_path, study_server, caplog):
     """Five ids a forwarded address at once (the limit per address), then BUSY for it, while another
     forwarded address is served; from an untrusted peer the header is not read (a client could

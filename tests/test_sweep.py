@@ -60,6 +60,8 @@ def test_sweep_survives_a_killed_worker(bus, spawn, background, wait_until, tmp_
     assert survivor.wait(timeout=30) == 0  # leaves once the coordinator is gone
 
 
+@pytest.mark.slow
+@pytest.mark.long  # 15 s or more in the full run: kept out of the default run
 def test_stopped_sweep_resumes_from_its_journal(bus, spawn, wait_until, tmp_path, reference):
     sweep, out = f"s{uuid.uuid4().hex[:8]}", tmp_path / "table.json"
     spawn("worker", bus.config(), *worker_args(sweep, "w1"))

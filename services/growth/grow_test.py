@@ -88,6 +88,11 @@ def test_a_small_population_grows_a_library_and_a_second_run_resumes_from_its_fi
         assert seat["test"]["members"]["partners"] > 0
         assert seat["test"]["stand-ins"]["partners"] == seat["test"]["members"]["partners"]  # one skill
         assert seat["test"]["both"]["partners"] == 2 * seat["test"]["members"]["partners"]
+    for role in ("bait", "shooter"):  # every member counted once in its family, able ones among them
+        families = summary["competence"][role]
+        assert sum(c["members"] for c in families.values()) == len(population[role])
+        assert all(0 <= c["able"] <= c["members"] for c in families.values())
+    assert "The population's competence" in (out / "summary.md").read_text()
     monkeypatch.setenv("TSF_LIBRARY", str(out / "library"))
     members = json.loads((out / "library" / "members.json").read_text())
     assert set(members) == {k for k in library.registry() if k.startswith(("GB", "GS"))}

@@ -1,7 +1,8 @@
 """The grown library's figures on the test population, computed from the run's files each time
 (`summary.json`, `summary.md`): per seat of ours, the held-out oracle headroom and the best single
 member beside the study library's, the selection's headroom curve, and each member's kills/min
-with each partner group (± standard error over the group's partners)."""
+with each partner group (± standard error over the group's partners); and the population's
+competence: per seat and family, how many members have a teammate that scores with them."""
 
 from __future__ import annotations
 
@@ -15,7 +16,9 @@ from services.growth.groups import grouped
 from services.growth.library import MEMBERS, merged_label
 from services.growth.workspace import Workspace
 from shared.files import write_json
-from shared.game import other
+from shared.game import ROLES, other
+
+ABLE = 1.0  # kills/min with its best teammate: a member at least this good "can score" (issue 57)
 
 
 def summary(
@@ -44,9 +47,37 @@ def summary(
             "groups": group_table(chosen, grid, assigned, int(label.max()) + 1),
             "partners": {p: f"G{g + 1}" for p, g in zip(grid.partners, assigned.tolist(), strict=True)},
         }
+    record["competence"] = competence(ws, grouping, held_out)
     write_json(ws.out / "summary.json", record)
     (ws.out / "summary.md").write_text(markdown(record))
     return record
+
+
+def competence(ws: Workspace, grouping: dict[str, Grid], held_out: dict[str, Grid]) -> dict:
+    """Per partner seat and family: the members, how many score at least ABLE kills/min with their
+    best teammate (the best of the candidates it played with, over seeds), and the median of that
+    best: what training a population to competence changes (the grouping's grid holds the training
+    members, the held-out one the validation and test members)."""
+    rows = json.loads((ws.out / "population.json").read_text())["members"]
+    out: dict = {}
+    for role in ROLES:
+        best = {}
+        for grid in (grouping[role], held_out[role]):
+            means = grid.kills.mean(axis=2).max(axis=1)
+            best |= {p: float(m) for p, m in zip(grid.partners, means, strict=True)}
+        families: dict[str, list[float]] = {}
+        for row in rows[role]:
+            if row["name"] in best:
+                families.setdefault(row["family"], []).append(best[row["name"]])
+        out[role] = {
+            family: {
+                "members": len(values),
+                "able": sum(v >= ABLE for v in values),
+                "median": round(float(np.median(values)), 3),
+            }
+            for family, values in families.items()
+        }
+    return out
 
 
 def figures_on(grid: Grid, chosen: list[str], study: list[str]) -> dict:
@@ -114,5 +145,19 @@ def markdown(summary: dict) -> str:
         ]
         for i, step in enumerate(seat["curve"]):
             lines.append(f"| {i + 1} | {step['library'][-1]} | {step['headroom']:+.1%} |")
+        lines.append("")
+    if "competence" in summary:  # older runs' summary.json have none
+        lines += [
+            "## The population's competence",
+            "",
+            f"Members whose best teammate scores at least {ABLE:g} kill/min with them, and the median "
+            "best teammate's kills/min, by partner seat and family:",
+            "",
+            "| partners | family | members | able to score | median best |",
+            "| --- | --- | --- | --- | --- |",
+        ]
+        for role, families in summary["competence"].items():
+            for family, c in families.items():
+                lines.append(f"| {role} | {family} | {c['members']} | {c['able']} | {c['median']:.2f} |")
         lines.append("")
     return "\n".join(lines)

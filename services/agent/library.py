@@ -44,6 +44,7 @@ NAMED = {
     "grown": Path(__file__).parent / "grown",
     "tuned": Path(__file__).parent / "tuned",
     "population": Path(__file__).parents[1] / "population" / "members",
+    "population-3": Path(__file__).parents[1] / "population" / "members-3",  # population-3.toml's
 }
 OUTSIDE = "outside"  # the family of a policy added from outside (a network over all 12 actions)
 PROXY_FAMILY = "proxy"  # the family of a proxy added from recorded people (services/proxy)

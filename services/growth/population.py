@@ -21,7 +21,7 @@ from shared.game import ROLES
 
 # The shipped populations' trained members (library.NAMED), adopted where a spec's events runs are
 # theirs: the first version's PPO runs (population.toml, population-2.toml) and the third's TRPO runs.
-SHIPPED = ("population",)
+SHIPPED = ("population", "population-3")
 
 
 def population(ws: Workspace) -> dict[str, list[tuple[Member, str]]]:

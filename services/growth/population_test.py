@@ -25,6 +25,12 @@ def test_a_run_the_shipped_population_trained_alike_is_adopted(tmp_path):
     assert all(_shipped(ws, run, library.NAMED["population"]) for run in runs)
 
 
+def test_the_third_versions_runs_are_adopted_from_its_own_shipped_members_and_not_the_firsts(tmp_path):
+    ws, runs = _recorded(tmp_path, SPEC.with_name("population-3.toml").read_text())
+    assert all(_shipped(ws, run, library.NAMED["population-3"]) for run in runs)
+    assert not any(_shipped(ws, run, library.NAMED["population"]) for run in runs)  # PPO, 150,000 steps
+
+
 def test_a_run_of_another_recipe_or_other_levels_is_trained(tmp_path):
     text = SPEC.read_text()
     ws, runs = _recorded(tmp_path / "steps", text.replace("steps = 150000", "steps = 160000", 1))

@@ -750,7 +750,9 @@ def test_a_bad_library_path_is_one_line_even_before_the_command_starts(tmp_path:
     tsf_path = shutil.which("tsf", path=str(Path(sys.executable).parent))
     assert tsf_path is not None
     (tmp_path / "empty").mkdir()
-    missing = "no such library; valid: grown, tuned, population, a directory with a registry.toml"
+    missing = (
+        "no such library; valid: grown, tuned, population, population-3, a directory with a registry.toml"
+    )
     for value, said in [
         (tmp_path / "missing", missing),
         ("grwon", missing),

@@ -29,20 +29,23 @@ def seat_keys(role: str) -> list[str]:
 def beside_keys(role: str) -> dict[str, Path]:
     """The policies of the libraries shipped beside the study's (library.NAMED) that play `role`'s
     seat, each with its library's directory (not listed by seat_keys, whose keys a user picks
-    from: the study's library and the scripted rules)."""
-    return {
-        k: r.root
-        for root in library.NAMED.values()
-        for k, r in library.registry(root).items()
-        if r.role == role
-    }
+    from: the study's library and the scripted rules). A key two of them hold is the first's: the
+    third population's members share the first's keys (PB01a is the first version's, and the third
+    version's where TSF_LIBRARY=population-3 puts it in use), so that a result made with one
+    reproduces whatever was shipped after it."""
+    found: dict[str, Path] = {}
+    for root in library.NAMED.values():
+        for key, recipe in library.registry(root).items():
+            if recipe.role == role:
+                found.setdefault(key, recipe.root)
+    return found
 
 
 def libraries() -> dict[str, Path]:
     """Every library whose keys load, by the name `tsf keys` gives it: the study's (`study`: B1-B9,
-    S1-S7), those shipped beside it (library.NAMED: `grown`; `tuned`, the library the default agent plays;
-    `population`, the partner population's trained members) and the user's own in TSF_LIBRARY (a
-    shipped one named there keeps its name)."""
+    S1-S7), those shipped beside it (library.NAMED: `grown`; `tuned`, the library the default agent
+    plays; `population` and `population-3`, the partner populations' trained members) and the
+    user's own in TSF_LIBRARY (a shipped one named there keeps its name)."""
     named = {"study": library.LIBRARY, **library.NAMED}
     shipped = {root.resolve() for root in named.values()}
     return named | {f"yours ({r})": r for r in library.roots()[1:] if r.resolve() not in shipped}

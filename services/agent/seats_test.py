@@ -12,7 +12,8 @@ from services.agent.seats import libraries, listed_keys, policy_for
 
 def test_every_listed_key_loads_and_plays_its_seat() -> None:
     rows = listed_keys()
-    assert {name for _, _, name, _ in rows} == {"study", "grown", "tuned", "population", "rules"}
+    names = {"study", "grown", "tuned", "population", "population-3", "rules"}
+    assert {name for _, _, name, _ in rows} == names
     for key, seat, _, _ in rows:
         assert policy_for(key, seat).role == seat, key
 
@@ -24,7 +25,7 @@ def test_the_libraries_are_named_by_what_they_are(monkeypatch: pytest.MonkeyPatc
     assert keys["study"] == [f"B{i}" for i in range(1, 10)] and keys["grown"][0] == "GB1"
     assert keys["tuned"][0] == "TB1"
     monkeypatch.setenv("TSF_LIBRARY", str(library.NAMED["grown"]))  # a shipped one keeps its name
-    assert list(libraries()) == ["study", "grown", "tuned", "population"]
+    assert list(libraries()) == ["study", "grown", "tuned", "population", "population-3"]
     (tmp_path / "mine").mkdir()
     monkeypatch.setenv("TSF_LIBRARY", str(tmp_path / "mine"))
     assert list(libraries())[-1] == f"yours ({tmp_path / 'mine'})"

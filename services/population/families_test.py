@@ -67,6 +67,8 @@ def test_stand_ins_at_each_skill():
         (("seed = 2026", 'keys = { bait = "PB" }\nseed = 2026'), "keys.bait = 'PB': a seat (bait, shooter)"),
         (("seed = 2026", 'keys = { bait = "GS" }\nseed = 2026'), "a prefix of its own for each seat"),
         (("regret = 0.05", "regret = 0.05, floor = -1"), "floor = -1, identify = 0.0: kills/min, 0 or more"),
+        (("steps = 150000,", 'steps = 150000, algorithm = "DQN",'), "algorithm = 'DQN': one of PPO"),
+        (("steps = 300000", 'steps = 300000, algorithm = "trpo"'), "algorithm = 'trpo': one of PPO"),
     ],
 )
 def test_a_wrong_spec_is_one_line(tmp_path, change, says):
@@ -85,6 +87,18 @@ def test_a_spec_grows_a_search_only_where_it_asks_for_one(tmp_path):
     search = read(path).search
     assert (search.trials, search.seeds) == (100, 8)
     assert search.of("bait") == ("circle",) and search.of("shooter") == ("mirror",)  # each seat's own rule
+
+
+def test_the_third_population_trains_its_events_runs_and_responses_with_trpo():
+    spec = read(SPEC.with_name("population-3.toml"))
+    first = read()
+    for role in ("bait", "shooter"):
+        runs, before = spec.events_runs(role), first.events_runs(role)
+        assert {r.algorithm for r in runs} == {"TRPO"} and {r.steps for r in runs} == {1_000_000}
+        assert [(r.key, r.weights, r.seed) for r in runs] == [(r.key, r.weights, r.seed) for r in before]
+        assert spec.seats[role].response["algorithm"] == "TRPO"
+    assert first.seats["bait"].response["algorithm"] == "PPO"  # where a spec names none
+    assert spec.split_of(spec.members("bait")) == first.split_of(first.members("bait"))
 
 
 def test_the_second_population_searches_the_orbit_too_and_grows_from_the_first_ones_members():

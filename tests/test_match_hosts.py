@@ -85,6 +85,8 @@ def hosted(endpoint: str) -> Serving:
     return Serving(max_matches=0, test_token=TEST, hosts=BusConfig("router", (endpoint,)), host_secret=SECRET)
 
 
+@pytest.mark.slow
+@pytest.mark.long  # 12 s or more in the full run: kept out of the default run
 def test_trials_run_on_a_match_host_and_their_recordings_come_back_whole(tmp_path, study_server, match_host):
     """A static and an adaptive agent, each in a match on the host; the participant's seat is played
     over the router, and each recording is the host's, byte for byte, complete."""

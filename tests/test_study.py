@@ -348,6 +348,8 @@ BROKEN = {  # the agent's bait seat of a variant whose match cannot be set up
 }
 
 
+@pytest.mark.slow
+@pytest.mark.long  # 12 s or more in the full run: kept out of the default run
 @pytest.mark.parametrize("bait", BROKEN.values(), ids=BROKEN.keys())
 def test_a_trial_that_cannot_be_set_up_is_told_at_once_and_takes_no_slot(tmp_path, study_server, bait):
     """A variant whose agent cannot play its seat: its participant is told of a problem at once (no
@@ -375,6 +377,8 @@ def test_a_trial_that_cannot_be_set_up_is_told_at_once_and_takes_no_slot(tmp_pat
     assert sidecar["status"] == "failed" and sidecar["variant"] == "broken"
 
 
+@pytest.mark.slow
+@pytest.mark.long  # 12 s or more in the full run: kept out of the default run
 def test_a_reload_during_set_up_is_a_resume(tmp_path, study_server):
     """The page is reloaded while its trial is set up (offered, not Ready): the new page resumes
     and plays every trial; the old socket is closed; the cut attempt is set down as failed."""
@@ -610,6 +614,8 @@ def test_a_participant_who_declines_is_told_so_and_nothing_is_recorded(tmp_path,
     assert not (tmp_path / "recordings").exists()
 
 
+@pytest.mark.slow
+@pytest.mark.long  # 12 s or more in the full run: kept out of the default run
 def test_a_practice_game_comes_before_the_first_recorded_one_and_is_no_trial(tmp_path, study_server):
     """With `practice_seconds`, a new participant first plays a short game with the scripted
     partner: offered as practice, kept apart in practice/, neither in the journal nor a sidecar;

@@ -12,7 +12,7 @@ import numpy as np
 
 from services.growth import choice
 from services.growth.choice import Grid
-from services.growth.groups import grouped
+from services.growth.groups import competence, grouped
 from services.growth.library import MEMBERS, merged_label
 from services.growth.workspace import Workspace
 from shared.files import write_json
@@ -47,13 +47,13 @@ def summary(
             "groups": group_table(chosen, grid, assigned, int(label.max()) + 1),
             "partners": {p: f"G{g + 1}" for p, g in zip(grid.partners, assigned.tolist(), strict=True)},
         }
-    record["competence"] = competence(ws, grouping, held_out)
+    record["competence"] = population_competence(ws, grouping, held_out)
     write_json(ws.out / "summary.json", record)
     (ws.out / "summary.md").write_text(markdown(record))
     return record
 
 
-def competence(ws: Workspace, grouping: dict[str, Grid], held_out: dict[str, Grid]) -> dict:
+def population_competence(ws: Workspace, grouping: dict[str, Grid], held_out: dict[str, Grid]) -> dict:
     """Per partner seat and family: the members, how many score at least ABLE kills/min with their
     best teammate (the best of the candidates it played with, over seeds), and the median of that
     best: what training a population to competence changes (the grouping's grid holds the training
@@ -61,10 +61,7 @@ def competence(ws: Workspace, grouping: dict[str, Grid], held_out: dict[str, Gri
     rows = json.loads((ws.out / "population.json").read_text())["members"]
     out: dict = {}
     for role in ROLES:
-        best = {}
-        for grid in (grouping[role], held_out[role]):
-            means = grid.kills.mean(axis=2).max(axis=1)
-            best |= {p: float(m) for p, m in zip(grid.partners, means, strict=True)}
+        best = competence(grouping[role]) | competence(held_out[role])
         families: dict[str, list[float]] = {}
         for row in rows[role]:
             if row["name"] in best:

@@ -50,7 +50,7 @@ RESPONSE_PREFIX = {"bait": "RB", "shooter": "RS"}
 CONDITIONED_PREFIX = {"bait": "CB", "shooter": "CS"}
 # What an events run or a best response may train with: the policy gradients over the learned heads
 # (training/algorithms.py).
-EVENTS_ALGORITHMS = ("PPO", "TRPO", "A2C")
+GRADIENT_ALGORITHMS = ("PPO", "TRPO", "A2C")
 LEVELS = "abcdefgh"  # an events run's levels, in training order
 # The event weights' ranges (HSP draws each event's weight at random): kills always pay, deaths
 # always cost, and each shaping term is left out (weight 0) or drawn from its range, per frame or
@@ -248,8 +248,7 @@ class EventsTable:
             raise ValueError(f"levels = {levels}: increasing fractions in (0, 1], at most {len(LEVELS)}")
         if self.runs < 0 or self.steps < 1:
             raise ValueError(f"runs = {self.runs}, steps = {self.steps}: 0 or more runs of at least 1 step")
-        if self.algorithm not in EVENTS_ALGORITHMS:
-            raise ValueError(f"algorithm = {self.algorithm!r}: one of {', '.join(EVENTS_ALGORITHMS)}")
+        _algorithm(self.algorithm)
         _heads(self.learned)
         _features(self.features)
         if self.runs and not self.partners:
@@ -269,8 +268,7 @@ class ResponseTable:
     algorithm: str = "PPO"
 
     def __post_init__(self) -> None:
-        if self.algorithm not in EVENTS_ALGORITHMS:
-            raise ValueError(f"algorithm = {self.algorithm!r}: one of {', '.join(EVENTS_ALGORITHMS)}")
+        _algorithm(self.algorithm)
         _heads(self.learned)
         _features(self.features)
         if self.steps < 1 or not self.reward:
@@ -418,6 +416,11 @@ class SpecFile:
                 raise ValueError(
                     f"{role}.rule.family = {family!r}: the {role}'s rule is {RULE_FAMILIES[role]!r}"
                 )
+
+
+def _algorithm(name: str) -> None:
+    if name not in GRADIENT_ALGORITHMS:
+        raise ValueError(f"algorithm = {name!r}: one of {', '.join(GRADIENT_ALGORITHMS)}")
 
 
 def _heads(learned: tuple[str, ...]) -> None:

@@ -367,6 +367,9 @@ def _good_shot_rows(observations, numbers, out):
 
 
 SCRIPTED = {"circle": CircleBait, "orbit": OrbitBait, "mirror": MirrorShooter}
+# The rule a learned policy of each role imitates in a warm start (training.algorithms.warm_start_fit;
+# a recipe's `demonstrator` holds its settings): the families whose choices a network's heads can take.
+DEMONSTRATOR = {"bait": "circle", "shooter": "mirror"}
 
 
 def scripted_keys(role: str) -> list[str]:

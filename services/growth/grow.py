@@ -7,7 +7,8 @@ journal, a training from its checkpoint); workspace.py holds what the stages sha
 1. population  population.py: the spec's members per seat, the events runs trained to each level.
 2. grouping    crossplay.py: the training members with the candidate teammates of the other seat.
 3. groups      groups.py: the training members grouped by what works with them.
-4. responses   responses.py: one best response per group (PPO), against its members and stand-ins.
+4. responses   responses.py: one best response per group (the spec's algorithm), against its
+               members and stand-ins; where the spec asks, first imitating the group's best rule.
 5. held-out    crossplay.py: the validation and test members, with their stand-ins, with every
                candidate: the study's policies, the rules and the responses.
 6. search      search.py: where the spec asks for it, our seat's rule tuned by search (Optuna's TPE)
@@ -45,7 +46,7 @@ class Grow(Workspace):
         train = {r: self.side(members[r], "train", stand_ins=False) for r in ROLES}
         grouping = self.timed("grouping", crossplay, "grouping", train)
         grouped = self.timed("groups", groups, grouping)
-        self.timed("responses", responses, grouped)
+        self.timed("responses", responses, grouped, grouping)
         held = {r: self.side(members[r], "validation") + self.side(members[r], "test") for r in ROLES}
         held_out = self.timed("held-out", crossplay, "held-out", held)
         held_out = self.timed("search", search, grouped, held_out)

@@ -32,7 +32,7 @@ response = { learned = ["turn", "thrust"], features = "self+shells+partner", rew
 library = ["S1", "S4", "S5", "S7"]
 rule = { family = "mirror", grid = { placed_distance = [8.0, 20.0, 40.0, 70.0] } }
 events = { runs = 1, steps = 2048, levels = [0.5, 1.0], learned = ["turn", "thrust"], features = "shooter", partners = ["B5"] }
-response = { learned = ["turn", "thrust"], features = "shooter", reward = "shooter-position", weights = { kill = 10.0, aim = 1.0 }, steps = 2048 }
+response = { learned = ["turn", "thrust"], features = "shooter", reward = "shooter-position", weights = { kill = 10.0, aim = 1.0 }, steps = 2048, warm_start = true }
 """  # noqa: E501
 
 
@@ -52,12 +52,14 @@ def test_pair_jobs_play_the_games_they_stand_for():
 
 @pytest.mark.slow
 @pytest.mark.long
-@pytest.mark.timeout(900)  # two minutes alone; a loaded machine takes more
+@pytest.mark.timeout(900)  # five minutes alone (two without the warm starts); a loaded machine takes more
 def test_a_small_population_grows_a_library_and_a_second_run_resumes_from_its_files(tmp_path, monkeypatch):
     pytest.importorskip("stable_baselines3", reason="the `train` extra is not installed")
     pytest.importorskip("optuna", reason="the `search` extra is not installed")  # the spec asks for a search
     from services.agent import library, networks
+    from services.growth.choice import Grid
     from services.growth.grow import KINDS, Grow
+    from services.growth.responses import demonstrator
     from services.jobs.kinds import in_process
     from services.population.families import read
 
@@ -74,6 +76,15 @@ def test_a_small_population_grows_a_library_and_a_second_run_resumes_from_its_fi
         grouped = sorted(m for g in groups[role]["groups"] for m in g)
         train = sorted(row["name"] for row in population[role] if row["split"] == "train")
         assert grouped == train  # every training member in one group, nothing else
+    shooters = library.registry(out / "responses")  # the shooters warm-start from their group's best mirror
+    for j, members in enumerate(groups["bait"]["groups"]):
+        grouping = Grid.of(json.loads((out / "grouping.json").read_text())["bait"])
+        assert shooters[f"RS{j + 1}"].demonstrator == demonstrator(grouping, members, "mirror")
+        checkpoint = json.loads((out / "runs" / f"RS{j + 1}" / "checkpoint.json").read_text())
+        assert checkpoint["warm_start"] and 0.0 <= checkpoint["agreement"] <= 1.0
+    assert not any(
+        r.demonstrator for k, r in library.registry(out / "responses").items() if k.startswith("RB")
+    )
     for ours, partners in (("shooter", "bait"), ("bait", "shooter")):  # the search's settings: candidates
         searched = json.loads((out / f"search-{ours}.json").read_text())
         trained = sorted(m for g in groups[partners]["groups"] for m in g)

@@ -1,36 +1,61 @@
 """Stage 4, the responses: one best response of the other seat per group, trained as the spec's
 `response` recipe says (its algorithm: PPO where it names none) against the group's members and
-their stand-ins into `responses/`, a library of its own (trained in `staging/`, then adopted)."""
+their stand-ins into `responses/`, a library of its own (trained in `staging/`, then adopted).
+
+Where the recipe asks for a warm start (`warm_start = true`), a response first imitates its
+group's best rule of the family a network can imitate (scripted.DEMONSTRATOR: the circle for a
+bait, the mirror for a shooter), chosen on the grouping cross-play, by DAgger
+(training.algorithms.warm_start_fit), then learns by its algorithm: it starts from the teammate
+the group already has instead of from a random walk."""
 
 from __future__ import annotations
 
 from services.agent import library
+from services.agent.scripted import DEMONSTRATOR
+from services.growth.choice import Grid
+from services.growth.library import rule_settings
 from services.growth.workspace import Workspace, is_library, train_job
 from services.population.families import RESPONSE_PREFIX, Spec
 from shared.game import ROLES, other
 
 
-def responses(ws: Workspace, groups: dict[str, dict]) -> None:
+def responses(ws: Workspace, groups: dict[str, dict], grouping: dict[str, Grid]) -> None:
     """A best response of the other seat for every group, trained into `responses/`."""
-    recipes = {}
+    recipes, warm = {}, {}
     for role, record in groups.items():
         ours = other(role)
+        warm[ours] = ws.spec.seats[ours].warm_start
         for j, members in enumerate(record["groups"]):
-            recipes[f"{RESPONSE_PREFIX[ours]}{j + 1}"] = response_recipe(ws.spec, role, j, members)
+            shown = demonstrator(grouping[role], members, DEMONSTRATOR[ours]) if warm[ours] else None
+            recipes[f"{RESPONSE_PREFIX[ours]}{j + 1}"] = response_recipe(ws.spec, role, j, members, shown)
     trained = library.manifest(ws.responses_dir) if is_library(ws.responses_dir) else {}
     todo = [k for k in recipes if k not in trained]
     if not todo:
         return
     library.record(ws.staging, recipes)
     library.record(ws.responses_dir, recipes)
-    jobs = [train_job(k, ws.staging, {k: int(recipes[k]["steps"])}, ws.runs) for k in todo]
+    runs = {k: int(recipes[k]["steps"]) for k in todo}
+    jobs = [train_job(k, ws.staging, {k: runs[k]}, ws.runs, warm[recipes[k]["role"]]) for k in todo]
     ws.say(f"responses: training {len(jobs)} best responses")
     ws.jobs("responses", jobs, roots=[ws.population_dir])
     library.adopt_members(ws.staging, ws.responses_dir, list(recipes))
 
 
-def response_recipe(spec: Spec, role: str, j: int, members: list[str]) -> dict:
-    """The registry fields of the best response to group `j` (its `members`) of `role`'s seat."""
+def demonstrator(grid: Grid, members: list[str], family: str) -> dict[str, float]:
+    """The settings of the candidate of rule `family` with the best mean kills/min over `members`
+    (the group's rows of the grouping cross-play)."""
+    rules = [c for c in grid.candidates if c.startswith(f"{family}(")]
+    if not rules:
+        raise ValueError(f"no {family} rule among the candidates to warm-start from")
+    means = grid.only(members).columns(rules).mean(axis=(0, 2))
+    return rule_settings(rules[int(means.argmax())])
+
+
+def response_recipe(
+    spec: Spec, role: str, j: int, members: list[str], demonstrator: dict[str, float] | None = None
+) -> dict:
+    """The registry fields of the best response to group `j` (its `members`) of `role`'s seat; with
+    a `demonstrator`, the settings of the rule it imitates first."""
     ours = other(role)
     recipe = dict(spec.seats[ours].response)
     recipe |= {
@@ -41,6 +66,7 @@ def response_recipe(spec: Spec, role: str, j: int, members: list[str]) -> dict:
         "seed": spec.seed + 1000 + 10 * ROLES.index(ours) + j,
         "partners": response_partners(spec, members),
     }
+    recipe |= {"demonstrator": demonstrator} if demonstrator else {}
     return recipe | ({"frame": "world"} if ours == "shooter" else {})
 
 

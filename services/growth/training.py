@@ -16,13 +16,19 @@ from services.training.loop import train
 
 def run_train_jobs(args: list[dict]) -> list[list]:
     """Each job's last level's kills/min with its curve partner (on seeds no selection plays)."""
-    return [[train_levels(a["key"], Path(a["library"]), a["levels"], Path(a["runs"]))] for a in args]
+    return [
+        [train_levels(a["key"], Path(a["library"]), a["levels"], Path(a["runs"]), a.get("warm_start", False))]
+        for a in args
+    ]
 
 
-def train_levels(key: str, root: Path, levels: dict[str, int], runs: Path) -> float:
+def train_levels(key: str, root: Path, levels: dict[str, int], runs: Path, warm_start: bool = False) -> float:
     entry: dict = {}
     for name, steps in levels.items():
-        entry = train(key, root, steps=steps, run_dir=runs, progress=False, every=max(steps // 4, 50_000))
+        every = max(steps // 4, 50_000)
+        entry = train(
+            key, root, steps=steps, run_dir=runs, progress=False, every=every, warm_start=warm_start
+        )
         if name != key:
             library.record_entry(root, name, library.copy_member(root, entry, root, name))
     return float(entry.get("score", {}).get("kills_per_minute", 0.0))

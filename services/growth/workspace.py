@@ -92,10 +92,13 @@ class Workspace:
         return _library_roots([r for r in roots if is_library(r)])
 
 
-def train_job(key: str, root: Path, levels: dict[str, int], runs: Path) -> core.Spec:
+def train_job(
+    key: str, root: Path, levels: dict[str, int], runs: Path, warm_start: bool = False
+) -> core.Spec:
     """A job that trains `key` of the library at `root` to each level (key -> steps, in order):
-    training.train_levels."""
+    training.train_levels; with `warm_start`, imitating its recipe's demonstrator first."""
     args = {"key": key, "library": str(root), "levels": levels, "runs": str(runs)}
+    args |= {"warm_start": True} if warm_start else {}
     return core.spec(f"train-{key}", "train", args, 1)
 
 

@@ -109,6 +109,7 @@ class Seat:
     partners: tuple[str, ...]
     response: dict
     algorithm: str = "PPO"  # the events runs'
+    warm_start: bool = False  # the best responses imitate their group's best rule before RL (ResponseTable)
 
 
 @dataclass(frozen=True)
@@ -266,6 +267,7 @@ class ResponseTable:
     weights: dict[str, float] = dataclasses.field(default_factory=dict)
     steps: int
     algorithm: str = "PPO"
+    warm_start: bool = False
 
     def __post_init__(self) -> None:
         _algorithm(self.algorithm)
@@ -275,9 +277,10 @@ class ResponseTable:
             raise ValueError(f"steps = {self.steps}, reward = {self.reward!r}: at least 1 step, a reward")
 
     def recipe(self) -> dict:
-        """The table as registry values (lists, no empty weights), as the file gave it."""
+        """The table as registry values (lists, no empty weights), as the file gave it; `warm_start`
+        is how it trains, not a registry field (the seat carries it)."""
         values = {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()}
-        return {k: v for k, v in values.items() if v or k != "weights"}
+        return {k: v for k, v in values.items() if (v or k != "weights") and k != "warm_start"}
 
 
 @dataclass(frozen=True)
@@ -303,6 +306,7 @@ class SeatTable:
             partners=events.partners,
             response=self.response.recipe(),
             algorithm=events.algorithm,
+            warm_start=self.response.warm_start,
         )
 
 

@@ -49,6 +49,10 @@ def test_stand_ins_at_each_skill():
         # every depth, kind and range (issue 59): a nested key, a negative count, a grid as text,
         # repeated grid values, a seat with no members
         (('reward = "drawing-fire"', 'reword = "drawing-fire"'), "bait.response.reword: no such setting"),
+        (
+            ('reward = "drawing-fire"', 'warm_start = "yes", reward = "drawing-fire"'),
+            'warm_start = "yes": true or false',
+        ),
         (("runs = 10, steps = 150000", "runs = 10, steps = -5"), "bait.events: runs = 10, steps = -5"),
         (("speed = [1.5, 2.5, 3.5]", 'speed = "1.5"'), 'bait.rule.grid.speed = "1.5": a list'),
         (("speed = [1.5, 2.5, 3.5]", "speed = [1.5, 1.5]"), "grid.speed = [1.5, 1.5]: a list of distinct"),

@@ -16,7 +16,7 @@ from stable_baselines3.common.vec_env import VecEnv
 from services.agent.library import LIBRARY, Recipe
 from services.agent.networks import HEADS
 from services.agent.outside import linear_arrays
-from services.agent.scripted import CircleBait, MirrorShooter
+from services.agent.scripted import DEMONSTRATOR, SCRIPTED
 from services.sim.observation import observe
 from services.training.env import RecipeVecEnv
 from shared.game import GameConfig
@@ -101,9 +101,6 @@ def make_model(
     return ALGORITHMS[recipe.algorithm]("MlpPolicy", env, seed=seed, device="cpu", verbose=0, **kwargs)
 
 
-DEMONSTRATORS = {"bait": CircleBait, "shooter": MirrorShooter}
-
-
 def demonstrations(recipe: Recipe, games: int, gamma: float, learner=None, first_seed: int = 0):  # noqa: ANN001, ANN201
     """(features, head choices, discounted returns) of games in the recipe's env, labelled by the
     recipe's demonstrator (the scripted policy of its role with its `demonstrator` settings). It
@@ -112,7 +109,7 @@ def demonstrations(recipe: Recipe, games: int, gamma: float, learner=None, first
     of one batch, seeded from `first_seed`."""
     env = RecipeVecEnv(recipe, games)
     env.seed(first_seed)
-    demonstrator = DEMONSTRATORS[recipe.role](**recipe.demonstrator)
+    demonstrator = SCRIPTED[DEMONSTRATOR[recipe.role]](**recipe.demonstrator)
     learned = [HEADS.index(h) for h in recipe.learned]
     obs = env.reset()
     features, labels, rewards = [], [], []

@@ -203,9 +203,10 @@ def _recipe(key: str, entry: dict, root: Path) -> Recipe:
     return replace(config.build(Recipe, entry | {"key": key}, f"{key}."), root=root)
 
 
-def keys(role: str | None = None) -> list[str]:
-    """Library keys in registry order, optionally of one role."""
-    return [k for k, r in registry().items() if role is None or r.role == role]
+def keys(role: str | None = None, root: Path | None = None) -> list[str]:
+    """Library keys in registry order, optionally of one role (of the library at `root`, or of
+    every library in use)."""
+    return [k for k, r in registry(root).items() if role is None or r.role == role]
 
 
 def manifest(root: Path | None = None) -> dict[str, dict]:

@@ -350,11 +350,12 @@ def _references(paired: _Paired, partner_role: str) -> tuple[dict[str, str], dic
     if seat is None:
         return played, {}
     missing: dict[str, str] = {}
-    study = [a for a in paired.statics if a in library.keys(seat)]
+    ours = library.keys(seat, library.LIBRARY)  # the study's, whatever TSF_LIBRARY adds beside it
+    study = [a for a in paired.statics if a in ours]
     if study:
         played[STUDY] = max(study, key=lambda a: float(paired.values[a].mean()))
     else:
-        missing[STUDY] = f"any of {', '.join(library.keys(seat))}"
+        missing[STUDY] = f"any of {', '.join(ours)}"
     previous = PREVIOUS_DEFAULT[seat]
     (played if previous in paired.statics else missing)[PREVIOUS] = previous
     return played, missing

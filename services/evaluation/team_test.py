@@ -107,6 +107,19 @@ def test_the_summary_gives_the_default_first_and_labelled_and_reads_older_files(
     )
 
 
+def test_the_studys_best_static_is_the_study_librarys_whatever_tsf_library_adds(monkeypatch) -> None:
+    """A library in TSF_LIBRARY (here the tuned one, whose TS1 scores best) is compared among the
+    statics, but the study's best static stays the study library's own."""
+    monkeypatch.setenv("TSF_LIBRARY", "tuned")
+    table = {
+        "P1": {"S1": 2.0, "S2": 1.0, "TS1": 5.0, DEFAULT: 4.0},
+        "P2": {"S1": 1.0, "S2": 3.0, "TS1": 4.0, DEFAULT: 3.0},
+    }
+    played = [TeamGame(p, a, s, k, 0, 0) for p, by in table.items() for a, k in by.items() for s in range(2)]
+    c = compare(played, listed(tuple(table), "bait"))
+    assert c.references[BEST] == "TS1" and c.references[STUDY] == "S2"
+
+
 @pytest.mark.parametrize(
     ("role", "statics", "references", "unplayed"),
     [  # the bait seat without GB1; the shooter seat with the grown library's GS2 only

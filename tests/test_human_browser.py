@@ -47,6 +47,8 @@ def match(tmp_path):
             running.exception(FRAMES / 30 + 60)
 
 
+@pytest.mark.slow
+@pytest.mark.long  # 13 s or more in the full run: kept out of the default run
 def test_a_person_plays_the_bait_from_the_browser(browser, match, tmp_path):
     links, running = match  # the match's sim waits for this person to press start
     page = browser.new_page(viewport={"width": 900, "height": 800})

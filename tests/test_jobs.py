@@ -51,6 +51,8 @@ def evaluate_both_ways(run) -> None:  # noqa: ANN001 - a Runner
     assert run(job, None) == in_process(identification.KINDS)(job)
 
 
+@pytest.mark.slow
+@pytest.mark.long  # 11 s or more in the full run: kept out of the default run
 def test_a_worker_without_the_plugin_gets_no_more_jobs(bus, spawn, tmp_path, monkeypatch, caplog, wait_until):
     (tmp_path / "lab_partners.py").write_text(
         "from services.population.partners_test import Constant\n\n"

@@ -34,8 +34,8 @@ def responses(ws: Workspace, groups: dict[str, dict], grouping: dict[str, Grid])
         return
     library.record(ws.staging, recipes)
     library.record(ws.responses_dir, recipes)
-    runs = {k: int(recipes[k]["steps"]) for k in todo}
-    jobs = [train_job(k, ws.staging, {k: runs[k]}, ws.runs, warm[recipes[k]["role"]]) for k in todo]
+    steps = {k: int(recipes[k]["steps"]) for k in todo}
+    jobs = [train_job(k, ws.staging, {k: steps[k]}, ws.runs, warm[recipes[k]["role"]]) for k in todo]
     ws.say(f"responses: training {len(jobs)} best responses")
     ws.jobs("responses", jobs, roots=[ws.population_dir])
     library.adopt_members(ws.staging, ws.responses_dir, list(recipes))

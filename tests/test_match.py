@@ -98,6 +98,8 @@ def test_a_killed_agent_leaves_the_clock_alone_and_a_restarted_one_answers_withi
     assert (answered - restarted) / 1e9 < 1.0
 
 
+@pytest.mark.slow
+@pytest.mark.long  # 8 s or more in the full run: kept out of the default run
 def test_a_restarted_recorder_records_the_gap_it_missed_and_nothing_else(live, wait_until):
     match = live("reckill")
     assert wait_until(lambda: match.frame() >= 60, timeout=20)

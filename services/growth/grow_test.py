@@ -76,15 +76,13 @@ def test_a_small_population_grows_a_library_and_a_second_run_resumes_from_its_fi
         grouped = sorted(m for g in groups[role]["groups"] for m in g)
         train = sorted(row["name"] for row in population[role] if row["split"] == "train")
         assert grouped == train  # every training member in one group, nothing else
-    shooters = library.registry(out / "responses")  # the shooters warm-start from their group's best mirror
+    responses = library.registry(out / "responses")  # the shooters warm-start from their group's best mirror
+    grouping = Grid.of(json.loads((out / "grouping.json").read_text())["bait"])
     for j, members in enumerate(groups["bait"]["groups"]):
-        grouping = Grid.of(json.loads((out / "grouping.json").read_text())["bait"])
-        assert shooters[f"RS{j + 1}"].demonstrator == demonstrator(grouping, members, "mirror")
+        assert responses[f"RS{j + 1}"].demonstrator == demonstrator(grouping, members, "mirror")
         checkpoint = json.loads((out / "runs" / f"RS{j + 1}" / "checkpoint.json").read_text())
         assert checkpoint["warm_start"] and 0.0 <= checkpoint["agreement"] <= 1.0
-    assert not any(
-        r.demonstrator for k, r in library.registry(out / "responses").items() if k.startswith("RB")
-    )
+    assert not any(r.demonstrator for k, r in responses.items() if k.startswith("RB"))
     for ours, partners in (("shooter", "bait"), ("bait", "shooter")):  # the search's settings: candidates
         searched = json.loads((out / f"search-{ours}.json").read_text())
         trained = sorted(m for g in groups[partners]["groups"] for m in g)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from services.agent import library
 from services.agent.scripted import DEMONSTRATOR
+from services.growth import choice
 from services.growth.choice import Grid
 from services.growth.library import rule_settings
 from services.growth.workspace import Workspace, is_library, train_job
@@ -47,8 +48,8 @@ def demonstrator(grid: Grid, members: list[str], family: str) -> dict[str, float
     rules = [c for c in grid.candidates if c.startswith(f"{family}(")]
     if not rules:
         raise ValueError(f"no {family} rule among the candidates to warm-start from")
-    means = grid.only(members).columns(rules).mean(axis=(0, 2))
-    return rule_settings(rules[int(means.argmax())])
+    best, _ = choice.best_single(grid.only(members).columns(rules))
+    return rule_settings(rules[best])
 
 
 def response_recipe(
